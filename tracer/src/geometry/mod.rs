@@ -1,0 +1,31 @@
+//! Rays and their intersection with triangles and the BVH.
+//!
+//! Contract (see ARCHITECTURE.md): the BVH is *built* by obvhs but *traversed* by our own robust
+//! slab test; triangles are intersected with the watertight Woop-Benthin-Wald test; secondary rays
+//! leave surfaces with the Wachter-Binder offset. No scene-scale epsilon appears anywhere.
+
+use glam::Vec3;
+
+/// A ray segment `origin + t * dir` for `t` in `(0, t_max)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub t_max: f32,
+}
+
+/// The closest hit of a ray: distance, triangle index and barycentrics of vertices 1 and 2.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub triangle: u32,
+    pub b1: f32,
+    pub b2: f32,
+}
+
+/// Counted traversal work: the deterministic cost measure of a tile.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TraversalStats {
+    pub nodes: u64,
+    pub triangles: u64,
+}

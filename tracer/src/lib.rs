@@ -1,0 +1,27 @@
+//! Pixels from a scene. No async, no network, and no clock of its own: the cost of a tile is
+//! counted work (BVH nodes visited, triangles tested, shading events), which is deterministic;
+//! callers that want wall time measure it around [`render_tile`].
+//!
+//! Module map:
+//! - [`scene`]: the in-memory scene ([`Scene`]) and its loader from TOML + OBJ/MTL files, with
+//!   validation that names file, line and problem.
+//! - [`geometry`]: rays, the watertight triangle test, the BVH (built by obvhs, traversed by our
+//!   own robust slab test), and the spawn-offset rule for secondary rays.
+//! - [`material`]: the closed set of materials ([`Material`]) and their BSDFs in a local frame.
+//! - [`sampler`]: the deterministic per-pixel random stream: a pure function of
+//!   (seed, frame, pixel, sample index, dimension).
+//! - [`integrator`]: the path tracer with next-event estimation and multiple importance sampling.
+//! - [`tile`]: the unit of work: render a rectangle of a frame, get its pixels and its cost map.
+//! - [`output`]: OpenEXR (linear float RGB) and tone-mapped sRGB PNG writers.
+
+pub mod geometry;
+pub mod integrator;
+pub mod material;
+pub mod output;
+pub mod sampler;
+pub mod scene;
+pub mod tile;
+
+pub use material::Material;
+pub use scene::Scene;
+

@@ -1,0 +1,91 @@
+//! The in-memory scene: what the loader produces and the integrator consumes.
+//!
+//! Everything is in world space and fully resolved (materials by index, textures decoded to linear
+//! RGB), so that rendering never touches the filesystem. The loader ([`load`]) reads a TOML scene
+//! file and the OBJ/MTL meshes and textures it references through a [`SceneFiles`] source, so the
+//! same code loads from disk or from the in-memory file set a peer received over the network.
+
+mod camera;
+mod texture;
+// The loader's modules (error, files, format, load, obj) are added by the scene-loader work.
+
+pub use camera::{Camera, CameraKey, CameraRays, CameraTrack};
+pub use texture::Texture;
+
+use crate::material::Material;
+use glam::{Vec2, Vec3};
+
+/// A scene ready to render.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub settings: RenderSettings,
+    pub camera: CameraTrack,
+    /// Every triangle of every mesh, in world space, degenerate ones already dropped.
+    pub triangles: Vec<Triangle>,
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    pub point_lights: Vec<PointLight>,
+    /// Constant radiance arriving from every direction that escapes the scene, if any.
+    pub environment: Option<Vec3>,
+    /// Every file the scene was read from (the TOML first), relative to the TOML's folder, so a
+    /// frame owner can ship the scene to peers that share no filesystem with it.
+    pub files: Vec<String>,
+}
+
+/// Render settings; the TOML's `[render]` table. See `scenes/README.md` for the defaults.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSettings {
+    pub width: u32,
+    pub height: u32,
+    pub samples_per_pixel: u32,
+    /// Maximum number of path segments (1 = direct visibility of emitters only); `None` means
+    /// unlimited, ended by Russian roulette alone.
+    pub max_depth: Option<u32>,
+    /// The depth from which Russian roulette may end paths; `None` turns it off.
+    pub russian_roulette_depth: Option<u32>,
+    pub seed: u64,
+    pub frames: u32,
+}
+
+/// One triangle with its shading attributes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Triangle {
+    /// Vertices in world space. The winding defines the geometric normal
+    /// `(p[1] - p[0]) x (p[2] - p[0])`, which is the emitting side of an area light.
+    pub p: [Vec3; 3],
+    /// Per-vertex shading normals (world space, unit length), when the OBJ has them.
+    pub n: Option<[Vec3; 3]>,
+    /// Per-vertex texture coordinates, when the OBJ has them.
+    pub uv: Option<[Vec2; 3]>,
+    /// Index into [`Scene::materials`].
+    pub material: u32,
+}
+
+impl Triangle {
+    /// Twice the area vector: its direction is the geometric normal, its length twice the area.
+    pub fn area_vector(&self) -> Vec3 {
+        (self.p[1] - self.p[0]).cross(self.p[2] - self.p[0])
+    }
+
+    pub fn area(&self) -> f32 {
+        0.5 * self.area_vector().length()
+    }
+}
+
+/// An isotropic point light: radiant intensity in W/sr per channel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointLight {
+    pub position: Vec3,
+    pub intensity: Vec3,
+}
+
+impl Scene {
+    /// The triangles whose material emits: the scene's area lights, in triangle order.
+    pub fn emissive_triangles(&self) -> impl Iterator<Item = (u32, &Triangle)> {
+        self.triangles
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| self.materials[t.material as usize].emission != Vec3::ZERO)
+            .map(|(i, t)| (i as u32, t))
+    }
+}

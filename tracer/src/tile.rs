@@ -1,0 +1,1 @@
+//! The unit of work: render a rectangle of one frame.
