@@ -1,1 +1,26 @@
-fn main() {}
+//! `tessera`: the command line. Thin: it parses arguments, sets up logging and calls the crates.
+//!
+//! - `cli`: the argument definitions (clap); `--help` is generated from their doc comments.
+//! - `render`: `tessera render`, one process rendering an animation, balanced by the PBT or a grid.
+//! - `report`: progress on a terminal, log lines elsewhere, the stats JSON and the tile-map PNGs.
+
+mod cli;
+mod render;
+mod report;
+
+use clap::Parser;
+
+fn main() -> anyhow::Result<()> {
+    let cli = cli::Cli::parse();
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    match cli.command {
+        cli::Command::Render(args) => render::run(&args),
+    }
+}

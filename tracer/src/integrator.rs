@@ -1,1 +1,280 @@
-//! The path tracer.
+//! The path tracer: next-event estimation with multiple importance sampling (power heuristic) for
+//! area lights and the environment, point lights by next-event estimation alone, and Russian
+//! roulette.
+//!
+//! Depth follows pbrt: `max_depth` counts scattering events, so 0 shows emitters only, 1 adds
+//! direct lighting, and a path has at most `max_depth + 1` segments. Every bounce draws its random
+//! numbers from a fixed block of dimensions ([`crate::sampler::DIMENSIONS_PER_BOUNCE`]), all of
+//! them drawn whether used or not, so skipping an absent effect never shifts a later number.
+
+use crate::effects::Effects;
+use crate::geometry::{offset_ray_origin, Accel, Hit, Ray, TraversalStats};
+use crate::lights::Lights;
+use crate::material::{Bsdf, Frame};
+use crate::sampler::PixelSampler;
+use crate::scene::Scene;
+use glam::{Vec2, Vec3};
+
+/// A scene prepared for rendering: its acceleration structure, lights and effect set.
+pub struct World {
+    pub scene: Scene,
+    pub accel: Accel,
+    pub lights: Lights,
+    pub effects: Effects,
+}
+
+/// Per-sample counters: the counted work that becomes a tile's cost, and the effect counters the
+/// tests read to check that absent effects cost nothing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PathStats {
+    pub traversal: TraversalStats,
+    /// Closest-hit rays (camera and bounce rays).
+    pub rays: u64,
+    pub shadow_rays: u64,
+    pub light_samples: u64,
+    pub refractions: u64,
+    pub environment_lookups: u64,
+    /// Samples whose radiance came out non-finite and were dropped (a bug if ever non-zero).
+    pub invalid_samples: u64,
+}
+
+impl PathStats {
+    pub fn add(&mut self, other: &PathStats) {
+        self.traversal.nodes += other.traversal.nodes;
+        self.traversal.triangles += other.traversal.triangles;
+        self.rays += other.rays;
+        self.shadow_rays += other.shadow_rays;
+        self.light_samples += other.light_samples;
+        self.refractions += other.refractions;
+        self.environment_lookups += other.environment_lookups;
+        self.invalid_samples += other.invalid_samples;
+    }
+
+    /// The deterministic cost of the work counted here, in abstract units: one per BVH node
+    /// visited and per triangle tested, plus a fixed charge per ray for shading and setup.
+    pub fn work(&self) -> u64 {
+        const PER_RAY: u64 = 16;
+        self.traversal.nodes + self.traversal.triangles + PER_RAY * (self.rays + self.shadow_rays)
+    }
+}
+
+impl World {
+    pub fn new(scene: Scene, accel: Accel, effects: Effects) -> Self {
+        let lights = Lights::new(&scene, &effects);
+        Self { scene, accel, lights, effects }
+    }
+
+    /// The radiance arriving along `ray` for one sample.
+    pub fn radiance(&self, ray: Ray, sampler: &mut PixelSampler, stats: &mut PathStats) -> Vec3 {
+        let settings = &self.scene.settings;
+        let effects = &self.effects;
+        let mut ray = ray;
+        let mut radiance = Vec3::ZERO;
+        let mut beta = Vec3::ONE;
+        // The density of the direction the last bounce sampled, and whether it was a delta lobe;
+        // the camera ray counts as specular (nothing else could have found what it hits).
+        let mut last_pdf = 0.0f32;
+        let mut last_delta = true;
+        let mut last_point = ray.origin;
+        let mut depth = 0u32;
+        loop {
+            sampler.start_bounce(depth);
+            stats.rays += 1;
+            let Some(hit) = self.accel.intersect(&ray, &mut stats.traversal) else {
+                if effects.environment {
+                    if let Some(env) = self.scene.environment {
+                        stats.environment_lookups += 1;
+                        let weight = if last_delta {
+                            1.0
+                        } else {
+                            power_heuristic(last_pdf, self.lights.environment_pdf())
+                        };
+                        radiance += beta * env * weight;
+                    }
+                }
+                break;
+            };
+            let surface = self.surface(&ray, &hit);
+            let material = &self.scene.materials[surface.material as usize];
+
+            if effects.area_lights && material.emission != Vec3::ZERO && surface.front_facing {
+                let weight = if last_delta {
+                    1.0
+                } else {
+                    let light_pdf =
+                        self.lights.triangle_pdf(&self.scene, hit.triangle, last_point, surface.point);
+                    power_heuristic(last_pdf, light_pdf)
+                };
+                radiance += beta * material.emission * weight;
+            }
+            if settings.max_depth.is_some_and(|max| depth >= max) {
+                break;
+            }
+
+            let bsdf = self.resolve(&material.bsdf, &surface);
+            let frame = Frame::from_normal(surface.shading_normal);
+            let wo = frame.to_local(-ray.dir);
+            // The bounce's random numbers, all drawn, in a fixed order.
+            let u_light_choice = sampler.next_1d();
+            let u_light = sampler.next_2d();
+            let u_bsdf_choice = sampler.next_1d();
+            let u_bsdf = sampler.next_2d();
+            let u_roulette = sampler.next_1d();
+
+            if effects.shadows && !bsdf.is_delta() {
+                radiance += beta
+                    * self.direct_light(&bsdf, &frame, wo, &surface, u_light_choice, u_light, stats);
+            }
+
+            let Some(sample) = bsdf.sample(wo, u_bsdf_choice, u_bsdf) else { break };
+            if sample.transmission {
+                stats.refractions += 1;
+            }
+            let wi = frame.to_world(sample.wi);
+            beta *= sample.weight;
+            if beta == Vec3::ZERO || !beta.is_finite() {
+                break;
+            }
+            last_pdf = sample.pdf;
+            last_delta = sample.delta;
+            last_point = surface.point;
+            depth += 1;
+
+            if let Some(start) = settings.russian_roulette_depth {
+                if depth >= start {
+                    let survive = beta.max_element().min(0.95);
+                    if u_roulette >= survive {
+                        break;
+                    }
+                    beta /= survive;
+                }
+            }
+            ray = Ray { origin: surface.spawn_origin(wi), dir: wi, t_max: f32::INFINITY };
+        }
+        radiance
+    }
+
+    /// One light sample, weighted by multiple importance sampling against the BSDF.
+    #[allow(clippy::too_many_arguments)]
+    fn direct_light(
+        &self,
+        bsdf: &Bsdf,
+        frame: &Frame,
+        wo: Vec3,
+        surface: &Surface,
+        u_choice: f32,
+        u: Vec2,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        stats.light_samples += 1;
+        let Some(light) = self.lights.sample(&self.scene, surface.point, u_choice, u) else {
+            return Vec3::ZERO;
+        };
+        let wi_local = frame.to_local(light.wi);
+        let f = bsdf.eval(wo, wi_local);
+        if f == Vec3::ZERO || light.radiance == Vec3::ZERO || light.pdf <= 0.0 {
+            return Vec3::ZERO;
+        }
+        stats.shadow_rays += 1;
+        let origin = surface.spawn_origin(light.wi);
+        let shadow = if light.distance.is_finite() {
+            // As pbrt's SpawnRayTo: offset both ends off their surfaces (the light's end towards
+            // the shading point) and stop a relative hair short, so neither the shading point's
+            // triangle nor the light's own triangle can shadow the pair.
+            let target = if light.normal == Vec3::ZERO {
+                light.point
+            } else {
+                let towards = if light.wi.dot(light.normal) < 0.0 { light.normal } else { -light.normal };
+                offset_ray_origin(light.point, towards)
+            };
+            let d = target - origin;
+            let length = d.length();
+            if length == 0.0 || !length.is_finite() {
+                return Vec3::ZERO;
+            }
+            Ray { origin, dir: d / length, t_max: length * (1.0 - SHADOW_EPSILON) }
+        } else {
+            Ray { origin, dir: light.wi, t_max: f32::INFINITY }
+        };
+        if self.accel.occluded(&shadow, &mut stats.traversal) {
+            return Vec3::ZERO;
+        }
+        let weight = if light.delta { 1.0 } else { power_heuristic(light.pdf, bsdf.pdf(wo, wi_local)) };
+        f * light.radiance * (weight / light.pdf)
+    }
+
+    fn resolve(&self, bsdf: &Bsdf, surface: &Surface) -> Bsdf {
+        match *bsdf {
+            Bsdf::Diffuse { albedo, texture: Some(texture) } if self.effects.textures => {
+                let texel = surface
+                    .uv
+                    .map_or(Vec3::ONE, |uv| self.scene.textures[texture as usize].lookup(uv));
+                Bsdf::Diffuse { albedo: albedo * texel, texture: None }
+            }
+            other => other,
+        }
+    }
+
+    /// The local geometry at a hit.
+    fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
+        let triangle = &self.scene.triangles[hit.triangle as usize];
+        let point = crate::geometry::barycentric_point(&triangle.p, hit.b1, hit.b2);
+        let geometric = triangle.area_vector().normalize();
+        let front_facing = ray.dir.dot(geometric) < 0.0;
+        // Orient both normals towards the side the ray came from.
+        let facing = if front_facing { geometric } else { -geometric };
+        let b0 = 1.0 - hit.b1 - hit.b2;
+        let shading_normal = match triangle.n {
+            Some(n) if self.effects.shading_normals => {
+                let interpolated = (b0 * n[0] + hit.b1 * n[1] + hit.b2 * n[2]).normalize_or_zero();
+                if interpolated == Vec3::ZERO {
+                    facing
+                } else if interpolated.dot(facing) < 0.0 {
+                    -interpolated
+                } else {
+                    interpolated
+                }
+            }
+            _ => facing,
+        };
+        let uv = triangle.uv.map(|uv| b0 * uv[0] + hit.b1 * uv[1] + hit.b2 * uv[2]);
+        Surface {
+            point,
+            geometric: facing,
+            shading_normal,
+            uv,
+            material: triangle.material,
+            front_facing,
+        }
+    }
+}
+
+/// The geometry of a hit, normals facing the incoming ray.
+struct Surface {
+    point: Vec3,
+    geometric: Vec3,
+    shading_normal: Vec3,
+    uv: Option<Vec2>,
+    material: u32,
+    front_facing: bool,
+}
+
+impl Surface {
+    /// The origin for a ray leaving in direction `wi`: offset to the side `wi` points to.
+    fn spawn_origin(&self, wi: Vec3) -> Vec3 {
+        let n = if wi.dot(self.geometric) >= 0.0 { self.geometric } else { -self.geometric };
+        offset_ray_origin(self.point, n)
+    }
+}
+
+/// The relative shortening of shadow rays, as pbrt-v4's `ShadowEpsilon`: scale-free.
+const SHADOW_EPSILON: f32 = 1e-4;
+
+fn power_heuristic(f: f32, g: f32) -> f32 {
+    let (f2, g2) = (f * f, g * g);
+    if f2 + g2 == 0.0 || !(f2 + g2).is_finite() {
+        // One density is infinite (a delta) or both vanish: the finite one takes all the weight.
+        return if f.is_finite() && f > g { 1.0 } else if g.is_finite() && g > f { 0.0 } else { 1.0 };
+    }
+    f2 / (f2 + g2)
+}

@@ -1,1 +1,130 @@
-//! Image output.
+//! Image files: OpenEXR (linear float RGB, readable by OpenImageIO and the OpenEXR bindings) for
+//! comparison with other renderers, and a tone-mapped sRGB PNG preview for people.
+//!
+//! Files are written to a temporary name and renamed, so a reader never sees half a frame.
+
+use std::path::{Path, PathBuf};
+
+/// An image of linear RGB pixels, row-major, top row first.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RgbImage {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<[f32; 3]>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {message}")]
+    Exr { path: PathBuf, message: String },
+    #[error("{path}: {message}")]
+    Png { path: PathBuf, message: String },
+}
+
+/// Writes `pixels` (`width` x `height`, linear RGB) as a 32-bit float RGB OpenEXR file.
+pub fn write_exr(path: &Path, width: u32, height: u32, pixels: &[[f32; 3]]) -> Result<(), OutputError> {
+    assert_eq!(pixels.len(), width as usize * height as usize, "pixel count must match the size");
+    let tmp = temporary(path);
+    exr::prelude::write_rgb_file(&tmp, width as usize, height as usize, |x, y| {
+        let p = pixels[y * width as usize + x];
+        (p[0], p[1], p[2])
+    })
+    .map_err(|e| OutputError::Exr { path: path.to_owned(), message: e.to_string() })?;
+    std::fs::rename(&tmp, path).map_err(|source| OutputError::Io { path: path.to_owned(), source })
+}
+
+/// Reads the first RGB(A) layer of an OpenEXR file as linear RGB (alpha ignored).
+pub fn read_exr(path: &Path) -> Result<RgbImage, OutputError> {
+    use exr::prelude::*;
+    let image = read_first_rgba_layer_from_file(
+        path,
+        |resolution, _| RgbImage {
+            width: resolution.width() as u32,
+            height: resolution.height() as u32,
+            pixels: vec![[0.0; 3]; resolution.width() * resolution.height()],
+        },
+        |image: &mut RgbImage, position, (r, g, b, _a): (f32, f32, f32, f32)| {
+            let index = position.y() * image.width as usize + position.x();
+            image.pixels[index] = [r, g, b];
+        },
+    )
+    .map_err(|e| OutputError::Exr { path: path.to_owned(), message: e.to_string() })?;
+    Ok(image.layer_data.channel_data.pixels)
+}
+
+/// Writes a preview PNG: linear RGB times `exposure`, clamped, sRGB-encoded, 8 bits.
+pub fn write_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[[f32; 3]],
+    exposure: f32,
+) -> Result<(), OutputError> {
+    let bytes = tone_map(pixels, exposure);
+    let image = image::RgbImage::from_raw(width, height, bytes)
+        .expect("tone_map returns three bytes per pixel of a width x height image");
+    let tmp = temporary(path);
+    image
+        .save_with_format(&tmp, image::ImageFormat::Png)
+        .map_err(|e| OutputError::Png { path: path.to_owned(), message: e.to_string() })?;
+    std::fs::rename(&tmp, path).map_err(|source| OutputError::Io { path: path.to_owned(), source })
+}
+
+/// Linear RGB to 8-bit sRGB with a fixed exposure: the one tone mapping every preview and every
+/// perceptual comparison uses.
+pub fn tone_map(pixels: &[[f32; 3]], exposure: f32) -> Vec<u8> {
+    pixels
+        .iter()
+        .flat_map(|p| p.map(|c| (linear_to_srgb(c * exposure) * 255.0 + 0.5) as u8))
+        .collect()
+}
+
+/// The sRGB transfer function; NaN and negatives map to 0, anything above 1 to 1.
+pub fn linear_to_srgb(c: f32) -> f32 {
+    let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
+    if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
+}
+
+/// The sRGB decoding function, for textures.
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.040_45 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+fn temporary(path: &Path) -> PathBuf {
+    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(".partial");
+    path.with_file_name(name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exr_round_trips_bits_and_png_is_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let pixels: Vec<[f32; 3]> =
+            (0..12).map(|i| [i as f32 * 0.1, 1.0 / (i as f32 + 1.0), 1e-30 * i as f32]).collect();
+        let path = dir.path().join("a.exr");
+        write_exr(&path, 4, 3, &pixels).unwrap();
+        let back = read_exr(&path).unwrap();
+        assert_eq!((back.width, back.height), (4, 3));
+        let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back.pixels), bits(&pixels));
+        let png = dir.path().join("a.png");
+        write_png(&png, 4, 3, &pixels, 1.0).unwrap();
+        let decoded = image::open(&png).unwrap().to_rgb8();
+        assert_eq!(decoded.get_pixel(0, 0).0, [0, 255, 0]);
+    }
+
+    #[test]
+    fn srgb_round_trip() {
+        for i in 0..=100 {
+            let c = i as f32 / 100.0;
+            assert!((srgb_to_linear(linear_to_srgb(c)) - c).abs() < 1e-5);
+        }
+        assert_eq!(linear_to_srgb(f32::NAN), 0.0);
+    }
+}

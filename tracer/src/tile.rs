@@ -1,1 +1,145 @@
-//! The unit of work: render a rectangle of one frame.
+//! The unit of work: render a rectangle of one frame, get its pixels and its cost.
+//!
+//! The cost is counted work (see [`PathStats::work`]), recorded per block of
+//! [`BLOCK_SIZE`]-pixel squares on a grid anchored at the image origin, so the costs of tiles of
+//! any partition add up to one map for the whole frame; the balancer predicts the next frame from
+//! it. A block cut by tile borders simply receives contributions from several tiles.
+
+use crate::integrator::{PathStats, World};
+use crate::sampler::PixelSampler;
+use serde::{Deserialize, Serialize};
+
+/// The side of a cost block, in pixels.
+pub const BLOCK_SIZE: u32 = 8;
+
+/// A rectangle of pixels: columns `x..x + w`, rows `y..y + h`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct Rect {
+    pub x: u32,
+    pub y: u32,
+    pub w: u32,
+    pub h: u32,
+}
+
+impl Rect {
+    pub fn area(&self) -> u64 {
+        u64::from(self.w) * u64::from(self.h)
+    }
+
+    /// The blocks this rectangle touches: (first column, first row, columns, rows).
+    pub fn blocks(&self) -> (u32, u32, u32, u32) {
+        if self.w == 0 || self.h == 0 {
+            return (self.x / BLOCK_SIZE, self.y / BLOCK_SIZE, 0, 0);
+        }
+        let (bx0, by0) = (self.x / BLOCK_SIZE, self.y / BLOCK_SIZE);
+        let bx1 = (self.x + self.w - 1) / BLOCK_SIZE;
+        let by1 = (self.y + self.h - 1) / BLOCK_SIZE;
+        (bx0, by0, bx1 - bx0 + 1, by1 - by0 + 1)
+    }
+}
+
+/// A rendered tile.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileOutput {
+    pub frame: u32,
+    pub rect: Rect,
+    /// Linear RGB, row-major within the rectangle.
+    pub pixels: Vec<[f32; 3]>,
+    pub cost: TileCost,
+    pub stats: PathStats,
+}
+
+/// What a tile cost: counted work, overall and per block.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TileCost {
+    pub rays: u64,
+    pub work: u64,
+    /// Work per block for the blocks [`Rect::blocks`] names, row-major; only this tile's pixels
+    /// are counted, so partial blocks carry partial work.
+    pub blocks: Vec<u64>,
+}
+
+/// Renders `rect` of `frame`: every pixel, every sample, in a fixed order.
+pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
+    let settings = &world.scene.settings;
+    let camera = world.scene.camera.at(frame).rays(settings.width, settings.height);
+    let (bx0, by0, bw, bh) = rect.blocks();
+    let mut blocks = vec![0u64; (bw * bh) as usize];
+    let mut pixels = Vec::with_capacity(rect.area() as usize);
+    let mut stats = PathStats::default();
+    let spp = settings.samples_per_pixel.max(1);
+    for y in rect.y..rect.y + rect.h {
+        for x in rect.x..rect.x + rect.w {
+            let mut pixel_stats = PathStats::default();
+            let mut sum = glam::Vec3::ZERO;
+            for sample in 0..spp {
+                let mut sampler = PixelSampler::new(settings.seed, frame, x, y, sample);
+                let jitter = sampler.next_2d();
+                let ray = camera.ray(x as f32 + jitter.x, y as f32 + jitter.y);
+                let radiance = world.radiance(ray, &mut sampler, &mut pixel_stats);
+                if radiance.is_finite() {
+                    sum += radiance;
+                } else {
+                    pixel_stats.invalid_samples += 1;
+                }
+            }
+            let value = sum / spp as f32;
+            pixels.push([value.x, value.y, value.z]);
+            let block = (y / BLOCK_SIZE - by0) * bw + (x / BLOCK_SIZE - bx0);
+            blocks[block as usize] += pixel_stats.work();
+            stats.add(&pixel_stats);
+        }
+    }
+    TileOutput {
+        frame,
+        rect,
+        pixels,
+        cost: TileCost { rays: stats.rays + stats.shadow_rays, work: stats.work(), blocks },
+        stats,
+    }
+}
+
+/// A whole frame being assembled from tiles: pixels and the per-block cost map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Film {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<[f32; 3]>,
+    /// Counted work per block, row-major over `blocks_x` x `blocks_y` blocks.
+    pub block_work: Vec<u64>,
+    pub blocks_x: u32,
+    pub blocks_y: u32,
+    pub stats: PathStats,
+}
+
+impl Film {
+    pub fn new(width: u32, height: u32) -> Self {
+        let blocks_x = width.div_ceil(BLOCK_SIZE);
+        let blocks_y = height.div_ceil(BLOCK_SIZE);
+        Self {
+            width,
+            height,
+            pixels: vec![[0.0; 3]; (width as usize) * (height as usize)],
+            block_work: vec![0; (blocks_x * blocks_y) as usize],
+            blocks_x,
+            blocks_y,
+            stats: PathStats::default(),
+        }
+    }
+
+    /// Copies a tile's pixels into place and adds its cost to the block map.
+    pub fn insert(&mut self, rect: Rect, pixels: &[[f32; 3]], cost: &TileCost) {
+        for row in 0..rect.h {
+            let src = (row * rect.w) as usize;
+            let dst = ((rect.y + row) * self.width + rect.x) as usize;
+            self.pixels[dst..dst + rect.w as usize].copy_from_slice(&pixels[src..src + rect.w as usize]);
+        }
+        let (bx0, by0, bw, bh) = rect.blocks();
+        for by in 0..bh {
+            for bx in 0..bw {
+                self.block_work[((by0 + by) * self.blocks_x + bx0 + bx) as usize] +=
+                    cost.blocks[(by * bw + bx) as usize];
+            }
+        }
+    }
+}

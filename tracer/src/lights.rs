@@ -1,0 +1,238 @@
+//! The lights of a scene and how next-event estimation samples them.
+//!
+//! Lights are emissive triangles (one-sided: they emit on the side of their winding normal), point
+//! lights and a constant environment. One light is chosen per shading point with probability
+//! proportional to its power, so a large sky quad is not starved by a hundred tiny lamps; the
+//! choice uses one random number, and the position on the light two more, whatever the light.
+
+use crate::effects::Effects;
+use crate::scene::Scene;
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// One light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Light {
+    /// An emissive triangle: the index into `Scene::triangles`.
+    Triangle(u32),
+    Point { position: Vec3, intensity: Vec3 },
+    Environment { radiance: Vec3 },
+}
+
+/// A sampled direction towards a light, as seen from a shading point.
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    /// Unit direction from the shading point towards the light.
+    pub wi: Vec3,
+    /// Distance to the sampled point (infinite for the environment).
+    pub distance: f32,
+    /// The point on the light (for spawning the shadow ray towards it); unused for the environment.
+    pub point: Vec3,
+    /// The light's geometric normal at `point` (zero for point lights and the environment).
+    pub normal: Vec3,
+    /// Radiance (or, for a point light, intensity / distance^2) arriving along `wi`.
+    pub radiance: Vec3,
+    /// Solid-angle density including the probability of choosing this light; for a point light,
+    /// just the choice probability (a delta in direction).
+    pub pdf: f32,
+    pub delta: bool,
+}
+
+/// All lights of a scene with their power-proportional choice distribution.
+#[derive(Clone, Debug)]
+pub struct Lights {
+    lights: Vec<Light>,
+    /// Cumulative choice probabilities, last entry 1.
+    cdf: Vec<f32>,
+    /// For each scene triangle, its light's index, or `u32::MAX` when it does not emit.
+    triangle_light: Vec<u32>,
+    environment_light: Option<u32>,
+    scene_radius: f32,
+}
+
+impl Lights {
+    pub fn new(scene: &Scene, effects: &Effects) -> Self {
+        let (center, radius) = bounding_sphere(scene);
+        let _ = center;
+        let mut lights = Vec::new();
+        let mut power = Vec::new();
+        let mut triangle_light = vec![u32::MAX; scene.triangles.len()];
+        if effects.area_lights {
+            for (index, triangle) in scene.emissive_triangles() {
+                let emission = scene.materials[triangle.material as usize].emission;
+                triangle_light[index as usize] = lights.len() as u32;
+                lights.push(Light::Triangle(index));
+                power.push(triangle.area() * luminance(emission) * PI);
+            }
+        }
+        if effects.point_lights {
+            for light in &scene.point_lights {
+                lights.push(Light::Point { position: light.position, intensity: light.intensity });
+                power.push(4.0 * PI * luminance(light.intensity));
+            }
+        }
+        let mut environment_light = None;
+        if effects.environment {
+            if let Some(radiance) = scene.environment {
+                environment_light = Some(lights.len() as u32);
+                lights.push(Light::Environment { radiance });
+                // The power the environment sends through the scene's bounding sphere.
+                power.push(luminance(radiance) * PI * 4.0 * PI * radius * radius);
+            }
+        }
+        let total: f64 = power.iter().map(|&p| f64::from(p.max(0.0))).sum();
+        let mut cdf = Vec::with_capacity(power.len());
+        let mut running = 0.0f64;
+        for &p in &power {
+            running += f64::from(p.max(0.0));
+            cdf.push(if total > 0.0 { (running / total) as f32 } else { 0.0 });
+        }
+        if total <= 0.0 || !total.is_finite() {
+            // Nothing emits anything measurable: no light is ever chosen.
+            lights.clear();
+            cdf.clear();
+            triangle_light.iter_mut().for_each(|l| *l = u32::MAX);
+            environment_light = None;
+        } else if let Some(last) = cdf.last_mut() {
+            *last = 1.0;
+        }
+        Self { lights, cdf, triangle_light, environment_light, scene_radius: radius }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.lights.is_empty()
+    }
+
+    pub fn len(&self) -> usize {
+        self.lights.len()
+    }
+
+    pub fn scene_radius(&self) -> f32 {
+        self.scene_radius
+    }
+
+    /// The probability that `sample` chooses light `index`.
+    fn choice_pdf(&self, index: usize) -> f32 {
+        let below = if index == 0 { 0.0 } else { self.cdf[index - 1] };
+        self.cdf[index] - below
+    }
+
+    /// Samples a light as seen from `p`. `u_choice` picks the light, `u` the point on it.
+    pub fn sample(&self, scene: &Scene, p: Vec3, u_choice: f32, u: Vec2) -> Option<LightSample> {
+        if self.lights.is_empty() {
+            return None;
+        }
+        let index = self.cdf.partition_point(|&c| c <= u_choice).min(self.lights.len() - 1);
+        let choice = self.choice_pdf(index);
+        if choice <= 0.0 {
+            return None;
+        }
+        match self.lights[index] {
+            Light::Triangle(t) => {
+                let triangle = &scene.triangles[t as usize];
+                let su = u.x.sqrt();
+                let (b1, b2) = (su * (1.0 - u.y), su * u.y);
+                let point = crate::geometry::barycentric_point(&triangle.p, b1, b2);
+                let area_vector = triangle.area_vector();
+                let area = 0.5 * area_vector.length();
+                let normal = area_vector.normalize_or_zero();
+                let to_light = point - p;
+                let distance_squared = to_light.length_squared();
+                if distance_squared == 0.0 || area == 0.0 {
+                    return None;
+                }
+                let distance = distance_squared.sqrt();
+                let wi = to_light / distance;
+                let cos_light = -wi.dot(normal);
+                if cos_light <= 0.0 {
+                    // The sampled point shows us its back, which does not emit.
+                    return None;
+                }
+                let pdf = choice * distance_squared / (cos_light * area);
+                let radiance = scene.materials[triangle.material as usize].emission;
+                Some(LightSample { wi, distance, point, normal, radiance, pdf, delta: false })
+            }
+            Light::Point { position, intensity } => {
+                let to_light = position - p;
+                let distance_squared = to_light.length_squared();
+                if distance_squared == 0.0 {
+                    return None;
+                }
+                let distance = distance_squared.sqrt();
+                Some(LightSample {
+                    wi: to_light / distance,
+                    distance,
+                    point: position,
+                    normal: Vec3::ZERO,
+                    radiance: intensity / distance_squared,
+                    pdf: choice,
+                    delta: true,
+                })
+            }
+            Light::Environment { radiance } => {
+                let wi = uniform_sphere(u);
+                Some(LightSample {
+                    wi,
+                    distance: f32::INFINITY,
+                    point: Vec3::ZERO,
+                    normal: Vec3::ZERO,
+                    radiance,
+                    pdf: choice / (4.0 * PI),
+                    delta: false,
+                })
+            }
+        }
+    }
+
+    /// The density with which `sample` would have produced the hit of emissive triangle `t` from
+    /// `p`, for multiple importance sampling; zero if the triangle is not a sampled light.
+    pub fn triangle_pdf(&self, scene: &Scene, t: u32, p: Vec3, hit_point: Vec3) -> f32 {
+        let Some(&index) = self.triangle_light.get(t as usize) else { return 0.0 };
+        if index == u32::MAX {
+            return 0.0;
+        }
+        let triangle = &scene.triangles[t as usize];
+        let area_vector = triangle.area_vector();
+        let area = 0.5 * area_vector.length();
+        let to_light = hit_point - p;
+        let distance_squared = to_light.length_squared();
+        let cos_light = (to_light.normalize_or_zero().dot(area_vector.normalize_or_zero())).abs();
+        if cos_light == 0.0 || area == 0.0 {
+            return 0.0;
+        }
+        self.choice_pdf(index as usize) * distance_squared / (cos_light * area)
+    }
+
+    /// The density with which `sample` would have produced an escaped direction.
+    pub fn environment_pdf(&self) -> f32 {
+        self.environment_light.map_or(0.0, |i| self.choice_pdf(i as usize) / (4.0 * PI))
+    }
+}
+
+pub fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+/// A direction uniformly distributed on the unit sphere.
+pub fn uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// A sphere around every triangle: the centre of the bounding box and half its diagonal.
+fn bounding_sphere(scene: &Scene) -> (Vec3, f32) {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for t in &scene.triangles {
+        for p in t.p {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    if lo.x > hi.x {
+        return (Vec3::ZERO, 1.0);
+    }
+    ((lo + hi) * 0.5, (0.5 * (hi - lo).length()).max(f32::MIN_POSITIVE))
+}
