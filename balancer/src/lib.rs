@@ -1,5 +1,64 @@
-//! The Prediction Binary Tree and its baselines: measured costs in, tiles out. Pure: std and serde
-//! only, never a clock, never I/O.
+//! The Prediction Binary Tree and its baselines: measured costs in, tiles out. Pure: std, serde
+//! and thiserror only; never a clock, never I/O, nothing of the tracer or the network.
+//!
+//! Module map:
+//! - [`rect`]: [`Rect`], a rectangle of pixels, and [`Rect::halves`], the one cut every tree
+//!   here makes (across the longer side, at the middle; tiles stay within 2:1 up to a pixel).
+//! - [`cost`]: [`CostMap`], measured cost per block of pixels over a whole image, with a
+//!   summed-area table so that the cost of any pixel rectangle is O(1).
+//! - [`pbt`]: [`Pbt`], the Prediction Binary Tree: leaves are tiles, re-cut between frames by
+//!   greedy split+merge pairs to minimise the variance of the predicted leaf costs.
+//! - [`regular`]: [`Regular`], the baseline: a fixed grid of (nearly) equal tiles.
+//! - [`assign`]: cutting an ordered list of tiles into one [`Assignment`] run per peer, either
+//!   contiguous with balanced predicted cost, or round-robin.
+//! - [`partition`]: the common surface the runtime and the simulator use: [`Partitioner`],
+//!   [`Tile`], [`Config`], and the predictor shared by every partition.
+//! - [`check`]: [`check_partition`], the O(n log n) validator of a tiling (exact cover, no
+//!   overlap, aspect, count), public for tests and the simulator.
+//!
+//! Everything is deterministic: the same image, config and sequence of observed cost maps give
+//! the same tiles in the same order.
 
-mod rect;
+pub mod assign;
+pub mod check;
+pub mod cost;
+pub mod partition;
+pub mod pbt;
+pub mod rect;
+pub mod regular;
+
+pub use assign::Assignment;
+pub use check::{PartitionError, check_partition};
+pub use cost::{CostMap, CostMapBuilder};
+pub use partition::{Config, Grid, Kind, Order, Partitioner, Tile, Update};
+pub use pbt::Pbt;
 pub use rect::Rect;
+pub use regular::Regular;
+
+/// What can go wrong building a cost map, a partition or an assignment. (A tiling that fails
+/// [`check_partition`] is a [`PartitionError`] instead: that is a verdict, not a failure.)
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Error {
+    #[error("a {width}x{height} image has no pixels to partition")]
+    EmptyImage { width: u32, height: u32 },
+    #[error("the block size of a cost map must be at least one pixel")]
+    ZeroBlock,
+    #[error("{found} block costs given, but the block grid has {expected} blocks")]
+    BlockCount { expected: usize, found: usize },
+    #[error("cost {value} for pixels {rect:?}: costs must be finite and non-negative")]
+    InvalidCost { value: f64, rect: Rect },
+    #[error("predicted cost {value} of tile {index}: costs must be finite and non-negative")]
+    InvalidTileCost { index: usize, value: f64 },
+    #[error("the costs add up to more than the largest finite f64")]
+    Overflow,
+    #[error("{rect:?} lies outside the {width}x{height} image")]
+    OutOfBounds { rect: Rect, width: u32, height: u32 },
+    #[error("the cost map covers {found:?} pixels but the partition covers {expected:?}")]
+    MapSize { expected: (u32, u32), found: (u32, u32) },
+    #[error("invalid config: {0}")]
+    Config(&'static str),
+    #[error("cannot assign tiles to zero peers")]
+    NoPeers,
+    #[error("invalid peer weights: {0}")]
+    Weights(&'static str),
+}

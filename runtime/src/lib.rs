@@ -1,1 +1,3 @@
 //! The peer. (Being written.)
+
+pub mod net;

@@ -8,7 +8,7 @@
 //! them drawn whether used or not, so skipping an absent effect never shifts a later number.
 
 use crate::effects::Effects;
-use crate::geometry::{offset_ray_origin, Accel, Hit, Ray, TraversalStats};
+use crate::geometry::{hit_point, spawn_ray, spawn_ray_to, Accel, Hit, Ray, Traversal, TraversalStats};
 use crate::lights::Lights;
 use crate::material::{Bsdf, Frame};
 use crate::sampler::PixelSampler;
@@ -21,6 +21,8 @@ pub struct World {
     pub accel: Accel,
     pub lights: Lights,
     pub effects: Effects,
+    /// How rays meet the BVH: our robust traversal (the default), or obvhs's own for comparison.
+    pub traversal: Traversal,
 }
 
 /// Per-sample counters: the counted work that becomes a tile's cost, and the effect counters the
@@ -61,7 +63,7 @@ impl PathStats {
 impl World {
     pub fn new(scene: Scene, accel: Accel, effects: Effects) -> Self {
         let lights = Lights::new(&scene, &effects);
-        Self { scene, accel, lights, effects }
+        Self { scene, accel, lights, effects, traversal: Traversal::Robust }
     }
 
     /// The radiance arriving along `ray` for one sample.
@@ -80,7 +82,7 @@ impl World {
         loop {
             sampler.start_bounce(depth);
             stats.rays += 1;
-            let Some(hit) = self.accel.intersect(&ray, &mut stats.traversal) else {
+            let Some(hit) = self.accel.intersect_with(&ray, self.traversal, &mut stats.traversal) else {
                 if effects.environment {
                     if let Some(env) = self.scene.environment {
                         stats.environment_lookups += 1;
@@ -149,7 +151,7 @@ impl World {
                     beta /= survive;
                 }
             }
-            ray = Ray { origin: surface.spawn_origin(wi), dir: wi, t_max: f32::INFINITY };
+            ray = spawn_ray(surface.point, surface.geometric, wi);
         }
         radiance
     }
@@ -176,27 +178,13 @@ impl World {
             return Vec3::ZERO;
         }
         stats.shadow_rays += 1;
-        let origin = surface.spawn_origin(light.wi);
         let shadow = if light.distance.is_finite() {
-            // As pbrt's SpawnRayTo: offset both ends off their surfaces (the light's end towards
-            // the shading point) and stop a relative hair short, so neither the shading point's
-            // triangle nor the light's own triangle can shadow the pair.
-            let target = if light.normal == Vec3::ZERO {
-                light.point
-            } else {
-                let towards = if light.wi.dot(light.normal) < 0.0 { light.normal } else { -light.normal };
-                offset_ray_origin(light.point, towards)
-            };
-            let d = target - origin;
-            let length = d.length();
-            if length == 0.0 || !length.is_finite() {
-                return Vec3::ZERO;
-            }
-            Ray { origin, dir: d / length, t_max: length * (1.0 - SHADOW_EPSILON) }
+            let light_normal = (light.normal != Vec3::ZERO).then_some(light.normal);
+            spawn_ray_to(surface.point, surface.geometric, light.point, light_normal)
         } else {
-            Ray { origin, dir: light.wi, t_max: f32::INFINITY }
+            spawn_ray(surface.point, surface.geometric, light.wi)
         };
-        if self.accel.occluded(&shadow, &mut stats.traversal) {
+        if self.accel.occluded_with(&shadow, self.traversal, &mut stats.traversal) {
             return Vec3::ZERO;
         }
         let weight = if light.delta { 1.0 } else { power_heuristic(light.pdf, bsdf.pdf(wo, wi_local)) };
@@ -205,11 +193,11 @@ impl World {
 
     fn resolve(&self, bsdf: &Bsdf, surface: &Surface) -> Bsdf {
         match *bsdf {
-            Bsdf::Diffuse { albedo, texture: Some(texture) } if self.effects.textures => {
+            Bsdf::Diffuse { texture: Some(texture), .. } if self.effects.textures => {
                 let texel = surface
                     .uv
                     .map_or(Vec3::ONE, |uv| self.scene.textures[texture as usize].lookup(uv));
-                Bsdf::Diffuse { albedo: albedo * texel, texture: None }
+                bsdf.with_texture_value(texel)
             }
             other => other,
         }
@@ -218,29 +206,30 @@ impl World {
     /// The local geometry at a hit.
     fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
         let triangle = &self.scene.triangles[hit.triangle as usize];
-        let point = crate::geometry::barycentric_point(&triangle.p, hit.b1, hit.b2);
+        let point = hit_point(&triangle.p, hit.b1, hit.b2);
+        // Normals keep the winding's orientation: the side a ray arrives from is what tells a
+        // dielectric whether it is entering or leaving, and an emitter whether it is seen from
+        // the front. Reflection-only BSDFs are two-sided by themselves.
         let geometric = triangle.area_vector().normalize();
         let front_facing = ray.dir.dot(geometric) < 0.0;
-        // Orient both normals towards the side the ray came from.
-        let facing = if front_facing { geometric } else { -geometric };
         let b0 = 1.0 - hit.b1 - hit.b2;
         let shading_normal = match triangle.n {
             Some(n) if self.effects.shading_normals => {
                 let interpolated = (b0 * n[0] + hit.b1 * n[1] + hit.b2 * n[2]).normalize_or_zero();
                 if interpolated == Vec3::ZERO {
-                    facing
-                } else if interpolated.dot(facing) < 0.0 {
+                    geometric
+                } else if interpolated.dot(geometric) < 0.0 {
                     -interpolated
                 } else {
                     interpolated
                 }
             }
-            _ => facing,
+            _ => geometric,
         };
         let uv = triangle.uv.map(|uv| b0 * uv[0] + hit.b1 * uv[1] + hit.b2 * uv[2]);
         Surface {
             point,
-            geometric: facing,
+            geometric,
             shading_normal,
             uv,
             material: triangle.material,
@@ -249,7 +238,7 @@ impl World {
     }
 }
 
-/// The geometry of a hit, normals facing the incoming ray.
+/// The geometry of a hit; both normals on the winding's side.
 struct Surface {
     point: Vec3,
     geometric: Vec3,
@@ -258,17 +247,6 @@ struct Surface {
     material: u32,
     front_facing: bool,
 }
-
-impl Surface {
-    /// The origin for a ray leaving in direction `wi`: offset to the side `wi` points to.
-    fn spawn_origin(&self, wi: Vec3) -> Vec3 {
-        let n = if wi.dot(self.geometric) >= 0.0 { self.geometric } else { -self.geometric };
-        offset_ray_origin(self.point, n)
-    }
-}
-
-/// The relative shortening of shadow rays, as pbrt-v4's `ShadowEpsilon`: scale-free.
-const SHADOW_EPSILON: f32 = 1e-4;
 
 fn power_heuristic(f: f32, g: f32) -> f32 {
     let (f2, g2) = (f * f, g * g);

@@ -18,18 +18,17 @@
 
 pub mod effects;
 pub mod geometry;
-// LEAD: enabled once geometry and material land.
-// pub mod integrator;
-// pub mod lights;
+pub mod integrator;
+pub mod lights;
 pub mod material;
 pub mod output;
 pub mod sampler;
 pub mod scene;
-// pub mod tile;
+pub mod tile;
 
 pub use material::Material;
-pub use scene::Scene;
+pub use scene::{Scene, SceneError};
 
 pub use effects::Effects;
-// pub use integrator::{PathStats, World};
-// pub use tile::{render_tile, Film, Rect, TileCost, TileOutput, BLOCK_SIZE};
+pub use integrator::{PathStats, World};
+pub use tile::{render_tile, Film, Rect, TileCost, TileOutput, BLOCK_SIZE};

@@ -132,7 +132,7 @@ impl Lights {
                 let triangle = &scene.triangles[t as usize];
                 let su = u.x.sqrt();
                 let (b1, b2) = (su * (1.0 - u.y), su * u.y);
-                let point = crate::geometry::barycentric_point(&triangle.p, b1, b2);
+                let point = crate::geometry::hit_point(&triangle.p, b1, b2);
                 let area_vector = triangle.area_vector();
                 let area = 0.5 * area_vector.length();
                 let normal = area_vector.normalize_or_zero();

@@ -3,6 +3,20 @@
 //! Contract (see ARCHITECTURE.md): the BVH is *built* by obvhs but *traversed* by our own robust
 //! slab test; triangles are intersected with the watertight Woop-Benthin-Wald test; secondary rays
 //! leave surfaces with the Wachter-Binder offset. No scene-scale epsilon appears anywhere.
+//!
+//! - `triangle`: the watertight ray/triangle test ([`intersect_triangle`]).
+//! - `offset`: spawn offsets and hit points for secondary rays ([`offset_ray_origin`]).
+//! - `bvh`: the [`Accel`] API, its build by obvhs, and brute force for tests.
+//! - `traverse`: our robust traversal, and obvhs's for comparison ([`Traversal`]).
+
+mod bvh;
+mod offset;
+mod traverse;
+mod triangle;
+
+pub use bvh::{Accel, BuildQuality, Traversal, intersect_brute_force};
+pub use offset::{hit_point, offset_ray_origin, spawn_ray, spawn_ray_to};
+pub use triangle::{TriangleHit, intersect_triangle, is_degenerate};
 
 use glam::Vec3;
 

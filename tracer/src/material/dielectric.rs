@@ -99,7 +99,12 @@ pub(crate) fn sanitize_ior(ior: f32) -> f32 {
 /// `tint / eta'^2`, with `eta'` the index of the side `wi` enters over the side `wo` is on (`ior`
 /// when `wo.z > 0`, `1 / ior` when `wo` is inside): the radiance scaling explained above.
 /// Returns `None` when `wo` lies in the tangent plane (`wo.z == 0`), where nothing is scattered.
-pub(crate) fn sample_dielectric(ior: f32, tint: Vec3, wo: Vec3, u_choice: f32) -> Option<BsdfSample> {
+pub(crate) fn sample_dielectric(
+    ior: f32,
+    tint: Vec3,
+    wo: Vec3,
+    u_choice: f32,
+) -> Option<BsdfSample> {
     if wo.z == 0.0 || wo.z.is_nan() {
         return None;
     }
@@ -112,7 +117,10 @@ pub(crate) fn sample_dielectric(ior: f32, tint: Vec3, wo: Vec3, u_choice: f32) -
         delta: true,
         transmission: false,
     };
-    if u_choice < f {
+    // Decide by F alone at its extremes, so that a `u_choice` outside [0, 1) can never pick a
+    // lobe of probability zero.
+    let reflect = f >= 1.0 || (f > 0.0 && u_choice < f);
+    if reflect {
         return Some(reflected);
     }
     match refract_local(wo, eta) {
@@ -124,9 +132,12 @@ pub(crate) fn sample_dielectric(ior: f32, tint: Vec3, wo: Vec3, u_choice: f32) -
             transmission: true,
         }),
         // `fresnel_dielectric` returns exactly 1 whenever `refract_local` finds total internal
-        // reflection (they test the same `sin2_t >= 1`), and `u_choice < 1` then reflects; this
-        // arm catches only `u_choice` outside [0, 1) and a transmitted ray in the tangent plane.
-        _ => Some(BsdfSample { pdf: 1.0, ..reflected }),
+        // reflection (they test the same `sin2_t >= 1`), which reflected above; this arm only
+        // catches a transmitted ray that rounding put in the tangent plane.
+        _ => Some(BsdfSample {
+            pdf: 1.0,
+            ..reflected
+        }),
     }
 }
 
@@ -139,10 +150,16 @@ mod tests {
         for eta in [1.0f32, 1.33, 1.5, 2.4, 0.6] {
             let by_hand = ((eta - 1.0) / (eta + 1.0)).powi(2);
             let f = fresnel_dielectric(1.0, eta);
-            assert!((f - by_hand).abs() < 1e-6, "eta {eta}: F = {f}, expected {by_hand}");
+            assert!(
+                (f - by_hand).abs() < 1e-6,
+                "eta {eta}: F = {f}, expected {by_hand}"
+            );
             // Seen from the other side, normal incidence reflects the same fraction.
             let back = fresnel_dielectric(-1.0, eta);
-            assert!((back - by_hand).abs() < 1e-6, "eta {eta} from inside: F = {back}");
+            assert!(
+                (back - by_hand).abs() < 1e-6,
+                "eta {eta} from inside: F = {back}"
+            );
         }
     }
 
@@ -164,13 +181,16 @@ mod tests {
     #[test]
     fn refraction_obeys_snell_and_is_reversible() {
         let eta = 1.5f32;
-        for theta in [0.0f32, 0.3, 0.9, 1.4, 1.5707] {
+        for theta in [0.0f32, 0.3, 0.9, 1.4, 1.55] {
             let wo = Vec3::new(theta.sin(), 0.0, theta.cos());
             let (wt, crossed) = refract_local(wo, eta).expect("no TIR entering a denser medium");
             assert_eq!(crossed, eta);
             assert!(wt.z < 0.0 && (wt.length() - 1.0).abs() < 1e-6);
             let sin_t = (wt.x * wt.x + wt.y * wt.y).sqrt();
-            assert!((theta.sin() - eta * sin_t).abs() < 1e-5, "Snell fails at theta {theta}");
+            assert!(
+                (theta.sin() - eta * sin_t).abs() < 1e-5,
+                "Snell fails at theta {theta}"
+            );
             // Tangential components point the opposite way: wo and wt are on opposite sides.
             assert!(wt.x <= 0.0);
             let (back, crossed_back) = refract_local(wt, eta).expect("the reverse path exists");

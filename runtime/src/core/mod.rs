@@ -1,0 +1,358 @@
+//! The scheduling core of a peer: queues, prefetch, stealing and frame completion, as a state
+//! machine with no I/O and no clock.
+//!
+//! As quinn-proto is to quinn: the driver feeds it inputs (`handle_*`, each with the current
+//! time) and drains its outputs (`poll_*`); the core never blocks, sleeps, reads a clock or
+//! touches a socket. That is what lets the simulator run thousands of cores in virtual time and
+//! tests script every race, and it makes a core's behaviour a pure function of its seed and
+//! its inputs: maps are ordered, randomness comes from a seeded generator.
+//!
+//! Every peer runs a worker (`worker.rs`, `steal.rs`); the peer that starts a frame also keeps
+//! its ledger (`ledger.rs`). The owner's worker and ledger talk through the same messages as
+//! remote peers do, delivered locally, so the owner needs no special cases. The protocol is
+//! described in `README.md` beside this file.
+
+mod config;
+mod event;
+mod ledger;
+mod steal;
+pub mod testing;
+mod worker;
+
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::time::Duration;
+
+pub use config::{Config, VictimOrder};
+pub use event::{Event, Failure, Fault, PeerStats};
+
+use crate::wire::{self, FrameId, Message, PeerId, TileId, TileResult, TileSpec};
+use ledger::Ledger;
+use steal::Estimates;
+use worker::Worker;
+
+/// A tile for the local renderer. Render it and give the result to
+/// [`Core::handle_tile_rendered`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WorkItem {
+    pub frame: FrameId,
+    pub tile: TileSpec,
+}
+
+/// A message the core cannot accept. The driver should close the connection it came on.
+#[derive(Debug, thiserror::Error)]
+pub enum ProtocolError {
+    #[error("{kind} belongs to the connection's driver, not the scheduling core")]
+    NotForCore { kind: &'static str },
+    #[error("{kind} for {frame}, which this peer does not own")]
+    NotOwner { kind: &'static str, frame: FrameId },
+}
+
+/// Why the owner could not start a frame.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    #[error("{0} is still running")]
+    Busy(FrameId),
+    #[error("{frame} is not newer than {newest}, which this peer has already seen")]
+    NotNewer { frame: FrameId, newest: FrameId },
+    #[error("{0} is not connected")]
+    UnknownPeer(PeerId),
+    #[error("{0} is assigned twice")]
+    DuplicateTile(TileId),
+    #[error("{0} has an invalid rectangle or predicted cost")]
+    InvalidTile(TileId),
+    #[error("a frame needs at least one tile")]
+    NoTiles,
+}
+
+/// One peer's scheduling state. See the module documentation and `README.md`.
+pub struct Core {
+    config: Config,
+    connected: BTreeSet<PeerId>,
+    worker: Worker,
+    ledger: Option<Ledger>,
+    last_owned: Option<FrameId>,
+    out: Outbox,
+}
+
+impl Core {
+    /// A core for peer `me`, whose renderer works on `slots` tiles at once. `seed` drives victim
+    /// choice; the core mixes `me` into it, so a cluster may give every peer the same seed.
+    pub fn new(me: PeerId, slots: usize, config: Config, seed: u64) -> Self {
+        let seed = seed ^ u64::from(me.0).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let estimates = Estimates::new(&config, seed);
+        Self {
+            config,
+            connected: BTreeSet::new(),
+            worker: Worker::new(me, slots, estimates),
+            ledger: None,
+            last_owned: None,
+            out: Outbox::new(me),
+        }
+    }
+
+    pub fn id(&self) -> PeerId {
+        self.worker.me
+    }
+
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The frame this peer is working on, if any.
+    pub fn frame(&self) -> Option<FrameId> {
+        self.worker.frame.as_ref().map(|state| state.id)
+    }
+
+    /// Tiles handed to the renderer (or ready to be) and not yet returned.
+    pub fn in_flight(&self) -> usize {
+        self.worker.in_flight.len()
+    }
+
+    /// (Owner) starts `frame`: `assignments` maps each participant (this peer included, if it
+    /// renders) to its initial tiles, typically a contiguous run of partition leaves in order.
+    pub fn start_frame(
+        &mut self,
+        now: Duration,
+        frame: FrameId,
+        assignments: BTreeMap<PeerId, Vec<TileSpec>>,
+    ) -> Result<(), FrameError> {
+        if let Some(ledger) = &self.ledger {
+            return Err(FrameError::Busy(ledger.frame()));
+        }
+        let newest = self.worker.newest().max(self.last_owned);
+        if let Some(newest) = newest.filter(|&newest| frame <= newest) {
+            return Err(FrameError::NotNewer { frame, newest });
+        }
+        let mut seen = BTreeSet::new();
+        for (peer, tiles) in &assignments {
+            if *peer != self.id() && !self.connected.contains(peer) {
+                return Err(FrameError::UnknownPeer(*peer));
+            }
+            for tile in tiles {
+                let limits = wire::Limits { max_tile_pixels: u64::MAX, ..wire::Limits::default() };
+                let valid = wire::check_rect(tile.rect, &limits).is_ok()
+                    && wire::check_cost(tile.predicted).is_ok();
+                if !valid {
+                    return Err(FrameError::InvalidTile(tile.id));
+                }
+                if !seen.insert(tile.id) {
+                    return Err(FrameError::DuplicateTile(tile.id));
+                }
+            }
+        }
+        if seen.is_empty() {
+            return Err(FrameError::NoTiles);
+        }
+        let timeout = self.config.peer_timeout;
+        self.ledger = Some(Ledger::start(now, self.id(), frame, assignments, timeout, &mut self.out));
+        self.settle(now);
+        Ok(())
+    }
+
+    /// A message from `from`. On error nothing changed, and the driver should close the
+    /// connection (then report it with [`Core::handle_peer_lost`]).
+    pub fn handle_message(
+        &mut self,
+        now: Duration,
+        from: PeerId,
+        message: Message,
+    ) -> Result<(), ProtocolError> {
+        self.worker.stats.messages_received += 1;
+        if let Some(ledger) = &mut self.ledger {
+            ledger.heard(now, from);
+        }
+        let result = self.dispatch(now, from, message);
+        self.settle(now);
+        result
+    }
+
+    /// The local renderer finished a tile that [`Core::poll_work`] handed out.
+    pub fn handle_tile_rendered(&mut self, now: Duration, result: TileResult) {
+        let (worker, mut cx) = self.split(now);
+        worker.on_tile_rendered(&mut cx, result);
+        self.settle(now);
+    }
+
+    /// Call when `now` reaches [`Core::poll_timeout`] (calling it earlier is harmless).
+    pub fn handle_timeout(&mut self, now: Duration) {
+        let (worker, mut cx) = self.split(now);
+        worker.thief_timeout(&mut cx);
+        worker.heartbeat(&mut cx);
+        if let Some(ledger) = &mut self.ledger {
+            ledger.on_timeout(now, &mut self.out);
+        }
+        self.settle(now);
+    }
+
+    /// A connection to `peer` is up (after the driver's handshake and scene transfer).
+    pub fn handle_peer_connected(&mut self, now: Duration, peer: PeerId) {
+        if peer != self.id() {
+            self.connected.insert(peer);
+        }
+        self.settle(now);
+    }
+
+    /// The connection to `peer` is gone: closed, timed out, or said `Goodbye`.
+    pub fn handle_peer_lost(&mut self, now: Duration, peer: PeerId) {
+        if peer == self.id() || !self.connected.remove(&peer) {
+            return;
+        }
+        let (worker, mut cx) = self.split(now);
+        worker.on_peer_lost(&mut cx, peer);
+        if let Some(ledger) = &mut self.ledger {
+            ledger.on_peer_lost(peer, Failure::Lost, &mut self.out);
+        }
+        self.settle(now);
+    }
+
+    /// A round-trip measurement from the transport (quinn's path RTT, for instance).
+    pub fn handle_rtt(&mut self, rtt: Duration) {
+        self.worker.estimates.sample_rtt(rtt);
+    }
+
+    /// Bytes the driver moved for this peer since its last report, for the frame's statistics.
+    pub fn record_bytes(&mut self, sent: u64, received: u64) {
+        self.worker.stats.bytes_sent += sent;
+        self.worker.stats.bytes_received += received;
+    }
+
+    /// The next message to send, and to whom.
+    pub fn poll_transmit(&mut self) -> Option<(PeerId, Message)> {
+        let transmit = self.out.transmits.pop_front()?;
+        self.worker.stats.messages_sent += 1;
+        Some(transmit)
+    }
+
+    /// The next tile for the local renderer. The core hands out at most `slots` at a time.
+    pub fn poll_work(&mut self) -> Option<WorkItem> {
+        self.worker.poll_work()
+    }
+
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.out.events.pop_front()
+    }
+
+    /// When to call [`Core::handle_timeout`], if ever.
+    pub fn poll_timeout(&self) -> Option<Duration> {
+        let thief = self.worker.thief_deadline(&self.config);
+        let heartbeat = self.worker.heartbeat_due(self.config.heartbeat_interval);
+        let owner = self.ledger.as_ref().and_then(Ledger::poll_timeout);
+        [thief, heartbeat, owner].into_iter().flatten().min()
+    }
+
+    fn split(&mut self, now: Duration) -> (&mut Worker, Ctx<'_>) {
+        let cx = Ctx { now, config: &self.config, connected: &self.connected, out: &mut self.out };
+        (&mut self.worker, cx)
+    }
+
+    fn dispatch(&mut self, now: Duration, from: PeerId, message: Message) -> Result<(), ProtocolError> {
+        let kind = message.kind();
+        let (worker, mut cx) = self.split(now);
+        match message {
+            Message::Hello { .. }
+            | Message::Welcome { .. }
+            | Message::Peers { .. }
+            | Message::Scene { .. }
+            | Message::SceneReady
+            | Message::Goodbye { .. } => return Err(ProtocolError::NotForCore { kind }),
+            Message::Assign { frame, peers, tiles } => {
+                worker.on_assign(&mut cx, from, frame, peers, tiles)
+            }
+            Message::StealRequest { frame, remaining } => {
+                worker.on_steal_request(&mut cx, from, frame, remaining)
+            }
+            Message::StealGrant { frame, tiles } => worker.on_grant(&mut cx, from, frame, tiles),
+            Message::StealRefuse { frame } => worker.on_refuse(&mut cx, from, frame),
+            Message::FrameDone { frame } => worker.on_frame_done(&mut cx, from, frame),
+            Message::StealNotice { frame, victim, tiles, stolen } => {
+                if let Some(ledger) = self.ledger_for(frame, kind)? {
+                    ledger.on_notice(from, victim, &tiles, stolen, &mut self.out);
+                }
+            }
+            Message::Status { frame, idle, assigned, stolen } => {
+                if let Some(ledger) = self.ledger_for(frame, kind)? {
+                    ledger.on_status(from, idle, assigned, stolen, &mut self.out);
+                }
+            }
+            Message::TileDone(result) => {
+                if let Some(ledger) = self.ledger_for(result.frame, kind)? {
+                    ledger.on_result(now, from, result, &mut self.out);
+                }
+            }
+            Message::FrameStats { frame, stats } => {
+                self.ledger_for(frame, kind)?;
+                self.out.events.push_back(Event::PeerStats { frame, peer: from, stats });
+            }
+        }
+        Ok(())
+    }
+
+    /// The ledger of `frame` if it is running here; `None` for a frame this peer owned and
+    /// finished (late messages are expected); an error for a frame it never owned.
+    fn ledger_for(
+        &mut self,
+        frame: FrameId,
+        kind: &'static str,
+    ) -> Result<Option<&mut Ledger>, ProtocolError> {
+        match &mut self.ledger {
+            Some(ledger) if ledger.frame() == frame => Ok(Some(ledger)),
+            _ if self.last_owned.is_some_and(|last| frame <= last) => Ok(None),
+            _ => Err(ProtocolError::NotOwner { kind, frame }),
+        }
+    }
+
+    /// Runs the core to a resting state after an input: delivers messages to itself, fills
+    /// renderer slots, steals, reports idleness, retires a completed ledger.
+    fn settle(&mut self, now: Duration) {
+        loop {
+            while let Some(message) = self.out.local.pop_front() {
+                let me = self.id();
+                if let Err(error) = self.dispatch(now, me, message) {
+                    debug_assert!(false, "a message to oneself was refused: {error}");
+                    tracing::error!(%error, "a message to oneself was refused");
+                }
+            }
+            if let Some(ledger) = self.ledger.take_if(|ledger| ledger.is_complete()) {
+                self.last_owned = Some(ledger.frame());
+            }
+            self.worker.fill_slots(now);
+            let (worker, mut cx) = self.split(now);
+            worker.maybe_steal(&mut cx);
+            worker.report_idle(&mut cx);
+            if self.out.local.is_empty() {
+                break;
+            }
+        }
+    }
+}
+
+/// What a handler needs besides the worker: the time, the policy, the connections and the
+/// outputs.
+pub(crate) struct Ctx<'a> {
+    now: Duration,
+    config: &'a Config,
+    connected: &'a BTreeSet<PeerId>,
+    out: &'a mut Outbox,
+}
+
+/// The core's outputs. Messages to this peer itself are delivered locally, never transmitted.
+pub(crate) struct Outbox {
+    me: PeerId,
+    transmits: VecDeque<(PeerId, Message)>,
+    local: VecDeque<Message>,
+    events: VecDeque<Event>,
+}
+
+impl Outbox {
+    fn new(me: PeerId) -> Self {
+        Self { me, transmits: VecDeque::new(), local: VecDeque::new(), events: VecDeque::new() }
+    }
+
+    fn send(&mut self, to: PeerId, message: Message) {
+        if to == self.me {
+            self.local.push_back(message);
+        } else {
+            self.transmits.push_back((to, message));
+        }
+    }
+}

@@ -1,0 +1,278 @@
+//! Work stealing between peers: when a peer asks, whom it asks, and what a victim gives.
+//!
+//! A peer steals before it runs dry, not after: when the work it holds would last less than a
+//! few round trips (the low-water mark, from its measured work rate and round-trip time), so the
+//! grant lands in its prefetch queue while its renderer is still busy. A victim gives from the
+//! far end of its queue, which its own renderer would reach last, about half the difference
+//! between its work and the thief's, and refuses when that would not pay for the transfer. The
+//! rules are written out in `core/README.md`.
+
+use std::time::Duration;
+
+use super::Ctx;
+use super::config::{Config, VictimOrder};
+use super::worker::{FrameState, Worker, shrink};
+use crate::wire::{FrameId, Message, PeerId, TileSpec};
+
+/// Where a peer's stealing stands within a frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Thief {
+    /// Not asking anyone; asks as soon as it wants work.
+    Ready,
+    /// Waiting for `victim`'s answer to a request sent at `sent`.
+    Asking { victim: PeerId, sent: Duration },
+    /// Every victim of the last round refused; asks again at `until`.
+    Backoff { until: Duration },
+}
+
+/// A round of requests: victim `start` first, then the others in turn.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Round {
+    start: usize,
+    tried: usize,
+}
+
+/// What a peer has measured about itself and the network.
+pub(super) struct Estimates {
+    /// Predicted cost rendered per second by one slot; `None` before the first tile.
+    slot_rate: Option<f64>,
+    rtt: Duration,
+    rtt_measured: bool,
+    rng: Rng,
+}
+
+impl Estimates {
+    pub(super) fn new(config: &Config, seed: u64) -> Self {
+        Self { slot_rate: None, rtt: config.initial_rtt, rtt_measured: false, rng: Rng(seed) }
+    }
+
+    /// Folds in one rendered tile: its predicted cost and how long a slot took over it.
+    pub(super) fn sample_rate(&mut self, predicted: f64, took: Duration) {
+        let secs = took.as_secs_f64();
+        if predicted > 0.0 && secs > 0.0 {
+            let sample = predicted / secs;
+            self.slot_rate = Some(self.slot_rate.map_or(sample, |r| r + (sample - r) * 0.25));
+        }
+    }
+
+    /// Folds in one round-trip measurement, smoothed as TCP does.
+    pub(super) fn sample_rtt(&mut self, rtt: Duration) {
+        self.rtt = if self.rtt_measured { (self.rtt * 7 + rtt) / 8 } else { rtt };
+        self.rtt_measured = true;
+    }
+
+    /// Seconds this peer needs for `work`, if it has measured its rate yet.
+    fn seconds_for(&self, work: f64, slots: usize) -> Option<f64> {
+        self.slot_rate.filter(|r| *r > 0.0).map(|r| work / (r * slots.max(1) as f64))
+    }
+}
+
+impl Worker {
+    /// Predicted work this peer still holds in `frame`: its queues plus what is left of the
+    /// tiles in its renderer (assuming they progress at the measured rate).
+    pub(super) fn remaining_work(&self, now: Duration) -> f64 {
+        let Some(state) = &self.frame else { return 0.0 };
+        let rate = self.estimates.slot_rate.unwrap_or(0.0);
+        let in_flight: f64 = self
+            .frame_in_flight(state.id)
+            .map(|f| (f.predicted - now.saturating_sub(f.started).as_secs_f64() * rate).max(0.0))
+            .sum();
+        state.queue_work + state.prefetch_work + in_flight
+    }
+
+    /// Whether this peer is below its low-water mark.
+    fn wants_work(&self, config: &Config, now: Duration) -> bool {
+        let Some(state) = &self.frame else { return false };
+        let waiting = state.queue.len() + state.prefetch.len();
+        if (waiting == 0 && self.in_flight.len() < self.slots) || waiting < config.prefetch_depth {
+            return true;
+        }
+        let low_water = config.low_water_rtts * self.estimates.rtt.as_secs_f64();
+        self.estimates
+            .seconds_for(self.remaining_work(now), self.slots)
+            .is_some_and(|seconds| seconds < low_water)
+    }
+
+    /// Sends a steal request if this peer wants work and may ask.
+    pub(super) fn maybe_steal(&mut self, cx: &mut Ctx) {
+        let Some(state) = &mut self.frame else { return };
+        match state.thief {
+            Thief::Asking { .. } => return,
+            Thief::Backoff { until } if cx.now < until => return,
+            Thief::Backoff { .. } | Thief::Ready => state.thief = Thief::Ready,
+        }
+        if !cx.config.steal || !self.wants_work(cx.config, cx.now) {
+            return;
+        }
+        let Self { me, frame, estimates, .. } = self;
+        let Some(state) = frame else { return };
+        let victims: Vec<PeerId> =
+            state.peers.iter().copied().filter(|p| p != me && cx.connected.contains(p)).collect();
+        if victims.is_empty() {
+            return;
+        }
+        let round = *state.round.get_or_insert_with(|| Round {
+            start: match cx.config.victims {
+                VictimOrder::RandomStart => estimates.rng.below(victims.len()),
+                VictimOrder::Ring => victims.iter().position(|p| p > me).unwrap_or(0),
+            },
+            tried: 0,
+        });
+        if round.tried >= victims.len() {
+            state.thief = Thief::Backoff { until: cx.now + cx.config.steal_backoff };
+            state.round = None;
+            return;
+        }
+        let victim = victims[(round.start + round.tried) % victims.len()];
+        let remaining = self.remaining_work(cx.now);
+        let state = self.frame.as_mut().expect("invariant: matched Some above");
+        state.thief = Thief::Asking { victim, sent: cx.now };
+        self.stats.steal_requests_sent += 1;
+        cx.out.send(victim, Message::StealRequest { frame: state.id, remaining });
+    }
+
+    /// Answers a thief: a grant from the far end of the queue, or a refusal.
+    pub(super) fn on_steal_request(
+        &mut self,
+        cx: &mut Ctx,
+        thief: PeerId,
+        frame: FrameId,
+        thief_remaining: f64,
+    ) {
+        self.stats.steal_requests_received += 1;
+        let running = self.frame.as_ref().is_some_and(|state| state.id == frame);
+        let count = if cx.config.steal && running {
+            self.grant_size(cx.config, cx.now, thief_remaining)
+        } else {
+            0
+        };
+        if count == 0 {
+            cx.out.send(thief, Message::StealRefuse { frame });
+            return;
+        }
+        let state = self.frame.as_mut().expect("invariant: a grant needs a running frame");
+        let tiles: Vec<TileSpec> = state.queue.split_off(state.queue.len() - count).into();
+        let given: f64 = tiles.iter().map(|tile| tile.predicted).sum();
+        state.queue_work = shrink(state.queue_work, given, state.queue.is_empty());
+        self.stats.tiles_given += count as u32;
+        cx.out.send(thief, Message::StealGrant { frame, tiles });
+    }
+
+    /// How many tiles from the back of the queue to give a thief holding `thief_remaining`: as
+    /// many as fit in half the difference between the two peers' work (at most half the queue),
+    /// or none when that is worth less than the transfer.
+    fn grant_size(&self, config: &Config, now: Duration, thief_remaining: f64) -> usize {
+        let Some(state) = &self.frame else { return 0 };
+        let target = (self.remaining_work(now) - thief_remaining) / 2.0;
+        let most = config.max_grant_tiles.min(state.queue.len().div_ceil(2));
+        let (mut count, mut given) = (0, 0.0);
+        for tile in state.queue.iter().rev().take(most) {
+            if given + tile.predicted > target {
+                break;
+            }
+            count += 1;
+            given += tile.predicted;
+        }
+        let worth_time = self.estimates.seconds_for(given, self.slots).is_none_or(|seconds| {
+            seconds >= config.min_grant_rtts * self.estimates.rtt.as_secs_f64()
+        });
+        if given > 0.0 && given >= config.min_steal_cost && worth_time { count } else { 0 }
+    }
+
+    /// Keeps granted tiles, however late they come: the victim has already let go of them.
+    pub(super) fn on_grant(
+        &mut self,
+        cx: &mut Ctx,
+        victim: PeerId,
+        frame: FrameId,
+        tiles: Vec<TileSpec>,
+    ) {
+        let Some(state) = self.frame.as_mut().filter(|state| state.id == frame) else {
+            tracing::debug!(%frame, %victim, "grant for a finished frame: dropped");
+            return;
+        };
+        if let Thief::Asking { victim: asked, sent } = state.thief
+            && asked == victim
+        {
+            self.estimates.sample_rtt(cx.now.saturating_sub(sent));
+            if tiles.is_empty() {
+                self.stats.steal_requests_refused += 1;
+                state.give_up_on_victim();
+                return;
+            }
+            state.thief = Thief::Ready;
+            state.round = None;
+        }
+        if tiles.is_empty() {
+            return;
+        }
+        state.stolen += 1;
+        self.stats.tiles_stolen += tiles.len() as u32;
+        state.prefetch_work += tiles.iter().map(|tile| tile.predicted).sum::<f64>();
+        let ids = tiles.iter().map(|tile| tile.id).collect();
+        state.prefetch.extend(tiles);
+        let notice = Message::StealNotice { frame, victim, tiles: ids, stolen: state.stolen };
+        state.send_to_owner(cx, notice);
+    }
+
+    pub(super) fn on_refuse(&mut self, cx: &mut Ctx, victim: PeerId, frame: FrameId) {
+        let Some(state) = self.frame.as_mut().filter(|state| state.id == frame) else { return };
+        if let Thief::Asking { victim: asked, sent } = state.thief
+            && asked == victim
+        {
+            self.estimates.sample_rtt(cx.now.saturating_sub(sent));
+            self.stats.steal_requests_refused += 1;
+            state.give_up_on_victim();
+        }
+    }
+
+    /// When the pending request times out, or the backoff ends.
+    pub(super) fn thief_deadline(&self, config: &Config) -> Option<Duration> {
+        match self.frame.as_ref()?.thief {
+            Thief::Ready => None,
+            Thief::Asking { sent, .. } => Some(sent + config.steal_timeout),
+            Thief::Backoff { until } => Some(until),
+        }
+    }
+
+    /// Counts an unanswered request as refused. A backoff needs no action here: the next
+    /// `maybe_steal` sees that it is over.
+    pub(super) fn thief_timeout(&mut self, cx: &mut Ctx) {
+        let Some(state) = &mut self.frame else { return };
+        if let Thief::Asking { sent, .. } = state.thief
+            && cx.now >= sent + cx.config.steal_timeout
+        {
+            self.stats.steal_requests_refused += 1;
+            state.give_up_on_victim();
+        }
+    }
+}
+
+impl FrameState {
+    /// Moves on to the round's next victim.
+    pub(super) fn give_up_on_victim(&mut self) {
+        self.thief = Thief::Ready;
+        if let Some(round) = &mut self.round {
+            round.tried += 1;
+        }
+    }
+}
+
+/// SplitMix64: tiny, fast, and good enough to pick victims; its whole state is one `u64`, so
+/// a core's choices are a pure function of its seed and inputs.
+pub(super) struct Rng(pub(super) u64);
+
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// A uniform index below `n` (which must not be 0), by multiply-shift.
+    fn below(&mut self, n: usize) -> usize {
+        ((u128::from(self.next_u64()) * n as u128) >> 64) as usize
+    }
+}

@@ -1,0 +1,284 @@
+//! The peer's side of a frame: its queues, its renderer's slots, and what it owes the owner.
+//!
+//! Every peer, the owner included, runs one worker. Its tiles wait in two queues: `queue` holds
+//! the tiles the owner gave it, in partition order, rendered from the front and given to thieves
+//! from the back; `prefetch` holds tiles it stole, which nobody can steal again, so that a peer
+//! that just paid a round trip for work keeps it. Stealing itself lives in `steal.rs`.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::time::Duration;
+
+use super::steal::{Estimates, Round, Thief};
+use super::{Ctx, WorkItem};
+use crate::core::event::{Event, PeerStats};
+use crate::wire::{FrameId, Message, PeerId, TileId, TileResult, TileSpec};
+
+pub(super) struct Worker {
+    pub(super) me: PeerId,
+    pub(super) slots: usize,
+    pub(super) frame: Option<FrameState>,
+    /// The newest frame this peer has been assigned, running or finished.
+    newest: Option<FrameId>,
+    /// Tiles handed to the renderer (or waiting in `ready` for the driver to hand over), of any
+    /// frame: a tile of a finished frame still occupies its slot until the renderer returns it.
+    pub(super) in_flight: BTreeMap<(FrameId, TileId), InFlight>,
+    ready: VecDeque<WorkItem>,
+    pub(super) estimates: Estimates,
+    /// Counts since the last `FrameStats`, reported and reset when a frame ends.
+    pub(super) stats: PeerStats,
+}
+
+pub(super) struct FrameState {
+    pub(super) id: FrameId,
+    pub(super) owner: PeerId,
+    /// The frame's live participants, sorted; this peer steals only from them.
+    pub(super) peers: Vec<PeerId>,
+    pub(super) queue: VecDeque<TileSpec>,
+    pub(super) queue_work: f64,
+    pub(super) prefetch: VecDeque<TileSpec>,
+    pub(super) prefetch_work: f64,
+    started: Duration,
+    /// `Assign`s and grants received this frame: the owner compares them with what it knows
+    /// was sent, to tell a stale idle report from a current one.
+    assigned: u32,
+    pub(super) stolen: u32,
+    pub(super) thief: Thief,
+    pub(super) round: Option<Round>,
+    /// The `(assigned, stolen)` counts of the last idle report, so it is sent once.
+    idle_reported: Option<(u32, u32)>,
+    last_to_owner: Duration,
+}
+
+pub(super) struct InFlight {
+    pub(super) predicted: f64,
+    pub(super) started: Duration,
+    /// Busy time before this instant is already in `stats.busy`.
+    accounted_from: Duration,
+}
+
+impl Worker {
+    pub(super) fn new(me: PeerId, slots: usize, estimates: Estimates) -> Self {
+        let stats = PeerStats { slots: slots as u32, ..PeerStats::default() };
+        Self {
+            me,
+            slots,
+            frame: None,
+            newest: None,
+            in_flight: BTreeMap::new(),
+            ready: VecDeque::new(),
+            estimates,
+            stats,
+        }
+    }
+
+    /// The newest frame this peer has been assigned; the owner never starts an older one.
+    pub(super) fn newest(&self) -> Option<FrameId> {
+        self.newest
+    }
+
+    pub(super) fn poll_work(&mut self) -> Option<WorkItem> {
+        self.ready.pop_front()
+    }
+
+    pub(super) fn on_assign(
+        &mut self,
+        cx: &mut Ctx,
+        from: PeerId,
+        frame: FrameId,
+        mut peers: Vec<PeerId>,
+        tiles: Vec<TileSpec>,
+    ) {
+        if self.newest.is_some_and(|newest| frame < newest)
+            || (self.newest == Some(frame) && self.frame.is_none())
+        {
+            tracing::debug!(%frame, %from, "tiles of a finished frame: dropped");
+            return;
+        }
+        if self.frame.as_ref().is_some_and(|running| running.id < frame) {
+            // The owner started a new frame, so the old one is complete even though its
+            // `FrameDone` has not arrived (or was lost with a connection).
+            self.finish_frame(cx);
+        }
+        peers.sort_unstable();
+        peers.dedup();
+        let now = cx.now;
+        let state = self.frame.get_or_insert_with(|| {
+            for flight in self.in_flight.values_mut() {
+                flight.accounted_from = flight.accounted_from.max(now);
+            }
+            FrameState::new(frame, from, now)
+        });
+        state.peers = peers;
+        state.queue_work += tiles.iter().map(|tile| tile.predicted).sum::<f64>();
+        state.queue.extend(tiles);
+        state.assigned += 1;
+        // New work ends a backoff: the thief is not idle any more.
+        if matches!(state.thief, Thief::Backoff { .. }) {
+            state.thief = Thief::Ready;
+            state.round = None;
+        }
+        self.newest = Some(frame);
+    }
+
+    pub(super) fn on_frame_done(&mut self, cx: &mut Ctx, from: PeerId, frame: FrameId) {
+        if self.frame.as_ref().is_some_and(|state| state.id == frame && state.owner == from) {
+            self.finish_frame(cx);
+        }
+    }
+
+    /// Ends the running frame: reports its statistics to its owner and drops its leftovers.
+    fn finish_frame(&mut self, cx: &mut Ctx) {
+        let Some(state) = self.frame.take() else { return };
+        let now = cx.now;
+        for flight in self.in_flight.values_mut() {
+            self.stats.busy += now.saturating_sub(flight.accounted_from);
+            flight.accounted_from = now;
+        }
+        self.drop_unstarted(state.id);
+        let mut stats = std::mem::take(&mut self.stats);
+        stats.slots = self.slots as u32;
+        stats.wall = now.saturating_sub(state.started);
+        stats.idle = (stats.wall * stats.slots).saturating_sub(stats.busy);
+        self.stats.slots = self.slots as u32;
+        cx.out.send(state.owner, Message::FrameStats { frame: state.id, stats });
+    }
+
+    /// Forgets tiles of `frame` the driver has not yet taken with `poll_work`.
+    fn drop_unstarted(&mut self, frame: FrameId) {
+        let in_flight = &mut self.in_flight;
+        self.ready.retain(|item| {
+            let keep = item.frame != frame;
+            if !keep {
+                in_flight.remove(&(item.frame, item.tile.id));
+            }
+            keep
+        });
+    }
+
+    pub(super) fn on_tile_rendered(&mut self, cx: &mut Ctx, result: TileResult) {
+        let Some(flight) = self.in_flight.remove(&(result.frame, result.tile)) else {
+            tracing::warn!(frame = %result.frame, tile = %result.tile, "result of a tile not in flight: dropped");
+            return;
+        };
+        let now = cx.now;
+        self.stats.busy += now.saturating_sub(flight.accounted_from);
+        self.stats.tiles_rendered += 1;
+        self.estimates.sample_rate(flight.predicted, now.saturating_sub(flight.started));
+        match &mut self.frame {
+            Some(state) if state.id == result.frame => {
+                state.send_to_owner(cx, Message::TileDone(result));
+            }
+            _ => tracing::debug!(frame = %result.frame, tile = %result.tile, "result of a finished frame: dropped"),
+        }
+    }
+
+    /// Drops the running frame if `peer` owned it; returns whether it did.
+    pub(super) fn on_peer_lost(&mut self, cx: &mut Ctx, peer: PeerId) {
+        let Some(state) = &mut self.frame else { return };
+        if state.owner == peer {
+            let frame = state.id;
+            self.frame = None;
+            self.drop_unstarted(frame);
+            cx.out.events.push_back(Event::OwnerLost { frame });
+            return;
+        }
+        state.peers.retain(|&other| other != peer);
+        if matches!(state.thief, Thief::Asking { victim, .. } if victim == peer) {
+            state.give_up_on_victim();
+        }
+    }
+
+    /// Hands queued tiles to free renderer slots: own tiles first, stolen ones after.
+    pub(super) fn fill_slots(&mut self, now: Duration) {
+        let Some(state) = &mut self.frame else { return };
+        while self.in_flight.len() < self.slots {
+            let tile = if let Some(tile) = state.queue.pop_front() {
+                state.queue_work = shrink(state.queue_work, tile.predicted, state.queue.is_empty());
+                tile
+            } else if let Some(tile) = state.prefetch.pop_front() {
+                let empty = state.prefetch.is_empty();
+                state.prefetch_work = shrink(state.prefetch_work, tile.predicted, empty);
+                tile
+            } else {
+                break;
+            };
+            let flight = InFlight { predicted: tile.predicted, started: now, accounted_from: now };
+            self.in_flight.insert((state.id, tile.id), flight);
+            self.ready.push_back(WorkItem { frame: state.id, tile });
+        }
+    }
+
+    /// Tiles of the running frame in the renderer.
+    pub(super) fn frame_in_flight(&self, frame: FrameId) -> impl Iterator<Item = &InFlight> {
+        self.in_flight.range((frame, TileId(0))..=(frame, TileId(u32::MAX))).map(|(_, f)| f)
+    }
+
+    /// Tells the owner, once per change, that this peer holds no work of the frame.
+    pub(super) fn report_idle(&mut self, cx: &mut Ctx) {
+        let Some(state) = &self.frame else { return };
+        let holds_work = !state.queue.is_empty()
+            || !state.prefetch.is_empty()
+            || self.frame_in_flight(state.id).next().is_some()
+            || matches!(state.thief, Thief::Asking { .. });
+        let counts = (state.assigned, state.stolen);
+        if holds_work || state.idle_reported == Some(counts) {
+            return;
+        }
+        let state = self.frame.as_mut().expect("invariant: checked just above");
+        state.idle_reported = Some(counts);
+        let status = state.status(true);
+        state.send_to_owner(cx, status);
+    }
+
+    /// Sends a heartbeat if the owner has heard nothing from this peer for a while.
+    pub(super) fn heartbeat(&mut self, cx: &mut Ctx) {
+        let Some(due) = self.heartbeat_due(cx.config.heartbeat_interval) else { return };
+        if cx.now >= due {
+            let state = self.frame.as_mut().expect("invariant: a heartbeat is due only in a frame");
+            let status = state.status(false);
+            state.send_to_owner(cx, status);
+        }
+    }
+
+    pub(super) fn heartbeat_due(&self, interval: Duration) -> Option<Duration> {
+        let state = self.frame.as_ref()?;
+        let idle = state.idle_reported == Some((state.assigned, state.stolen));
+        (state.owner != self.me && !idle).then(|| state.last_to_owner + interval)
+    }
+}
+
+impl FrameState {
+    fn new(id: FrameId, owner: PeerId, now: Duration) -> Self {
+        Self {
+            id,
+            owner,
+            peers: Vec::new(),
+            queue: VecDeque::new(),
+            queue_work: 0.0,
+            prefetch: VecDeque::new(),
+            prefetch_work: 0.0,
+            started: now,
+            assigned: 0,
+            stolen: 0,
+            thief: Thief::Ready,
+            round: None,
+            idle_reported: None,
+            last_to_owner: now,
+        }
+    }
+
+    pub(super) fn send_to_owner(&mut self, cx: &mut Ctx, message: Message) {
+        self.last_to_owner = cx.now;
+        cx.out.send(self.owner, message);
+    }
+
+    fn status(&self, idle: bool) -> Message {
+        Message::Status { frame: self.id, idle, assigned: self.assigned, stolen: self.stolen }
+    }
+}
+
+/// Subtracts a tile's cost from a running sum, resetting it to exactly zero when its queue
+/// empties so that rounding errors cannot accumulate over a frame.
+pub(super) fn shrink(sum: f64, cost: f64, now_empty: bool) -> f64 {
+    if now_empty { 0.0 } else { (sum - cost).max(0.0) }
+}

@@ -1,0 +1,378 @@
+//! The wire protocol: every message peers exchange, and its byte encoding.
+//!
+//! Decoding is where a broken or hostile peer meets us, so it is a pure function over a byte slice
+//! that a fuzzer can drive: no I/O, no panics, and every length a message claims is checked
+//! against [`Limits`] and against the rest of the message (a tile's pixel buffer must hold exactly
+//! its rectangle) before the scheduling core sees it.
+//!
+//! Messages are postcard-encoded: compact and fast, but not self-describing, so both ends must
+//! agree on the layout. [`PROTOCOL_VERSION`] in the `Hello`/`Welcome` handshake is that agreement.
+//! Those two variants keep their position and their leading `version` field in every future
+//! version, so [`decode`] can name a version mismatch instead of reporting garbage. Byte buffers
+//! use `serde_bytes`, which postcard copies in one piece instead of element by element.
+//!
+//! Allocation stays bounded even before validation: [`decode`] refuses input longer than
+//! [`Limits::max_message_bytes`], postcard never pre-allocates more elements than there are input
+//! bytes left (and serde caps pre-allocation at 1 MiB), and byte buffers are copied from the
+//! input, so no claimed length can make us allocate more than a small multiple of the input.
+
+use std::fmt;
+
+use balancer::Rect;
+use serde::{Deserialize, Serialize};
+
+use crate::core::PeerStats;
+
+#[cfg(test)]
+mod tests;
+
+/// The version of this protocol. Bump it on any change to [`Message`]'s layout.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Pixels travel as linear RGB `f32` triples, little-endian: 12 bytes per pixel.
+pub const BYTES_PER_PIXEL: u64 = 12;
+
+/// A cost map holds at most one 8-byte value per pixel; anything longer is malformed.
+pub const MAX_COST_BYTES_PER_PIXEL: u64 = 8;
+
+/// One message between two peers.
+///
+/// `Hello` to `SceneReady` and `Goodbye` belong to the connection's driver (handshake, scene
+/// distribution, orderly close); the rest are the scheduling core's (see `core/README.md`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Message {
+    /// First message of the dialing side. Must stay variant 0 with `version` first.
+    Hello { version: u32, peer: PeerId, slots: u32 },
+    /// Reply to `Hello`. Must stay variant 1 with `version` first.
+    Welcome { version: u32, peer: PeerId },
+    /// Where the other peers listen, so that peers can steal from each other directly.
+    Peers { peers: Vec<PeerAddress> },
+    /// The scene's files; the receiver checks each file's hash before loading it.
+    Scene { files: Vec<SceneFile> },
+    /// The receiver has loaded the scene and can take tiles.
+    SceneReady,
+    /// The owner gives tiles of `frame` to the receiver (its initial set, or re-issued tiles).
+    /// `peers` are the frame's live participants: the receiver steals only from them.
+    Assign { frame: FrameId, peers: Vec<PeerId>, tiles: Vec<TileSpec> },
+    /// A thief asks for work; `remaining` is the predicted work it still holds.
+    StealRequest { frame: FrameId, remaining: f64 },
+    /// The victim's answer: tiles from the far end of its queue.
+    StealGrant { frame: FrameId, tiles: Vec<TileSpec> },
+    /// The victim's answer when giving would not pay for the transfer.
+    StealRefuse { frame: FrameId },
+    /// A thief tells the owner which tiles it took from `victim`, so the owner's ledger knows
+    /// who holds them. `stolen` counts the grants the thief has received this frame.
+    StealNotice { frame: FrameId, victim: PeerId, tiles: Vec<TileId>, stolen: u32 },
+    /// A peer's liveness and idleness report to the owner. `assigned` and `stolen` count the
+    /// `Assign`s and grants the peer has received this frame, so the owner can tell a stale
+    /// report from a current one.
+    Status { frame: FrameId, idle: bool, assigned: u32, stolen: u32 },
+    /// A finished tile, sent to the owner by whoever rendered it.
+    TileDone(TileResult),
+    /// The owner has every tile of `frame`; peers drop what is left of it.
+    FrameDone { frame: FrameId },
+    /// A peer's statistics for `frame`, sent to the owner after `FrameDone`.
+    FrameStats { frame: FrameId, stats: PeerStats },
+    /// The sender is closing the connection.
+    Goodbye { reason: GoodbyeReason },
+}
+
+impl Message {
+    /// The variant's name, for errors and logs.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Message::Hello { .. } => "Hello",
+            Message::Welcome { .. } => "Welcome",
+            Message::Peers { .. } => "Peers",
+            Message::Scene { .. } => "Scene",
+            Message::SceneReady => "SceneReady",
+            Message::Assign { .. } => "Assign",
+            Message::StealRequest { .. } => "StealRequest",
+            Message::StealGrant { .. } => "StealGrant",
+            Message::StealRefuse { .. } => "StealRefuse",
+            Message::StealNotice { .. } => "StealNotice",
+            Message::Status { .. } => "Status",
+            Message::TileDone(_) => "TileDone",
+            Message::FrameDone { .. } => "FrameDone",
+            Message::FrameStats { .. } => "FrameStats",
+            Message::Goodbye { .. } => "Goodbye",
+        }
+    }
+}
+
+/// Why a peer closes a connection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum GoodbyeReason {
+    /// The render is over or the user stopped it.
+    Shutdown,
+    /// The other side speaks another [`PROTOCOL_VERSION`].
+    VersionMismatch,
+    /// A scene file did not match its hash or did not load.
+    BadScene,
+    /// The other side sent a malformed or unexpected message.
+    ProtocolViolation,
+}
+
+/// A peer, numbered by whoever sets up the cluster.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct PeerId(pub u32);
+
+/// A tile, unique within its frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct TileId(pub u32);
+
+/// A frame of an animation; frames are numbered upwards and never reused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct FrameId(pub u64);
+
+macro_rules! display_id {
+    ($($ty:ident => $prefix:literal),*) => {$(
+        impl fmt::Display for $ty {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                write!(f, concat!($prefix, "{}"), self.0)
+            }
+        }
+    )*};
+}
+display_id!(PeerId => "peer ", TileId => "tile ", FrameId => "frame ");
+
+/// A tile to render: a leaf of the partition with the predictor's cost estimate (in the
+/// predictor's units; only ratios between estimates matter to the core).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TileSpec {
+    pub id: TileId,
+    pub rect: Rect,
+    pub predicted: f64,
+}
+
+/// A rendered tile: its pixels (see [`BYTES_PER_PIXEL`]) and its measured block cost map, both
+/// opaque to the scheduling core.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TileResult {
+    pub frame: FrameId,
+    pub tile: TileId,
+    pub rect: Rect,
+    #[serde(with = "serde_bytes")]
+    pub pixels: Vec<u8>,
+    #[serde(with = "serde_bytes")]
+    pub costs: Vec<u8>,
+}
+
+/// One file of a scene. `name` is a relative path with `/` separators; `hash` is the content
+/// hash of `bytes`, computed and checked by the drivers (blake3 by convention).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneFile {
+    pub name: String,
+    pub hash: [u8; 32],
+    #[serde(with = "serde_bytes")]
+    pub bytes: Vec<u8>,
+}
+
+/// Where a peer listens, as a socket address string (`"10.0.0.7:4433"`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PeerAddress {
+    pub peer: PeerId,
+    pub addr: String,
+}
+
+/// Bounds on what one decoded message may contain.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Limits {
+    /// Longest encoded message. Scenes travel in one message, so this bounds the scene too.
+    pub max_message_bytes: usize,
+    /// Most tiles (or tile ids) in one message.
+    pub max_tiles_per_message: usize,
+    /// Most peers named in one message.
+    pub max_peers: usize,
+    /// Most files in a scene.
+    pub max_scene_files: usize,
+    /// Largest scene file.
+    pub max_file_bytes: usize,
+    /// Longest file name or address, in bytes.
+    pub max_name_bytes: usize,
+    /// Largest tile, in pixels.
+    pub max_tile_pixels: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            max_message_bytes: 256 << 20,
+            max_tiles_per_message: 1 << 16,
+            max_peers: 1 << 16,
+            max_scene_files: 4096,
+            max_file_bytes: 256 << 20,
+            max_name_bytes: 1024,
+            max_tile_pixels: 1 << 24,
+        }
+    }
+}
+
+/// Why bytes did not decode to an acceptable [`Message`].
+#[derive(Debug, thiserror::Error)]
+pub enum WireError {
+    #[error("message of {len} bytes exceeds the limit of {max}")]
+    TooLong { len: usize, max: usize },
+    #[error("malformed message: {0}")]
+    Malformed(#[from] postcard::Error),
+    #[error("{0} trailing bytes after the message")]
+    Trailing(usize),
+    #[error("peer speaks protocol version {theirs}, we speak {ours}")]
+    VersionMismatch { theirs: u32, ours: u32 },
+    #[error("{what}: {len} exceeds the limit of {max}")]
+    Limit { what: &'static str, len: u64, max: u64 },
+    #[error("invalid {what}")]
+    Invalid { what: &'static str },
+}
+
+/// Encodes a message. Pure; never fails.
+pub fn encode(message: &Message) -> Vec<u8> {
+    postcard::to_stdvec(message)
+        .expect("invariant: every Message field has a known length, so postcard cannot fail")
+}
+
+/// Decodes and validates one message. Pure and total: any input gives a message or an error.
+pub fn decode(bytes: &[u8], limits: &Limits) -> Result<Message, WireError> {
+    if bytes.len() > limits.max_message_bytes {
+        return Err(WireError::TooLong { len: bytes.len(), max: limits.max_message_bytes });
+    }
+    check_handshake_version(bytes)?;
+    let (message, rest) = postcard::take_from_bytes::<Message>(bytes)?;
+    if !rest.is_empty() {
+        return Err(WireError::Trailing(rest.len()));
+    }
+    validate(&message, limits)?;
+    Ok(message)
+}
+
+/// Reads the version of a `Hello` or `Welcome` before decoding the rest, whose layout may
+/// differ in another version.
+fn check_handshake_version(bytes: &[u8]) -> Result<(), WireError> {
+    // Both are postcard varints: the variant index, then the leading `version` field.
+    let Ok(((variant, theirs), _)) = postcard::take_from_bytes::<(u32, u32)>(bytes) else {
+        return Ok(());
+    };
+    if variant <= 1 && theirs != PROTOCOL_VERSION {
+        return Err(WireError::VersionMismatch { theirs, ours: PROTOCOL_VERSION });
+    }
+    Ok(())
+}
+
+fn validate(message: &Message, limits: &Limits) -> Result<(), WireError> {
+    match message {
+        Message::Hello { .. } | Message::Welcome { .. } | Message::SceneReady => Ok(()),
+        Message::Peers { peers } => {
+            bound("peers", peers.len(), limits.max_peers)?;
+            for entry in peers {
+                bound("address length", entry.addr.len(), limits.max_name_bytes)?;
+            }
+            Ok(())
+        }
+        Message::Scene { files } => {
+            bound("scene files", files.len(), limits.max_scene_files)?;
+            for file in files {
+                bound("scene file size", file.bytes.len(), limits.max_file_bytes)?;
+                bound("file name length", file.name.len(), limits.max_name_bytes)?;
+                check_file_name(&file.name)?;
+            }
+            Ok(())
+        }
+        Message::Assign { peers, tiles, .. } => {
+            bound("peers", peers.len(), limits.max_peers)?;
+            check_tiles(tiles, limits)
+        }
+        Message::StealRequest { remaining, .. } => check_cost(*remaining),
+        Message::StealGrant { tiles, .. } => check_tiles(tiles, limits),
+        Message::StealNotice { tiles, .. } => {
+            bound("tiles", tiles.len(), limits.max_tiles_per_message)
+        }
+        Message::TileDone(result) => check_result(result, limits),
+        Message::StealRefuse { .. }
+        | Message::Status { .. }
+        | Message::FrameDone { .. }
+        | Message::FrameStats { .. }
+        | Message::Goodbye { .. } => Ok(()),
+    }
+}
+
+fn bound(what: &'static str, len: usize, max: usize) -> Result<(), WireError> {
+    if len > max {
+        return Err(WireError::Limit { what, len: len as u64, max: max as u64 });
+    }
+    Ok(())
+}
+
+fn check_tiles(tiles: &[TileSpec], limits: &Limits) -> Result<(), WireError> {
+    bound("tiles", tiles.len(), limits.max_tiles_per_message)?;
+    for tile in tiles {
+        check_rect(tile.rect, limits)?;
+        check_cost(tile.predicted)?;
+    }
+    Ok(())
+}
+
+/// A predicted cost is a finite, non-negative number: anything else would poison the steal
+/// arithmetic.
+pub(crate) fn check_cost(cost: f64) -> Result<(), WireError> {
+    if cost.is_finite() && cost >= 0.0 {
+        Ok(())
+    } else {
+        Err(WireError::Invalid { what: "predicted cost" })
+    }
+}
+
+/// A tile is non-empty, within `u32` coordinates and no larger than the limit.
+pub(crate) fn check_rect(rect: Rect, limits: &Limits) -> Result<(), WireError> {
+    let inside = rect.x.checked_add(rect.w).is_some() && rect.y.checked_add(rect.h).is_some();
+    if rect.w == 0 || rect.h == 0 || !inside {
+        return Err(WireError::Invalid { what: "tile rectangle" });
+    }
+    if rect.area() > limits.max_tile_pixels {
+        return Err(WireError::Limit {
+            what: "tile pixels",
+            len: rect.area(),
+            max: limits.max_tile_pixels,
+        });
+    }
+    Ok(())
+}
+
+/// A result's buffers must fit its rectangle: exactly [`BYTES_PER_PIXEL`] bytes per pixel, and
+/// at most [`MAX_COST_BYTES_PER_PIXEL`] bytes of cost map per pixel.
+pub(crate) fn check_result(result: &TileResult, limits: &Limits) -> Result<(), WireError> {
+    check_rect(result.rect, limits)?;
+    check_buffers(result)
+}
+
+/// The buffer half of [`check_result`], for results that did not come through [`decode`].
+pub(crate) fn check_buffers(result: &TileResult) -> Result<(), WireError> {
+    let area = result.rect.area();
+    if result.pixels.len() as u64 != area * BYTES_PER_PIXEL {
+        return Err(WireError::Invalid { what: "pixel buffer length for the tile's rectangle" });
+    }
+    let max_costs = area * MAX_COST_BYTES_PER_PIXEL;
+    if result.costs.len() as u64 > max_costs {
+        return Err(WireError::Limit {
+            what: "cost map bytes",
+            len: result.costs.len() as u64,
+            max: max_costs,
+        });
+    }
+    Ok(())
+}
+
+/// A file name must stay inside the directory the receiver unpacks the scene into.
+fn check_file_name(name: &str) -> Result<(), WireError> {
+    let bad_component = |part: &str| part.is_empty() || part == "." || part == "..";
+    let bad = name.is_empty()
+        || name.contains(['\0', '\\', ':'])
+        || name.starts_with('/')
+        || name.split('/').any(bad_component);
+    if bad {
+        return Err(WireError::Invalid { what: "scene file name" });
+    }
+    Ok(())
+}

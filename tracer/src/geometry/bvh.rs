@@ -1,0 +1,472 @@
+//! The acceleration structure: a binary BVH built by obvhs and traversed by our own code.
+//!
+//! Why split the work this way: obvhs builds good trees fast (PLOC, reinsertion, leaf collapse),
+//! but its traversal is tuned for speed, not for the guarantees a path tracer's tests rely on. Its
+//! ray replaces tiny direction components by `1/f32::EPSILON`, its slab test has no error margin
+//! and can cull a box on rounding alone, and its triangle test is Moller-Trumbore, which lets
+//! rays slip between triangles sharing an edge. Our traversal (in `traverse.rs`) walks the same
+//! `Bvh2` nodes with a conservative slab test and the watertight triangle test, so a ray never
+//! misses a closed mesh and the BVH answers exactly as brute force over all triangles would.
+//! obvhs's own traversal stays available ([`Traversal::Obvhs`]) so that the difference can be
+//! measured on the same tree.
+//!
+//! Determinism: the tree is a pure function of the triangles and the [`BuildQuality`]. obvhs
+//! builds on one thread unless its `parallel` feature is on (it is off here, and nothing in the
+//! workspace enables it); its builder uses no random numbers, only deterministic radix and
+//! unstable sorts, so the same input gives the same tree. With `parallel` on, PLOC would split its
+//! search into chunks by `rayon::current_num_threads()`, which this code must not depend on.
+//! We also build without obvhs's `build_bvh2_from_tris` helper, which reads the clock.
+
+use super::triangle::{ShearedRay, is_degenerate};
+use super::{Hit, Ray, TraversalStats};
+use crate::scene::Triangle;
+use glam::{Vec3, Vec3A};
+use obvhs::BvhBuildParams;
+use obvhs::aabb::Aabb;
+use obvhs::bvh2::{Bvh2, leaf_collapser::collapse, reinsertion::ReinsertionOptimizer};
+use obvhs::ploc::PlocBuilder;
+use obvhs::splits::split_aabbs_preset;
+
+/// How much time to spend building the tree, mapped to obvhs's presets. Slower builds give
+/// trees that are faster to trace; [`BuildQuality::Medium`] gave the best render time per build
+/// time on the 871k-triangle dragon (see the module tests' measurements in the report).
+///
+/// | quality    | obvhs preset        | PLOC search | reinsertion | spatial pre-splits |
+/// |------------|---------------------|-------------|-------------|--------------------|
+/// | `Fastest`  | `very_fast_build()` | minimum     | 1%          | no                 |
+/// | `Fast`     | `fast_build()`      | low         | 2%          | no                 |
+/// | `Medium`   | `medium_build()`    | medium      | 5% + 10%    | no                 |
+/// | `Slow`     | `slow_build()`      | high        | 20% + 40%   | yes                |
+/// | `VerySlow` | `very_slow_build()` | medium      | 100% + 100% | yes                |
+///
+/// obvhs's `fastest_build()` (one triangle per leaf, no reinsertion) is not offered: its trees
+/// trace much slower and save little build time over `very_fast_build()`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum BuildQuality {
+    Fastest,
+    Fast,
+    #[default]
+    Medium,
+    Slow,
+    VerySlow,
+}
+
+impl BuildQuality {
+    pub const ALL: [BuildQuality; 5] = [
+        BuildQuality::Fastest,
+        BuildQuality::Fast,
+        BuildQuality::Medium,
+        BuildQuality::Slow,
+        BuildQuality::VerySlow,
+    ];
+
+    /// The obvhs build parameters this quality stands for.
+    pub fn params(self) -> BvhBuildParams {
+        match self {
+            BuildQuality::Fastest => BvhBuildParams::very_fast_build(),
+            BuildQuality::Fast => BvhBuildParams::fast_build(),
+            BuildQuality::Medium => BvhBuildParams::medium_build(),
+            BuildQuality::Slow => BvhBuildParams::slow_build(),
+            BuildQuality::VerySlow => BvhBuildParams::very_slow_build(),
+        }
+    }
+}
+
+/// Which code walks the tree and tests triangles.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Traversal {
+    /// Ours: conservative slab test (Ize 2013, pbrt-v4) and the watertight triangle test.
+    /// What the renderer uses.
+    #[default]
+    Robust,
+    /// obvhs's `Bvh2` traversal with its `Ray` and Moller-Trumbore `Triangle::intersect`, for
+    /// accuracy and speed comparisons. Its `TraversalStats::nodes` counts only the leaves obvhs
+    /// hands back (it does not expose its inner-node tests), so compare triangle counts only.
+    Obvhs,
+}
+
+/// A BVH over a scene's triangles, with the triangles' vertices copied in leaf order.
+#[derive(Clone)]
+pub struct Accel {
+    /// The tree. Leaf `first_index .. first_index + prim_count` indexes `vertices`/`original`.
+    pub(super) bvh: Bvh2,
+    /// Vertices of each leaf entry, in leaf order, so that a leaf's triangles are contiguous in
+    /// memory. With spatial pre-splits a triangle can appear in several leaves.
+    pub(super) vertices: Vec<[Vec3; 3]>,
+    /// The index in the input slice of each leaf entry: what hits report.
+    pub(super) original: Vec<u32>,
+    /// Number of levels of the tree (a lone leaf is 1); bounds the traversal stack.
+    pub(super) depth: usize,
+}
+
+impl Accel {
+    /// Builds the BVH. Degenerate triangles ([`is_degenerate`]) are left out, as they can never
+    /// be hit; with no triangle left every ray misses.
+    pub fn build(triangles: &[Triangle], quality: BuildQuality) -> Accel {
+        let kept: Vec<u32> = (0..triangles.len())
+            .filter(|&i| !is_degenerate(&triangles[i].p))
+            .map(|i| u32::try_from(i).expect("fewer than 2^32 triangles: Hit::triangle is a u32"))
+            .collect();
+        if kept.is_empty() {
+            return Accel {
+                bvh: Bvh2::default(),
+                vertices: Vec::new(),
+                original: Vec::new(),
+                depth: 0,
+            };
+        }
+        let shapes: Vec<obvhs::triangle::Triangle> = kept
+            .iter()
+            .map(|&i| {
+                let [v0, v1, v2] = triangles[i as usize].p.map(Vec3A::from);
+                obvhs::triangle::Triangle { v0, v1, v2 }
+            })
+            .collect();
+        let mut bvh = build_bvh2(&shapes, quality.params());
+        let depth = tree_depth(&bvh);
+        // obvhs sizes its own traversal stack from max_depth, which reinsertion may outgrow.
+        bvh.max_depth = bvh.max_depth.max(depth);
+        let original: Vec<u32> = bvh.primitive_indices.iter().map(|&k| kept[k as usize]).collect();
+        let vertices = original.iter().map(|&i| triangles[i as usize].p).collect();
+        Accel {
+            bvh,
+            vertices,
+            original,
+            depth,
+        }
+    }
+
+    /// The closest hit in `(0, ray.t_max)`, by our robust traversal. Ties in `t` go to the lower
+    /// triangle index.
+    pub fn intersect(&self, ray: &Ray, stats: &mut TraversalStats) -> Option<Hit> {
+        self.intersect_with(ray, Traversal::Robust, stats)
+    }
+
+    /// Whether anything is hit in `(0, ray.t_max)`; stops at the first hit found.
+    pub fn occluded(&self, ray: &Ray, stats: &mut TraversalStats) -> bool {
+        self.occluded_with(ray, Traversal::Robust, stats)
+    }
+
+    /// [`Accel::intersect`] by the chosen traversal.
+    pub fn intersect_with(
+        &self,
+        ray: &Ray,
+        traversal: Traversal,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
+        match traversal {
+            Traversal::Robust => self.traverse_robust::<false>(ray, stats),
+            Traversal::Obvhs => self.traverse_obvhs::<false>(ray, stats),
+        }
+    }
+
+    /// [`Accel::occluded`] by the chosen traversal.
+    pub fn occluded_with(&self, ray: &Ray, traversal: Traversal, stats: &mut TraversalStats) -> bool {
+        match traversal {
+            Traversal::Robust => self.traverse_robust::<true>(ray, stats).is_some(),
+            Traversal::Obvhs => self.traverse_obvhs::<true>(ray, stats).is_some(),
+        }
+    }
+
+    /// Number of tree nodes (inner nodes and leaves).
+    pub fn node_count(&self) -> usize {
+        self.bvh.nodes.len()
+    }
+
+    /// Number of levels of the tree; 0 when it is empty.
+    pub fn depth(&self) -> usize {
+        self.depth
+    }
+
+    /// Number of leaf entries: the non-degenerate triangles, plus duplicates made by spatial
+    /// pre-splits.
+    pub fn leaf_entries(&self) -> usize {
+        self.original.len()
+    }
+}
+
+impl std::fmt::Debug for Accel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Accel")
+            .field("nodes", &self.node_count())
+            .field("leaf_entries", &self.leaf_entries())
+            .field("depth", &self.depth)
+            .finish()
+    }
+}
+
+/// The closest hit of `ray` among all `triangles`, testing every one: the reference the BVH is
+/// tested against. Same triangle test and tie rule as [`Accel::intersect`].
+pub fn intersect_brute_force(triangles: &[Triangle], ray: &Ray) -> Option<Hit> {
+    let sheared = ShearedRay::new(ray);
+    let mut closest = Closest::new(ray);
+    for (i, triangle) in triangles.iter().enumerate() {
+        if !is_degenerate(&triangle.p) {
+            closest.offer(&sheared, &triangle.p, i as u32);
+        }
+    }
+    closest.best
+}
+
+/// The closest hit found so far, and the rule by which a new hit replaces it.
+pub(super) struct Closest {
+    pub(super) best: Option<Hit>,
+    ray_t_max: f32,
+}
+
+impl Closest {
+    pub(super) fn new(ray: &Ray) -> Self {
+        Closest {
+            best: None,
+            ray_t_max: ray.t_max,
+        }
+    }
+
+    /// The current end of the search interval: the best `t`, or the ray's own `t_max`.
+    #[inline(always)]
+    pub(super) fn t_max(&self) -> f32 {
+        self.best.map_or(self.ray_t_max, |h| h.t)
+    }
+
+    /// Tests one triangle and keeps its hit if closer; returns whether it was kept. A hit
+    /// replaces the best one when strictly closer, or equally close with a lower triangle
+    /// index, so the result does not depend on the order triangles are tested in. The ray's own
+    /// `t_max` is exclusive.
+    #[inline(always)]
+    pub(super) fn offer(&mut self, sheared: &ShearedRay, p: &[Vec3; 3], triangle: u32) -> bool {
+        let Some(h) = sheared.intersect(p, self.t_max()) else {
+            return false;
+        };
+        let better = match self.best {
+            None => h.t < self.ray_t_max,
+            Some(best) => h.t < best.t || (h.t == best.t && triangle < best.triangle),
+        };
+        if better {
+            self.best = Some(Hit {
+                t: h.t,
+                triangle,
+                b1: h.b1,
+                b2: h.b2,
+            });
+        }
+        better
+    }
+}
+
+/// obvhs's `build_bvh2_from_tris`, minus its clock and debug validation, plus padding of
+/// split boxes (see [`pad_split_boxes`]).
+fn build_bvh2(shapes: &[obvhs::triangle::Triangle], params: BvhBuildParams) -> Bvh2 {
+    let mut aabbs: Vec<Aabb> = shapes.iter().map(|t| t.aabb()).collect();
+    let mut indices: Vec<u32> = (0..shapes.len() as u32).collect();
+    if params.pre_split {
+        let largest = aabbs.iter().map(Aabb::half_area).fold(0.0, f32::max);
+        let average = aabbs.iter().map(Aabb::half_area).sum::<f32>() / aabbs.len() as f32;
+        split_aabbs_preset(&mut aabbs, &mut indices, shapes, average, largest);
+        pad_split_boxes(&mut aabbs, &indices, shapes);
+    }
+    let mut bvh = PlocBuilder::with_capacity(aabbs.len()).build(
+        params.ploc_search_distance,
+        &aabbs,
+        indices,
+        params.sort_precision,
+        params.search_depth_threshold,
+    );
+    bvh.uses_spatial_splits = params.pre_split;
+    let mut reinsertion = ReinsertionOptimizer::default();
+    reinsertion.run(&mut bvh, params.reinsertion_batch_ratio, None);
+    collapse(
+        &mut bvh,
+        params.max_prims_per_leaf.clamp(1, 255),
+        params.collapse_traversal_cost,
+    );
+    let post_collapse =
+        params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
+    reinsertion.run(&mut bvh, post_collapse, None);
+    bvh
+}
+
+/// Widens boxes made by obvhs's spatial pre-splits so that they cover their piece of triangle.
+///
+/// A split box's extent on the other axes comes from points where the triangle's edges cross the
+/// split plane, computed in `f32` with an error of about 13 units of roundoff of the largest
+/// vertex coordinate `m`. A box short by that much leaves a crack between the two halves that a
+/// ray can pass through. Widening by `16 * EPSILON * m` (32 units of roundoff), clamped to the
+/// whole triangle's box, which is exact, closes the crack and keeps boxes conservative.
+fn pad_split_boxes(aabbs: &mut [Aabb], indices: &[u32], shapes: &[obvhs::triangle::Triangle]) {
+    for (aabb, &index) in aabbs.iter_mut().zip(indices) {
+        let whole = shapes[index as usize].aabb();
+        if *aabb != whole {
+            let m = whole.min.abs().max(whole.max.abs()).max_element();
+            let pad = Vec3A::splat(16.0 * f32::EPSILON * m);
+            aabb.min = (aabb.min - pad).max(whole.min);
+            aabb.max = (aabb.max + pad).min(whole.max);
+        }
+    }
+}
+
+/// The number of levels of the tree, without recursion (obvhs's `depth` recurses).
+fn tree_depth(bvh: &Bvh2) -> usize {
+    let mut deepest = 0;
+    let mut stack = vec![(0usize, 1usize)];
+    while let Some((index, depth)) = stack.pop() {
+        deepest = deepest.max(depth);
+        let node = &bvh.nodes[index];
+        if !node.is_leaf() {
+            let first = node.first_index as usize;
+            stack.push((first, depth + 1));
+            stack.push((first + 1, depth + 1));
+        }
+    }
+    deepest
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn triangle(p: [Vec3; 3]) -> Triangle {
+        Triangle {
+            p,
+            n: None,
+            uv: None,
+            material: 0,
+        }
+    }
+
+    /// A bumpy grid of `n * n` quads, two triangles each, in the plane z = 0 (up to bumps).
+    fn grid(n: usize) -> Vec<Triangle> {
+        let v = |i: usize, j: usize| {
+            let bump = ((i * 7 + j * 13) % 5) as f32 * 0.01;
+            Vec3::new(i as f32, j as f32, bump)
+        };
+        let mut out = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                out.push(triangle([v(i, j), v(i + 1, j), v(i + 1, j + 1)]));
+                out.push(triangle([v(i, j), v(i + 1, j + 1), v(i, j + 1)]));
+            }
+        }
+        out
+    }
+
+    fn down(x: f32, y: f32) -> Ray {
+        Ray {
+            origin: Vec3::new(x, y, 5.0),
+            dir: -Vec3::Z,
+            t_max: f32::INFINITY,
+        }
+    }
+
+    #[test]
+    fn an_empty_or_all_degenerate_scene_misses_every_ray() {
+        let degenerate = vec![triangle([Vec3::ZERO, Vec3::X, Vec3::X * 2.0]); 3];
+        for triangles in [Vec::new(), degenerate] {
+            let accel = Accel::build(&triangles, BuildQuality::Medium);
+            let mut stats = TraversalStats::default();
+            for traversal in [Traversal::Robust, Traversal::Obvhs] {
+                assert_eq!(accel.intersect_with(&down(0.5, 0.0), traversal, &mut stats), None);
+                assert!(!accel.occluded_with(&down(0.5, 0.0), traversal, &mut stats));
+            }
+            assert_eq!(stats, TraversalStats::default(), "no tree, no work");
+        }
+    }
+
+    #[test]
+    fn a_single_triangle_is_a_root_leaf_and_costs_one_box_and_one_test() {
+        let flat = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let accel = Accel::build(&[triangle(flat)], BuildQuality::Medium);
+        assert_eq!((accel.node_count(), accel.depth()), (1, 1));
+        let mut stats = TraversalStats::default();
+        let hit = accel.intersect(&down(0.25, 0.25), &mut stats).expect("inside");
+        assert_eq!((hit.triangle, hit.t), (0, 5.0));
+        assert_eq!(stats, TraversalStats { nodes: 1, triangles: 1 });
+    }
+
+    #[test]
+    fn hits_report_the_original_triangle_index_and_degenerates_are_skipped() {
+        let mut triangles = grid(8);
+        triangles.insert(0, triangle([Vec3::ONE; 3]));
+        let accel = Accel::build(&triangles, BuildQuality::Medium);
+        assert_eq!(accel.leaf_entries(), triangles.len() - 1);
+        for (x, y) in [(0.75, 0.25), (5.2, 3.9), (7.9, 7.95)] {
+            let mut stats = TraversalStats::default();
+            let hit = accel.intersect(&down(x, y), &mut stats).expect("inside the grid");
+            assert_eq!(Some(hit), intersect_brute_force(&triangles, &down(x, y)));
+            let p = hit.point(&triangles[hit.triangle as usize].p);
+            assert!((p.x - x).abs() < 1e-5 && (p.y - y).abs() < 1e-5, "{p} for {x},{y}");
+            assert!(stats.nodes > 1 && stats.triangles >= 1);
+        }
+    }
+
+    #[test]
+    fn building_twice_gives_the_same_tree() {
+        let triangles = grid(30);
+        for quality in BuildQuality::ALL {
+            let a = Accel::build(&triangles, quality);
+            let b = Accel::build(&triangles, quality);
+            let bytes = |accel: &Accel| bytemuck_nodes(&accel.bvh).to_vec();
+            assert_eq!(bytes(&a), bytes(&b), "{quality:?}");
+            assert_eq!(a.original, b.original);
+        }
+    }
+
+    fn bytemuck_nodes(bvh: &Bvh2) -> Vec<u32> {
+        bvh.nodes
+            .iter()
+            .flat_map(|n| {
+                let (min, max) = (n.aabb().min.to_array(), n.aabb().max.to_array());
+                let floats = min.into_iter().chain(max).map(f32::to_bits);
+                floats.chain([n.prim_count, n.first_index]).collect::<Vec<_>>()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn obvhs_traversal_finds_the_same_interior_hits_with_consistent_barycentrics() {
+        let triangles = grid(8);
+        let accel = Accel::build(&triangles, BuildQuality::Medium);
+        let mut stats = TraversalStats::default();
+        for (x, y) in [(0.7, 0.2), (5.3, 3.9), (2.6, 6.1)] {
+            let ours = accel.intersect(&down(x, y), &mut stats).expect("inside");
+            let theirs = accel
+                .intersect_with(&down(x, y), Traversal::Obvhs, &mut stats)
+                .expect("inside");
+            assert_eq!(ours.triangle, theirs.triangle);
+            assert!((ours.t - theirs.t).abs() < 1e-5);
+            assert!((ours.b1 - theirs.b1).abs() < 1e-5 && (ours.b2 - theirs.b2).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn split_boxes_are_padded_but_never_beyond_their_triangle() {
+        // A long diagonal sliver among small triangles: its box is mostly empty, so the Slow
+        // preset's pre-splits cut it.
+        let mut triangles = grid(20);
+        triangles.push(triangle([
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(100.0, 100.0, 1.3),
+            Vec3::new(100.0, 99.0, 0.7),
+        ]));
+        let shapes: Vec<obvhs::triangle::Triangle> = triangles
+            .iter()
+            .map(|t| {
+                let [v0, v1, v2] = t.p.map(Vec3A::from);
+                obvhs::triangle::Triangle { v0, v1, v2 }
+            })
+            .collect();
+        let mut aabbs: Vec<Aabb> = shapes.iter().map(|t| t.aabb()).collect();
+        let mut indices: Vec<u32> = (0..shapes.len() as u32).collect();
+        let largest = aabbs.iter().map(Aabb::half_area).fold(0.0, f32::max);
+        let average = aabbs.iter().map(Aabb::half_area).sum::<f32>() / aabbs.len() as f32;
+        split_aabbs_preset(&mut aabbs, &mut indices, &shapes, average, largest);
+        assert!(aabbs.len() > shapes.len(), "the big triangle was split");
+        let before = aabbs.clone();
+        pad_split_boxes(&mut aabbs, &indices, &shapes);
+        for ((padded, old), &i) in aabbs.iter().zip(&before).zip(&indices) {
+            let whole = shapes[i as usize].aabb();
+            assert!(padded.min.cmple(old.min).all() && padded.max.cmpge(old.max).all());
+            assert!(padded.min.cmpge(whole.min).all() && padded.max.cmple(whole.max).all());
+        }
+        assert!(aabbs.iter().zip(&before).any(|(a, b)| a != b));
+    }
+}

@@ -1,0 +1,272 @@
+//! The watertight ray/triangle test of Woop, Benthin and Wald ("Watertight Ray/Triangle
+//! Intersection", JCGT 2013), written as pbrt-v4's `IntersectTriangle`.
+//!
+//! Why this test and not Moller-Trumbore: a ray through an edge or vertex shared by several
+//! triangles must hit at least one of them, or light leaks through closed meshes and shadow rays
+//! slip through seams. The test moves every vertex into a frame where the ray is the +z axis
+//! (translate by the origin, permute axes so the largest direction component becomes z, shear),
+//! after which the question is 2D: does the origin lie inside the projected triangle? The edge
+//! functions of an edge depend only on its two transformed vertices, so two triangles sharing an
+//! edge compute exactly opposite values and cannot both reject a point on it. An edge function
+//! that rounds to exactly zero is recomputed in double precision, where the products are exact, so
+//! its sign is right. The hit distance is accepted only when it is conservatively positive, using
+//! the error bounds of pbrt-v4 (Physically Based Rendering, 4th edition, section 6.8.4).
+//!
+//! The per-ray part of the transform lives in [`ShearedRay`], computed once per ray: every
+//! triangle then sees bit-identical shear factors, which the watertightness argument needs.
+
+use super::Ray;
+use glam::Vec3;
+
+/// Where a ray meets a triangle: the distance along the ray and the barycentric coordinates of
+/// the hit point with respect to the triangle's vertices 0, 1 and 2.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TriangleHit {
+    pub t: f32,
+    pub b0: f32,
+    pub b1: f32,
+    pub b2: f32,
+}
+
+/// Intersects `ray` with the triangle `p` over the open interval `(0, ray.t_max)`.
+///
+/// Degenerate triangles (see [`is_degenerate`]) are never hit, and no input produces a NaN
+/// distance or barycentric: non-finite intermediate values fail every acceptance test.
+pub fn intersect_triangle(ray: &Ray, p: &[Vec3; 3]) -> Option<TriangleHit> {
+    if is_degenerate(p) {
+        return None;
+    }
+    let hit = ShearedRay::new(ray).intersect(p, ray.t_max)?;
+    (hit.t < ray.t_max).then_some(hit)
+}
+
+/// True when the triangle has zero area as computed in `f32` (all components of the cross
+/// product of its edges are exactly zero: repeated vertices, collinear vertices) or a vertex
+/// that is not finite. Such triangles can never be hit.
+///
+/// pbrt-v4 tests the squared length of the cross product against zero; testing the components
+/// instead keeps tiny but valid triangles (edges near 1e-12) from underflowing into "degenerate".
+pub fn is_degenerate(p: &[Vec3; 3]) -> bool {
+    let finite = p.iter().all(|v| v.is_finite());
+    !finite || (p[2] - p[0]).cross(p[1] - p[0]) == Vec3::ZERO
+}
+
+/// `gamma(n)` of pbrt: a bound on the relative error of `n` successive roundings, `n u / (1 - n u)`
+/// with `u` the unit roundoff of `f32` (half its machine epsilon).
+pub(crate) const fn gamma(n: u32) -> f32 {
+    let nu = n as f32 * (f32::EPSILON * 0.5);
+    nu / (1.0 - nu)
+}
+
+/// A ray prepared for [`ShearedRay::intersect`]: the axis permutation and shear that make it the
+/// +z axis, computed once so that every triangle sees bit-identical factors.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ShearedRay {
+    origin: Vec3,
+    kx: usize,
+    ky: usize,
+    kz: usize,
+    sx: f32,
+    sy: f32,
+    sz: f32,
+}
+
+impl ShearedRay {
+    pub(crate) fn new(ray: &Ray) -> Self {
+        let a = ray.dir.abs();
+        // pbrt's MaxComponentIndex, ties included, so that our choice of axis matches pbrt's.
+        let kz = if a.x > a.y {
+            if a.x > a.z { 0 } else { 2 }
+        } else if a.y > a.z {
+            1
+        } else {
+            2
+        };
+        let kx = (kz + 1) % 3;
+        let ky = (kx + 1) % 3;
+        let d = ray.dir;
+        ShearedRay {
+            origin: ray.origin,
+            kx,
+            ky,
+            kz,
+            sx: -d[kx] / d[kz],
+            sy: -d[ky] / d[kz],
+            sz: 1.0 / d[kz],
+        }
+    }
+
+    /// Moves a vertex into the ray's frame: translated, permuted and sheared in x and y. The z
+    /// shear (scaling by `sz`) is applied later, only when the edge tests pass, as in pbrt.
+    #[inline(always)]
+    fn transform(&self, p: Vec3) -> Vec3 {
+        let v = p - self.origin;
+        let (x, y, z) = (v[self.kx], v[self.ky], v[self.kz]);
+        Vec3::new(x + self.sx * z, y + self.sy * z, z)
+    }
+
+    /// The test itself, for a triangle already known not to be degenerate. Accepts hits in the
+    /// half-open interval `(0, t_max]`: closed at `t_max` so that a BVH traversal can pass its
+    /// current closest distance and still see exact ties, which it breaks by triangle index.
+    #[inline(always)]
+    pub(crate) fn intersect(&self, p: &[Vec3; 3], t_max: f32) -> Option<TriangleHit> {
+        let p0t = self.transform(p[0]);
+        let p1t = self.transform(p[1]);
+        let p2t = self.transform(p[2]);
+
+        let mut e0 = p1t.x * p2t.y - p1t.y * p2t.x;
+        let mut e1 = p2t.x * p0t.y - p2t.y * p0t.x;
+        let mut e2 = p0t.x * p1t.y - p0t.y * p1t.x;
+        if e0 == 0.0 || e1 == 0.0 || e2 == 0.0 {
+            // The ray passes (to within rounding) through an edge or vertex: recompute in f64,
+            // where the products of two f32 values are exact and the sign is therefore right.
+            e0 = edge_function_f64(p1t, p2t);
+            e1 = edge_function_f64(p2t, p0t);
+            e2 = edge_function_f64(p0t, p1t);
+        }
+        if (e0 < 0.0 || e1 < 0.0 || e2 < 0.0) && (e0 > 0.0 || e1 > 0.0 || e2 > 0.0) {
+            return None;
+        }
+        let det = e0 + e1 + e2;
+        if det == 0.0 {
+            return None;
+        }
+
+        let z0 = p0t.z * self.sz;
+        let z1 = p1t.z * self.sz;
+        let z2 = p2t.z * self.sz;
+        let t_scaled = e0 * z0 + e1 * z1 + e2 * z2;
+        // A hit behind the origin has t_scaled of the opposite sign to det; rejecting it here
+        // saves the division. Unlike pbrt we do not compare against t_max * det here: the
+        // rounded product could reject a hit whose computed t is within t_max, and a closest-hit
+        // query must see every triangle's t exactly as brute force would.
+        if (det < 0.0 && t_scaled >= 0.0) || (det > 0.0 && t_scaled <= 0.0) {
+            return None;
+        }
+        let inv_det = 1.0 / det;
+        let t = t_scaled * inv_det;
+        // Written so that NaN fails: `!(t <= t_max)` rejects NaN as well as far hits.
+        if !(t <= t_max) {
+            return None;
+        }
+
+        // Ensure t is conservatively greater than zero (pbrt-v4, section 6.8.4).
+        let max_zt = z0.abs().max(z1.abs()).max(z2.abs());
+        let delta_z = gamma(3) * max_zt;
+        let max_xt = p0t.x.abs().max(p1t.x.abs()).max(p2t.x.abs());
+        let max_yt = p0t.y.abs().max(p1t.y.abs()).max(p2t.y.abs());
+        let delta_x = gamma(5) * (max_xt + max_zt);
+        let delta_y = gamma(5) * (max_yt + max_zt);
+        let delta_e = 2.0 * (gamma(2) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
+        let max_e = e0.abs().max(e1.abs()).max(e2.abs());
+        let delta_t =
+            3.0 * (gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
+        if !(t > delta_t) {
+            return None;
+        }
+
+        Some(TriangleHit {
+            t,
+            b0: e0 * inv_det,
+            b1: e1 * inv_det,
+            b2: e2 * inv_det,
+        })
+    }
+}
+
+/// `a.x * b.y - a.y * b.x` with exact products: two 24-bit significands multiply into at most
+/// 48 bits, which fit in an f64, so only the subtraction rounds and a zero result is a true zero.
+#[inline(never)]
+fn edge_function_f64(a: Vec3, b: Vec3) -> f32 {
+    let (ax, ay, bx, by) = (a.x as f64, a.y as f64, b.x as f64, b.y as f64);
+    (ax * by - ay * bx) as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ray(origin: Vec3, dir: Vec3) -> Ray {
+        Ray {
+            origin,
+            dir,
+            t_max: f32::INFINITY,
+        }
+    }
+
+    const UNIT: [Vec3; 3] = [Vec3::ZERO, Vec3::X, Vec3::Y];
+
+    #[test]
+    fn hits_the_interior_with_the_right_distance_and_barycentrics() {
+        let hit = intersect_triangle(&ray(Vec3::new(0.25, 0.5, 2.0), -Vec3::Z), &UNIT)
+            .expect("the ray passes through the interior");
+        assert_eq!(hit.t, 2.0);
+        assert_eq!((hit.b0, hit.b1, hit.b2), (0.25, 0.25, 0.5));
+    }
+
+    #[test]
+    fn respects_both_ends_of_the_interval() {
+        let r = Ray {
+            t_max: 2.0,
+            ..ray(Vec3::new(0.25, 0.25, 2.0), -Vec3::Z)
+        };
+        assert!(intersect_triangle(&r, &UNIT).is_none(), "t_max is exclusive");
+        let behind = ray(Vec3::new(0.25, 0.25, 2.0), Vec3::Z);
+        assert!(intersect_triangle(&behind, &UNIT).is_none());
+        let on_plane = ray(Vec3::new(0.25, 0.25, 0.0), Vec3::Z);
+        assert!(intersect_triangle(&on_plane, &UNIT).is_none(), "t = 0 is not a hit");
+    }
+
+    #[test]
+    fn a_vertex_is_hit_from_either_side() {
+        for dir in [Vec3::Z, -Vec3::Z] {
+            let hit = intersect_triangle(&ray(Vec3::X - 3.0 * dir, dir), &UNIT);
+            let hit = hit.expect("a ray through a vertex hits the triangle");
+            assert_eq!((hit.t, hit.b1), (3.0, 1.0));
+        }
+    }
+
+    #[test]
+    fn the_f64_fallback_gives_the_sign_that_f32_rounds_away() {
+        // a.x * b.y = 1 + 2e exactly, a.y * b.x = (1 + e)^2 = 1 + 2e + e^2, which f32 rounds to
+        // 1 + 2e: in f32 the edge function is zero, in truth it is -e^2.
+        let e = f32::EPSILON;
+        let a = Vec3::new(1.0, 1.0 + e, 0.0);
+        let b = Vec3::new(1.0 + e, 1.0 + 2.0 * e, 0.0);
+        assert_eq!(a.x * b.y - a.y * b.x, 0.0);
+        assert_eq!(edge_function_f64(a, b), -(e * e));
+        assert_eq!(edge_function_f64(b, a), e * e, "swapping the edge flips the sign exactly");
+    }
+
+    #[test]
+    fn degenerate_triangles_are_recognised() {
+        let line = [Vec3::ZERO, Vec3::ONE, Vec3::splat(2.0)];
+        let point = [Vec3::ONE; 3];
+        let nan = [Vec3::ZERO, Vec3::X, Vec3::new(f32::NAN, 1.0, 0.0)];
+        for p in [line, point, nan] {
+            assert!(is_degenerate(&p), "{p:?}");
+            assert!(intersect_triangle(&ray(Vec3::new(0.5, 0.5, 3.0), -Vec3::Z), &p).is_none());
+        }
+        // Seen from a distance of its own size; from much farther away the error bound on t,
+        // which grows with the distance, would (rightly, for f32) refuse to call t positive.
+        let tiny = UNIT.map(|v| v * 1e-12);
+        assert!(!is_degenerate(&tiny), "a 1e-12 triangle has area");
+        let r = ray(Vec3::new(2.5e-13, 2.5e-13, 1e-12), -Vec3::Z);
+        assert!(intersect_triangle(&r, &tiny).is_some());
+    }
+
+    #[test]
+    fn a_zero_or_nan_direction_never_hits_and_never_gives_nan() {
+        for dir in [Vec3::ZERO, Vec3::new(f32::NAN, 0.0, -1.0), Vec3::splat(f32::INFINITY)] {
+            let hit = intersect_triangle(&ray(Vec3::new(0.25, 0.25, 1.0), dir), &UNIT);
+            assert!(hit.is_none(), "{dir:?} gave {hit:?}");
+        }
+    }
+
+    #[test]
+    fn gamma_matches_its_definition() {
+        let u = f32::EPSILON as f64 * 0.5;
+        let expected = 3.0 * u / (1.0 - 3.0 * u);
+        assert!(((gamma(3) as f64) - expected).abs() < expected * 1e-6);
+    }
+}

@@ -1,0 +1,187 @@
+//! The path tracer against answers known in closed form, not against images of its own.
+//!
+//! Each test renders a small image and compares its mean with the exact value, within a few
+//! standard errors of the mean estimated from the pixels themselves (pixels are independent).
+
+use glam::Vec3;
+use tracer::geometry::{Accel, BuildQuality};
+use tracer::{render_tile, Effects, Rect, World};
+
+/// Renders the whole image of `toml` and returns the per-channel mean and its standard error.
+fn render_mean(toml: &str) -> (Vec3, Vec3) {
+    let scene = tracer::scene::load_str(toml).expect("test scene loads");
+    let accel = Accel::build(&scene.triangles, BuildQuality::default());
+    let effects = Effects::of(&scene);
+    let (w, h) = (scene.settings.width, scene.settings.height);
+    let world = World::new(scene, accel, effects);
+    let out = render_tile(&world, 0, Rect { x: 0, y: 0, w, h });
+    assert_eq!(out.stats.invalid_samples, 0, "no sample may be NaN or infinite");
+    let n = out.pixels.len() as f64;
+    let mut sum = [0.0f64; 3];
+    let mut sum_sq = [0.0f64; 3];
+    for p in &out.pixels {
+        for c in 0..3 {
+            assert!(p[c].is_finite());
+            sum[c] += f64::from(p[c]);
+            sum_sq[c] += f64::from(p[c]).powi(2);
+        }
+    }
+    let mean = sum.map(|s| s / n);
+    let se: [f64; 3] = std::array::from_fn(|c| ((sum_sq[c] / n - mean[c].powi(2)).max(0.0) / n).sqrt());
+    (Vec3::new(mean[0] as f32, mean[1] as f32, mean[2] as f32), Vec3::new(se[0] as f32, se[1] as f32, se[2] as f32))
+}
+
+/// Asserts `mean` is within four standard errors (plus a relative `slack` for tessellation) of
+/// `expected` in every channel.
+fn assert_close(what: &str, (mean, se): (Vec3, Vec3), expected: Vec3, slack: f32) {
+    for c in 0..3 {
+        let tolerance = 4.0 * se[c] + slack * expected[c].abs() + 1e-6;
+        assert!(
+            (mean[c] - expected[c]).abs() <= tolerance,
+            "{what}: channel {c} mean {} expected {} (se {}, tolerance {tolerance})",
+            mean[c],
+            expected[c],
+            se[c]
+        );
+    }
+}
+
+fn furnace(albedo: f32, emission: f32, depth: &str, roulette: &str, seed: u64) -> String {
+    format!(
+        r#"
+        [render]
+        width = 24
+        height = 24
+        spp = 16
+        max_depth = {depth}
+        russian_roulette_depth = {roulette}
+        seed = {seed}
+        [camera]
+        position = [0.1, -0.2, 0.05]
+        look_at = [1, 0.3, 0.2]
+        vfov = 90
+        [[object]]
+        shape = "sphere"
+        center = [0, 0, 0]
+        radius = 1
+        subdivisions = 3
+        inward = true
+        material = "wall"
+        [materials.wall]
+        type = "diffuse"
+        albedo = [{albedo}, {albedo}, {albedo}]
+        emission = [{emission}, {emission}, {emission}]
+        "#
+    )
+}
+
+#[test]
+fn closed_emissive_diffuse_sphere_gives_the_geometric_series_at_each_depth() {
+    let (rho, le) = (0.5f32, 1.5f32);
+    for depth in [1u32, 2, 3, 5] {
+        let expected: f32 = le * (0..=depth).map(|k| rho.powi(k as i32)).sum::<f32>();
+        let result = render_mean(&furnace(rho, le, &depth.to_string(), "\"off\"", 1));
+        assert_close(&format!("furnace depth {depth}"), result, Vec3::splat(expected), 0.0);
+    }
+}
+
+#[test]
+fn russian_roulette_is_unbiased_with_unlimited_depth() {
+    let (rho, le) = (0.7f32, 1.0f32);
+    for seed in [3, 4] {
+        let result = render_mean(&furnace(rho, le, "\"unlimited\"", "2", seed));
+        assert_close("furnace with roulette", result, Vec3::splat(le / (1.0 - rho)), 0.0);
+    }
+}
+
+#[test]
+fn point_light_at_the_centre_of_a_diffuse_sphere_gives_radiance_one() {
+    // Intensity pi at distance 1 gives irradiance pi; a Lambertian albedo 0.5 turns that into
+    // radiance 0.5 after one bounce, and the bounces inside the closed sphere sum to 1. The
+    // tessellated sphere's faces lie slightly inside the unit sphere, hence a 1% slack.
+    let toml = r#"
+        [render]
+        width = 24
+        height = 24
+        spp = 16
+        max_depth = "unlimited"
+        russian_roulette_depth = 3
+        [camera]
+        position = [0, 0, 0]
+        look_at = [0, 0, 1]
+        vfov = 100
+        [[object]]
+        shape = "sphere"
+        center = [0, 0, 0]
+        radius = 1
+        subdivisions = 4
+        inward = true
+        material = "wall"
+        [materials.wall]
+        type = "diffuse"
+        albedo = [0.5, 0.5, 0.5]
+        [[light]]
+        type = "point"
+        position = [0, 0, 0]
+        intensity = [3.14159265, 3.14159265, 3.14159265]
+    "#;
+    assert_close("point in sphere", render_mean(toml), Vec3::ONE, 0.01);
+}
+
+fn convex_in_environment(material: &str) -> String {
+    format!(
+        r#"
+        [render]
+        width = 24
+        height = 24
+        spp = 16
+        max_depth = "unlimited"
+        russian_roulette_depth = 4
+        [camera]
+        position = [0, 0, -3]
+        look_at = [0, 0, 0]
+        vfov = 40
+        [[object]]
+        shape = "sphere"
+        center = [0, 0, 0]
+        radius = 1
+        subdivisions = 3
+        material = "ball"
+        [materials.ball]
+        {material}
+        [environment]
+        radiance = [0.8, 0.8, 0.8]
+        "#
+    )
+}
+
+#[test]
+fn white_furnace_energy_conserving_materials_vanish_in_a_uniform_environment() {
+    for material in [
+        "type = \"diffuse\"\nalbedo = [1, 1, 1]",
+        "type = \"mirror\"\nreflectance = [1, 1, 1]",
+        "type = \"glass\"\nior = 1.5",
+    ] {
+        assert_close(material, render_mean(&convex_in_environment(material)), Vec3::splat(0.8), 0.0);
+    }
+}
+
+#[test]
+fn white_furnace_rough_metal_loses_energy_but_never_gains_it() {
+    // Single-scattering microfacet models lose the energy of multiple scattering between
+    // microfacets, more at higher roughness: the image may be darker than the environment, never
+    // brighter.
+    let (mean, se) = render_mean(&convex_in_environment("type = \"metal\"\nreflectance = [1, 1, 1]\nroughness = 0.5"));
+    for c in 0..3 {
+        assert!(mean[c] <= 0.8 + 4.0 * se[c], "metal brighter than its environment: {mean}");
+        assert!(mean[c] > 0.6, "metal lost implausibly much energy: {mean}");
+    }
+}
+
+#[test]
+fn one_sided_emitters_are_dark_from_behind() {
+    // The furnace sphere emits inward only: seen from outside it is black (no environment).
+    let toml = furnace(0.5, 1.0, "3", "\"off\"", 0).replace("position = [0.1, -0.2, 0.05]", "position = [0, 0, -4]").replace("look_at = [1, 0.3, 0.2]", "look_at = [0, 0, 0]");
+    let (mean, _) = render_mean(&toml);
+    assert_eq!(mean, Vec3::ZERO);
+}
