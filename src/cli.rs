@@ -15,6 +15,10 @@ pub struct Cli {
 pub enum Command {
     /// Render a scene (all frames of its animation) to EXR and PNG files.
     Render(RenderArgs),
+    /// Compare two OpenEXR images (B is the reference): RMSE, relative MSE, FLIP, ...
+    Compare(crate::compare::CompareArgs),
+    /// Measure what accuracy costs in time: error against time for each accuracy knob.
+    Accuracy(crate::accuracy::AccuracyArgs),
 }
 
 #[derive(Debug, clap::Args)]

@@ -3,8 +3,12 @@
 //! - `cli`: the argument definitions (clap); `--help` is generated from their doc comments.
 //! - `render`: `tessera render`, one process rendering an animation, balanced by the PBT or a grid.
 //! - `report`: progress on a terminal, log lines elsewhere, the stats JSON and the tile-map PNGs.
+//! - `compare`: `tessera compare`, the error metrics of one image against another.
+//! - `accuracy`: `tessera accuracy`, what accuracy costs in time, as a table and a plot.
 
+mod accuracy;
 mod cli;
+mod compare;
 mod render;
 mod report;
 
@@ -22,5 +26,7 @@ fn main() -> anyhow::Result<()> {
         .init();
     match cli.command {
         cli::Command::Render(args) => render::run(&args),
+        cli::Command::Compare(args) => compare::run(&args),
+        cli::Command::Accuracy(args) => accuracy::run(&args),
     }
 }

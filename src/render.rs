@@ -6,7 +6,6 @@ use crate::cli::{BalancerKind, EffectsChoice, RenderArgs};
 use crate::report::{self, FrameStats, Progress, StatsFile, TileStats};
 use anyhow::Context;
 use rayon::prelude::*;
-use std::path::Path;
 use std::time::Instant;
 use tracer::geometry::{Accel, BuildQuality};
 use tracer::{Effects, Film, Scene, World};
@@ -20,7 +19,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let world = prepare_world(scene, args.effects);
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
 
-    let mut partitioner = partitioner(args.balancer, args.tiles, settings.width, settings.height);
+    let mut partitioner = partitioner(args.balancer, args.tiles, settings.width, settings.height)?;
     let progress = Progress::new(settings.frames, partitioner.tiles().len() as u64);
     progress.line(&format!(
         "{}: {}x{}, {} spp, {} frames, {} triangles, effects {}, {} threads, {:?} balancer with {} tiles",
@@ -145,19 +144,26 @@ fn write_frame(args: &RenderArgs, frame: u32, film: &Film, stats: &FrameStats) -
     Ok(())
 }
 
-fn partitioner(kind: BalancerKind, tiles: usize, width: u32, height: u32) -> balancer::Partitioner {
-    let config = balancer::Config { leaves: tiles, ..balancer::Config::default() };
-    match kind {
-        BalancerKind::Pbt => balancer::Partitioner::pbt(width, height, config),
-        BalancerKind::Regular => balancer::Partitioner::regular(width, height, tiles),
-    }
+/// The balancer the flags ask for. `--tiles M` is the PBT's leaf count, or for the regular grid
+/// the nearest k x k grid (k = round(sqrt(M))), so equal flags mean comparable tile counts.
+pub fn partitioner(kind: BalancerKind, tiles: usize, width: u32, height: u32) -> anyhow::Result<balancer::Partitioner> {
+    let side = ((tiles as f64).sqrt().round() as u32).max(1);
+    let config = balancer::Config {
+        kind: match kind {
+            BalancerKind::Pbt => balancer::Kind::Pbt,
+            BalancerKind::Regular => balancer::Kind::Regular,
+        },
+        leaves: tiles,
+        grid: balancer::Grid::Count { columns: side, rows: side },
+        ..balancer::Config::default()
+    };
+    Ok(balancer::Partitioner::new(width, height, &config)?)
 }
 
 /// The frame's per-block counted work as the balancer's cost map.
 fn cost_map(film: &Film) -> balancer::CostMap {
-    let costs: Vec<f64> = film.block_work.iter().map(|&w| w as f64).collect();
-    balancer::CostMap::from_blocks(film.width, film.height, tracer::BLOCK_SIZE, film.blocks_x, costs)
-        .expect("counted work is finite and non-negative, and the film's block grid matches its size")
+    balancer::CostMap::from_counts(film.width, film.height, tracer::BLOCK_SIZE, &film.block_work)
+        .expect("the film's block grid matches its size and counted work is never negative")
 }
 
 fn to_tracer(r: balancer::Rect) -> tracer::Rect {

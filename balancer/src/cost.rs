@@ -366,9 +366,8 @@ mod tests {
         assert_eq!(map.cost(Rect::new(8, 0, 1, 4)), 0.5 * 3.0);
         // One pixel of the 2x2 corner block 5.
         assert_eq!(map.cost(Rect::new(9, 5, 1, 1)), 6.0 / 4.0);
-        // A quarter of block 0, all of block 1 along x, a quarter of block 2 (2 columns of 4
-        // pixels... of its 2): x 3..9 covers 1/4 of block 0, block 1, 1/2 of block 2; y 2..5
-        // covers 2/4 of row 0 and 1/2 of row 1.
+        // x 3..9 covers 1/4 of block column 0, all of column 1 and 1/2 of the 2-pixel column 2;
+        // y 2..5 covers 2/4 of block row 0 and 1/2 of the 2-pixel row 1.
         let expected = 0.5 * (0.25 * 1.0 + 2.0 + 0.5 * 3.0) + 0.5 * (0.25 * 4.0 + 5.0 + 0.5 * 6.0);
         assert_eq!(map.cost(Rect::new(3, 2, 6, 3)), expected);
     }

@@ -63,10 +63,11 @@ pub enum Message {
     /// A thief tells the owner which tiles it took from `victim`, so the owner's ledger knows
     /// who holds them. `stolen` counts the grants the thief has received this frame.
     StealNotice { frame: FrameId, victim: PeerId, tiles: Vec<TileId>, stolen: u32 },
-    /// A peer's liveness and idleness report to the owner. `assigned` and `stolen` count the
-    /// `Assign`s and grants the peer has received this frame, so the owner can tell a stale
-    /// report from a current one.
-    Status { frame: FrameId, idle: bool, assigned: u32, stolen: u32 },
+    /// A peer's report to the owner: alive, and idle (holding no work of the frame) or not.
+    /// `assigned`, `stolen` and `done` count the `Assign`s and grants the peer has received and
+    /// the `TileDone`s it has sent this frame, so that the owner, whose messages may arrive in
+    /// any order, can tell a current idle report from one overtaken by events.
+    Status { frame: FrameId, idle: bool, assigned: u32, stolen: u32, done: u32 },
     /// A finished tile, sent to the owner by whoever rendered it.
     TileDone(TileResult),
     /// The owner has every tile of `frame`; peers drop what is left of it.

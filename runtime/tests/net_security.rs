@@ -14,7 +14,7 @@ use quinn::crypto::rustls::QuicClientConfig;
 use quinn::{ConnectionError, Endpoint};
 use runtime::net::certs::ANY_PEER_NAME;
 use runtime::net::{
-    CertError, CloseCode, CloseReason, ClusterCerts, ConnId, Config, Direction, Event, Expect,
+    CertError, CloseCode, CloseReason, ClusterCerts, Config, ConnId, Direction, Event, Expect,
     Link, PeerIdentity, SendError, tls,
 };
 use tokio::sync::mpsc::Receiver;
@@ -57,13 +57,16 @@ fn loopback() -> SocketAddr {
 
 /// Runs a test body under a time limit, so that a hang fails instead of stalling the suite.
 async fn bounded<F: Future<Output = ()>>(body: F) {
-    tokio::time::timeout(Duration::from_secs(30), body)
+    tokio::time::timeout(Duration::from_secs(20), body)
         .await
         .expect("test timed out");
 }
 
 async fn next(events: &mut Receiver<Event<Vec<u8>>>) -> Event<Vec<u8>> {
-    events.recv().await.expect("the link keeps its event channel open")
+    events
+        .recv()
+        .await
+        .expect("the link keeps its event channel open")
 }
 
 async fn expect_connected(events: &mut Receiver<Event<Vec<u8>>>) -> (ConnId, SocketAddr) {
@@ -192,7 +195,10 @@ async fn message_round_trip_between_peers_of_one_ca() {
             panic!("peer 1 should see the connection first");
         };
         assert_eq!(direction, Direction::Inbound);
-        assert!(certificate.certifies(0), "peer 0's certificate names peer 0");
+        assert!(
+            certificate.certifies(0),
+            "peer 0's certificate names peer 0"
+        );
         assert!(!certificate.certifies(1), "and no other peer");
         match next(&mut a_events).await {
             Event::Connected {
@@ -208,9 +214,15 @@ async fn message_round_trip_between_peers_of_one_ca() {
         }
 
         a.send(a_conn, &message(b"steal?")).await.expect("sending");
-        assert_eq!(expect_message(&mut b_events).await, (b_conn, b"steal?".to_vec()));
+        assert_eq!(
+            expect_message(&mut b_events).await,
+            (b_conn, b"steal?".to_vec())
+        );
         b.send(b_conn, &message(b"tiles")).await.expect("replying");
-        assert_eq!(expect_message(&mut a_events).await, (a_conn, b"tiles".to_vec()));
+        assert_eq!(
+            expect_message(&mut a_events).await,
+            (a_conn, b"tiles".to_vec())
+        );
 
         a.close(a_conn, CloseCode::Normal, "done");
         match next(&mut b_events).await {
@@ -227,7 +239,9 @@ async fn message_round_trip_between_peers_of_one_ca() {
             other => panic!("expected the close, got {other:?}"),
         }
         match next(&mut a_events).await {
-            Event::Closed { reason, .. } => assert_eq!(reason, CloseReason::Local(CloseCode::Normal)),
+            Event::Closed { reason, .. } => {
+                assert_eq!(reason, CloseReason::Local(CloseCode::Normal))
+            }
             other => panic!("expected the close, got {other:?}"),
         }
         assert!(matches!(
@@ -262,9 +276,15 @@ async fn client_with_certificate_from_another_ca_is_refused() {
         let addr = server.0.local_addr().expect("a bound node");
 
         // Knows and trusts our CA, but its own certificate is signed by another.
-        let impostor = raw_endpoint(rustls_client(&cluster.peers()[1], Some(&foreign.peers()[0])));
+        let impostor = raw_endpoint(rustls_client(
+            &cluster.peers()[1],
+            Some(&foreign.peers()[0]),
+        ));
         let ended = attempt(&impostor, addr).await;
-        assert!(is_tls_alert(&ended), "impostor not refused in the handshake: {ended:?}");
+        assert!(
+            is_tls_alert(&ended),
+            "impostor not refused in the handshake: {ended:?}"
+        );
 
         // A whole foreign cluster's node: refused as well (here by its own side of the check).
         let (stranger, _stranger_events) = node(&foreign.peers()[0]);
@@ -285,7 +305,10 @@ async fn client_without_certificate_is_refused() {
 
         let anonymous = raw_endpoint(rustls_client(&cluster.peers()[1], None));
         let ended = attempt(&anonymous, addr).await;
-        assert!(is_tls_alert(&ended), "anonymous client not refused in the handshake: {ended:?}");
+        assert!(
+            is_tls_alert(&ended),
+            "anonymous client not refused in the handshake: {ended:?}"
+        );
 
         assert_serves(&mut server, &cluster.peers()[1]).await;
     })
@@ -298,7 +321,10 @@ async fn assert_stream_closes_connection(bytes: Vec<u8>, expected: CloseCode) {
     let cluster = ClusterCerts::generate(3).expect("generating certificates");
     let mut server = node(&cluster.peers()[0]);
     let addr = server.0.local_addr().expect("a bound node");
-    let hostile = raw_endpoint(rustls_client(&cluster.peers()[1], Some(&cluster.peers()[1])));
+    let hostile = raw_endpoint(rustls_client(
+        &cluster.peers()[1],
+        Some(&cluster.peers()[1]),
+    ));
     let connection = hostile
         .connect(addr, ANY_PEER_NAME)
         .expect("a valid connect call")
@@ -313,12 +339,20 @@ async fn assert_stream_closes_connection(bytes: Vec<u8>, expected: CloseCode) {
 
     match connection.closed().await {
         ConnectionError::ApplicationClosed(close) => {
-            assert_eq!(close.error_code, expected.varint(), "reason: {:?}", close.reason);
+            assert_eq!(
+                close.error_code,
+                expected.varint(),
+                "reason: {:?}",
+                close.reason
+            );
         }
         other => panic!("expected an application close, got {other:?}"),
     }
     match next(&mut server.1).await {
-        Event::Closed { conn: closed, reason } => {
+        Event::Closed {
+            conn: closed,
+            reason,
+        } => {
             assert_eq!(closed, conn);
             assert_eq!(reason, CloseReason::Local(expected));
         }
@@ -331,7 +365,11 @@ async fn assert_stream_closes_connection(bytes: Vec<u8>, expected: CloseCode) {
 async fn random_bytes_in_a_frame_are_malformed() {
     let payload = noise(512, 0x5eed);
     assert!(decode(&payload).is_err(), "the noise must not decode");
-    bounded(assert_stream_closes_connection(framed(&payload), CloseCode::Malformed)).await;
+    bounded(assert_stream_closes_connection(
+        framed(&payload),
+        CloseCode::Malformed,
+    ))
+    .await;
 }
 
 #[tokio::test]
@@ -352,7 +390,11 @@ async fn truncated_frame_closes_the_connection() {
 
 #[tokio::test]
 async fn truncated_header_closes_the_connection() {
-    bounded(assert_stream_closes_connection(vec![9, 0], CloseCode::Truncated)).await;
+    bounded(assert_stream_closes_connection(
+        vec![9, 0],
+        CloseCode::Truncated,
+    ))
+    .await;
 }
 
 #[tokio::test]
@@ -370,7 +412,11 @@ async fn bytes_beyond_the_declared_length_are_malformed() {
 
 #[tokio::test]
 async fn a_decoder_panic_costs_only_that_connection() {
-    bounded(assert_stream_closes_connection(framed(b"TT1:panic"), CloseCode::Malformed)).await;
+    bounded(assert_stream_closes_connection(
+        framed(b"TT1:panic"),
+        CloseCode::Malformed,
+    ))
+    .await;
 }
 
 #[tokio::test]
@@ -379,7 +425,10 @@ async fn an_abandoned_message_is_dropped_and_the_connection_lives() {
         let cluster = ClusterCerts::generate(2).expect("generating certificates");
         let mut server = node(&cluster.peers()[0]);
         let addr = server.0.local_addr().expect("a bound node");
-        let client = raw_endpoint(rustls_client(&cluster.peers()[1], Some(&cluster.peers()[1])));
+        let client = raw_endpoint(rustls_client(
+            &cluster.peers()[1],
+            Some(&cluster.peers()[1]),
+        ));
         let connection = client
             .connect(addr, ANY_PEER_NAME)
             .expect("a valid connect call")
@@ -393,11 +442,43 @@ async fn an_abandoned_message_is_dropped_and_the_connection_lives() {
         abandoned.write_all(&cut).await.expect("writing");
         abandoned.reset(0u32.into()).expect("resetting");
         let mut whole = connection.open_uni().await.expect("opening a stream");
-        whole.write_all(&framed(&message(b"this one"))).await.expect("writing");
+        whole
+            .write_all(&framed(&message(b"this one")))
+            .await
+            .expect("writing");
         whole.finish().expect("finishing");
 
-        assert_eq!(expect_message(&mut server.1).await, (conn, b"this one".to_vec()));
-        assert!(connection.close_reason().is_none(), "the connection was closed");
+        assert_eq!(
+            expect_message(&mut server.1).await,
+            (conn, b"this one".to_vec())
+        );
+        // Round trips after the reset, by which time the server has long seen it: the connection
+        // must still carry messages both ways.
+        server
+            .0
+            .send(conn, &message(b"reply"))
+            .await
+            .expect("the server can still send");
+        let mut reply = connection.accept_uni().await.expect("the connection lives");
+        assert_eq!(
+            reply.read_to_end(64).await.expect("reading the reply"),
+            framed(&message(b"reply"))
+        );
+        let mut again = connection.open_uni().await.expect("opening a stream");
+        again
+            .write_all(&framed(&message(b"again")))
+            .await
+            .expect("writing");
+        again.finish().expect("finishing");
+        assert_eq!(
+            expect_message(&mut server.1).await,
+            (conn, b"again".to_vec())
+        );
+        assert!(
+            connection.close_reason().is_none(),
+            "the connection was closed"
+        );
+        assert!(server.1.try_recv().is_err(), "the server reported more");
     })
     .await;
 }
@@ -413,10 +494,153 @@ async fn sending_over_the_limit_is_refused_locally() {
             .await
             .expect("connecting");
         let refused = a.send(conn, &vec![0; LIMIT + 1]).await;
-        assert!(matches!(refused, Err(SendError::TooLarge { len, max: LIMIT }) if len == LIMIT + 1));
+        assert!(
+            matches!(refused, Err(SendError::TooLarge { len, max: LIMIT }) if len == LIMIT + 1)
+        );
         a.send(conn, &message(b"fits")).await.expect("sending");
         expect_connected(&mut b_events).await;
         assert_eq!(expect_message(&mut b_events).await.1, b"fits");
+    })
+    .await;
+}
+
+#[tokio::test]
+async fn a_cancelled_send_resets_its_stream() {
+    bounded(async {
+        let cluster = ClusterCerts::generate(2).expect("generating certificates");
+        let (a, _a_events) = Link::bind(
+            loopback(),
+            &cluster.peers()[0],
+            Config {
+                max_message_bytes: 4 << 20,
+                ..Config::default()
+            },
+            decode,
+        )
+        .expect("binding");
+        // A bare server that takes the stream but reads nothing, so that flow control stalls the
+        // sender after 64 KiB, mid-message.
+        let mut transport = quinn::TransportConfig::default();
+        transport.stream_receive_window((64u32 * 1024).into());
+        let crypto = tls::server_config(&cluster.peers()[1]).expect("a server configuration");
+        let mut server_config = quinn::ServerConfig::with_crypto(Arc::new(crypto));
+        server_config.transport_config(Arc::new(transport));
+        let server = Endpoint::server(server_config, loopback()).expect("binding");
+        let addr = server.local_addr().expect("a bound endpoint");
+        let accepting = tokio::spawn(async move {
+            let incoming = server.accept().await.expect("an incoming connection");
+            let connection = incoming.await.expect("a handshake");
+            let stream = connection.accept_uni().await.expect("a stream");
+            (server, connection, stream)
+        });
+
+        let conn = a.connect(addr, Expect::Peer(1)).await.expect("connecting");
+        let big = message(&vec![5; 1 << 20]);
+        let stalled = tokio::time::timeout(Duration::from_millis(300), a.send(conn, &big)).await;
+        assert!(stalled.is_err(), "the send should stall on flow control");
+
+        let (_server, _connection, mut stream) = accepting.await.expect("the server task");
+        match stream.read_to_end(4 << 20).await {
+            Err(quinn::ReadToEndError::Read(quinn::ReadError::Reset(_))) => {}
+            other => panic!("a cancelled send must reset its stream, got {other:?}"),
+        }
+    })
+    .await;
+}
+
+#[tokio::test]
+async fn connections_over_the_limit_are_refused() {
+    bounded(async {
+        let cluster = ClusterCerts::generate(3).expect("generating certificates");
+        let (server, mut server_events) = Link::bind(
+            loopback(),
+            &cluster.peers()[0],
+            Config {
+                max_connections: 1,
+                ..config()
+            },
+            decode,
+        )
+        .expect("binding");
+        let addr = server.local_addr().expect("a bound node");
+        let (a, _a_events) = node(&cluster.peers()[1]);
+        let (b, _b_events) = node(&cluster.peers()[2]);
+
+        let a_conn = a
+            .connect(addr, Expect::AnyPeer)
+            .await
+            .expect("the first gets in");
+        expect_connected(&mut server_events).await;
+        assert!(
+            b.connect(addr, Expect::AnyPeer).await.is_err(),
+            "the second got in"
+        );
+
+        a.send(a_conn, &message(b"still served"))
+            .await
+            .expect("sending");
+        assert_eq!(expect_message(&mut server_events).await.1, b"still served");
+
+        a.close(a_conn, CloseCode::Normal, "making room");
+        assert!(matches!(
+            next(&mut server_events).await,
+            Event::Closed { .. }
+        ));
+        b.connect(addr, Expect::AnyPeer)
+            .await
+            .expect("a freed place is taken again");
+    })
+    .await;
+}
+
+#[tokio::test]
+async fn shutdown_and_a_dropped_receiver_tell_the_peers() {
+    bounded(async {
+        let cluster = ClusterCerts::generate(3).expect("generating certificates");
+        let (a, mut a_events) = node(&cluster.peers()[0]);
+        let (b, mut b_events) = node(&cluster.peers()[1]);
+        let (c, c_events) = node(&cluster.peers()[2]);
+        let b_addr = b.local_addr().expect("a bound node");
+        let c_addr = c.local_addr().expect("a bound node");
+        a.connect(b_addr, Expect::Peer(1))
+            .await
+            .expect("connecting");
+        expect_connected(&mut a_events).await;
+        expect_connected(&mut b_events).await;
+
+        b.shutdown().await;
+        let shutdown = CloseCode::Shutdown.varint().into_inner();
+        match next(&mut a_events).await {
+            Event::Closed {
+                reason: CloseReason::Remote { code, .. },
+                ..
+            } => assert_eq!(code, shutdown),
+            other => panic!("expected a remote close, got {other:?}"),
+        }
+        match next(&mut b_events).await {
+            Event::Closed { reason, .. } => {
+                assert_eq!(reason, CloseReason::Local(CloseCode::Shutdown))
+            }
+            other => panic!("expected a local close, got {other:?}"),
+        }
+        assert!(
+            a.connect(b_addr, Expect::Peer(1)).await.is_err(),
+            "b still accepts"
+        );
+
+        a.connect(c_addr, Expect::Peer(2))
+            .await
+            .expect("connecting");
+        expect_connected(&mut a_events).await;
+        // The driver of c goes away without a word: c closes its connections all the same.
+        drop(c_events);
+        match next(&mut a_events).await {
+            Event::Closed {
+                reason: CloseReason::Remote { code, .. },
+                ..
+            } => assert_eq!(code, shutdown),
+            other => panic!("expected a remote close, got {other:?}"),
+        }
     })
     .await;
 }
@@ -441,12 +665,22 @@ fn keygen_files_load_back_and_are_never_overwritten() {
         assert_eq!(mode & 0o077, 0, "private key readable by others: {mode:o}");
     }
 
-    assert!(matches!(cluster.write_pem(dir.path()), Err(CertError::Exists { .. })));
-    assert!(matches!(PeerIdentity::load(dir.path(), 3), Err(CertError::Io { .. })));
+    assert!(matches!(
+        cluster.write_pem(dir.path()),
+        Err(CertError::Exists { .. })
+    ));
+    assert!(matches!(
+        PeerIdentity::load(dir.path(), 3),
+        Err(CertError::Io { .. })
+    ));
 
     // Peer 0's certificate and key under peer 1's name: the certificate does not name peer 1.
     let renamed = tempfile::tempdir().expect("a temporary directory");
-    for (from, to) in [("ca.pem", "ca.pem"), ("peer-0.pem", "peer-1.pem"), ("peer-0-key.pem", "peer-1-key.pem")] {
+    for (from, to) in [
+        ("ca.pem", "ca.pem"),
+        ("peer-0.pem", "peer-1.pem"),
+        ("peer-0-key.pem", "peer-1-key.pem"),
+    ] {
         std::fs::copy(dir.path().join(from), renamed.path().join(to)).expect("copying");
     }
     assert!(matches!(
@@ -470,7 +704,10 @@ fn keygen_files_load_back_and_are_never_overwritten() {
     ));
 
     std::fs::write(renamed.path().join("ca.pem"), "not PEM").expect("writing");
-    assert!(matches!(PeerIdentity::load(renamed.path(), 0), Err(CertError::Pem { .. })));
+    assert!(matches!(
+        PeerIdentity::load(renamed.path(), 0),
+        Err(CertError::Pem { .. })
+    ));
 }
 
 #[tokio::test]
@@ -482,7 +719,11 @@ async fn identities_loaded_from_files_connect() {
             .write_pem(dir.path())
             .expect("writing PEM files");
         let mut server = node(&PeerIdentity::load(dir.path(), 0).expect("loading peer 0"));
-        assert_serves(&mut server, &PeerIdentity::load(dir.path(), 1).expect("loading peer 1")).await;
+        assert_serves(
+            &mut server,
+            &PeerIdentity::load(dir.path(), 1).expect("loading peer 1"),
+        )
+        .await;
     })
     .await;
 }
@@ -513,14 +754,16 @@ async fn loopback_round_trips_and_large_messages_arrive_intact() {
 
         // Peer 1 echoes small messages and acknowledges the big ones once all arrived intact.
         tokio::spawn(async move {
-            let mut intact = 0;
+            // Messages may arrive in any order, so the big ones are counted, not ranked.
+            let (mut received, mut intact) = (0, 0);
             while let Some(event) = b_events.recv().await {
                 let Event::Message { conn, message: m } = event else { continue };
                 if m.len() < 64 {
                     let _ = b.send(conn, &message(&m)).await;
                 } else {
-                    intact += usize::from(m.iter().all(|&byte| byte == m[0]));
-                    if m[0] == BIG_COUNT - 1 {
+                    received += 1;
+                    intact += usize::from(m.len() == BIG && m.iter().all(|&byte| byte == m[0]));
+                    if received == usize::from(BIG_COUNT) {
                         let _ = b.send(conn, &message(&intact.to_le_bytes())).await;
                     }
                 }

@@ -24,6 +24,9 @@ pub(super) struct Ledger {
     missing: usize,
     peers: BTreeMap<PeerId, PeerView>,
     peer_timeout: Duration,
+    /// No participant can have been silent too long before this instant: deadlines only move
+    /// later as peers are heard from, so the owner scans for silent peers only when it passes.
+    next_check: Option<Duration>,
 }
 
 struct Entry {
@@ -35,10 +38,12 @@ struct Entry {
 
 struct PeerView {
     alive: bool,
-    /// Set by a current idle report, cleared whenever the peer may have received work.
-    idle: bool,
+    /// The counts `[assigned, stolen, done]` of the peer's newest idle report.
+    idle_report: Option<[u32; 3]>,
     assigns_sent: u32,
+    /// The highest grant count in the peer's steal notices.
     grants_seen: u32,
+    results_received: u32,
     last_heard: Duration,
 }
 
@@ -61,6 +66,7 @@ impl Ledger {
             missing: 0,
             peers: BTreeMap::new(),
             peer_timeout,
+            next_check: Some(now + peer_timeout),
         };
         for (&peer, tiles) in &assignments {
             ledger.peers.insert(peer, PeerView::new(now));
@@ -72,7 +78,7 @@ impl Ledger {
         ledger.missing = ledger.tiles.len();
         let participants = ledger.live_peers();
         for (peer, tiles) in assignments {
-            ledger.send_assign(peer, participants.clone(), tiles, out);
+            ledger.send_assign(now, peer, participants.clone(), tiles, out);
         }
         ledger
     }
@@ -99,25 +105,40 @@ impl Ledger {
         result: TileResult,
         out: &mut Outbox,
     ) {
-        let frame = self.frame;
-        let tile = result.tile;
-        let fault = |fault| Event::FaultyPeer { frame, peer: from, tile, fault };
-        let Some(entry) = self.tiles.get_mut(&tile) else {
-            out.events.push_back(fault(Fault::UnknownTile));
-            return;
-        };
+        let counted = self.peers.get_mut(&from).map(|view| {
+            view.results_received += 1;
+            view.idle()
+        });
+        if let Some(fault) = self.record(now, from, result, out) {
+            out.events.push_back(fault);
+        }
+        // The result may have been what kept the sender's idle report from counting.
+        if counted == Some(true) {
+            self.reissue_if_all_idle(now, out);
+        }
+    }
+
+    /// Records a result; returns the fault if it is not acceptable.
+    fn record(
+        &mut self,
+        now: Duration,
+        from: PeerId,
+        result: TileResult,
+        out: &mut Outbox,
+    ) -> Option<Event> {
+        let (frame, tile) = (self.frame, result.tile);
+        let fault = |fault| Some(Event::FaultyPeer { frame, peer: from, tile, fault });
+        let Some(entry) = self.tiles.get_mut(&tile) else { return fault(Fault::UnknownTile) };
         if result.rect != entry.spec.rect {
-            out.events.push_back(fault(Fault::WrongRect));
-            return;
+            return fault(Fault::WrongRect);
         }
         if wire::check_buffers(&result).is_err() {
-            out.events.push_back(fault(Fault::BadBuffers));
-            return;
+            return fault(Fault::BadBuffers);
         }
         match &entry.result {
             // Rendering is deterministic, so an honest duplicate is bit-identical.
-            Some((_, kept)) if kept.pixels == result.pixels => {}
-            Some((first, _)) => out.events.push_back(fault(Fault::Mismatch { first: *first })),
+            Some((_, kept)) if kept.pixels == result.pixels => None,
+            Some((first, _)) => fault(Fault::Mismatch { first: *first }),
             None => {
                 entry.result = Some((from, result));
                 entry.holders.clear();
@@ -125,6 +146,7 @@ impl Ledger {
                 if self.missing == 0 {
                     self.complete(now, out);
                 }
+                None
             }
         }
     }
@@ -132,6 +154,7 @@ impl Ledger {
     /// A thief took `tiles` from `victim`: it holds them now.
     pub(super) fn on_notice(
         &mut self,
+        now: Duration,
         thief: PeerId,
         victim: PeerId,
         tiles: &[TileId],
@@ -141,11 +164,12 @@ impl Ledger {
         let thief_alive = match self.peers.get_mut(&thief) {
             Some(view) => {
                 view.grants_seen = view.grants_seen.max(grants);
-                view.idle = false;
                 view.alive
             }
             None => false,
         };
+        // The thief holds work again, so its silence matters again.
+        self.watch(now + self.peer_timeout);
         let mut orphans = Vec::new();
         for id in tiles {
             let Some(entry) = self.tiles.get_mut(id).filter(|e| e.result.is_none()) else {
@@ -159,30 +183,40 @@ impl Ledger {
                 orphans.push(*id);
             }
         }
-        self.reissue(orphans, out);
+        self.reissue(now, orphans, out);
     }
 
-    /// A liveness or idleness report. An idle report counts only if the peer had received
-    /// every `Assign` sent to it and every grant the owner has heard of when it was sent.
+    /// A liveness report, and an idle report if `idle`. Reports may arrive in any order; the
+    /// counts only grow, so the newest report is the one with the highest counts.
     pub(super) fn on_status(
         &mut self,
+        now: Duration,
         from: PeerId,
         idle: bool,
-        assigned: u32,
-        stolen: u32,
+        counts: [u32; 3],
         out: &mut Outbox,
     ) {
         let Some(view) = self.peers.get_mut(&from) else { return };
-        view.idle = idle && assigned >= view.assigns_sent && stolen >= view.grants_seen;
-        if view.idle {
-            self.reissue_if_all_idle(out);
+        if idle {
+            let newest = view.idle_report.map_or(counts, |old| {
+                [0, 1, 2].map(|i| old[i].max(counts[i]))
+            });
+            view.idle_report = Some(newest);
+        }
+        if view.idle() {
+            self.reissue_if_all_idle(now, out);
         }
     }
 
-    pub(super) fn on_peer_lost(&mut self, peer: PeerId, reason: Failure, out: &mut Outbox) {
+    pub(super) fn on_peer_lost(
+        &mut self,
+        now: Duration,
+        peer: PeerId,
+        reason: Failure,
+        out: &mut Outbox,
+    ) {
         let Some(view) = self.peers.get_mut(&peer).filter(|view| view.alive) else { return };
         view.alive = false;
-        view.idle = false;
         let mut orphans = Vec::new();
         for (id, entry) in &mut self.tiles {
             let before = entry.holders.len();
@@ -192,38 +226,47 @@ impl Ledger {
             }
         }
         let reissued = orphans.len();
-        self.reissue(orphans, out);
+        self.reissue(now, orphans, out);
         let frame = self.frame;
         out.events.push_back(Event::PeerFailed { frame, peer, reason, reissued });
-        self.reissue_if_all_idle(out);
+        self.reissue_if_all_idle(now, out);
     }
 
     /// Declares failed every participant that may hold work and has been silent too long.
     pub(super) fn on_timeout(&mut self, now: Duration, out: &mut Outbox) {
+        if self.next_check.is_none_or(|check| now < check) {
+            return;
+        }
         let silent: Vec<PeerId> = self
             .suspects()
             .filter(|(_, deadline)| now >= *deadline)
             .map(|(peer, _)| peer)
             .collect();
         for peer in silent {
-            self.on_peer_lost(peer, Failure::Silent, out);
+            self.on_peer_lost(now, peer, Failure::Silent, out);
         }
+        self.next_check = self.suspects().map(|(_, deadline)| deadline).min();
     }
 
     pub(super) fn poll_timeout(&self) -> Option<Duration> {
-        self.suspects().map(|(_, deadline)| deadline).min()
+        self.next_check
+    }
+
+    /// Makes sure the owner looks for silent peers by `deadline`.
+    fn watch(&mut self, deadline: Duration) {
+        self.next_check = Some(self.next_check.map_or(deadline, |check| check.min(deadline)));
     }
 
     /// Participants that may hold work, with the instant their silence becomes a failure.
     fn suspects(&self) -> impl Iterator<Item = (PeerId, Duration)> + '_ {
         self.peers
             .iter()
-            .filter(|(peer, view)| **peer != self.me && view.alive && !view.idle)
+            .filter(|(peer, view)| **peer != self.me && view.alive && !view.idle())
             .map(|(peer, view)| (*peer, view.last_heard + self.peer_timeout))
     }
 
-    fn reissue_if_all_idle(&mut self, out: &mut Outbox) {
-        let all_idle = self.peers.values().filter(|view| view.alive).all(|view| view.idle);
+    fn reissue_if_all_idle(&mut self, now: Duration, out: &mut Outbox) {
+        let all_idle = self.peers.values().filter(|view| view.alive).all(PeerView::idle);
         if self.missing > 0 && all_idle {
             let missing: Vec<TileId> = self
                 .tiles
@@ -232,23 +275,23 @@ impl Ledger {
                 .map(|(id, _)| *id)
                 .collect();
             tracing::info!(frame = %self.frame, tiles = missing.len(), "every peer is idle: re-issuing missing tiles");
-            self.reissue(missing, out);
+            self.reissue(now, missing, out);
         }
     }
 
     /// Gives `tiles` (in id order) to live participants in contiguous runs: to the idle ones
     /// if any, else to all. With none left alive, the owner takes them itself.
-    fn reissue(&mut self, tiles: Vec<TileId>, out: &mut Outbox) {
+    fn reissue(&mut self, now: Duration, tiles: Vec<TileId>, out: &mut Outbox) {
         if tiles.is_empty() {
             return;
         }
         let live = self.live_peers();
-        let idle: Vec<PeerId> = live.iter().copied().filter(|p| self.peers[p].idle).collect();
+        let idle: Vec<PeerId> = live.iter().copied().filter(|p| self.peers[p].idle()).collect();
         let targets = match (idle.is_empty(), live.is_empty()) {
             (false, _) => idle,
             (true, false) => live.clone(),
             (true, true) => {
-                self.peers.insert(self.me, PeerView::new(self.started));
+                self.peers.insert(self.me, PeerView::new(now));
                 vec![self.me]
             }
         };
@@ -265,12 +308,14 @@ impl Ledger {
                     entry.spec
                 })
                 .collect();
-            self.send_assign(target, participants.clone(), specs, out);
+            self.send_assign(now, target, participants.clone(), specs, out);
         }
     }
 
+    /// Sends `peer` tiles. Its silence counts from now: an idle peer sends no heartbeats.
     fn send_assign(
         &mut self,
+        now: Duration,
         peer: PeerId,
         peers: Vec<PeerId>,
         tiles: Vec<TileSpec>,
@@ -278,7 +323,8 @@ impl Ledger {
     ) {
         let view = self.peers.get_mut(&peer).expect("invariant: tiles go to participants");
         view.assigns_sent += 1;
-        view.idle = false;
+        view.last_heard = view.last_heard.max(now);
+        self.watch(now + self.peer_timeout);
         out.send(peer, Message::Assign { frame: self.frame, peers, tiles });
     }
 
@@ -302,6 +348,26 @@ impl Ledger {
 
 impl PeerView {
     fn new(now: Duration) -> Self {
-        Self { alive: true, idle: false, assigns_sent: 0, grants_seen: 0, last_heard: now }
+        Self {
+            alive: true,
+            idle_report: None,
+            assigns_sent: 0,
+            grants_seen: 0,
+            results_received: 0,
+            last_heard: now,
+        }
+    }
+
+    /// Whether the peer holds no work, as far as the owner can tell: its newest idle report was
+    /// sent after it had received every `Assign` sent to it and every grant the owner has heard
+    /// of, and every result it had sent then has arrived. A peer goes from idle to busy only by
+    /// receiving one of those, so no explicit "busy" report is needed.
+    fn idle(&self) -> bool {
+        self.alive
+            && self.idle_report.is_some_and(|[assigned, stolen, done]| {
+                assigned >= self.assigns_sent
+                    && stolen >= self.grants_seen
+                    && done <= self.results_received
+            })
     }
 }

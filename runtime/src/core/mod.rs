@@ -200,7 +200,7 @@ impl Core {
         let (worker, mut cx) = self.split(now);
         worker.on_peer_lost(&mut cx, peer);
         if let Some(ledger) = &mut self.ledger {
-            ledger.on_peer_lost(peer, Failure::Lost, &mut self.out);
+            ledger.on_peer_lost(now, peer, Failure::Lost, &mut self.out);
         }
         self.settle(now);
     }
@@ -265,40 +265,26 @@ impl Core {
             Message::StealRefuse { frame } => worker.on_refuse(&mut cx, from, frame),
             Message::FrameDone { frame } => worker.on_frame_done(&mut cx, from, frame),
             Message::StealNotice { frame, victim, tiles, stolen } => {
-                if let Some(ledger) = self.ledger_for(frame, kind)? {
-                    ledger.on_notice(from, victim, &tiles, stolen, &mut self.out);
+                if let Some(ledger) = ledger_for(&mut self.ledger, self.last_owned, frame, kind)? {
+                    ledger.on_notice(now, from, victim, &tiles, stolen, &mut self.out);
                 }
             }
-            Message::Status { frame, idle, assigned, stolen } => {
-                if let Some(ledger) = self.ledger_for(frame, kind)? {
-                    ledger.on_status(from, idle, assigned, stolen, &mut self.out);
+            Message::Status { frame, idle, assigned, stolen, done } => {
+                if let Some(ledger) = ledger_for(&mut self.ledger, self.last_owned, frame, kind)? {
+                    ledger.on_status(now, from, idle, [assigned, stolen, done], &mut self.out);
                 }
             }
             Message::TileDone(result) => {
-                if let Some(ledger) = self.ledger_for(result.frame, kind)? {
+                if let Some(ledger) = ledger_for(&mut self.ledger, self.last_owned, result.frame, kind)? {
                     ledger.on_result(now, from, result, &mut self.out);
                 }
             }
             Message::FrameStats { frame, stats } => {
-                self.ledger_for(frame, kind)?;
+                ledger_for(&mut self.ledger, self.last_owned, frame, kind)?;
                 self.out.events.push_back(Event::PeerStats { frame, peer: from, stats });
             }
         }
         Ok(())
-    }
-
-    /// The ledger of `frame` if it is running here; `None` for a frame this peer owned and
-    /// finished (late messages are expected); an error for a frame it never owned.
-    fn ledger_for(
-        &mut self,
-        frame: FrameId,
-        kind: &'static str,
-    ) -> Result<Option<&mut Ledger>, ProtocolError> {
-        match &mut self.ledger {
-            Some(ledger) if ledger.frame() == frame => Ok(Some(ledger)),
-            _ if self.last_owned.is_some_and(|last| frame <= last) => Ok(None),
-            _ => Err(ProtocolError::NotOwner { kind, frame }),
-        }
     }
 
     /// Runs the core to a resting state after an input: delivers messages to itself, fills
@@ -323,6 +309,21 @@ impl Core {
                 break;
             }
         }
+    }
+}
+
+/// The ledger of `frame` if it is running here; `None` for a frame this peer owned and
+/// finished (late messages are expected); an error for a frame it never owned.
+fn ledger_for<'a>(
+    ledger: &'a mut Option<Ledger>,
+    last_owned: Option<FrameId>,
+    frame: FrameId,
+    kind: &'static str,
+) -> Result<Option<&'a mut Ledger>, ProtocolError> {
+    match ledger {
+        Some(ledger) if ledger.frame() == frame => Ok(Some(ledger)),
+        _ if last_owned.is_some_and(|last| frame <= last) => Ok(None),
+        _ => Err(ProtocolError::NotOwner { kind, frame }),
     }
 }
 

@@ -38,14 +38,15 @@ pub(super) struct FrameState {
     pub(super) prefetch: VecDeque<TileSpec>,
     pub(super) prefetch_work: f64,
     started: Duration,
-    /// `Assign`s and grants received this frame: the owner compares them with what it knows
-    /// was sent, to tell a stale idle report from a current one.
+    /// `Assign`s and grants received and `TileDone`s sent this frame: the owner compares them
+    /// with what it knows of, to tell a stale idle report from a current one.
     assigned: u32,
     pub(super) stolen: u32,
+    done: u32,
     pub(super) thief: Thief,
     pub(super) round: Option<Round>,
-    /// The `(assigned, stolen)` counts of the last idle report, so it is sent once.
-    idle_reported: Option<(u32, u32)>,
+    /// The counts of the last idle report, so that it is sent once.
+    idle_reported: Option<[u32; 3]>,
     last_to_owner: Duration,
 }
 
@@ -121,8 +122,17 @@ impl Worker {
     }
 
     pub(super) fn on_frame_done(&mut self, cx: &mut Ctx, from: PeerId, frame: FrameId) {
-        if self.frame.as_ref().is_some_and(|state| state.id == frame && state.owner == from) {
-            self.finish_frame(cx);
+        let running = self.frame.as_ref().map(|state| (state.id, state.owner));
+        match running {
+            Some((id, owner)) if id == frame && owner == from => self.finish_frame(cx),
+            // A later frame is done, so this one is too; its own `FrameDone` was lost.
+            Some((id, _)) if id < frame => self.finish_frame(cx),
+            _ => {}
+        }
+        if self.newest.is_none_or(|newest| frame > newest) {
+            // Messages may arrive in any order: this `FrameDone` overtook our `Assign`, which
+            // must now be dropped when it comes.
+            self.newest = Some(frame);
         }
     }
 
@@ -166,13 +176,14 @@ impl Worker {
         self.estimates.sample_rate(flight.predicted, now.saturating_sub(flight.started));
         match &mut self.frame {
             Some(state) if state.id == result.frame => {
+                state.done += 1;
                 state.send_to_owner(cx, Message::TileDone(result));
             }
             _ => tracing::debug!(frame = %result.frame, tile = %result.tile, "result of a finished frame: dropped"),
         }
     }
 
-    /// Drops the running frame if `peer` owned it; returns whether it did.
+    /// Drops the running frame if `peer` owned it, else stops stealing from `peer`.
     pub(super) fn on_peer_lost(&mut self, cx: &mut Ctx, peer: PeerId) {
         let Some(state) = &mut self.frame else { return };
         if state.owner == peer {
@@ -220,7 +231,7 @@ impl Worker {
             || !state.prefetch.is_empty()
             || self.frame_in_flight(state.id).next().is_some()
             || matches!(state.thief, Thief::Asking { .. });
-        let counts = (state.assigned, state.stolen);
+        let counts = state.counts();
         if holds_work || state.idle_reported == Some(counts) {
             return;
         }
@@ -242,7 +253,7 @@ impl Worker {
 
     pub(super) fn heartbeat_due(&self, interval: Duration) -> Option<Duration> {
         let state = self.frame.as_ref()?;
-        let idle = state.idle_reported == Some((state.assigned, state.stolen));
+        let idle = state.idle_reported == Some(state.counts());
         (state.owner != self.me && !idle).then(|| state.last_to_owner + interval)
     }
 }
@@ -260,6 +271,7 @@ impl FrameState {
             started: now,
             assigned: 0,
             stolen: 0,
+            done: 0,
             thief: Thief::Ready,
             round: None,
             idle_reported: None,
@@ -272,8 +284,13 @@ impl FrameState {
         cx.out.send(self.owner, message);
     }
 
+    fn counts(&self) -> [u32; 3] {
+        [self.assigned, self.stolen, self.done]
+    }
+
     fn status(&self, idle: bool) -> Message {
-        Message::Status { frame: self.id, idle, assigned: self.assigned, stolen: self.stolen }
+        let [assigned, stolen, done] = self.counts();
+        Message::Status { frame: self.id, idle, assigned, stolen, done }
     }
 }
 

@@ -29,9 +29,7 @@ use rcgen::{
 };
 use rustls::client::{verify_server_cert_signed_by_trust_anchor, verify_server_name};
 use rustls::pki_types::pem::PemObject;
-use rustls::pki_types::{
-    CertificateDer, PrivateKeyDer, PrivatePkcs8KeyDer, ServerName, UnixTime,
-};
+use rustls::pki_types::{CertificateDer, PrivateKeyDer, PrivatePkcs8KeyDer, ServerName, UnixTime};
 use rustls::server::ParsedCertificate;
 
 /// The name every peer certificate carries: "a member of this cluster".
@@ -91,7 +89,9 @@ impl ClusterCerts {
     pub fn generate(peers: u32) -> Result<Self, CertError> {
         let year = current_year();
         let mut ca_params = CertificateParams::new(Vec::<String>::new())?;
-        ca_params.distinguished_name.push(DnType::CommonName, "tessera cluster CA");
+        ca_params
+            .distinguished_name
+            .push(DnType::CommonName, "tessera cluster CA");
         // Path length 0: the CA signs peer certificates, never another CA.
         ca_params.is_ca = IsCa::Ca(BasicConstraints::Constrained(0));
         ca_params.key_usages = vec![KeyUsagePurpose::KeyCertSign, KeyUsagePurpose::CrlSign];
@@ -165,7 +165,8 @@ impl PeerIdentity {
     /// checks that its certificate was issued by `ca.pem` for that index.
     pub fn load(dir: &Path, index: u32) -> Result<Self, CertError> {
         let ca = read_pem::<CertificateDer>(&dir.join("ca.pem"), "certificate")?;
-        let cert = read_pem::<CertificateDer>(&dir.join(format!("peer-{index}.pem")), "certificate")?;
+        let cert =
+            read_pem::<CertificateDer>(&dir.join(format!("peer-{index}.pem")), "certificate")?;
         let key = read_pem::<PrivatePkcs8KeyDer>(
             &dir.join(format!("peer-{index}-key.pem")),
             "PKCS#8 private key",
@@ -210,8 +211,14 @@ impl PeerIdentity {
         let roots = super::tls::roots(&self.ca).map_err(not_issued)?;
         let parsed = ParsedCertificate::try_from(&self.cert).map_err(not_issued)?;
         let algorithms = super::tls::provider().signature_verification_algorithms.all;
-        verify_server_cert_signed_by_trust_anchor(&parsed, &roots, &[], UnixTime::now(), algorithms)
-            .map_err(not_issued)?;
+        verify_server_cert_signed_by_trust_anchor(
+            &parsed,
+            &roots,
+            &[],
+            UnixTime::now(),
+            algorithms,
+        )
+        .map_err(not_issued)?;
         if !PeerCertificate(self.cert.clone()).certifies(self.index) {
             return Err(CertError::WrongPeer { index: self.index });
         }

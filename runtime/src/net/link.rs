@@ -271,7 +271,11 @@ impl<M: Send + 'static> Shared<M> {
         let remote = connection.remote_address();
         let certificate = connection
             .peer_identity()
-            .and_then(|identity| identity.downcast::<Vec<rustls::pki_types::CertificateDer>>().ok())
+            .and_then(|identity| {
+                identity
+                    .downcast::<Vec<rustls::pki_types::CertificateDer>>()
+                    .ok()
+            })
             .and_then(|chain| chain.into_iter().next());
         let Some(certificate) = certificate else {
             warn!(%remote, "closing a connection without a peer certificate");
@@ -330,7 +334,10 @@ impl PeerConn {
     }
 
     fn local_close(&self) -> CloseCode {
-        self.local_close.get().copied().unwrap_or(CloseCode::Shutdown)
+        self.local_close
+            .get()
+            .copied()
+            .unwrap_or(CloseCode::Shutdown)
     }
 }
 

@@ -180,7 +180,10 @@ impl Config {
             });
         }
         for (value, name) in [
-            (self.max_concurrent_messages as usize, "max_concurrent_messages"),
+            (
+                self.max_concurrent_messages as usize,
+                "max_concurrent_messages",
+            ),
             (self.max_connections, "max_connections"),
             (self.event_capacity, "event_capacity"),
         ] {

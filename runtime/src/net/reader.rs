@@ -21,14 +21,14 @@ use super::link::{CloseReason, ConnId, Event, PeerConn, Shared};
 const HEADER_BYTES: usize = 4;
 
 /// Serves one established connection until it closes: reports it connected, reads its messages,
-/// then reports it closed once every message read from it has been delivered. `_slot` is its
+/// then reports it closed once every message read from it has been delivered. `slot` is its
 /// place among `max_connections`, held as long as the connection lives.
 pub(super) async fn run<M: Send + 'static>(
     shared: Arc<Shared<M>>,
     conn: ConnId,
     peer: Arc<PeerConn>,
     connected: Event<M>,
-    _slot: Option<OwnedSemaphorePermit>,
+    slot: Option<OwnedSemaphorePermit>,
 ) {
     if shared.events.send(connected).await.is_err() {
         // The driver is gone; the loop below sees the close at once and ends.
@@ -50,13 +50,20 @@ pub(super) async fn run<M: Send + 'static>(
         reaped(done, conn, &peer);
     }
     shared.forget(conn);
+    // Freed before the driver hears of the close, so that it may count on the place.
+    drop(slot);
     let reason = CloseReason::new(error, &peer);
     debug!(%conn, ?reason, "connection closed");
     let _ = shared.events.send(Event::Closed { conn, reason }).await;
 }
 
 /// Reads, checks and decodes one message, and delivers it or closes the connection.
-async fn read<M>(shared: Arc<Shared<M>>, conn: ConnId, peer: Arc<PeerConn>, mut stream: RecvStream) {
+async fn read<M>(
+    shared: Arc<Shared<M>>,
+    conn: ConnId,
+    peer: Arc<PeerConn>,
+    mut stream: RecvStream,
+) {
     let bytes = match receive(&mut stream, shared.config.max_message_bytes).await {
         Ok(bytes) => bytes,
         Err(Failure::Violation(code, problem)) => return violation(&peer, conn, code, &problem),

@@ -10,22 +10,15 @@
 //! obvhs's own traversal stays available ([`Traversal::Obvhs`]) so that the difference can be
 //! measured on the same tree.
 //!
-//! Determinism: the tree is a pure function of the triangles and the [`BuildQuality`]. obvhs
-//! builds on one thread unless its `parallel` feature is on (it is off here, and nothing in the
-//! workspace enables it); its builder uses no random numbers, only deterministic radix and
-//! unstable sorts, so the same input gives the same tree. With `parallel` on, PLOC would split its
-//! search into chunks by `rayon::current_num_threads()`, which this code must not depend on.
-//! We also build without obvhs's `build_bvh2_from_tris` helper, which reads the clock.
+//! The tree is deterministic: the same triangles and quality give the same tree (see `build.rs`).
 
+use super::build::{build_bvh2, tree_depth};
 use super::triangle::{ShearedRay, is_degenerate};
 use super::{Hit, Ray, TraversalStats};
 use crate::scene::Triangle;
 use glam::{Vec3, Vec3A};
 use obvhs::BvhBuildParams;
-use obvhs::aabb::Aabb;
-use obvhs::bvh2::{Bvh2, leaf_collapser::collapse, reinsertion::ReinsertionOptimizer};
-use obvhs::ploc::PlocBuilder;
-use obvhs::splits::split_aabbs_preset;
+use obvhs::bvh2::Bvh2;
 
 /// How much time to spend building the tree, mapped to obvhs's presets. Slower builds give
 /// trees that are faster to trace; [`BuildQuality::Medium`] gave the best render time per build
@@ -126,7 +119,11 @@ impl Accel {
         let depth = tree_depth(&bvh);
         // obvhs sizes its own traversal stack from max_depth, which reinsertion may outgrow.
         bvh.max_depth = bvh.max_depth.max(depth);
-        let original: Vec<u32> = bvh.primitive_indices.iter().map(|&k| kept[k as usize]).collect();
+        let original: Vec<u32> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&k| kept[k as usize])
+            .collect();
         let vertices = original.iter().map(|&i| triangles[i as usize].p).collect();
         Accel {
             bvh,
@@ -161,7 +158,12 @@ impl Accel {
     }
 
     /// [`Accel::occluded`] by the chosen traversal.
-    pub fn occluded_with(&self, ray: &Ray, traversal: Traversal, stats: &mut TraversalStats) -> bool {
+    pub fn occluded_with(
+        &self,
+        ray: &Ray,
+        traversal: Traversal,
+        stats: &mut TraversalStats,
+    ) -> bool {
         match traversal {
             Traversal::Robust => self.traverse_robust::<true>(ray, stats).is_some(),
             Traversal::Obvhs => self.traverse_obvhs::<true>(ray, stats).is_some(),
@@ -253,73 +255,6 @@ impl Closest {
     }
 }
 
-/// obvhs's `build_bvh2_from_tris`, minus its clock and debug validation, plus padding of
-/// split boxes (see [`pad_split_boxes`]).
-fn build_bvh2(shapes: &[obvhs::triangle::Triangle], params: BvhBuildParams) -> Bvh2 {
-    let mut aabbs: Vec<Aabb> = shapes.iter().map(|t| t.aabb()).collect();
-    let mut indices: Vec<u32> = (0..shapes.len() as u32).collect();
-    if params.pre_split {
-        let largest = aabbs.iter().map(Aabb::half_area).fold(0.0, f32::max);
-        let average = aabbs.iter().map(Aabb::half_area).sum::<f32>() / aabbs.len() as f32;
-        split_aabbs_preset(&mut aabbs, &mut indices, shapes, average, largest);
-        pad_split_boxes(&mut aabbs, &indices, shapes);
-    }
-    let mut bvh = PlocBuilder::with_capacity(aabbs.len()).build(
-        params.ploc_search_distance,
-        &aabbs,
-        indices,
-        params.sort_precision,
-        params.search_depth_threshold,
-    );
-    bvh.uses_spatial_splits = params.pre_split;
-    let mut reinsertion = ReinsertionOptimizer::default();
-    reinsertion.run(&mut bvh, params.reinsertion_batch_ratio, None);
-    collapse(
-        &mut bvh,
-        params.max_prims_per_leaf.clamp(1, 255),
-        params.collapse_traversal_cost,
-    );
-    let post_collapse =
-        params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
-    reinsertion.run(&mut bvh, post_collapse, None);
-    bvh
-}
-
-/// Widens boxes made by obvhs's spatial pre-splits so that they cover their piece of triangle.
-///
-/// A split box's extent on the other axes comes from points where the triangle's edges cross the
-/// split plane, computed in `f32` with an error of about 13 units of roundoff of the largest
-/// vertex coordinate `m`. A box short by that much leaves a crack between the two halves that a
-/// ray can pass through. Widening by `16 * EPSILON * m` (32 units of roundoff), clamped to the
-/// whole triangle's box, which is exact, closes the crack and keeps boxes conservative.
-fn pad_split_boxes(aabbs: &mut [Aabb], indices: &[u32], shapes: &[obvhs::triangle::Triangle]) {
-    for (aabb, &index) in aabbs.iter_mut().zip(indices) {
-        let whole = shapes[index as usize].aabb();
-        if *aabb != whole {
-            let m = whole.min.abs().max(whole.max.abs()).max_element();
-            let pad = Vec3A::splat(16.0 * f32::EPSILON * m);
-            aabb.min = (aabb.min - pad).max(whole.min);
-            aabb.max = (aabb.max + pad).min(whole.max);
-        }
-    }
-}
-
-/// The number of levels of the tree, without recursion (obvhs's `depth` recurses).
-fn tree_depth(bvh: &Bvh2) -> usize {
-    let mut deepest = 0;
-    let mut stack = vec![(0usize, 1usize)];
-    while let Some((index, depth)) = stack.pop() {
-        deepest = deepest.max(depth);
-        let node = &bvh.nodes[index];
-        if !node.is_leaf() {
-            let first = node.first_index as usize;
-            stack.push((first, depth + 1));
-            stack.push((first + 1, depth + 1));
-        }
-    }
-    deepest
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -364,7 +299,10 @@ mod tests {
             let accel = Accel::build(&triangles, BuildQuality::Medium);
             let mut stats = TraversalStats::default();
             for traversal in [Traversal::Robust, Traversal::Obvhs] {
-                assert_eq!(accel.intersect_with(&down(0.5, 0.0), traversal, &mut stats), None);
+                assert_eq!(
+                    accel.intersect_with(&down(0.5, 0.0), traversal, &mut stats),
+                    None
+                );
                 assert!(!accel.occluded_with(&down(0.5, 0.0), traversal, &mut stats));
             }
             assert_eq!(stats, TraversalStats::default(), "no tree, no work");
@@ -377,9 +315,17 @@ mod tests {
         let accel = Accel::build(&[triangle(flat)], BuildQuality::Medium);
         assert_eq!((accel.node_count(), accel.depth()), (1, 1));
         let mut stats = TraversalStats::default();
-        let hit = accel.intersect(&down(0.25, 0.25), &mut stats).expect("inside");
+        let hit = accel
+            .intersect(&down(0.25, 0.25), &mut stats)
+            .expect("inside");
         assert_eq!((hit.triangle, hit.t), (0, 5.0));
-        assert_eq!(stats, TraversalStats { nodes: 1, triangles: 1 });
+        assert_eq!(
+            stats,
+            TraversalStats {
+                nodes: 1,
+                triangles: 1
+            }
+        );
     }
 
     #[test]
@@ -390,10 +336,15 @@ mod tests {
         assert_eq!(accel.leaf_entries(), triangles.len() - 1);
         for (x, y) in [(0.75, 0.25), (5.2, 3.9), (7.9, 7.95)] {
             let mut stats = TraversalStats::default();
-            let hit = accel.intersect(&down(x, y), &mut stats).expect("inside the grid");
+            let hit = accel
+                .intersect(&down(x, y), &mut stats)
+                .expect("inside the grid");
             assert_eq!(Some(hit), intersect_brute_force(&triangles, &down(x, y)));
             let p = hit.point(&triangles[hit.triangle as usize].p);
-            assert!((p.x - x).abs() < 1e-5 && (p.y - y).abs() < 1e-5, "{p} for {x},{y}");
+            assert!(
+                (p.x - x).abs() < 1e-5 && (p.y - y).abs() < 1e-5,
+                "{p} for {x},{y}"
+            );
             assert!(stats.nodes > 1 && stats.triangles >= 1);
         }
     }
@@ -416,7 +367,9 @@ mod tests {
             .flat_map(|n| {
                 let (min, max) = (n.aabb().min.to_array(), n.aabb().max.to_array());
                 let floats = min.into_iter().chain(max).map(f32::to_bits);
-                floats.chain([n.prim_count, n.first_index]).collect::<Vec<_>>()
+                floats
+                    .chain([n.prim_count, n.first_index])
+                    .collect::<Vec<_>>()
             })
             .collect()
     }
@@ -435,38 +388,5 @@ mod tests {
             assert!((ours.t - theirs.t).abs() < 1e-5);
             assert!((ours.b1 - theirs.b1).abs() < 1e-5 && (ours.b2 - theirs.b2).abs() < 1e-5);
         }
-    }
-
-    #[test]
-    fn split_boxes_are_padded_but_never_beyond_their_triangle() {
-        // A long diagonal sliver among small triangles: its box is mostly empty, so the Slow
-        // preset's pre-splits cut it.
-        let mut triangles = grid(20);
-        triangles.push(triangle([
-            Vec3::new(0.0, 0.0, 1.0),
-            Vec3::new(100.0, 100.0, 1.3),
-            Vec3::new(100.0, 99.0, 0.7),
-        ]));
-        let shapes: Vec<obvhs::triangle::Triangle> = triangles
-            .iter()
-            .map(|t| {
-                let [v0, v1, v2] = t.p.map(Vec3A::from);
-                obvhs::triangle::Triangle { v0, v1, v2 }
-            })
-            .collect();
-        let mut aabbs: Vec<Aabb> = shapes.iter().map(|t| t.aabb()).collect();
-        let mut indices: Vec<u32> = (0..shapes.len() as u32).collect();
-        let largest = aabbs.iter().map(Aabb::half_area).fold(0.0, f32::max);
-        let average = aabbs.iter().map(Aabb::half_area).sum::<f32>() / aabbs.len() as f32;
-        split_aabbs_preset(&mut aabbs, &mut indices, &shapes, average, largest);
-        assert!(aabbs.len() > shapes.len(), "the big triangle was split");
-        let before = aabbs.clone();
-        pad_split_boxes(&mut aabbs, &indices, &shapes);
-        for ((padded, old), &i) in aabbs.iter().zip(&before).zip(&indices) {
-            let whole = shapes[i as usize].aabb();
-            assert!(padded.min.cmple(old.min).all() && padded.max.cmpge(old.max).all());
-            assert!(padded.min.cmpge(whole.min).all() && padded.max.cmple(whole.max).all());
-        }
-        assert!(aabbs.iter().zip(&before).any(|(a, b)| a != b));
     }
 }

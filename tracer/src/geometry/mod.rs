@@ -6,9 +6,11 @@
 //!
 //! - `triangle`: the watertight ray/triangle test ([`intersect_triangle`]).
 //! - `offset`: spawn offsets and hit points for secondary rays ([`offset_ray_origin`]).
-//! - `bvh`: the [`Accel`] API, its build by obvhs, and brute force for tests.
+//! - `bvh`: the [`Accel`] API, and brute force for tests.
+//! - `build`: building the tree with obvhs, deterministically and without cracks.
 //! - `traverse`: our robust traversal, and obvhs's for comparison ([`Traversal`]).
 
+mod build;
 mod bvh;
 mod offset;
 mod traverse;

@@ -125,7 +125,10 @@ mod tests {
     #[test]
     fn the_normal_is_normalised_and_a_zero_normal_does_nothing() {
         let p = Vec3::new(2.0, 3.0, 4.0);
-        assert_eq!(offset_ray_origin(p, Vec3::Z * 1e-20), offset_ray_origin(p, Vec3::Z));
+        assert_eq!(
+            offset_ray_origin(p, Vec3::Z * 1e-20),
+            offset_ray_origin(p, Vec3::Z)
+        );
         assert_eq!(offset_ray_origin(p, Vec3::ZERO), p);
     }
 
@@ -152,7 +155,11 @@ mod tests {
 
     #[test]
     fn hit_point_interpolates_the_vertices() {
-        let p = [Vec3::ZERO, Vec3::new(4.0, 0.0, 0.0), Vec3::new(0.0, 8.0, 0.0)];
+        let p = [
+            Vec3::ZERO,
+            Vec3::new(4.0, 0.0, 0.0),
+            Vec3::new(0.0, 8.0, 0.0),
+        ];
         assert_eq!(hit_point(&p, 0.25, 0.5), Vec3::new(1.0, 4.0, 0.0));
         assert_eq!(hit_point(&p, 0.0, 0.0), p[0]);
     }

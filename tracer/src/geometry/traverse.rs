@@ -94,6 +94,10 @@ impl Accel {
 
     /// The traversal proper. `stack` must hold `depth - 1` entries: each level of the current
     /// path pushes at most one far child.
+    ///
+    /// As in obvhs, a child that is a leaf is tested as soon as its box is hit rather than
+    /// descended into later: large triangles high in the tree (walls, floors) then bound the
+    /// search, or end an any-hit query, before any deeper subtree is opened.
     #[inline(always)]
     fn robust_with_stack<const ANY_HIT: bool>(
         &self,
@@ -109,47 +113,50 @@ impl Accel {
 
         stats.nodes += 1;
         slab.enter(nodes[0].aabb(), cull(&closest))?;
+        if nodes[0].is_leaf() {
+            self.intersect_leaf::<ANY_HIT>(&nodes[0], &sheared, &mut closest, stats);
+            return closest.best;
+        }
+        // From here on `node` is always an inner node.
         let mut node: &Bvh2Node = &nodes[0];
         let mut len = 0;
         loop {
-            if node.is_leaf() {
-                let first = node.first_index as usize;
-                for k in first..first + node.prim_count as usize {
-                    stats.triangles += 1;
-                    if closest.offer(&sheared, &self.vertices[k], self.original[k]) && ANY_HIT {
+            let first = node.first_index as usize;
+            stats.nodes += 2;
+            let limit = cull(&closest);
+            let t_left = slab.enter(nodes[first].aabb(), limit);
+            let t_right = slab.enter(nodes[first + 1].aabb(), limit);
+            let right_first = matches!((t_left, t_right), (Some(l), Some(r)) if r < l);
+            let order = if right_first {
+                [(first + 1, t_right), (first, t_left)]
+            } else {
+                [(first, t_left), (first + 1, t_right)]
+            };
+            let mut next = None;
+            for (index, t_near) in order {
+                let Some(t_near) = t_near else { continue };
+                let child = &nodes[index];
+                if child.is_leaf() {
+                    // The near leaf may have moved the closest hit in front of this one.
+                    if t_near <= cull(&closest)
+                        && self.intersect_leaf::<ANY_HIT>(child, &sheared, &mut closest, stats)
+                        && ANY_HIT
+                    {
                         return closest.best;
                     }
+                } else if next.is_none() {
+                    next = Some(child);
+                } else {
+                    stack[len] = StackEntry {
+                        node: index as u32,
+                        t_near,
+                    };
+                    len += 1;
                 }
-            } else {
-                let first = node.first_index as usize;
-                let (left, right) = (&nodes[first], &nodes[first + 1]);
-                stats.nodes += 2;
-                let limit = cull(&closest);
-                match (slab.enter(left.aabb(), limit), slab.enter(right.aabb(), limit)) {
-                    (Some(t_left), Some(t_right)) => {
-                        let (near, far_index, t_far) = if t_right < t_left {
-                            (right, first, t_left)
-                        } else {
-                            (left, first + 1, t_right)
-                        };
-                        stack[len] = StackEntry {
-                            node: far_index as u32,
-                            t_near: t_far,
-                        };
-                        len += 1;
-                        node = near;
-                        continue;
-                    }
-                    (Some(_), None) => {
-                        node = left;
-                        continue;
-                    }
-                    (None, Some(_)) => {
-                        node = right;
-                        continue;
-                    }
-                    (None, None) => {}
-                }
+            }
+            if let Some(child) = next {
+                node = child;
+                continue;
             }
             // Resume at the nearest postponed box that may still hold a closer hit.
             loop {
@@ -164,6 +171,30 @@ impl Accel {
                 }
             }
         }
+    }
+
+    /// Tests the triangles of a leaf; returns whether any became the closest hit (with
+    /// `ANY_HIT`, stops at the first).
+    #[inline(always)]
+    fn intersect_leaf<const ANY_HIT: bool>(
+        &self,
+        leaf: &Bvh2Node,
+        sheared: &ShearedRay,
+        closest: &mut Closest,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        let first = leaf.first_index as usize;
+        let mut found = false;
+        for k in first..first + leaf.prim_count as usize {
+            stats.triangles += 1;
+            if closest.offer(sheared, &self.vertices[k], self.original[k]) {
+                found = true;
+                if ANY_HIT {
+                    break;
+                }
+            }
+        }
+        found
     }
 
     /// Closest hit (or, with `ANY_HIT`, the first hit found) by obvhs's traversal, ray and
@@ -253,9 +284,18 @@ mod tests {
     fn signed_zero_directions_select_the_slab_or_nothing() {
         for zero in [0.0, -0.0] {
             let dir = Vec3::new(zero, zero, 1.0);
-            assert_eq!(slab(Vec3::new(0.5, 0.5, -2.0), dir).enter(&UNIT_BOX, 10.0), Some(2.0));
-            assert_eq!(slab(Vec3::new(1.5, 0.5, -2.0), dir).enter(&UNIT_BOX, 10.0), None);
-            assert_eq!(slab(Vec3::new(-0.5, 0.5, -2.0), dir).enter(&UNIT_BOX, 10.0), None);
+            assert_eq!(
+                slab(Vec3::new(0.5, 0.5, -2.0), dir).enter(&UNIT_BOX, 10.0),
+                Some(2.0)
+            );
+            assert_eq!(
+                slab(Vec3::new(1.5, 0.5, -2.0), dir).enter(&UNIT_BOX, 10.0),
+                None
+            );
+            assert_eq!(
+                slab(Vec3::new(-0.5, 0.5, -2.0), dir).enter(&UNIT_BOX, 10.0),
+                None
+            );
         }
     }
 
@@ -265,7 +305,11 @@ mod tests {
         for x in [0.0, 1.0] {
             for zero in [0.0, -0.0] {
                 let s = slab(Vec3::new(x, 0.5, -2.0), Vec3::new(zero, 0.0, 1.0));
-                assert_eq!(s.enter(&UNIT_BOX, 10.0), Some(2.0), "x = {x}, dir.x = {zero}");
+                assert_eq!(
+                    s.enter(&UNIT_BOX, 10.0),
+                    Some(2.0),
+                    "x = {x}, dir.x = {zero}"
+                );
             }
         }
         // A flat box (min = max on x) containing the ray's plane.

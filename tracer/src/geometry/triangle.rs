@@ -210,11 +210,17 @@ mod tests {
             t_max: 2.0,
             ..ray(Vec3::new(0.25, 0.25, 2.0), -Vec3::Z)
         };
-        assert!(intersect_triangle(&r, &UNIT).is_none(), "t_max is exclusive");
+        assert!(
+            intersect_triangle(&r, &UNIT).is_none(),
+            "t_max is exclusive"
+        );
         let behind = ray(Vec3::new(0.25, 0.25, 2.0), Vec3::Z);
         assert!(intersect_triangle(&behind, &UNIT).is_none());
         let on_plane = ray(Vec3::new(0.25, 0.25, 0.0), Vec3::Z);
-        assert!(intersect_triangle(&on_plane, &UNIT).is_none(), "t = 0 is not a hit");
+        assert!(
+            intersect_triangle(&on_plane, &UNIT).is_none(),
+            "t = 0 is not a hit"
+        );
     }
 
     #[test]
@@ -235,7 +241,11 @@ mod tests {
         let b = Vec3::new(1.0 + e, 1.0 + 2.0 * e, 0.0);
         assert_eq!(a.x * b.y - a.y * b.x, 0.0);
         assert_eq!(edge_function_f64(a, b), -(e * e));
-        assert_eq!(edge_function_f64(b, a), e * e, "swapping the edge flips the sign exactly");
+        assert_eq!(
+            edge_function_f64(b, a),
+            e * e,
+            "swapping the edge flips the sign exactly"
+        );
     }
 
     #[test]
@@ -257,7 +267,11 @@ mod tests {
 
     #[test]
     fn a_zero_or_nan_direction_never_hits_and_never_gives_nan() {
-        for dir in [Vec3::ZERO, Vec3::new(f32::NAN, 0.0, -1.0), Vec3::splat(f32::INFINITY)] {
+        for dir in [
+            Vec3::ZERO,
+            Vec3::new(f32::NAN, 0.0, -1.0),
+            Vec3::splat(f32::INFINITY),
+        ] {
             let hit = intersect_triangle(&ray(Vec3::new(0.25, 0.25, 1.0), dir), &UNIT);
             assert!(hit.is_none(), "{dir:?} gave {hit:?}");
         }

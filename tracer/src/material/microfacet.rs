@@ -35,11 +35,12 @@ pub(crate) struct Ggx {
 
 impl Ggx {
     pub fn new(f0: Vec3, alpha: f32) -> Self {
-        // `max` returns the non-NaN operand, so NaN maps to MIN_ALPHA.
-        Self {
-            f0,
-            alpha: alpha.max(MIN_ALPHA).min(1.0),
-        }
+        let alpha = if alpha.is_nan() {
+            MIN_ALPHA
+        } else {
+            alpha.clamp(MIN_ALPHA, 1.0)
+        };
+        Self { f0, alpha }
     }
 
     /// `f(wo, wi) * cos_i` for `wo.z > 0`; zero unless `wi` is in the upper hemisphere too.
@@ -48,14 +49,12 @@ impl Ggx {
             return Vec3::ZERO;
         };
         let denominator = 2.0 * (wi.z * self.s(wo) + wo.z * self.s(wi));
-        if !(denominator > 0.0) {
-            return Vec3::ZERO;
-        }
         let value = self.d(h) * wi.z / denominator;
-        if !value.is_finite() {
-            return Vec3::ZERO;
+        if denominator > 0.0 && value.is_finite() {
+            fresnel_schlick(self.f0, wo.dot(h)) * value
+        } else {
+            Vec3::ZERO
         }
-        fresnel_schlick(self.f0, wo.dot(h)) * value
     }
 
     /// The solid-angle density of [`Ggx::sample`] at `wi`, for `wo.z > 0`.
@@ -72,20 +71,12 @@ impl Ggx {
     /// macro-surface), which happens with probability 1 minus the integral of [`Ggx::pdf`].
     pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
         let h = self.sample_visible_normal(wo, u);
-        let wi = 2.0 * wo.dot(h) * h - wo;
-        if !(wi.z > 0.0) {
-            return None;
-        }
-        let pdf = self.pdf(wo, wi);
-        if !(pdf > 0.0) {
-            return None;
-        }
+        // Each `filter` also rejects NaN, which compares false.
+        let wi = Some(2.0 * wo.dot(h) * h - wo).filter(|wi| wi.z > 0.0)?;
+        let pdf = Some(self.pdf(wo, wi)).filter(|&pdf| pdf > 0.0)?;
         // eval / pdf with D cancelled: F cos_i (cos_o + s(wo)) / (cos_i s(wo) + cos_o s(wi)).
         let so = self.s(wo);
-        let denominator = wi.z * so + wo.z * self.s(wi);
-        if !(denominator > 0.0) {
-            return None;
-        }
+        let denominator = Some(wi.z * so + wo.z * self.s(wi)).filter(|&d| d > 0.0)?;
         let weight = fresnel_schlick(self.f0, wo.dot(h)) * (wi.z * (wo.z + so) / denominator);
         Some((wi, weight, pdf))
     }
@@ -120,7 +111,7 @@ impl Ggx {
         let r = u.x.max(0.0).sqrt();
         let phi = 2.0 * PI * u.y;
         let p1 = r * phi.cos();
-        let s = 1.0;
+        let s = 0.5 * (1.0 + vh.z);
         let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * r * phi.sin();
         let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
         Vec3::new(a * nh.x, a * nh.y, nh.z.max(0.0)).normalize_or(Vec3::Z)

@@ -50,35 +50,57 @@ impl SceneError {
     }
 
     pub(crate) fn at_line(file: &str, line: usize, detail: impl Into<String>) -> Self {
-        SceneError::Invalid { at: Location::line(file, line), detail: detail.into() }
+        SceneError::Invalid {
+            at: Location::line(file, line),
+            detail: detail.into(),
+        }
     }
 
     pub(crate) fn in_file(file: &str, detail: impl Into<String>) -> Self {
-        SceneError::Invalid { at: Location::file(file), detail: detail.into() }
+        SceneError::Invalid {
+            at: Location::file(file),
+            detail: detail.into(),
+        }
     }
 
     /// The same error with every file name passed through `rename`: used to turn names relative
     /// to a disk root into full paths.
     pub(crate) fn rename_files(self, rename: impl Fn(&str) -> String) -> Self {
-        let fix = |at: Location| Location { file: rename(&at.file), line: at.line };
+        let fix = |at: Location| Location {
+            file: rename(&at.file),
+            line: at.line,
+        };
         match self {
-            SceneError::Read { file, referenced_at, source } => SceneError::Read {
+            SceneError::Read {
+                file,
+                referenced_at,
+                source,
+            } => SceneError::Read {
                 file: rename(&file),
                 referenced_at: referenced_at.map(fix),
                 source,
             },
-            SceneError::Invalid { at, detail } => SceneError::Invalid { at: fix(at), detail },
+            SceneError::Invalid { at, detail } => SceneError::Invalid {
+                at: fix(at),
+                detail,
+            },
         }
     }
 }
 
 impl Location {
     pub(crate) fn line(file: &str, line: usize) -> Self {
-        Location { file: file.to_owned(), line: Some(line) }
+        Location {
+            file: file.to_owned(),
+            line: Some(line),
+        }
     }
 
     pub(crate) fn file(file: &str) -> Self {
-        Location { file: file.to_owned(), line: None }
+        Location {
+            file: file.to_owned(),
+            line: None,
+        }
     }
 }
 
@@ -101,5 +123,8 @@ fn referenced(at: &Option<Location>) -> String {
 /// The 1-based line of byte offset `offset` in `text`.
 pub(crate) fn line_of(text: &str, offset: usize) -> usize {
     let end = offset.min(text.len());
-    1 + text.as_bytes()[..end].iter().filter(|&&b| b == b'\n').count()
+    1 + text.as_bytes()[..end]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
 }

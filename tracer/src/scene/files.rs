@@ -54,7 +54,10 @@ impl SceneFiles for DiskFiles {
 impl SceneFiles for MemoryFiles {
     fn read(&self, relative_path: &str) -> Result<Vec<u8>, io::Error> {
         self.0.get(relative_path).cloned().ok_or_else(|| {
-            io::Error::new(io::ErrorKind::NotFound, "no such file in the scene's file set")
+            io::Error::new(
+                io::ErrorKind::NotFound,
+                "no such file in the scene's file set",
+            )
         })
     }
 
@@ -91,8 +94,14 @@ pub(crate) struct FileLog<'a> {
 
 impl<'a> FileLog<'a> {
     pub(crate) fn new(files: &'a dyn SceneFiles, toml_name: &str) -> Self {
-        let scene_folder = split(&normalize(toml_name).unwrap_or_default()).0.to_owned();
-        FileLog { files, scene_folder, read: Vec::new() }
+        let scene_folder = split(&normalize(toml_name).unwrap_or_default())
+            .0
+            .to_owned();
+        FileLog {
+            files,
+            scene_folder,
+            read: Vec::new(),
+        }
     }
 
     /// Reads `reference` (as written in the file `from`, a path relative to the scene's folder)
@@ -105,7 +114,9 @@ impl<'a> FileLog<'a> {
         let referenced_at = from.map(|(file, line)| Location::line(file, line));
         let base = from.map_or("", |(file, _)| split(file).0);
         let wanted = resolve(base, reference).ok_or_else(|| SceneError::Invalid {
-            at: referenced_at.clone().unwrap_or_else(|| Location::file(reference)),
+            at: referenced_at
+                .clone()
+                .unwrap_or_else(|| Location::file(reference)),
             detail: format!("`{reference}` is not a relative path inside the scene's tree"),
         })?;
         let rooted = |path: &str| join(&self.scene_folder, path);
@@ -126,7 +137,11 @@ impl<'a> FileLog<'a> {
                 }
                 Ok((path, bytes))
             }
-            Err(source) => Err(SceneError::Read { file: path, referenced_at, source }),
+            Err(source) => Err(SceneError::Read {
+                file: path,
+                referenced_at,
+                source,
+            }),
         }
     }
 
@@ -196,7 +211,10 @@ mod tests {
 
     #[test]
     fn paths_normalise_and_keep_leading_parents() {
-        assert_eq!(resolve("meshes", "../tex/./a.png").as_deref(), Some("tex/a.png"));
+        assert_eq!(
+            resolve("meshes", "../tex/./a.png").as_deref(),
+            Some("tex/a.png")
+        );
         assert_eq!(resolve("", "../../x.obj").as_deref(), Some("../../x.obj"));
         assert_eq!(resolve("a/b", "..\\c.mtl").as_deref(), Some("a/c.mtl"));
         assert_eq!(resolve("", "/etc/passwd"), None);
@@ -210,7 +228,10 @@ mod tests {
         files.insert("scenes/m/Tex.JPG", "jpg");
         let mut log = FileLog::new(&files, "scenes/s.toml");
         let (path, bytes) = log.read(Some(("m/a.mtl", 3)), "TEX.jpg").unwrap();
-        assert_eq!((path.as_str(), bytes.as_slice()), ("m/Tex.JPG", b"jpg".as_slice()));
+        assert_eq!(
+            (path.as_str(), bytes.as_slice()),
+            ("m/Tex.JPG", b"jpg".as_slice())
+        );
         log.read(None, "m/Tex.JPG").unwrap();
         let missing = log.read(Some(("m/a.mtl", 4)), "nope.png").unwrap_err();
         assert_eq!(missing.file(), "m/nope.png");

@@ -8,8 +8,8 @@
 
 use super::error::{SceneError, line_of};
 use glam::Vec3;
-use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::Deserialize;
+use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use std::collections::BTreeMap;
 use std::fmt;
 use toml::Spanned;
@@ -179,7 +179,7 @@ pub(crate) fn parse(file: &str, text: &str) -> Result<SceneSpec, SceneError> {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Count(pub u32);
 
-/// A depth limit: an integer of at least 1 or the word `W` (which means no limit).
+/// A depth limit: an integer of at least `W::MIN` or the word `W::WORD` (no limit).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Limit<W> {
     pub value: Option<u32>,
@@ -188,21 +188,28 @@ pub(crate) struct Limit<W> {
 
 pub(crate) trait Word {
     const WORD: &'static str;
+    const MIN: u32;
 }
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Unlimited;
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Off;
+/// `max_depth` counts scattering events (pbrt's convention): 0 shows emitters only.
 impl Word for Unlimited {
     const WORD: &'static str = "unlimited";
+    const MIN: u32 = 0;
 }
 impl Word for Off {
     const WORD: &'static str = "off";
+    const MIN: u32 = 1;
 }
 
 impl<W> Limit<W> {
     fn new(value: Option<u32>) -> Self {
-        Limit { value, word: std::marker::PhantomData }
+        Limit {
+            value,
+            word: std::marker::PhantomData,
+        }
     }
 }
 
@@ -257,28 +264,68 @@ macro_rules! checked_type {
     };
 }
 
-checked_type!(Count, u32, |v| if v >= 1 { Ok(v) } else { Err("must be at least 1".to_owned()) });
+checked_type!(Count, u32, |v| if v >= 1 {
+    Ok(v)
+} else {
+    Err("must be at least 1".to_owned())
+});
 checked_type!(Point, Triple<3>, |v| finite(v.0));
-checked_type!(Finite, f32, |v| if v.is_finite() { Ok(v) } else { Err(not_finite()) });
-checked_type!(Positive, f32, |v| in_range(v, |v| v > 0.0, "must be greater than 0"));
-checked_type!(Fraction, f32, |v| in_range(v, |v| (0.0..0.5).contains(&v), "must be in [0, 0.5)"));
-checked_type!(Fov, f32, |v| in_range(v, |v| v > 0.0 && v < 180.0, "must be in (0, 180) degrees"));
-checked_type!(Ior, f32, |v| in_range(v, |v| v >= 1.0, "must be at least 1"));
-checked_type!(Roughness, f32, |v| in_range(v, |v| v > 0.0 && v <= 1.0, "must be in (0, 1]"));
+checked_type!(Finite, f32, |v| if v.is_finite() {
+    Ok(v)
+} else {
+    Err(not_finite())
+});
+checked_type!(Positive, f32, |v| in_range(
+    v,
+    |v| v > 0.0,
+    "must be greater than 0"
+));
+checked_type!(Fraction, f32, |v| in_range(
+    v,
+    |v| (0.0..0.5).contains(&v),
+    "must be in [0, 0.5)"
+));
+checked_type!(Fov, f32, |v| in_range(
+    v,
+    |v| v > 0.0 && v < 180.0,
+    "must be in (0, 180) degrees"
+));
+checked_type!(Ior, f32, |v| in_range(
+    v,
+    |v| v >= 1.0,
+    "must be at least 1"
+));
+checked_type!(Roughness, f32, |v| in_range(
+    v,
+    |v| v > 0.0 && v <= 1.0,
+    "must be in (0, 1]"
+));
 checked_type!(Reflectance, Triple<1>, |v| {
     finite(v.0).and_then(|c| {
         let ok = c.cmpge(Vec3::ZERO).all() && c.cmple(Vec3::ONE).all();
-        if ok { Ok(c) } else { Err("every component must be in [0, 1]".to_owned()) }
+        if ok {
+            Ok(c)
+        } else {
+            Err("every component must be in [0, 1]".to_owned())
+        }
     })
 });
 checked_type!(Radiance, Triple<1>, |v| {
     finite(v.0).and_then(|c| {
-        if c.cmpge(Vec3::ZERO).all() { Ok(c) } else { Err("must not be negative".to_owned()) }
+        if c.cmpge(Vec3::ZERO).all() {
+            Ok(c)
+        } else {
+            Err("must not be negative".to_owned())
+        }
     })
 });
 checked_type!(Scale, Triple<1>, |v| {
     finite(v.0).and_then(|c| {
-        if c.cmpne(Vec3::ZERO).all() { Ok(c) } else { Err("must not be 0".to_owned()) }
+        if c.cmpne(Vec3::ZERO).all() {
+            Ok(c)
+        } else {
+            Err("must not be 0".to_owned())
+        }
     })
 });
 
@@ -287,7 +334,11 @@ fn not_finite() -> String {
 }
 
 fn finite(v: Vec3) -> Result<Vec3, String> {
-    if v.is_finite() { Ok(v) } else { Err(not_finite()) }
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(not_finite())
+    }
 }
 
 fn in_range(v: f32, ok: impl Fn(f32) -> bool, what: &str) -> Result<f32, String> {
@@ -309,7 +360,11 @@ impl<'de, const SINGLE: usize> Deserialize<'de> for Triple<SINGLE> {
         impl<'de, const S: usize> Visitor<'de> for V<S> {
             type Value = Triple<S>;
             fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-                f.write_str(if S == 1 { "a number or an array of 3 numbers" } else { "an array of 3 numbers" })
+                f.write_str(if S == 1 {
+                    "a number or an array of 3 numbers"
+                } else {
+                    "an array of 3 numbers"
+                })
             }
             fn visit_f64<E: de::Error>(self, v: f64) -> Result<Self::Value, E> {
                 if S == 1 {
@@ -327,7 +382,9 @@ impl<'de, const SINGLE: usize> Deserialize<'de> for Triple<SINGLE> {
             fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
                 let mut c = [0.0f32; 3];
                 for (i, slot) in c.iter_mut().enumerate() {
-                    *slot = seq.next_element()?.ok_or_else(|| de::Error::invalid_length(i, &self))?;
+                    *slot = seq
+                        .next_element()?
+                        .ok_or_else(|| de::Error::invalid_length(i, &self))?;
                 }
                 if seq.next_element::<f32>()?.is_some() {
                     return Err(de::Error::invalid_length(4, &self));
@@ -345,16 +402,19 @@ impl<'de, W: Word> Deserialize<'de> for Limit<W> {
         impl<'de, W: Word> Visitor<'de> for V<W> {
             type Value = Limit<W>;
             fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-                write!(f, "an integer of at least 1 or \"{}\"", W::WORD)
+                write!(f, "an integer of at least {} or \"{}\"", W::MIN, W::WORD)
             }
             fn visit_i64<E: de::Error>(self, v: i64) -> Result<Self::Value, E> {
-                match u32::try_from(v) {
-                    Ok(v) if v >= 1 => Ok(Limit::new(Some(v))),
-                    _ => Err(E::custom(format!("{v} is not allowed: use an integer of at least 1, or \"{}\"", W::WORD))),
+                match u64::try_from(v) {
+                    Ok(v) => self.visit_u64(v),
+                    Err(_) => Err(limit_error(v, W::MIN, W::WORD)),
                 }
             }
             fn visit_u64<E: de::Error>(self, v: u64) -> Result<Self::Value, E> {
-                self.visit_i64(i64::try_from(v).unwrap_or(-1))
+                match u32::try_from(v) {
+                    Ok(v) if v >= W::MIN => Ok(Limit::new(Some(v))),
+                    _ => Err(limit_error(v, W::MIN, W::WORD)),
+                }
             }
             fn visit_str<E: de::Error>(self, v: &str) -> Result<Self::Value, E> {
                 if v == W::WORD {
@@ -366,4 +426,11 @@ impl<'de, W: Word> Deserialize<'de> for Limit<W> {
         }
         d.deserialize_any(V(std::marker::PhantomData))
     }
+}
+
+fn limit_error<E: de::Error>(v: impl fmt::Display, min: u32, word: &str) -> E {
+    E::custom(format!(
+        "{v} is not allowed: use an integer from {min} to {}, or \"{word}\"",
+        u32::MAX
+    ))
 }

@@ -10,6 +10,7 @@ mod error;
 mod files;
 mod format;
 mod load;
+mod materials;
 mod mtl;
 mod obj;
 mod shapes;

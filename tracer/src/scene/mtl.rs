@@ -59,10 +59,18 @@ pub(crate) fn parse(file: &str, bytes: &[u8]) -> Result<Vec<MtlMaterial>, SceneE
                 return Err(err("`newmtl` without a name".into()));
             }
             if let Some(first) = materials.iter().find(|m| m.name == rest) {
-                return Err(err(format!("material `{rest}` is defined twice (first at line {})", first.line)));
+                return Err(err(format!(
+                    "material `{rest}` is defined twice (first at line {})",
+                    first.line
+                )));
             }
             let name = rest.to_owned();
-            materials.push(MtlMaterial { name, file: file.to_owned(), line, ..Default::default() });
+            materials.push(MtlMaterial {
+                name,
+                file: file.to_owned(),
+                line,
+                ..Default::default()
+            });
             continue;
         }
         let Some(current) = materials.last_mut() else {
@@ -74,18 +82,45 @@ pub(crate) fn parse(file: &str, bytes: &[u8]) -> Result<Vec<MtlMaterial>, SceneE
             "Ks" => current.ks = Some(at(color(rest).map_err(err)?)),
             "Ke" => current.ke = Some(at(color(rest).map_err(err)?)),
             "Tf" => current.tf = Some(at(color(rest).map_err(err)?)),
-            "Ns" => current.ns = Some(At { value: number(rest).map_err(err)?, line }),
-            "Ni" => current.ni = Some(At { value: number(rest).map_err(err)?, line }),
-            "d" => current.d = Some(At { value: number(rest).map_err(err)?, line }),
+            "Ns" => {
+                current.ns = Some(At {
+                    value: number(rest).map_err(err)?,
+                    line,
+                })
+            }
+            "Ni" => {
+                current.ni = Some(At {
+                    value: number(rest).map_err(err)?,
+                    line,
+                })
+            }
+            "d" => {
+                current.d = Some(At {
+                    value: number(rest).map_err(err)?,
+                    line,
+                })
+            }
             // `Tr` is transparency, 1 - `d`; some exporters write it inverted, so `d` wins.
             "Tr" if current.d.is_none() => {
-                current.d = Some(At { value: 1.0 - number(rest).map_err(err)?, line })
+                current.d = Some(At {
+                    value: 1.0 - number(rest).map_err(err)?,
+                    line,
+                })
             }
             "illum" => match rest.parse::<u32>() {
                 Ok(model) if model <= 10 => current.illum = Some(At { value: model, line }),
-                _ => return Err(err(format!("`illum {rest}`: expected an integer from 0 to 10"))),
+                _ => {
+                    return Err(err(format!(
+                        "`illum {rest}`: expected an integer from 0 to 10"
+                    )));
+                }
             },
-            "map_Kd" => current.map_kd = Some(At { value: texture_name(rest).map_err(err)?, line }),
+            "map_Kd" => {
+                current.map_kd = Some(At {
+                    value: texture_name(rest).map_err(err)?,
+                    line,
+                })
+            }
             // Ambient colour, bump/normal maps and the rest have no counterpart in our materials.
             _ => {}
         }
@@ -107,28 +142,49 @@ impl MtlMaterial {
         let illum = self.illum.as_ref().map(|i| i.value);
         let glassy = self.d.as_ref().is_some_and(|d| d.value < 1.0) && self.ni.is_some();
         let bsdf = if illum == Some(5) {
-            Bsdf::Mirror { reflectance: self.reflectance(&self.ks, Vec3::ONE, "Ks")? }
+            Bsdf::Mirror {
+                reflectance: self.reflectance(&self.ks, Vec3::ONE, "Ks")?,
+            }
         } else if matches!(illum, Some(4 | 6 | 7)) || glassy {
             let ior = match &self.ni {
                 Some(ni) if ni.value < 1.0 => {
-                    return Err(self.bad(ni.line, format!("`Ni {}` must be at least 1 for glass", ni.value)));
+                    return Err(self.bad(
+                        ni.line,
+                        format!("`Ni {}` must be at least 1 for glass", ni.value),
+                    ));
                 }
                 Some(ni) => ni.value,
                 None => 1.5,
             };
-            Bsdf::Dielectric { ior, tint: self.reflectance(&self.tf, Vec3::ONE, "Tf")? }
+            Bsdf::Dielectric {
+                ior,
+                tint: self.reflectance(&self.tf, Vec3::ONE, "Tf")?,
+            }
         } else if let Some(ns) = self.ns.as_ref().filter(|_| self.specular_dominates()) {
             if ns.value < 0.0 {
                 return Err(self.bad(ns.line, format!("`Ns {}` must not be negative", ns.value)));
             }
             let alpha = (2.0 / (ns.value + 2.0)).sqrt().clamp(1e-3, 1.0);
-            Bsdf::Conductor { f0: self.reflectance(&self.ks, Vec3::ONE, "Ks")?, alpha }
+            Bsdf::Conductor {
+                f0: self.reflectance(&self.ks, Vec3::ONE, "Ks")?,
+                alpha,
+            }
         } else if let Some(map) = &self.map_kd {
-            Bsdf::Diffuse { albedo: Vec3::ONE, texture: Some(load_texture(&map.value, map.line)?) }
+            Bsdf::Diffuse {
+                albedo: Vec3::ONE,
+                texture: Some(load_texture(&map.value, map.line)?),
+            }
         } else {
-            Bsdf::Diffuse { albedo: self.reflectance(&self.kd, Vec3::splat(0.8), "Kd")?, texture: None }
+            Bsdf::Diffuse {
+                albedo: self.reflectance(&self.kd, Vec3::splat(0.8), "Kd")?,
+                texture: None,
+            }
         };
-        Ok(Material { name: self.name.clone(), bsdf, emission })
+        Ok(Material {
+            name: self.name.clone(),
+            bsdf,
+            emission,
+        })
     }
 
     fn specular_dominates(&self) -> bool {
@@ -137,7 +193,12 @@ impl MtlMaterial {
     }
 
     /// A colour used as a reflectance: components above 1 would create energy.
-    fn reflectance(&self, c: &Option<At<Vec3>>, default: Vec3, key: &str) -> Result<Vec3, SceneError> {
+    fn reflectance(
+        &self,
+        c: &Option<At<Vec3>>,
+        default: Vec3,
+        key: &str,
+    ) -> Result<Vec3, SceneError> {
         match c {
             Some(c) if c.value.max_element() > 1.0 => Err(self.bad(
                 c.line,
@@ -153,7 +214,11 @@ impl MtlMaterial {
     }
 
     fn bad(&self, line: usize, detail: String) -> SceneError {
-        SceneError::at_line(&self.file, line, format!("material `{}`: {detail}", self.name))
+        SceneError::at_line(
+            &self.file,
+            line,
+            format!("material `{}`: {detail}", self.name),
+        )
     }
 }
 
@@ -162,7 +227,10 @@ fn color(rest: &str) -> Result<Vec3, String> {
     if rest.starts_with("spectral") || rest.starts_with("xyz") {
         return Err(format!("`{rest}`: only RGB colours are supported"));
     }
-    let values = rest.split_whitespace().map(parse_number).collect::<Result<Vec<_>, _>>()?;
+    let values = rest
+        .split_whitespace()
+        .map(parse_number)
+        .collect::<Result<Vec<_>, _>>()?;
     let c = match values[..] {
         [v] => Vec3::splat(v),
         [r, g, b] => Vec3::new(r, g, b),
@@ -209,26 +277,70 @@ mod tests {
     use super::*;
 
     fn one(text: &str) -> Result<Material, SceneError> {
-        parse("a.mtl", text.as_bytes())?.remove(0).to_material(|_, _| Ok(7))
+        parse("a.mtl", text.as_bytes())?
+            .remove(0)
+            .to_material(|_, _| Ok(7))
     }
 
     #[test]
     fn the_mapping_follows_the_documented_order() {
         let light = one("newmtl l\nKd 0.78 0.78 0.78\nKe 17 12 4 # warm\n").unwrap();
         assert_eq!(light.emission, Vec3::new(17.0, 12.0, 4.0));
-        assert_eq!(light.bsdf, Bsdf::Diffuse { albedo: Vec3::splat(0.78), texture: None });
+        assert_eq!(
+            light.bsdf,
+            Bsdf::Diffuse {
+                albedo: Vec3::splat(0.78),
+                texture: None
+            }
+        );
         let mirror = one("newmtl m\nKd 0.01\nKs 0.95 0.95 0.95\nillum 5\n").unwrap();
-        assert_eq!(mirror.bsdf, Bsdf::Mirror { reflectance: Vec3::splat(0.95) });
-        let glass = one("newmtl g\r\nKs 0.3 0.3 0.3\r\nTf 0.1 0.1 0.1\r\nNi 2.5\r\nillum 7\r\n").unwrap();
-        assert_eq!(glass.bsdf, Bsdf::Dielectric { ior: 2.5, tint: Vec3::splat(0.1) });
+        assert_eq!(
+            mirror.bsdf,
+            Bsdf::Mirror {
+                reflectance: Vec3::splat(0.95)
+            }
+        );
+        let glass =
+            one("newmtl g\r\nKs 0.3 0.3 0.3\r\nTf 0.1 0.1 0.1\r\nNi 2.5\r\nillum 7\r\n").unwrap();
+        assert_eq!(
+            glass.bsdf,
+            Bsdf::Dielectric {
+                ior: 2.5,
+                tint: Vec3::splat(0.1)
+            }
+        );
         let dissolved = one("newmtl g\nd 0.5\nNi 1.33\n").unwrap();
-        assert_eq!(dissolved.bsdf, Bsdf::Dielectric { ior: 1.33, tint: Vec3::ONE });
+        assert_eq!(
+            dissolved.bsdf,
+            Bsdf::Dielectric {
+                ior: 1.33,
+                tint: Vec3::ONE
+            }
+        );
         let metal = one("newmtl c\nKd 0.1\nKs 0.9 0.6 0.2\nNs 98\n").unwrap();
-        assert_eq!(metal.bsdf, Bsdf::Conductor { f0: Vec3::new(0.9, 0.6, 0.2), alpha: (0.02f32).sqrt() });
+        assert_eq!(
+            metal.bsdf,
+            Bsdf::Conductor {
+                f0: Vec3::new(0.9, 0.6, 0.2),
+                alpha: (0.02f32).sqrt()
+            }
+        );
         let textured = one("newmtl t\nKd 0.5 0.5 0.5\nmap_Kd tex/A B.jpg # note\n").unwrap();
-        assert_eq!(textured.bsdf, Bsdf::Diffuse { albedo: Vec3::ONE, texture: Some(7) });
+        assert_eq!(
+            textured.bsdf,
+            Bsdf::Diffuse {
+                albedo: Vec3::ONE,
+                texture: Some(7)
+            }
+        );
         let opaque_with_ni = one("newmtl w\nNs 10\nNi 1.5\nd 1\nTr 0\nKs 0 0 0\nKd 0.5\n").unwrap();
-        assert_eq!(opaque_with_ni.bsdf, Bsdf::Diffuse { albedo: Vec3::splat(0.5), texture: None });
+        assert_eq!(
+            opaque_with_ni.bsdf,
+            Bsdf::Diffuse {
+                albedo: Vec3::splat(0.5),
+                texture: None
+            }
+        );
     }
 
     #[test]

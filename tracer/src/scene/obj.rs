@@ -10,10 +10,10 @@
 //! Materials are assigned by `usemtl` through tobj's per-mesh `material_id`, never by `g`/`o`
 //! names (the Cornell box's `g` lines follow their faces; see its PROVENANCE.md).
 
+use super::Triangle;
 use super::error::SceneError;
 use super::files::FileLog;
 use super::mtl::{self, MtlMaterial, parse_number};
-use super::Triangle;
 use glam::{Vec2, Vec3};
 use std::collections::{BTreeMap, HashMap};
 
@@ -38,24 +38,42 @@ pub(crate) fn load(log: &mut FileLog, path: &str, bytes: &[u8]) -> Result<ObjMes
         materials.extend(mtl::parse(&mtl_path, &mtl_bytes)?);
     }
     // The last definition of a name wins, as in tobj (which resolves `usemtl` through this map).
-    let by_name: HashMap<String, usize> =
-        materials.iter().enumerate().map(|(i, m)| (m.name.clone(), i)).collect();
+    let by_name: HashMap<String, usize> = materials
+        .iter()
+        .enumerate()
+        .map(|(i, m)| (m.name.clone(), i))
+        .collect();
     for (name, line) in &scan.usemtls {
         if !by_name.contains_key(name) {
-            let libraries = scan.mtllibs.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>();
+            let libraries = scan
+                .mtllibs
+                .iter()
+                .map(|(n, _)| n.as_str())
+                .collect::<Vec<_>>();
             let detail = if libraries.is_empty() {
                 format!("`usemtl {name}` but the file has no `mtllib`")
             } else {
-                format!("`usemtl {name}`: no material of that name in {}", libraries.join(", "))
+                format!(
+                    "`usemtl {name}`: no material of that name in {}",
+                    libraries.join(", ")
+                )
             };
             return Err(SceneError::at_line(path, *line, detail));
         }
     }
     if scan.faces == 0 {
-        return Err(SceneError::in_file(path, "no faces: the file defines no triangles"));
+        return Err(SceneError::in_file(
+            path,
+            "no faces: the file defines no triangles",
+        ));
     }
-    let names: Vec<tobj::Material> =
-        materials.iter().map(|m| tobj::Material { name: m.name.clone(), ..Default::default() }).collect();
+    let names: Vec<tobj::Material> = materials
+        .iter()
+        .map(|m| tobj::Material {
+            name: m.name.clone(),
+            ..Default::default()
+        })
+        .collect();
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
@@ -64,14 +82,21 @@ pub(crate) fn load(log: &mut FileLog, path: &str, bytes: &[u8]) -> Result<ObjMes
         ..Default::default()
     };
     let (models, _) = tobj::load_obj_buf(&mut scan.canonical.as_bytes(), &options, |_| {
-        Ok((names.clone(), by_name.iter().map(|(name, &i)| (name.clone(), i)).collect()))
+        Ok((
+            names.clone(),
+            by_name.iter().map(|(name, &i)| (name.clone(), i)).collect(),
+        ))
     })
     .map_err(|e| SceneError::in_file(path, format!("tobj rejected the validated file: {e}")))?;
     let mut triangles = Vec::with_capacity(scan.faces);
     for model in &models {
         append_triangles(path, &model.mesh, &mut triangles);
     }
-    Ok(ObjMesh { triangles, materials, first_face_without_material: scan.first_face_without_material })
+    Ok(ObjMesh {
+        triangles,
+        materials,
+        first_face_without_material: scan.first_face_without_material,
+    })
 }
 
 /// Splits a Wavefront (OBJ or MTL) file into statements: `(1-based line, text)` with the line
@@ -81,16 +106,26 @@ pub(crate) fn statements<'a>(
     file: &'a str,
     bytes: &'a [u8],
 ) -> impl Iterator<Item = Result<(usize, &'a str), SceneError>> + 'a {
-    bytes.split(|&b| b == b'\n').enumerate().filter_map(move |(i, raw)| {
-        let code = raw.iter().position(|&b| b == b'#').map_or(raw, |hash| &raw[..hash]);
-        match std::str::from_utf8(code) {
-            Ok(text) => {
-                let text = text.trim();
-                (!text.is_empty()).then_some(Ok((i + 1, text)))
+    bytes
+        .split(|&b| b == b'\n')
+        .enumerate()
+        .filter_map(move |(i, raw)| {
+            let code = raw
+                .iter()
+                .position(|&b| b == b'#')
+                .map_or(raw, |hash| &raw[..hash]);
+            match std::str::from_utf8(code) {
+                Ok(text) => {
+                    let text = text.trim();
+                    (!text.is_empty()).then_some(Ok((i + 1, text)))
+                }
+                Err(_) => Some(Err(SceneError::at_line(
+                    file,
+                    i + 1,
+                    "not valid UTF-8 text",
+                ))),
             }
-            Err(_) => Some(Err(SceneError::at_line(file, i + 1, "not valid UTF-8 text"))),
-        }
-    })
+        })
 }
 
 /// What the validation pass learns and the canonical text it writes for tobj.
@@ -123,10 +158,16 @@ fn scan(file: &str, bytes: &[u8]) -> Result<Scan, SceneError> {
                     [x, y, z] | [x, y, z, _, _, _] => Vec3::new(x, y, z),
                     [x, y, z, w] if w != 0.0 => Vec3::new(x, y, z) / w,
                     [_, _, _, _] => return Err(err("vertex weight `w` is 0".into())),
-                    _ => return Err(err(format!("`v {rest}`: expected x y z, x y z w or x y z r g b"))),
+                    _ => {
+                        return Err(err(format!(
+                            "`v {rest}`: expected x y z, x y z w or x y z r g b"
+                        )));
+                    }
                 };
                 if !p.is_finite() {
-                    return Err(err(format!("`v {rest}`: coordinates overflow 32-bit floats")));
+                    return Err(err(format!(
+                        "`v {rest}`: coordinates overflow 32-bit floats"
+                    )));
                 }
                 if v.len() == 3 {
                     push_line(&mut body, format_args!("v {rest}"));
@@ -142,7 +183,11 @@ fn scan(file: &str, bytes: &[u8]) -> Result<Scan, SceneError> {
                     [u, v] | [u, v, _] => Vec2::new(u, v),
                     _ => return Err(err(format!("`vt {rest}`: expected 1 to 3 numbers"))),
                 };
-                push_line(&mut body, format_args!("vt {} {}", uv.x, uv.y));
+                if t.len() == 2 {
+                    push_line(&mut body, format_args!("vt {rest}"));
+                } else {
+                    push_line(&mut body, format_args!("vt {} {}", uv.x, uv.y));
+                }
                 texcoords += 1;
             }
             "vn" => {
@@ -171,7 +216,9 @@ fn scan(file: &str, bytes: &[u8]) -> Result<Scan, SceneError> {
             "mtllib" if rest.is_empty() => return Err(err("`mtllib` without a file name".into())),
             "mtllib" => mtllibs.push((rest.to_owned(), line)),
             "curv" | "curv2" | "surf" if !warned_free_form => {
-                tracing::warn!("{file}:{line}: free-form geometry (`{keyword}`) is not supported; ignored");
+                tracing::warn!(
+                    "{file}:{line}: free-form geometry (`{keyword}`) is not supported; ignored"
+                );
                 warned_free_form = true;
             }
             // Groups, objects, smoothing, lines, points and the rest do not affect triangles.
@@ -186,12 +233,19 @@ fn scan(file: &str, bytes: &[u8]) -> Result<Scan, SceneError> {
     canonical.push_str(&body);
     let mut usemtls: Vec<(String, usize)> = usemtls.into_iter().collect();
     usemtls.sort_by_key(|(_, line)| *line);
-    Ok(Scan { canonical, mtllibs, usemtls, faces, first_face_without_material })
+    Ok(Scan {
+        canonical,
+        mtllibs,
+        usemtls,
+        faces,
+        first_face_without_material,
+    })
 }
 
 fn push_line(out: &mut String, line: std::fmt::Arguments) {
     use std::fmt::Write;
-    out.write_fmt(line).expect("writing to a String cannot fail");
+    out.write_fmt(line)
+        .expect("writing to a String cannot fail");
     out.push('\n');
 }
 
@@ -214,18 +268,27 @@ fn check_face(rest: &str, counts: [usize; 3]) -> Result<(), String> {
             *part = split.next().unwrap_or_default();
         }
         if split.next().is_some() || parts[0].is_empty() {
-            return Err(format!("face corner `{corner}`: expected v, v/vt, v//vn or v/vt/vn"));
+            return Err(format!(
+                "face corner `{corner}`: expected v, v/vt, v//vn or v/vt/vn"
+            ));
         }
         let present = parts.map(|p| !p.is_empty());
         if *form.get_or_insert(present) != present {
-            return Err(format!("face corner `{corner}` does not have the form of the face's first corner"));
+            return Err(format!(
+                "face corner `{corner}` does not have the form of the face's first corner"
+            ));
         }
         for (k, part) in parts.iter().enumerate().filter(|(_, p)| !p.is_empty()) {
-            let index: i64 = part.parse().map_err(|_| format!("face corner `{corner}`: `{part}` is not an integer index"))?;
+            let index: i64 = part
+                .parse()
+                .map_err(|_| format!("face corner `{corner}`: `{part}` is not an integer index"))?;
             let count = counts[k] as i64;
             let resolved = if index < 0 { count + index } else { index - 1 };
             if index == 0 {
-                return Err(format!("face corner `{corner}`: {} index 0 (OBJ indices start at 1)", KINDS[k]));
+                return Err(format!(
+                    "face corner `{corner}`: {} index 0 (OBJ indices start at 1)",
+                    KINDS[k]
+                ));
             }
             if !(0..count).contains(&resolved) {
                 return Err(format!(
@@ -236,7 +299,9 @@ fn check_face(rest: &str, counts: [usize; 3]) -> Result<(), String> {
         }
     }
     if corners < 3 {
-        return Err(format!("a face needs at least 3 corners, this one has {corners}"));
+        return Err(format!(
+            "a face needs at least 3 corners, this one has {corners}"
+        ));
     }
     Ok(())
 }
@@ -249,18 +314,20 @@ fn append_triangles(file: &str, mesh: &tobj::Mesh, out: &mut Vec<Triangle>) {
     let has_normals = mesh.normals.len() == 3 * vertices && vertices > 0;
     let has_uvs = mesh.texcoords.len() == 2 * vertices && vertices > 0;
     if (!mesh.normals.is_empty() && !has_normals) || (!mesh.texcoords.is_empty() && !has_uvs) {
-        tracing::warn!("{file}: faces mix corners with and without normals or texture coordinates; those are dropped for the mesh");
+        tracing::warn!(
+            "{file}: faces mix corners with and without normals or texture coordinates; those are dropped for the mesh"
+        );
     }
     let p = |i: u32| Vec3::from_slice(&mesh.positions[3 * i as usize..]);
     let n = |i: u32| Vec3::from_slice(&mesh.normals[3 * i as usize..]).normalize_or_zero();
     let uv = |i: u32| Vec2::from_slice(&mesh.texcoords[2 * i as usize..]);
     let material = mesh.material_id.map_or(NO_MATERIAL, |id| id as u32);
     for c in mesh.indices.chunks_exact(3) {
-        let normals = [n(c[0]), n(c[1]), n(c[2])];
+        // A zero `vn` has no direction; such a triangle is shaded with its geometric normal.
+        let normals = has_normals.then(|| [n(c[0]), n(c[1]), n(c[2])]);
         out.push(Triangle {
             p: [p(c[0]), p(c[1]), p(c[2])],
-            // A zero `vn` has no direction; such a triangle is shaded with its geometric normal.
-            n: (has_normals && normals.iter().all(|n| *n != Vec3::ZERO)).then_some(normals),
+            n: normals.filter(|n| n.iter().all(|n| *n != Vec3::ZERO)),
             uv: has_uvs.then(|| [uv(c[0]), uv(c[1]), uv(c[2])]),
             material,
         });

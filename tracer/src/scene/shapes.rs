@@ -7,6 +7,7 @@
 //! (the emitting side of a light); `inward` reverses it and the shading normals.
 
 use super::Triangle;
+use super::format::{ObjectSpec, ShapeKind};
 use glam::{Mat3, Vec2, Vec3};
 use std::collections::HashMap;
 
@@ -32,8 +33,10 @@ impl Sphere {
             let jitter = 2.0 * unit_random(self.seed, i as u64) - 1.0;
             *v = self.center + *v * self.radius * (1.0 + self.perturb * jitter);
         }
-        let faces: Vec<[u32; 3]> =
-            faces.into_iter().map(|[a, b, c]| if self.inward { [a, c, b] } else { [a, b, c] }).collect();
+        let faces: Vec<[u32; 3]> = faces
+            .into_iter()
+            .map(|[a, b, c]| if self.inward { [a, c, b] } else { [a, b, c] })
+            .collect();
         let mut normals = vec![Vec3::ZERO; vertices.len()];
         for f in &faces {
             let area_vector = (vertices[f[1] as usize] - vertices[f[0] as usize])
@@ -116,7 +119,11 @@ impl Transform {
             * Mat3::from_rotation_y(r.y)
             * Mat3::from_rotation_x(r.x)
             * Mat3::from_diagonal(scale.recip());
-        Transform { linear, normal, translation }
+        Transform {
+            linear,
+            normal,
+            translation,
+        }
     }
 
     pub(crate) fn is_identity(&self) -> bool {
@@ -128,7 +135,11 @@ impl Transform {
     pub(crate) fn apply(&self, t: &Triangle) -> Triangle {
         let mut out = Triangle {
             p: t.p.map(|p| self.linear * p + self.translation),
-            n: t.n.map(|n| n.map(|n| (self.normal * n).normalize_or_zero())),
+            // A normal that a near-zero scale sends to infinity has no direction left; such a
+            // triangle is shaded with its geometric normal.
+            n: t.n
+                .map(|n| n.map(|n| (self.normal * n).normalize_or_zero()))
+                .filter(|n| n.iter().all(|n| *n != Vec3::ZERO)),
             uv: t.uv,
             material: t.material,
         };
@@ -145,23 +156,111 @@ impl Transform {
     }
 }
 
+/// The triangles of a procedural shape in object space; an error names the problem.
+pub(crate) fn shape_triangles(
+    kind: ShapeKind,
+    o: &ObjectSpec,
+    material: u32,
+) -> Result<Vec<Triangle>, String> {
+    Ok(match kind {
+        ShapeKind::Sphere => {
+            let subdivisions = o.subdivisions.unwrap_or(3);
+            if subdivisions > 8 {
+                return Err(format!(
+                    "sphere `subdivisions` {subdivisions} is above 8 (20 * 4^8 triangles)"
+                ));
+            }
+            Sphere {
+                center: o.center.map_or(Vec3::ZERO, |c| c.0),
+                radius: o.radius.map_or(1.0, |r| r.0),
+                subdivisions,
+                inward: o.inward.unwrap_or(false),
+                perturb: o.perturb.map_or(0.0, |p| p.0),
+                seed: o.seed.unwrap_or(0),
+                smooth: o.smooth.unwrap_or(true),
+            }
+            .triangles(material)
+        }
+        ShapeKind::Quad => {
+            let corners = o
+                .corners
+                .ok_or("quad needs `corners` (4 points, counter-clockwise seen from the front)")?;
+            quad(corners.map(|c| c.0), material)
+        }
+        ShapeKind::Box => {
+            let (Some(min), Some(max)) = (o.min, o.max) else {
+                return Err("box needs `min` and `max`".into());
+            };
+            if !min.0.cmplt(max.0).all() {
+                return Err("box `min` must be below `max` in x, y and z".into());
+            }
+            cuboid(min.0, max.0, o.inward.unwrap_or(false), material)
+        }
+    })
+}
+
+/// The shape-specific keys an [[object]] table gives (transform keys and `material` apply to all).
+pub(crate) fn given_keys(o: &ObjectSpec) -> Vec<&'static str> {
+    let keys = [
+        ("center", o.center.is_some()),
+        ("radius", o.radius.is_some()),
+        ("subdivisions", o.subdivisions.is_some()),
+        ("inward", o.inward.is_some()),
+        ("perturb", o.perturb.is_some()),
+        ("seed", o.seed.is_some()),
+        ("smooth", o.smooth.is_some()),
+        ("corners", o.corners.is_some()),
+        ("min", o.min.is_some()),
+        ("max", o.max.is_some()),
+    ];
+    keys.into_iter()
+        .filter(|(_, given)| *given)
+        .map(|(key, _)| key)
+        .collect()
+}
+
 /// The unit icosahedron subdivided `n` times: vertices on the unit sphere and outward-wound
 /// faces. Midpoints are cached per edge so that neighbouring faces share vertices exactly.
 fn icosphere(n: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
     let t = (1.0 + 5.0f32.sqrt()) / 2.0;
     let mut vertices: Vec<Vec3> = [
-        (-1.0, t, 0.0), (1.0, t, 0.0), (-1.0, -t, 0.0), (1.0, -t, 0.0),
-        (0.0, -1.0, t), (0.0, 1.0, t), (0.0, -1.0, -t), (0.0, 1.0, -t),
-        (t, 0.0, -1.0), (t, 0.0, 1.0), (-t, 0.0, -1.0), (-t, 0.0, 1.0),
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
     ]
     .into_iter()
     .map(|(x, y, z)| Vec3::new(x, y, z).normalize())
     .collect();
     let mut faces: Vec<[u32; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     for _ in 0..n {
         let mut midpoints: HashMap<(u32, u32), u32> = HashMap::new();
@@ -209,13 +308,25 @@ mod tests {
         }
         for (&(a, b), &count) in &edges {
             assert_eq!(count, 1, "directed edge used {count} times");
-            assert_eq!(edges.get(&(b, a)), Some(&1), "edge without its twin: not closed");
+            assert_eq!(
+                edges.get(&(b, a)),
+                Some(&1),
+                "edge without its twin: not closed"
+            );
         }
     }
 
     fn sphere(inward: bool, perturb: f32) -> Sphere {
         let center = Vec3::new(1.0, 2.0, 3.0);
-        Sphere { center, radius: 2.0, subdivisions: 2, inward, perturb, seed: 9, smooth: true }
+        Sphere {
+            center,
+            radius: 2.0,
+            subdivisions: 2,
+            inward,
+            perturb,
+            seed: 9,
+            smooth: true,
+        }
     }
 
     #[test]
@@ -232,20 +343,34 @@ mod tests {
                 let shading = t.n.unwrap()[0].dot(centroid) > 0.0;
                 assert_eq!(shading, !inward);
                 if perturb == 0.0 {
-                    assert!(t.p.iter().all(|p| ((*p - s.center).length() - 2.0).abs() < 1e-5));
+                    assert!(
+                        t.p.iter()
+                            .all(|p| ((*p - s.center).length() - 2.0).abs() < 1e-5)
+                    );
                 }
             }
         }
         let bumpy = sphere(false, 0.2).triangles(0);
-        let radii = bumpy.iter().flat_map(|t| t.p).map(|p| (p - Vec3::new(1.0, 2.0, 3.0)).length());
+        let radii = bumpy
+            .iter()
+            .flat_map(|t| t.p)
+            .map(|p| (p - Vec3::new(1.0, 2.0, 3.0)).length());
         let (lo, hi) = radii.fold((f32::MAX, 0.0f32), |(lo, hi), r| (lo.min(r), hi.max(r)));
-        assert!(lo >= 2.0 * 0.8 - 1e-5 && hi <= 2.0 * 1.2 + 1e-5 && hi - lo > 0.3, "{lo} {hi}");
+        assert!(
+            lo >= 2.0 * 0.8 - 1e-5 && hi <= 2.0 * 1.2 + 1e-5 && hi - lo > 0.3,
+            "{lo} {hi}"
+        );
     }
 
     #[test]
     fn boxes_are_closed_and_face_outwards_unless_inward() {
         for inward in [false, true] {
-            let tris = cuboid(Vec3::new(-1.0, 0.0, 2.0), Vec3::new(3.0, 1.0, 5.0), inward, 0);
+            let tris = cuboid(
+                Vec3::new(-1.0, 0.0, 2.0),
+                Vec3::new(3.0, 1.0, 5.0),
+                inward,
+                0,
+            );
             assert_eq!(tris.len(), 12);
             assert_closed(&tris);
             let center = Vec3::new(1.0, 0.5, 3.5);
@@ -258,12 +383,26 @@ mod tests {
 
     #[test]
     fn transforms_scale_rotate_translate_in_that_order_and_keep_the_front() {
-        let t = Transform::new(Vec3::new(2.0, 1.0, 1.0), Vec3::new(0.0, 90.0, 0.0), Vec3::new(0.0, 0.0, 10.0));
-        let tri = Triangle { p: [Vec3::X, Vec3::Y, Vec3::ZERO], n: Some([Vec3::Z; 3]), uv: None, material: 0 };
+        let t = Transform::new(
+            Vec3::new(2.0, 1.0, 1.0),
+            Vec3::new(0.0, 90.0, 0.0),
+            Vec3::new(0.0, 0.0, 10.0),
+        );
+        let tri = Triangle {
+            p: [Vec3::X, Vec3::Y, Vec3::ZERO],
+            n: Some([Vec3::Z; 3]),
+            uv: None,
+            material: 0,
+        };
         let placed = t.apply(&tri);
         // x scaled to 2, then rotated 90 degrees about y (x -> -z), then moved 10 along z.
-        assert!((placed.p[0] - Vec3::new(0.0, 0.0, 8.0)).length() < 1e-5, "{:?}", placed.p);
-        let mirrored = Transform::new(Vec3::new(-1.0, 1.0, 1.0), Vec3::ZERO, Vec3::ZERO).apply(&tri);
+        assert!(
+            (placed.p[0] - Vec3::new(0.0, 0.0, 8.0)).length() < 1e-5,
+            "{:?}",
+            placed.p
+        );
+        let mirrored =
+            Transform::new(Vec3::new(-1.0, 1.0, 1.0), Vec3::ZERO, Vec3::ZERO).apply(&tri);
         let before = tri.area_vector().normalize();
         let after = mirrored.area_vector().normalize();
         // The mirror maps the normal (0, 0, 1) to itself; the front must stay where it was.

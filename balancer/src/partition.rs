@@ -1,0 +1,237 @@
+//! The common surface: whichever balancer is configured, the runtime and the simulator see
+//! [`Tile`]s with predicted costs, feed back measured [`CostMap`]s, and ask for an
+//! [`Assignment`] of tiles to peers.
+//!
+//! A frame goes: `tiles()` (what to render, in a fixed order) -> `assign(peers, weights)` (who
+//! starts with which tiles) -> render, measuring a [`CostMap`] -> `observe(&map)` (new
+//! predictions, and for the PBT a re-cut tree) -> next frame.
+//!
+//! Both balancers predict with the same [`Predictor`](self): a tile's predicted cost is the
+//! previous frame's measured cost of its pixels, optionally smoothed over frames
+//! ([`Config::smoothing`]); before any measurement it is the tile's area in pixels (a uniform
+//! guess: one unit of cost per pixel, which only the ratios between tiles make meaningful).
+
+use serde::{Deserialize, Serialize};
+
+use crate::assign::{self, Assignment};
+use crate::{CostMap, Error, Pbt, Rect, Regular};
+
+/// One tile of the partition, with the cost predicted for the next frame.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Tile {
+    pub rect: Rect,
+    pub predicted: f64,
+}
+
+/// What an `observe` (or a change of leaf count) did to the partition.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Update {
+    /// Leaves split into their two halves.
+    pub splits: usize,
+    /// Sibling leaf pairs merged into their parent.
+    pub merges: usize,
+    /// The greedy PBT update stopped at its safety cap on moves rather than at a local optimum
+    /// (see [`crate::pbt`]). Never expected; reported so that tests and the simulator can tell.
+    pub capped: bool,
+}
+
+/// Policy for building and dealing tiles. Every field has a documented default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// Which partition to build. Default: [`Kind::Pbt`].
+    pub kind: Kind,
+    /// PBT target leaf count `m`. Default 256: about 16 tiles each for 16 peers, tiles of
+    /// roughly 90x90 pixels at 1920x1080, enough slack for stealing to even out mispredictions.
+    /// The tree never has fewer leaves than the cuts a very wide image forces, nor more than
+    /// the image has pixels.
+    pub leaves: usize,
+    /// The regular baseline's grid. Default: 16 x 16 tiles.
+    pub grid: Grid,
+    /// How tiles are dealt to peers. Default: [`Order::Contiguous`].
+    pub order: Order,
+    /// Exponential smoothing of predictions: the weight the previous prediction keeps, in
+    /// `[0, 1)`; a new prediction is `smoothing * old + (1 - smoothing) * measured`, block by
+    /// block. Default 0: off, the prediction is the last frame's measurement, which is what
+    /// temporal coherence of a moving scene calls for. Raise it for noisy cost measurements.
+    pub smoothing: f64,
+}
+
+/// The closed set of balancers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kind {
+    /// Adaptive subdivision by a Prediction Binary Tree ([`Pbt`]).
+    #[default]
+    Pbt,
+    /// A fixed grid of nearly equal tiles ([`Regular`]).
+    Regular,
+}
+
+/// The shape of a regular grid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Grid {
+    /// `columns x rows` tiles whose sides differ by at most one pixel.
+    Count { columns: u32, rows: u32 },
+    /// Tiles of `width x height` pixels from the top-left corner, partial at the right and
+    /// bottom edges.
+    Size { width: u32, height: u32 },
+}
+
+impl Default for Grid {
+    fn default() -> Self {
+        Grid::Count { columns: 16, rows: 16 }
+    }
+}
+
+/// How an ordered list of tiles is dealt to peers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Order {
+    /// Each peer gets one contiguous run of tiles, runs of nearly equal predicted cost
+    /// (weighted by peer speed); spatially coherent for the PBT's depth-first order.
+    #[default]
+    Contiguous,
+    /// Tiles dealt one at a time (smooth weighted round-robin), ignoring predicted cost.
+    RoundRobin,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config { kind: Kind::Pbt, leaves: 256, grid: Grid::default(), order: Order::Contiguous, smoothing: 0.0 }
+    }
+}
+
+impl Config {
+    /// Checks the knobs the chosen [`Kind`] reads.
+    pub fn validate(&self) -> Result<(), Error> {
+        if !(0.0..1.0).contains(&self.smoothing) {
+            return Err(Error::Config("smoothing must be in [0, 1)"));
+        }
+        match self.kind {
+            Kind::Pbt if self.leaves == 0 => Err(Error::Config("a PBT needs at least one leaf")),
+            Kind::Regular => match self.grid {
+                Grid::Count { columns: 0, .. } | Grid::Count { rows: 0, .. } => {
+                    Err(Error::Config("a grid needs at least one column and one row"))
+                }
+                Grid::Size { width: 0, .. } | Grid::Size { height: 0, .. } => {
+                    Err(Error::Config("grid tiles need at least one pixel a side"))
+                }
+                _ => Ok(()),
+            },
+            Kind::Pbt => Ok(()),
+        }
+    }
+}
+
+/// Any balancer, behind one surface.
+#[derive(Clone, Debug)]
+pub enum Partitioner {
+    Pbt(Pbt),
+    Regular(Regular),
+}
+
+impl Partitioner {
+    /// The balancer `config.kind` names, over a `width` x `height` image.
+    pub fn new(width: u32, height: u32, config: &Config) -> Result<Self, Error> {
+        Ok(match config.kind {
+            Kind::Pbt => Partitioner::Pbt(Pbt::new(width, height, config)?),
+            Kind::Regular => Partitioner::Regular(Regular::new(width, height, config)?),
+        })
+    }
+
+    pub fn width(&self) -> u32 {
+        match self {
+            Partitioner::Pbt(pbt) => pbt.width(),
+            Partitioner::Regular(regular) => regular.width(),
+        }
+    }
+
+    pub fn height(&self) -> u32 {
+        match self {
+            Partitioner::Pbt(pbt) => pbt.height(),
+            Partitioner::Regular(regular) => regular.height(),
+        }
+    }
+
+    /// The tiles, in their fixed order (depth-first for the PBT, row-major for the grid).
+    pub fn tiles(&self) -> Vec<Tile> {
+        match self {
+            Partitioner::Pbt(pbt) => pbt.tiles(),
+            Partitioner::Regular(regular) => regular.tiles(),
+        }
+    }
+
+    /// Takes the measured costs of the frame just rendered: updates predictions, and re-cuts
+    /// the PBT.
+    pub fn observe(&mut self, map: &CostMap) -> Result<Update, Error> {
+        match self {
+            Partitioner::Pbt(pbt) => pbt.observe(map),
+            Partitioner::Regular(regular) => regular.observe(map),
+        }
+    }
+
+    /// Deals the tiles to `peers` peers, optionally weighted by peer speed (`None`: equal).
+    /// Run `p` lists the indices into [`Self::tiles`] that peer `p` starts with.
+    pub fn assign(&self, peers: usize, weights: Option<&[f64]>) -> Result<Assignment, Error> {
+        match self {
+            Partitioner::Pbt(pbt) => pbt.assign(peers, weights),
+            Partitioner::Regular(regular) => regular.assign(peers, weights),
+        }
+    }
+}
+
+/// Deals `tiles` by `order`: the one assignment path both balancers share.
+pub(crate) fn deal(
+    tiles: &[Tile],
+    order: Order,
+    peers: usize,
+    weights: Option<&[f64]>,
+) -> Result<Assignment, Error> {
+    let costs: Vec<f64> = tiles.iter().map(|tile| tile.predicted).collect();
+    assign::assign(&costs, order, peers, weights)
+}
+
+/// Predicts the next frame's cost of any rectangle from the frames observed so far.
+#[derive(Clone, Debug)]
+pub(crate) struct Predictor {
+    width: u32,
+    height: u32,
+    smoothing: f64,
+    /// The predicted cost map; `None` before the first observation.
+    map: Option<CostMap>,
+}
+
+impl Predictor {
+    pub(crate) fn new(width: u32, height: u32, smoothing: f64) -> Self {
+        Predictor { width, height, smoothing, map: None }
+    }
+
+    /// Predicted cost of `rect`: the (smoothed) measured cost, or before any measurement its
+    /// area in pixels.
+    pub(crate) fn estimate(&self, rect: Rect) -> f64 {
+        match &self.map {
+            Some(map) => map.cost(rect),
+            None => rect.area() as f64,
+        }
+    }
+
+    /// Folds in one frame's measurement. A map in a different block size than the previous
+    /// one cannot be blended block by block, so it replaces the prediction outright.
+    pub(crate) fn observe(&mut self, measured: &CostMap) -> Result<(), Error> {
+        if (measured.width(), measured.height()) != (self.width, self.height) {
+            return Err(Error::MapSize {
+                expected: (self.width, self.height),
+                found: (measured.width(), measured.height()),
+            });
+        }
+        self.map = Some(match &self.map {
+            Some(old) if self.smoothing > 0.0 && old.block() == measured.block() => {
+                old.blend(measured, self.smoothing)
+            }
+            _ => measured.clone(),
+        });
+        Ok(())
+    }
+}

@@ -1,0 +1,278 @@
+//! Timed renders and the one-knob-at-a-time ladders.
+//!
+//! A rung's time is the wall time of rendering the whole frame on the thread pool, tiles of
+//! [`TILE`] pixels handed out by rayon as `tessera render` would. Renders shorter than
+//! [`MIN_TIMED_SECONDS`] are repeated and the median taken, because a 1-spp render of a small image
+//! lasts milliseconds and a single measurement of it is mostly scheduler noise; the image itself is
+//! deterministic, so repeating changes only the time.
+
+use super::Knob;
+use super::reference::Reference;
+use crate::compare::{Metrics, mean_flip};
+use rayon::prelude::*;
+use std::time::Instant;
+use tracer::geometry::{Accel, BuildQuality, Traversal};
+use tracer::output::RgbImage;
+use tracer::scene::RenderSettings;
+use tracer::{Film, Rect, World};
+
+/// The side of the square tiles a frame is cut into.
+pub const TILE: u32 = 32;
+/// Renders (and BVH builds) faster than this are repeated for a steadier time.
+pub const MIN_TIMED_SECONDS: f64 = 0.25;
+/// At most this many repetitions of a short render.
+const MAX_REPEATS: usize = 31;
+/// The depth cap of the roulette ladder: "off" needs one, or paths in a closed scene never end,
+/// and every roulette rung gets the same cap so that only the roulette differs. At a survival
+/// probability of at most 0.95 per bounce, paths this long are rare enough not to matter.
+pub const ROULETTE_DEPTH_CAP: u32 = 64;
+
+/// One measured rung of a ladder.
+#[derive(Clone, Debug)]
+pub struct Row {
+    pub knob: Knob,
+    /// The knob's value, as a reader would name it ("16 spp", "depth 4", "off", "Medium", ...).
+    pub setting: String,
+    pub settings: RenderSettings,
+    pub bvh: BuildQuality,
+    pub traversal: Traversal,
+    pub build_seconds: f64,
+    pub render_seconds: f64,
+    /// Closest-hit plus shadow rays traced.
+    pub rays: u64,
+    pub metrics: Metrics,
+    pub flip: f64,
+    /// Whatever else the rung showed (an image that changed when it must not, dropped samples).
+    pub note: String,
+}
+
+impl Row {
+    /// The time this rung cost: BVH build (for the BVH ladder) plus render.
+    pub fn seconds(&self) -> f64 {
+        self.build_seconds + self.render_seconds
+    }
+
+    /// 1 / (relative MSE x time): higher is better; equal for settings that trade one for the other.
+    pub fn efficiency(&self) -> f64 {
+        1.0 / (self.metrics.rel_mse * self.seconds())
+    }
+
+    pub fn mrays_per_second(&self) -> f64 {
+        self.rays as f64 / self.render_seconds / 1e6
+    }
+}
+
+/// A rendered frame and what it cost.
+pub struct Timed {
+    pub image: RgbImage,
+    pub seconds: f64,
+    pub rays: u64,
+    pub invalid_samples: u64,
+}
+
+/// Renders frame 0 of `world` on `pool`, timed (median of repeats when short).
+pub fn render(world: &World, pool: &rayon::ThreadPool) -> Timed {
+    let (width, height) = (world.scene.settings.width, world.scene.settings.height);
+    let tiles: Vec<Rect> = (0..height.div_ceil(TILE))
+        .flat_map(|ty| (0..width.div_ceil(TILE)).map(move |tx| (tx, ty)))
+        .map(|(tx, ty)| {
+            let (x, y) = (tx * TILE, ty * TILE);
+            Rect { x, y, w: TILE.min(width - x), h: TILE.min(height - y) }
+        })
+        .collect();
+    let once = || {
+        let started = Instant::now();
+        let outputs: Vec<_> = pool.install(|| tiles.par_iter().map(|&rect| tracer::render_tile(world, 0, rect)).collect());
+        let mut film = Film::new(width, height);
+        for output in &outputs {
+            film.insert(output.rect, &output.pixels, &output.cost);
+            film.stats.add(&output.stats);
+        }
+        (film, started.elapsed().as_secs_f64())
+    };
+    let (film, first) = once();
+    let seconds = median_time(first, || once().1);
+    Timed {
+        rays: film.stats.rays + film.stats.shadow_rays,
+        invalid_samples: film.stats.invalid_samples,
+        image: RgbImage { width, height, pixels: film.pixels },
+        seconds,
+    }
+}
+
+/// `first`, or when it is shorter than [`MIN_TIMED_SECONDS`] the median of it and enough further
+/// runs of `again` to fill that time.
+pub fn median_time(first: f64, mut again: impl FnMut() -> f64) -> f64 {
+    if first >= MIN_TIMED_SECONDS {
+        return first;
+    }
+    let repeats = ((MIN_TIMED_SECONDS / first.max(1e-6)).ceil() as usize).clamp(2, MAX_REPEATS);
+    let mut times = vec![first];
+    times.extend((1..repeats).map(|_| again()));
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
+
+/// The world being measured, the pool it renders on and the reference it is measured against.
+pub struct Bench<'a> {
+    world: World,
+    pool: &'a rayon::ThreadPool,
+    reference: &'a Reference,
+    /// The settings every rung starts from (`world.scene.settings` on entry).
+    baseline: RenderSettings,
+}
+
+impl<'a> Bench<'a> {
+    pub fn new(world: World, pool: &'a rayon::ThreadPool, reference: &'a Reference) -> Self {
+        let baseline = world.scene.settings.clone();
+        Bench { world, pool, reference, baseline }
+    }
+
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// Samples per pixel 1, 2, 4, ... up to `max_spp`.
+    pub fn spp_ladder(&mut self, max_spp: u32) -> Vec<Row> {
+        let rungs = (0..32).map(|k| 1u32 << k).take_while(|&spp| spp <= max_spp);
+        rungs
+            .map(|spp| {
+                let settings = RenderSettings { samples_per_pixel: spp, ..self.baseline.clone() };
+                self.measure(Knob::Spp, format!("{spp} spp"), settings).0
+            })
+            .collect()
+    }
+
+    /// Maximum depth 1, 2, 4, 8, 16 and unlimited, at `spp`.
+    pub fn depth_ladder(&mut self, spp: u32) -> Vec<Row> {
+        [Some(1), Some(2), Some(4), Some(8), Some(16), None]
+            .into_iter()
+            .map(|max_depth| {
+                let settings = RenderSettings { samples_per_pixel: spp, max_depth, ..self.baseline.clone() };
+                let label = max_depth.map_or("unlimited".to_owned(), |d| format!("depth {d}"));
+                self.measure(Knob::Depth, label, settings).0
+            })
+            .collect()
+    }
+
+    /// Russian roulette off, and on from depth 1, 2, 3, 5 and 8, all capped at
+    /// [`ROULETTE_DEPTH_CAP`], at `spp`.
+    pub fn roulette_ladder(&mut self, spp: u32) -> Vec<Row> {
+        [None, Some(1), Some(2), Some(3), Some(5), Some(8)]
+            .into_iter()
+            .map(|start| {
+                let settings = RenderSettings {
+                    samples_per_pixel: spp,
+                    max_depth: Some(ROULETTE_DEPTH_CAP),
+                    russian_roulette_depth: start,
+                    ..self.baseline.clone()
+                };
+                let label = start.map_or("off".to_owned(), |d| format!("from depth {d}"));
+                self.measure(Knob::Roulette, label, settings).0
+            })
+            .collect()
+    }
+
+    /// Each BVH build quality: build time, render time at `spp`, and whether the image is
+    /// bit-identical to the default quality's (it must be: the traversal finds the closest hit
+    /// whatever the tree).
+    pub fn bvh_ladder(&mut self, spp: u32) -> Vec<Row> {
+        let settings = RenderSettings { samples_per_pixel: spp, ..self.baseline.clone() };
+        self.world.scene.settings = settings.clone();
+        let default_image = render(&self.world, self.pool).image;
+        let rows = BuildQuality::ALL
+            .into_iter()
+            .map(|quality| {
+                let triangles = &self.world.scene.triangles;
+                let started = Instant::now();
+                let accel = Accel::build(triangles, quality);
+                let build_seconds = median_time(started.elapsed().as_secs_f64(), || {
+                    let again = Instant::now();
+                    drop(std::hint::black_box(Accel::build(triangles, quality)));
+                    again.elapsed().as_secs_f64()
+                });
+                self.world.accel = accel;
+                let (mut row, image) = self.measure(Knob::Bvh, format!("{quality:?}"), settings.clone());
+                row.bvh = quality;
+                row.build_seconds = build_seconds;
+                row.note = difference_note(&image, &default_image, "the default BVH's image");
+                row
+            })
+            .collect();
+        self.world.accel = Accel::build(&self.world.scene.triangles, BuildQuality::default());
+        rows
+    }
+
+    /// Our robust traversal and obvhs's own, at `spp`.
+    pub fn traversal_ladder(&mut self, spp: u32) -> Vec<Row> {
+        let settings = RenderSettings { samples_per_pixel: spp, ..self.baseline.clone() };
+        let mut rows = Vec::new();
+        let mut robust_image = None;
+        for traversal in [Traversal::Robust, Traversal::Obvhs] {
+            self.world.traversal = traversal;
+            let (mut row, image) =
+                self.measure(Knob::Traversal, format!("{traversal:?}").to_lowercase(), settings.clone());
+            row.traversal = traversal;
+            match &robust_image {
+                None => robust_image = Some(image),
+                Some(robust) => row.note = difference_note(&image, robust, "the robust traversal's image"),
+            }
+            rows.push(row);
+        }
+        self.world.traversal = Traversal::Robust;
+        rows
+    }
+
+    /// Renders with `settings` and measures the image against the reference; returns the image
+    /// too, for ladders that compare rungs with each other.
+    fn measure(&mut self, knob: Knob, setting: String, settings: RenderSettings) -> (Row, RgbImage) {
+        self.world.scene.settings = settings.clone();
+        let timed = render(&self.world, self.pool);
+        let reference = self.reference.image();
+        let metrics = Metrics::between(&timed.image, reference)
+            .expect("every rung renders at the reference's size: both come from the same settings");
+        let flip = mean_flip(&timed.image, reference);
+        let note = if timed.invalid_samples > 0 {
+            format!("{} non-finite samples dropped", timed.invalid_samples)
+        } else {
+            String::new()
+        };
+        println!(
+            "  {:<9} {:<16} {:>9.4} s  RMSE {:.4e}  relMSE {:.4e}  FLIP {:.4}  mean {:+.2}%",
+            knob.name(),
+            setting,
+            timed.seconds,
+            metrics.rmse,
+            metrics.rel_mse,
+            flip,
+            100.0 * metrics.mean_bias(),
+        );
+        self.world.scene.settings = self.baseline.clone();
+        let row = Row {
+            knob,
+            setting,
+            settings,
+            bvh: BuildQuality::default(),
+            traversal: self.world.traversal,
+            build_seconds: 0.0,
+            render_seconds: timed.seconds,
+            rays: timed.rays,
+            metrics,
+            flip,
+            note,
+        };
+        (row, timed.image)
+    }
+}
+
+/// "identical to WHAT", or how much `image` differs from `other`.
+fn difference_note(image: &RgbImage, other: &RgbImage, what: &str) -> String {
+    let bits = |i: &RgbImage| i.pixels.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
+    let (a, b) = (bits(image), bits(other));
+    let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+    if differing == 0 {
+        return format!("bit-identical to {what}");
+    }
+    let largest = Metrics::between(image, other).map_or(f64::NAN, |m| m.max_difference.value);
+    format!("differs from {what} in {differing} of {} values (largest {largest:.3e})", a.len())
+}

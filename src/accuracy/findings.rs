@@ -1,0 +1,285 @@
+//! The comparisons a reader wants, in sentences: how error and time scale with samples, and for
+//! every other knob whether it beats simply rendering longer at the baseline settings.
+//!
+//! The spp ladder is the yardstick: a [`Curve`] of RMSE against time, interpolated linearly in
+//! log-log space between rungs. Outside the ladder nothing is extrapolated; the answer is a bound
+//! ([`Estimate::Below`] or [`Estimate::Above`]), because a power law fitted to noisy rungs would
+//! invent numbers the run did not measure.
+
+use super::Knob;
+use super::bench::Row;
+use super::report::Run;
+use tracer::geometry::Traversal;
+
+/// A value read off the spp ladder: measured between two rungs, or only bounded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Estimate {
+    Within(f64),
+    /// Lower than this (beyond the ladder's end).
+    Below(f64),
+    /// Higher than this (before the ladder's start).
+    Above(f64),
+}
+
+/// RMSE against time along the spp ladder.
+pub struct Curve {
+    /// (seconds, RMSE), sorted by seconds.
+    by_time: Vec<(f64, f64)>,
+    /// The same points sorted by decreasing RMSE.
+    by_error: Vec<(f64, f64)>,
+}
+
+impl Curve {
+    /// The spp ladder's curve, if it has at least two rungs with a positive error.
+    pub fn of(run: &Run) -> Option<Curve> {
+        let points: Vec<(f64, f64)> = run
+            .rows_of(Knob::Spp)
+            .map(|r| (r.seconds(), r.metrics.rmse))
+            .filter(|&(t, e)| t > 0.0 && e > 0.0)
+            .collect();
+        if points.len() < 2 {
+            return None;
+        }
+        let mut by_time = points.clone();
+        by_time.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut by_error = points;
+        by_error.sort_by(|a, b| b.1.total_cmp(&a.1));
+        Some(Curve { by_time, by_error })
+    }
+
+    /// The baseline's RMSE after `seconds` of rendering.
+    pub fn error_at(&self, seconds: f64) -> Estimate {
+        let (first, last) = (self.by_time[0], self.by_time[self.by_time.len() - 1]);
+        if seconds < first.0 {
+            return Estimate::Above(first.1);
+        }
+        if seconds > last.0 {
+            return Estimate::Below(last.1);
+        }
+        Estimate::Within(log_interpolate(self.by_time.iter().map(|&(t, e)| (t, e)), seconds))
+    }
+
+    /// The baseline's time to reach `rmse`.
+    pub fn time_for(&self, rmse: f64) -> Estimate {
+        let (worst, best) = (self.by_error[0], self.by_error[self.by_error.len() - 1]);
+        if rmse > worst.1 {
+            return Estimate::Below(worst.0);
+        }
+        if rmse < best.1 {
+            return Estimate::Above(best.0);
+        }
+        // Along decreasing error: interpolate in -ln(error), which increases.
+        let points = self.by_error.iter().map(|&(t, e)| (1.0 / e, t));
+        Estimate::Within(log_interpolate(points, 1.0 / rmse))
+    }
+
+    /// Whether `row` has a lower RMSE than the baseline reaches in the same time; `None` when the
+    /// ladder cannot tell.
+    pub fn beaten_by(&self, row: &Row) -> Option<bool> {
+        let rmse = row.metrics.rmse;
+        match self.error_at(row.seconds()) {
+            Estimate::Within(e) => Some(rmse < e),
+            Estimate::Above(e) => (rmse <= e).then_some(true),
+            Estimate::Below(e) => (rmse >= e).then_some(false),
+        }
+    }
+}
+
+/// Piecewise-linear interpolation of ln(y) against ln(x) over points sorted by increasing x;
+/// `x` must lie within them.
+fn log_interpolate(points: impl Iterator<Item = (f64, f64)>, x: f64) -> f64 {
+    let points: Vec<(f64, f64)> = points.collect();
+    for pair in points.windows(2) {
+        let ((x0, y0), (x1, y1)) = (pair[0], pair[1]);
+        if x0 <= x && x <= x1 {
+            if x1 == x0 {
+                return y0;
+            }
+            let s = (x.ln() - x0.ln()) / (x1.ln() - x0.ln());
+            return (y0.ln() + s * (y1.ln() - y0.ln())).exp();
+        }
+    }
+    points.last().map_or(f64::NAN, |p| p.1)
+}
+
+/// The least-squares slope of ln(y) against ln(x); points with a non-positive coordinate are
+/// left out. NaN with fewer than two points.
+pub fn loglog_slope(points: &[(f64, f64)]) -> f64 {
+    let logs: Vec<(f64, f64)> =
+        points.iter().filter(|(x, y)| *x > 0.0 && *y > 0.0).map(|(x, y)| (x.ln(), y.ln())).collect();
+    let n = logs.len() as f64;
+    let (mx, my) = (logs.iter().map(|p| p.0).sum::<f64>() / n, logs.iter().map(|p| p.1).sum::<f64>() / n);
+    let sxy: f64 = logs.iter().map(|(x, y)| (x - mx) * (y - my)).sum();
+    let sxx: f64 = logs.iter().map(|(x, _)| (x - mx) * (x - mx)).sum();
+    if logs.len() < 2 || sxx == 0.0 { f64::NAN } else { sxy / sxx }
+}
+
+/// The findings of a run, one sentence (or two) per knob measured.
+pub fn sentences(run: &Run, curve: Option<&Curve>) -> Vec<String> {
+    let mut out = Vec::new();
+    let spp: Vec<&Row> = run.rows_of(Knob::Spp).collect();
+    if spp.len() >= 2 {
+        let n = |r: &Row| f64::from(r.settings.samples_per_pixel);
+        let rmse_slope = loglog_slope(&spp.iter().map(|r| (n(r), r.metrics.rmse)).collect::<Vec<_>>());
+        let time_slope = loglog_slope(&spp.iter().map(|r| (n(r), r.seconds())).collect::<Vec<_>>());
+        let (first, last) = (spp[0], spp[spp.len() - 1]);
+        let mut s = format!(
+            "Samples: RMSE falls as spp^{rmse_slope:.3} from {} to {} spp (Monte Carlo predicts -0.5) while time grows \
+             as spp^{time_slope:.3}, so halving the error costs {:.1}x the time. At {} spp the frame takes {:.3} s for \
+             RMSE {:.3e}; at {} spp {:.4} s for RMSE {:.3e}.",
+            first.settings.samples_per_pixel,
+            last.settings.samples_per_pixel,
+            2f64.powf(-time_slope / rmse_slope),
+            last.settings.samples_per_pixel,
+            last.seconds(),
+            last.metrics.rmse,
+            first.settings.samples_per_pixel,
+            first.seconds(),
+            first.metrics.rmse,
+        );
+        let noise = run.reference.noise_mse;
+        if noise > 0.0 {
+            let net: Vec<(f64, f64)> =
+                spp.iter().map(|r| (n(r), (r.metrics.mse - noise).max(0.0).sqrt())).collect();
+            s += &format!(
+                " Net of the reference's own noise the slope is {:.3}; that noise is {:.0}% of the error at {} spp.",
+                loglog_slope(&net),
+                100.0 * (noise / last.metrics.mse).sqrt(),
+                last.settings.samples_per_pixel,
+            );
+        }
+        out.push(s);
+    }
+    let depth: Vec<&Row> = run.rows_of(Knob::Depth).collect();
+    if let Some(unlimited) = depth.iter().find(|r| r.settings.max_depth.is_none()) {
+        let capped: Vec<&&Row> = depth.iter().filter(|r| r.settings.max_depth.is_some()).collect();
+        let close = capped.iter().find(|r| r.metrics.mean_bias().abs() < 0.01);
+        let mut s = match (capped.first(), close) {
+            (Some(shallowest), Some(close)) => format!(
+                "Depth: a cap at {} makes the image {} on average, a bias no number of samples removes; \
+                 the shallowest cap within 1% of the reference's mean is {}, at {:.0}% of unlimited depth's time.",
+                shallowest.setting,
+                brightness(shallowest.metrics.mean_bias()),
+                close.setting,
+                100.0 * close.seconds() / unlimited.seconds(),
+            ),
+            (Some(shallowest), None) => format!(
+                "Depth: a cap at {} makes the image {} on average; no cap measured comes within 1% of the \
+                 reference's mean.",
+                shallowest.setting,
+                brightness(shallowest.metrics.mean_bias()),
+            ),
+            _ => String::new(),
+        };
+        if let Some(curve) = curve {
+            let (won, lost): (Vec<&&&Row>, Vec<&&&Row>) =
+                capped.iter().filter(|r| curve.beaten_by(r).is_some()).partition(|r| curve.beaten_by(r) == Some(true));
+            let names = |rows: &[&&&Row]| rows.iter().map(|r| r.setting.as_str()).collect::<Vec<_>>().join(", ");
+            s += &format!(
+                " At equal time, {} beat{} rendering more samples at unlimited depth, and {} {} not.",
+                if won.is_empty() { "no cap".to_owned() } else { names(&won) },
+                if won.len() == 1 { "s" } else { "" },
+                if lost.is_empty() { "none".to_owned() } else { names(&lost) },
+                if lost.len() == 1 { "does" } else { "do" },
+            );
+        }
+        out.push(s);
+    }
+    let roulette: Vec<&Row> = run.rows_of(Knob::Roulette).collect();
+    let off = roulette.iter().find(|r| r.settings.russian_roulette_depth.is_none());
+    let best = roulette.iter().max_by(|a, b| a.efficiency().total_cmp(&b.efficiency()));
+    if let (Some(off), Some(best)) = (off, best) {
+        out.push(format!(
+            "Russian roulette: the most efficient setting is {} ({:.2}x the efficiency 1/(relMSE x time) of no roulette: \
+             {:.3} s against {:.3} s, relMSE {:.3e} against {:.3e}).",
+            best.setting,
+            best.efficiency() / off.efficiency(),
+            best.seconds(),
+            off.seconds(),
+            best.metrics.rel_mse,
+            off.metrics.rel_mse,
+        ));
+    }
+    out.extend(bvh_sentence(run));
+    out.extend(traversal_sentence(run));
+    out
+}
+
+/// "12.3% darker" or "0.4% brighter".
+fn brightness(bias: f64) -> String {
+    format!("{:.1}% {}", 100.0 * bias.abs(), if bias < 0.0 { "darker" } else { "brighter" })
+}
+
+fn bvh_sentence(run: &Run) -> Option<String> {
+    let rows: Vec<&Row> = run.rows_of(Knob::Bvh).collect();
+    let fastest = rows.iter().min_by(|a, b| a.seconds().total_cmp(&b.seconds()))?;
+    let slowest = rows.iter().max_by(|a, b| a.seconds().total_cmp(&b.seconds()))?;
+    let changed: Vec<&str> = rows.iter().filter(|r| !r.note.starts_with("bit-identical")).map(|r| r.setting.as_str()).collect();
+    let images = if changed.is_empty() {
+        format!("All {} build qualities gave bit-identical images.", rows.len())
+    } else {
+        format!("The images of {} DIFFER from the default quality's: the BVH must never change an image.", changed.join(", "))
+    };
+    Some(format!(
+        "BVH: {images} Builds took {:.2e} to {:.2e} s; build plus render is lowest for {} ({:.4} s, of which the build is \
+         {:.1}%) and highest for {} ({:.4} s).",
+        rows.iter().map(|r| r.build_seconds).fold(f64::INFINITY, f64::min),
+        rows.iter().map(|r| r.build_seconds).fold(0.0, f64::max),
+        fastest.setting,
+        fastest.seconds(),
+        100.0 * fastest.build_seconds / fastest.seconds(),
+        slowest.setting,
+        slowest.seconds(),
+    ))
+}
+
+fn traversal_sentence(run: &Run) -> Option<String> {
+    let robust = run.rows_of(Knob::Traversal).find(|r| r.traversal == Traversal::Robust)?;
+    let obvhs = run.rows_of(Knob::Traversal).find(|r| r.traversal == Traversal::Obvhs)?;
+    let mut s = format!(
+        "Traversal: obvhs's own traversal renders at {:.2} Mrays/s against {:.2} for ours ({:.2}x), and its image {}.",
+        obvhs.mrays_per_second(),
+        robust.mrays_per_second(),
+        obvhs.mrays_per_second() / robust.mrays_per_second(),
+        obvhs.note.replace("differs from the robust traversal's image", "differs from ours").replace("bit-identical to the robust traversal's image", "is bit-identical to ours"),
+    );
+    if let (Some(r), Some(o)) = (run.leak_check(Traversal::Robust), run.leak_check(Traversal::Obvhs)) {
+        s += &format!(
+            " On a closed sphere of {} triangles, of {} rays obvhs's leaked {} and hit their own triangle {} times \
+             ({:.2} Mrays/s); ours leaked {} and hit themselves {} times of {} ({:.2} Mrays/s).",
+            o.triangles,
+            o.rays,
+            o.leaks,
+            o.self_hits,
+            o.mrays_per_second(),
+            r.leaks,
+            r.self_hits,
+            r.rays,
+            r.mrays_per_second(),
+        );
+    }
+    Some(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_slope_of_a_power_law_is_its_exponent() {
+        let points: Vec<(f64, f64)> = (0..8).map(|k| (2f64.powi(k), 3.0 * 2f64.powi(k).powf(-0.5))).collect();
+        assert!((loglog_slope(&points) + 0.5).abs() < 1e-12);
+        assert!(loglog_slope(&points[..1]).is_nan());
+    }
+
+    #[test]
+    fn interpolation_is_linear_in_log_log() {
+        let curve = Curve { by_time: vec![(1.0, 1.0), (4.0, 0.5)], by_error: vec![(1.0, 1.0), (4.0, 0.5)] };
+        assert!(matches!(curve.error_at(2.0), Estimate::Within(e) if (e - 0.5f64.sqrt()).abs() < 1e-12));
+        assert!(matches!(curve.time_for(0.5f64.sqrt()), Estimate::Within(t) if (t - 2.0).abs() < 1e-12));
+        assert_eq!(curve.error_at(0.5), Estimate::Above(1.0));
+        assert_eq!(curve.error_at(8.0), Estimate::Below(0.5));
+        assert_eq!(curve.time_for(2.0), Estimate::Below(1.0));
+        assert_eq!(curve.time_for(0.25), Estimate::Above(4.0));
+    }
+}

@@ -1,0 +1,203 @@
+//! Robust against fast intersection: what obvhs's own traversal gains in rays per second, and what
+//! it costs in rays that leak out of a closed mesh or hit the surface they leave.
+//!
+//! A render of an open scene cannot count leaks (an escaped ray looks like any other miss), so the
+//! check uses a scene where every miss is a bug: a closed, perturbed icosphere built by the scene
+//! loader. Primary rays start inside it and aim at points on its triangles' edges and at its
+//! vertices, where a non-watertight triangle test lets rays slip between neighbours. From each hit a
+//! secondary ray leaves into the sphere, spawned as the integrator spawns bounces; it must hit
+//! another triangle (a ray leaving a planar triangle on its front side cannot meet it again), and
+//! must not miss. Both traversals walk the same tree over the same rays.
+
+use rayon::prelude::*;
+use std::time::Instant;
+use tracer::geometry::{Accel, BuildQuality, Ray, Traversal, TraversalStats, hit_point, spawn_ray};
+use tracer::lights::uniform_sphere;
+use tracer::sampler::PixelSampler;
+
+/// The closed sphere: 20 * 4^5 triangles, vertices moved radially by up to 20%, off the origin so
+/// that no coordinate is conveniently symmetric.
+const SPHERE_SCENE: &str = r#"
+[camera]
+position = [0, 0, 0]
+look_at = [0, 0, -1]
+
+[materials.wall]
+type = "diffuse"
+
+[[object]]
+shape = "sphere"
+material = "wall"
+center = [0.3, -0.2, 0.1]
+radius = 1.5
+subdivisions = 5
+perturb = 0.2
+seed = 7
+"#;
+const CENTER: glam::Vec3 = glam::Vec3::new(0.3, -0.2, 0.1);
+/// Ray origins lie within this distance of the centre: well inside the smallest radius, 1.2.
+const ORIGIN_RADIUS: f32 = 0.75;
+const PROBE_SEED: u64 = 0x1ea4;
+
+/// What one traversal did with the probe rays.
+#[derive(Clone, Debug)]
+pub struct LeakCheck {
+    pub traversal: Traversal,
+    pub triangles: usize,
+    /// All rays traced: edge probes, bounce probes and their bounces.
+    pub rays: u64,
+    /// Primary rays aimed at an edge or a vertex, and how many of them missed the sphere.
+    pub edge_rays: u64,
+    pub edge_leaks: u64,
+    /// Secondary rays spawned from a hit inside a triangle, how many missed the sphere, and how
+    /// many hit the triangle they left.
+    pub bounce_rays: u64,
+    pub bounce_leaks: u64,
+    pub self_hits: u64,
+    pub seconds: f64,
+}
+
+impl LeakCheck {
+    pub fn leaks(&self) -> u64 {
+        self.edge_leaks + self.bounce_leaks
+    }
+
+    pub fn mrays_per_second(&self) -> f64 {
+        self.rays as f64 / self.seconds / 1e6
+    }
+
+    pub fn describe(&self) -> String {
+        format!(
+            "closed sphere of {} triangles, {:?} traversal: {} of {} rays aimed at edges leaked; of {} bounces {} leaked \
+             and {} hit their own triangle; {:.2} Mrays/s",
+            self.triangles,
+            self.traversal,
+            self.edge_leaks,
+            self.edge_rays,
+            self.bounce_rays,
+            self.bounce_leaks,
+            self.self_hits,
+            self.mrays_per_second()
+        )
+    }
+}
+
+/// Runs `probes` probes through both traversals: half of them a ray aimed at an edge or a vertex,
+/// half a ray aimed inside a triangle followed by a bounce from its hit.
+pub fn closed_sphere(pool: &rayon::ThreadPool, probes: u32) -> Vec<LeakCheck> {
+    let scene = tracer::scene::load_str(SPHERE_SCENE).expect("the built-in sphere scene is valid");
+    let accel = Accel::build(&scene.triangles, BuildQuality::default());
+    let triangles: Vec<[glam::Vec3; 3]> = scene.triangles.iter().map(|t| t.p).collect();
+    [Traversal::Robust, Traversal::Obvhs]
+        .into_iter()
+        .map(|traversal| {
+            let started = Instant::now();
+            let c = pool.install(|| {
+                (0..probes)
+                    .into_par_iter()
+                    .map(|i| probe(&accel, &triangles, traversal, i))
+                    .reduce(Counts::default, Counts::add)
+            });
+            LeakCheck {
+                traversal,
+                triangles: triangles.len(),
+                rays: c.edge_rays + c.aimed_rays + c.bounce_rays,
+                edge_rays: c.edge_rays,
+                edge_leaks: c.edge_leaks,
+                bounce_rays: c.bounce_rays,
+                bounce_leaks: c.bounce_leaks,
+                self_hits: c.self_hits,
+                seconds: started.elapsed().as_secs_f64(),
+            }
+        })
+        .collect()
+}
+
+#[derive(Clone, Copy, Default)]
+struct Counts {
+    edge_rays: u64,
+    edge_leaks: u64,
+    /// Primary rays of bounce probes (aimed inside a triangle; a miss counts as an edge leak would,
+    /// but these essentially never miss).
+    aimed_rays: u64,
+    aimed_leaks: u64,
+    bounce_rays: u64,
+    bounce_leaks: u64,
+    self_hits: u64,
+}
+
+impl Counts {
+    fn add(self, o: Counts) -> Counts {
+        Counts {
+            edge_rays: self.edge_rays + o.edge_rays,
+            edge_leaks: self.edge_leaks + o.edge_leaks,
+            aimed_rays: self.aimed_rays + o.aimed_rays,
+            aimed_leaks: self.aimed_leaks + o.aimed_leaks,
+            bounce_rays: self.bounce_rays + o.bounce_rays,
+            bounce_leaks: self.bounce_leaks + o.bounce_leaks,
+            self_hits: self.self_hits + o.self_hits,
+        }
+    }
+}
+
+/// Probe `i`: its random numbers are a pure function of `i`, so both traversals see the same rays.
+/// Even probes aim at an edge (one in four of them at a vertex); odd probes aim at a uniformly
+/// random point of a triangle and bounce.
+fn probe(accel: &Accel, triangles: &[[glam::Vec3; 3]], traversal: Traversal, i: u32) -> Counts {
+    let mut random = PixelSampler::new(PROBE_SEED, 0, i, 0, 0);
+    let mut stats = TraversalStats::default();
+    let mut counts = Counts::default();
+    let origin = CENTER + ORIGIN_RADIUS * random.next_1d().cbrt() * uniform_sphere(random.next_2d());
+    let p = triangles[((random.next_1d() * triangles.len() as f32) as usize).min(triangles.len() - 1)];
+    let target = if i % 2 == 0 {
+        let edge = ((random.next_1d() * 3.0) as usize).min(2);
+        let along = if i % 8 == 0 { 0.0 } else { random.next_1d() };
+        p[edge].lerp(p[(edge + 1) % 3], along)
+    } else {
+        let (r, s) = (random.next_1d().sqrt(), random.next_1d());
+        hit_point(&p, r * (1.0 - s), r * s)
+    };
+    let dir = (target - origin).normalize();
+    let primary = accel.intersect_with(&Ray { origin, dir, t_max: f32::INFINITY }, traversal, &mut stats);
+    if i % 2 == 0 {
+        counts.edge_rays = 1;
+        counts.edge_leaks = u64::from(primary.is_none());
+        return counts;
+    }
+    counts.aimed_rays = 1;
+    let Some(hit) = primary else {
+        counts.aimed_leaks = 1;
+        return counts;
+    };
+    let q = &triangles[hit.triangle as usize];
+    let point = hit_point(q, hit.b1, hit.b2);
+    let normal = (q[1] - q[0]).cross(q[2] - q[0]).normalize();
+    let inward = if normal.dot(dir) > 0.0 { -normal } else { normal };
+    let mut bounce = uniform_sphere(random.next_2d());
+    if bounce.dot(inward) < 0.0 {
+        bounce = -bounce;
+    }
+    counts.bounce_rays = 1;
+    match accel.intersect_with(&spawn_ray(point, inward, bounce), traversal, &mut stats) {
+        None => counts.bounce_leaks = 1,
+        Some(second) if second.triangle == hit.triangle => counts.self_hits = 1,
+        Some(_) => {}
+    }
+    counts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_robust_traversal_neither_leaks_nor_hits_itself() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let checks = closed_sphere(&pool, 20_000);
+        let robust = &checks[0];
+        assert_eq!(robust.traversal, Traversal::Robust);
+        assert_eq!((robust.edge_rays, robust.bounce_rays), (10_000, 10_000), "{}", robust.describe());
+        assert_eq!((robust.leaks(), robust.self_hits), (0, 0), "{}", robust.describe());
+        assert_eq!(checks[1].edge_rays, 10_000);
+    }
+}

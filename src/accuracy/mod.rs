@@ -1,0 +1,251 @@
+//! `tessera accuracy`: what accuracy costs in time, measured rather than asserted.
+//!
+//! Every accuracy knob of the renderer trades time for error, and a reader choosing settings needs
+//! both numbers side by side. So the command renders one scene over a ladder of values per knob,
+//! times each render with the wall clock (the tracer has none), measures its error against a
+//! reference, and writes a table, a log-log plot and the equal-time / equal-error comparisons.
+//!
+//! Every rung changes one thing from a *baseline*: unlimited path depth ended by Russian roulette
+//! (unbiased), our robust traversal, the default BVH quality. The reference is the baseline at
+//! many samples per pixel with seeds of its own, so that its noise is independent of the rungs'
+//! (a rung at n spp uses sample indices 0..n, and a reference with the same seed would share
+//! them); it is cached in the output folder with a sidecar of its settings, or replaced by an
+//! exact value when the scene is a furnace whose answer is known (`--analytic-mean`).
+//!
+//! - `bench`: the timed render of a whole frame, and the one-knob-at-a-time ladders.
+//! - `reference`: the reference image: analytic, cached, or rendered and cached.
+//! - `leaks`: robust against obvhs's traversal on a closed sphere: leaks and self-hits.
+//! - `report`: accuracy.csv and accuracy.md; `findings`: the comparisons in sentences;
+//!   `plot`: accuracy.svg.
+
+mod bench;
+mod findings;
+mod leaks;
+mod plot;
+mod reference;
+mod report;
+
+use anyhow::{Context, ensure};
+use clap::ValueEnum;
+use std::path::PathBuf;
+use tracer::geometry::{Accel, BuildQuality};
+use tracer::scene::RenderSettings;
+use tracer::{Effects, World};
+
+/// The default image width (and height, for a square scene): small enough that the full set of
+/// ladders runs in minutes on two cores, large enough for a few thousand pixels of statistics.
+pub const DEFAULT_SIZE: u32 = 128;
+
+/// Measure what accuracy costs in time: render a scene over a ladder of values per accuracy knob
+/// and write DIR/accuracy.csv, DIR/accuracy.md and DIR/accuracy.svg.
+#[derive(Debug, clap::Args)]
+pub struct AccuracyArgs {
+    /// The scene file (TOML; see scenes/README.md).
+    pub scene: PathBuf,
+    /// Output folder; the cached reference (reference.exr and reference.json) lives here too.
+    #[arg(long, default_value = "accuracy")]
+    pub out: PathBuf,
+    /// The top of the samples-per-pixel ladder 1, 2, 4, ... (rounded down to a power of two).
+    #[arg(long, default_value_t = 1024)]
+    pub max_spp: u32,
+    /// Image width (default: 128 pixels on the scene's longer side, keeping its aspect ratio).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height (default: as for the width).
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Samples per pixel of the depth, roulette, BVH and traversal ladders.
+    #[arg(long, default_value_t = 64)]
+    pub knob_spp: u32,
+    /// Samples per pixel of the rendered reference (default: 4 x max-spp).
+    #[arg(long)]
+    pub reference_spp: Option<u32>,
+    /// The exact mean radiance of every pixel, "R,G,B", for scenes that have one (a furnace):
+    /// used as the reference instead of a render.
+    #[arg(long, value_parser = parse_rgb)]
+    pub analytic_mean: Option<Rgb>,
+    /// Seed of the ladders' pixel sampler (default: the scene's).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Which knobs to measure, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = Knob::ALL)]
+    pub knobs: Vec<Knob>,
+    /// Rays shot per traversal by the closed-sphere leak check.
+    #[arg(long, default_value_t = 1 << 19)]
+    pub leak_rays: u32,
+    /// Rendering threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// An RGB triple given on the command line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rgb(pub [f32; 3]);
+
+/// The accuracy knobs, each a ladder of values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Knob {
+    /// Samples per pixel 1, 2, 4, ... max-spp.
+    Spp,
+    /// Maximum path depth 1, 2, 4, 8, 16 and unlimited (Russian roulette).
+    Depth,
+    /// Russian roulette off, or on from a start depth.
+    Roulette,
+    /// Each BVH build quality.
+    Bvh,
+    /// Our robust traversal against obvhs's own.
+    Traversal,
+}
+
+impl Knob {
+    pub const ALL: [Knob; 5] = [Knob::Spp, Knob::Depth, Knob::Roulette, Knob::Bvh, Knob::Traversal];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Knob::Spp => "spp",
+            Knob::Depth => "depth",
+            Knob::Roulette => "roulette",
+            Knob::Bvh => "bvh",
+            Knob::Traversal => "traversal",
+        }
+    }
+}
+
+pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
+    ensure!(args.max_spp >= 1 && args.knob_spp >= 1, "samples per pixel must be at least 1");
+    ensure!(args.reference_spp.is_none_or(|n| n >= 2), "the reference needs at least 2 samples per pixel");
+    let mut scene = tracer::scene::load(&args.scene)?;
+    let (width, height) = image_size(args.width, args.height, scene.settings.width, scene.settings.height)?;
+    let scene_settings = scene.settings.clone();
+    scene.settings = RenderSettings {
+        width,
+        height,
+        samples_per_pixel: 1,
+        max_depth: None,
+        russian_roulette_depth: Some(scene_settings.russian_roulette_depth.unwrap_or(3)),
+        seed: args.seed.unwrap_or(scene_settings.seed),
+        frames: 1,
+    };
+    let files_hash = reference::hash_scene_files(&args.scene, &scene.files)?;
+    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let effects = Effects::of(&scene);
+    let accel = Accel::build(&scene.triangles, BuildQuality::default());
+    let mut world = World::new(scene, accel, effects);
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+
+    println!(
+        "{}: {}x{}, {} triangles, effects {}, {} threads; baseline: unlimited depth, roulette from depth {}, robust traversal, {:?} BVH",
+        args.scene.display(),
+        width,
+        height,
+        world.scene.triangles.len(),
+        world.effects,
+        threads,
+        world.scene.settings.russian_roulette_depth.unwrap_or(0),
+        BuildQuality::default(),
+    );
+    let reference_spp = args.reference_spp.unwrap_or(args.max_spp.saturating_mul(4)).max(2);
+    let reference = match args.analytic_mean {
+        Some(Rgb(mean)) => reference::Reference::analytic(width, height, mean),
+        None => reference::Reference::cached_or_rendered(&args.out, &args.scene, files_hash, reference_spp, &mut world, &pool)?,
+    };
+    println!("reference: {}", reference.describe());
+
+    let mut bench = bench::Bench::new(world, &pool, &reference);
+    let mut rows = Vec::new();
+    let mut leak_checks = Vec::new();
+    for &knob in &args.knobs {
+        rows.extend(match knob {
+            Knob::Spp => bench.spp_ladder(args.max_spp),
+            Knob::Depth => bench.depth_ladder(args.knob_spp),
+            Knob::Roulette => bench.roulette_ladder(args.knob_spp),
+            Knob::Bvh => bench.bvh_ladder(args.knob_spp),
+            Knob::Traversal => {
+                leak_checks = leaks::closed_sphere(&pool, args.leak_rays);
+                for check in &leak_checks {
+                    println!("  {}", check.describe());
+                }
+                bench.traversal_ladder(args.knob_spp)
+            }
+        });
+    }
+    let run = report::Run {
+        command: command_line(),
+        scene: args.scene.display().to_string(),
+        width,
+        height,
+        threads,
+        triangles: bench.world().scene.triangles.len(),
+        scene_settings,
+        baseline: bench.world().scene.settings.clone(),
+        knob_spp: args.knob_spp,
+        reference: &reference,
+        rows: &rows,
+        leak_checks: &leak_checks,
+    };
+    report::write_all(&args.out, &run)?;
+    println!(
+        "wrote {0}/accuracy.csv, {0}/accuracy.md and {0}/accuracy.svg",
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// The image size: the flags, or the scene's size scaled so its longer side is [`DEFAULT_SIZE`]
+/// pixels; a single flag keeps the scene's aspect ratio.
+fn image_size(width: Option<u32>, height: Option<u32>, scene_w: u32, scene_h: u32) -> anyhow::Result<(u32, u32)> {
+    let aspect = f64::from(scene_w) / f64::from(scene_h);
+    let scaled = |v: f64| (v.round() as u32).max(1);
+    let size = match (width, height) {
+        (Some(w), Some(h)) => (w, h),
+        (Some(w), None) => (w, scaled(f64::from(w) / aspect)),
+        (None, Some(h)) => (scaled(f64::from(h) * aspect), h),
+        (None, None) if scene_w >= scene_h => (DEFAULT_SIZE, scaled(f64::from(DEFAULT_SIZE) / aspect)),
+        (None, None) => (scaled(f64::from(DEFAULT_SIZE) * aspect), DEFAULT_SIZE),
+    };
+    ensure!(size.0 > 0 && size.1 > 0, "the image must be at least 1x1 pixels");
+    Ok(size)
+}
+
+fn parse_rgb(text: &str) -> Result<Rgb, String> {
+    let values: Vec<f32> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f32>().map_err(|e| format!("`{v}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    match values[..] {
+        [r, g, b] if values.iter().all(|v| v.is_finite() && *v >= 0.0) => Ok(Rgb([r, g, b])),
+        [v] if v.is_finite() && v >= 0.0 => Ok(Rgb([v; 3])),
+        _ => Err("expected R,G,B (or one value for grey): finite and not negative".to_owned()),
+    }
+}
+
+/// The command as a reader would retype it: `tessera` and the arguments given.
+fn command_line() -> String {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    format!("tessera {}", args.join(" "))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_size_keeps_the_aspect_ratio() {
+        assert_eq!(image_size(None, None, 512, 512).unwrap(), (128, 128));
+        assert_eq!(image_size(None, None, 1920, 1080).unwrap(), (128, 72));
+        assert_eq!(image_size(None, None, 600, 800).unwrap(), (96, 128));
+        assert_eq!(image_size(Some(64), None, 1920, 1080).unwrap(), (64, 36));
+        assert_eq!(image_size(Some(10), Some(20), 512, 512).unwrap(), (10, 20));
+    }
+
+    #[test]
+    fn colours_parse_as_three_values_or_one() {
+        assert_eq!(parse_rgb("1,0.5, 2").unwrap(), Rgb([1.0, 0.5, 2.0]));
+        assert_eq!(parse_rgb("0.25").unwrap(), Rgb([0.25; 3]));
+        assert!(parse_rgb("1,2").is_err());
+        assert!(parse_rgb("1,-2,3").is_err());
+        assert!(parse_rgb("1,nan,3").is_err());
+    }
+}

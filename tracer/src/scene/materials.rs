@@ -1,0 +1,246 @@
+//! The scene's material and texture tables.
+//!
+//! Materials come from two places: `[materials.NAME]` tables of the TOML and `newmtl` blocks of
+//! MTL files. A TOML table replaces every MTL material of the same name, which is how a scene
+//! fixes an exported material without editing the data. Each material and texture enters the
+//! scene once, when first used, so the tables hold only what triangles reference, in first-use
+//! order.
+
+use super::Texture;
+use super::error::{SceneError, line_of};
+use super::files::FileLog;
+use super::format::{MaterialKind, MaterialSpec};
+use super::mtl::MtlMaterial;
+use crate::material::{Bsdf, Material};
+use glam::Vec3;
+use std::collections::{BTreeMap, BTreeSet};
+use toml::Spanned;
+
+pub(crate) struct MaterialTable<'a> {
+    /// The TOML file's name and text, for the lines of its material tables.
+    toml: &'a str,
+    text: &'a str,
+    defined: &'a BTreeMap<Spanned<String>, MaterialSpec>,
+    used_defined: BTreeSet<String>,
+    pub materials: Vec<Material>,
+    ids: BTreeMap<MaterialKey, u32>,
+    pub textures: Vec<Texture>,
+    /// Decoded textures by path relative to the scene's folder.
+    texture_ids: BTreeMap<String, u32>,
+}
+
+/// Materials are shared by identity: a TOML material by name, an MTL material by file and name.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum MaterialKey {
+    Toml(String),
+    Mtl { file: String, name: String },
+}
+
+impl<'a> MaterialTable<'a> {
+    pub(crate) fn new(
+        toml: &'a str,
+        text: &'a str,
+        defined: &'a BTreeMap<Spanned<String>, MaterialSpec>,
+    ) -> Self {
+        MaterialTable {
+            toml,
+            text,
+            defined,
+            used_defined: BTreeSet::new(),
+            materials: Vec::new(),
+            ids: BTreeMap::new(),
+            textures: Vec::new(),
+            texture_ids: BTreeMap::new(),
+        }
+    }
+
+    /// The id of the TOML material `name`, referenced where `name`'s span says.
+    pub(crate) fn toml_material(
+        &mut self,
+        log: &mut FileLog,
+        name: &Spanned<String>,
+    ) -> Result<u32, SceneError> {
+        let key = MaterialKey::Toml(name.get_ref().clone());
+        if let Some(&id) = self.ids.get(&key) {
+            return Ok(id);
+        }
+        let defined = self.defined;
+        let Some((definition, spec)) = defined.get_key_value(name.get_ref().as_str()) else {
+            let line = line_of(self.text, name.span().start);
+            let name = name.get_ref();
+            let detail =
+                format!("material `{name}` is not defined: add a [materials.{name}] table");
+            return Err(SceneError::at_line(self.toml, line, detail));
+        };
+        let material = self.from_spec(log, definition, spec)?;
+        self.used_defined.insert(name.get_ref().clone());
+        Ok(self.add(key, material))
+    }
+
+    /// The id of an MTL material, or of the TOML material that replaces it.
+    pub(crate) fn mtl_material(
+        &mut self,
+        log: &mut FileLog,
+        m: &MtlMaterial,
+    ) -> Result<u32, SceneError> {
+        let defined = self.defined;
+        if let Some((name, _)) = defined.get_key_value(m.name.as_str()) {
+            return self.toml_material(log, name);
+        }
+        let key = MaterialKey::Mtl {
+            file: m.file.clone(),
+            name: m.name.clone(),
+        };
+        if let Some(&id) = self.ids.get(&key) {
+            return Ok(id);
+        }
+        let material =
+            m.to_material(|texture, line| self.texture(log, (&m.file, line), texture))?;
+        Ok(self.add(key, material))
+    }
+
+    /// A TOML material table that nothing used: most likely a misspelt name.
+    pub(crate) fn unused_definition(&self) -> Option<SceneError> {
+        let (name, _) = self
+            .defined
+            .iter()
+            .find(|(n, _)| !self.used_defined.contains(n.get_ref()))?;
+        let line = line_of(self.text, name.span().start);
+        let detail = format!(
+            "[materials.{}] matches no MTL material and no object uses it",
+            name.get_ref()
+        );
+        Some(SceneError::at_line(self.toml, line, detail))
+    }
+
+    fn add(&mut self, key: MaterialKey, material: Material) -> u32 {
+        let id = self.materials.len() as u32;
+        self.materials.push(material);
+        self.ids.insert(key, id);
+        id
+    }
+
+    fn from_spec(
+        &mut self,
+        log: &mut FileLog,
+        name: &Spanned<String>,
+        spec: &MaterialSpec,
+    ) -> Result<Material, SceneError> {
+        let line = line_of(self.text, name.span().start);
+        let err = |detail: &str| {
+            let detail = format!("[materials.{}]: {detail}", name.get_ref());
+            SceneError::at_line(self.toml, line, detail)
+        };
+        let Some(kind) = spec.kind else {
+            return Err(err(
+                "needs `type` (diffuse, mirror, glass, metal or emissive)",
+            ));
+        };
+        let (type_name, allowed): (&str, &[&str]) = match kind {
+            MaterialKind::Diffuse => ("diffuse", &["albedo", "texture"]),
+            MaterialKind::Mirror => ("mirror", &["reflectance"]),
+            MaterialKind::Glass => ("glass", &["ior", "tint"]),
+            MaterialKind::Metal => ("metal", &["reflectance", "roughness"]),
+            MaterialKind::Emissive => ("emissive", &["albedo"]),
+        };
+        let given = [
+            ("albedo", spec.albedo.is_some()),
+            ("texture", spec.texture.is_some()),
+            ("reflectance", spec.reflectance.is_some()),
+            ("ior", spec.ior.is_some()),
+            ("tint", spec.tint.is_some()),
+            ("roughness", spec.roughness.is_some()),
+        ];
+        if let Some((key, _)) = given
+            .iter()
+            .find(|(key, given)| *given && !allowed.contains(key))
+        {
+            return Err(err(&format!(
+                "key `{key}` does not apply to type {type_name}"
+            )));
+        }
+        let emission = spec.emission.map_or(Vec3::ZERO, |e| e.0);
+        let bsdf = match kind {
+            MaterialKind::Diffuse => {
+                let texture = match &spec.texture {
+                    Some(t) => {
+                        let at = (self.toml, line_of(self.text, t.span().start));
+                        Some(self.texture(log, at, t.get_ref())?)
+                    }
+                    None => None,
+                };
+                Bsdf::Diffuse {
+                    albedo: spec.albedo.map_or(Vec3::splat(0.8), |a| a.0),
+                    texture,
+                }
+            }
+            MaterialKind::Mirror => Bsdf::Mirror {
+                reflectance: spec.reflectance.map_or(Vec3::ONE, |r| r.0),
+            },
+            MaterialKind::Glass => Bsdf::Dielectric {
+                ior: spec.ior.map_or(1.5, |i| i.0),
+                tint: spec.tint.map_or(Vec3::ONE, |t| t.0),
+            },
+            MaterialKind::Metal => Bsdf::Conductor {
+                f0: spec.reflectance.map_or(Vec3::splat(0.9), |r| r.0),
+                alpha: spec.roughness.map_or(0.2, |r| r.0),
+            },
+            MaterialKind::Emissive if emission == Vec3::ZERO => {
+                return Err(err("type emissive needs a non-zero `emission`"));
+            }
+            MaterialKind::Emissive => Bsdf::Diffuse {
+                albedo: spec.albedo.map_or(Vec3::ZERO, |a| a.0),
+                texture: None,
+            },
+        };
+        Ok(Material {
+            name: name.get_ref().clone(),
+            bsdf,
+            emission,
+        })
+    }
+
+    /// The index of the texture `reference`, named at `from` (file, line); decoded once.
+    fn texture(
+        &mut self,
+        log: &mut FileLog,
+        from: (&str, usize),
+        reference: &str,
+    ) -> Result<u32, SceneError> {
+        let (path, bytes) = log.read(Some(from), reference)?;
+        if let Some(&id) = self.texture_ids.get(&path) {
+            return Ok(id);
+        }
+        let texture = decode_texture(&bytes)
+            .map_err(|e| SceneError::in_file(&path, format!("cannot decode the image: {e}")))?;
+        let id = self.textures.len() as u32;
+        self.textures.push(texture);
+        self.texture_ids.insert(path, id);
+        Ok(id)
+    }
+}
+
+/// Decodes a PNG or JPEG to linear RGB: colour images store sRGB-encoded values, and shading
+/// needs linear reflectances. Alpha is ignored.
+fn decode_texture(bytes: &[u8]) -> Result<Texture, image::ImageError> {
+    let image = image::load_from_memory(bytes)?.into_rgb8();
+    let to_linear: Vec<f32> = (0..=255u8)
+        .map(|v| {
+            let c = v as f32 / 255.0;
+            if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            }
+        })
+        .collect();
+    let texels = image
+        .pixels()
+        .map(|p| Vec3::from(p.0.map(|c| to_linear[c as usize])))
+        .collect();
+    Ok(Texture {
+        width: image.width(),
+        height: image.height(),
+        texels,
+    })
+}
