@@ -16,10 +16,12 @@
 //! middle blocks, a partial last block) give at most nine block-aligned sums and sixteen
 //! lookups.
 //!
-//! **Precision.** The table is kept in double-double arithmetic (a pair of f64 whose sum is the
-//! value, added with error-free transformations), so that differencing large prefix sums does
-//! not cancel away small costs: next to a block of cost 1e30, a block of cost 1 still queries as
-//! exactly 1. Integer counts up to 2^53 per block are exact.
+//! **Precision.** When every block cost is an integer and the total is below 2^53 (counted work,
+//! the tracer's case), plain f64 prefix sums are exact, and so is every block-aligned query.
+//! Otherwise the table is kept in double-double arithmetic (a pair of f64 whose sum is the value,
+//! added with error-free transformations), so that differencing large prefix sums does not
+//! cancel away small costs: next to a block of cost 1e30, a block of cost 1 still queries as
+//! exactly 1.
 
 use std::sync::Arc;
 
@@ -36,9 +38,14 @@ pub struct CostMap {
     rows: u32,
     /// Cost of each block, row-major.
     blocks: Arc<[f64]>,
+    /// `log2(block)` when the block size is a power of two, for shifts instead of divisions.
+    shift: Option<u32>,
     /// Summed-area table: entry `(c, r)` at `r * (columns + 1) + c` is the cost of blocks
-    /// `0..c` x `0..r`.
-    sat: Arc<[Dd]>,
+    /// `0..c` x `0..r`; the high parts of the double-double values.
+    sat: Arc<[f64]>,
+    /// The low parts, `None` where they are all zero because plain f64 sums are exact (see the
+    /// module docs).
+    sat_low: Option<Arc<[f64]>>,
 }
 
 /// Accumulates block costs for a [`CostMap`], e.g. from the tiles of one frame.
@@ -125,7 +132,8 @@ impl CostMap {
 
     /// Cost of the whole image.
     pub fn total(&self) -> f64 {
-        self.sat[self.sat.len() - 1].value()
+        let last = self.sat.len() - 1;
+        self.sat[last] + self.sat_low.as_ref().map_or(0.0, |low| low[last])
     }
 
     /// Cost of one block, `None` outside the block grid.
@@ -148,23 +156,41 @@ impl CostMap {
         if rect.x >= x1 || rect.y >= y1 {
             return 0.0;
         }
-        let xs = Segments::new(rect.x, x1, self.block, self.width);
-        let ys = Segments::new(rect.y, y1, self.block, self.height);
+        let xs = Segments::new(rect.x, x1, self.block, self.shift, self.width);
+        let ys = Segments::new(rect.y, y1, self.block, self.shift, self.height);
         let stride = self.columns as usize + 1;
-        let mut corners = [[Dd::ZERO; 4]; 4];
-        for (j, &by) in ys.bounds[..=ys.len].iter().enumerate() {
-            for (i, &bx) in xs.bounds[..=xs.len].iter().enumerate() {
-                corners[j][i] = self.sat[by as usize * stride + bx as usize];
-            }
-        }
+        let at = |j: usize, i: usize| ys.bounds[j] as usize * stride + xs.bounds[i] as usize;
         let mut total = 0.0;
-        for j in 0..ys.len {
-            for i in 0..xs.len {
-                let sum = corners[j + 1][i + 1]
-                    .sub(corners[j][i + 1])
-                    .sub(corners[j + 1][i])
-                    .add(corners[j][i]);
-                total += xs.weights[i] * ys.weights[j] * sum.value().max(0.0);
+        match &self.sat_low {
+            None => {
+                let mut corners = [[0.0; 4]; 4];
+                for (j, row) in corners.iter_mut().enumerate().take(ys.len + 1) {
+                    for (i, corner) in row.iter_mut().enumerate().take(xs.len + 1) {
+                        *corner = self.sat[at(j, i)];
+                    }
+                }
+                for j in 0..ys.len {
+                    for i in 0..xs.len {
+                        let c = &corners;
+                        let sum = ((c[j + 1][i + 1] - c[j][i + 1]) - c[j + 1][i]) + c[j][i];
+                        total += xs.weights[i] * ys.weights[j] * sum;
+                    }
+                }
+            }
+            Some(low) => {
+                let mut corners = [[Dd::ZERO; 4]; 4];
+                for (j, row) in corners.iter_mut().enumerate().take(ys.len + 1) {
+                    for (i, corner) in row.iter_mut().enumerate().take(xs.len + 1) {
+                        *corner = Dd { hi: self.sat[at(j, i)], lo: low[at(j, i)] };
+                    }
+                }
+                for j in 0..ys.len {
+                    for i in 0..xs.len {
+                        let c = &corners;
+                        let sum = c[j + 1][i + 1].sub(c[j][i + 1]).sub(c[j + 1][i]).add(c[j][i]);
+                        total += xs.weights[i] * ys.weights[j] * sum.value().max(0.0);
+                    }
+                }
             }
         }
         total
@@ -233,17 +259,23 @@ impl CostMapBuilder {
                 sat[(row + 1) * stride + column + 1] = sat[row * stride + column + 1].add(running);
             }
         }
-        if !sat[sat.len() - 1].value().is_finite() {
+        let total = sat[sat.len() - 1].value();
+        if !total.is_finite() {
             return Err(Error::Overflow);
         }
+        // Below 2^53 every integer is an f64 and sums of integers are exact.
+        let exact = total < 9_007_199_254_740_992.0 && self.costs.iter().all(|c| c.fract() == 0.0);
+        let sat_low = (!exact).then(|| sat.iter().map(|dd| dd.lo).collect());
         Ok(CostMap {
             width: self.width,
             height: self.height,
             block: self.block,
             columns: self.columns,
             rows: self.rows,
+            shift: self.block.is_power_of_two().then(|| self.block.trailing_zeros()),
             blocks: self.costs.into(),
-            sat: sat.into(),
+            sat: sat.iter().map(|dd| dd.hi).collect(),
+            sat_low,
         })
     }
 }
@@ -267,19 +299,25 @@ struct Segments {
 }
 
 impl Segments {
-    /// `lo < hi <= extent`, where `extent` is the image's size along this axis.
-    fn new(lo: u32, hi: u32, block: u32, extent: u32) -> Self {
-        let (first, last) = (lo / block, (hi - 1) / block);
-        let span = |b: u32| f64::from(block.min(extent - b * block));
+    /// `lo < hi <= extent`, where `extent` is the image's size along this axis; `shift` is
+    /// `log2(block)` if `block` is a power of two.
+    fn new(lo: u32, hi: u32, block: u32, shift: Option<u32>, extent: u32) -> Self {
+        let index = |pixel: u32| shift.map_or(pixel / block, |shift| pixel >> shift);
+        let (first, last) = (index(lo), index(hi - 1));
+        // The fraction of block `b`'s pixels that `covered` pixels are; exactly 1 when whole.
+        let fraction = |covered: u32, b: u32| {
+            let span = block.min(extent - b * block);
+            if covered == span { 1.0 } else { f64::from(covered) / f64::from(span) }
+        };
         let mut segments = Segments { bounds: [first, 0, 0, 0], weights: [0.0; 3], len: 0 };
         if first == last {
-            segments.push(first + 1, f64::from(hi - lo) / span(first));
+            segments.push(first + 1, fraction(hi - lo, first));
         } else {
-            segments.push(first + 1, f64::from((first + 1) * block - lo) / span(first));
+            segments.push(first + 1, fraction((first + 1) * block - lo, first));
             if last > first + 1 {
                 segments.push(last, 1.0);
             }
-            segments.push(last + 1, f64::from(hi - last * block) / span(last));
+            segments.push(last + 1, fraction(hi - last * block, last));
         }
         segments
     }

@@ -26,3 +26,41 @@ fn scratch() {
         }
     }
 }
+#[test]
+fn scratch2() {
+    let m = 16384;
+    let mut pbt = Pbt::new(1920, 1080, &Config { leaves: m, ..Config::default() }).unwrap();
+    let map = frame(3);
+    for f in 0..4 { pbt.observe(&frame(f)).unwrap(); }
+    let tiles = pbt.tiles();
+    let mean = tiles.iter().map(|t| t.predicted).sum::<f64>() / tiles.len() as f64;
+    let mut sorted = tiles.clone(); sorted.sort_by(|a, b| b.predicted.total_cmp(&a.predicted));
+    for t in &sorted[..5] {
+        let (a, b) = t.rect.halves().unwrap();
+        eprintln!("{:?} {:.2} halves {:.2} {:.2} gain/mean2 {:.3}", t.rect, t.predicted / mean, map.cost(a) / mean, map.cost(b) / mean, map.cost(a) * map.cost(b) / mean / mean);
+    }
+    let min = sorted.last().unwrap();
+    eprintln!("min {:?} {:.4}", min.rect, min.predicted / mean);
+    let mut areas: Vec<u64> = tiles.iter().map(|t| t.rect.area()).collect(); areas.sort();
+    eprintln!("area min {} median {} max {}", areas[0], areas[areas.len()/2], areas[areas.len()-1]);
+}
+#[test]
+fn scratch3() {
+    for m in [4096, 16384] {
+    let mut pbt = Pbt::new(1920, 1080, &Config { leaves: m, ..Config::default() }).unwrap();
+    for f in 0..4 { pbt.observe(&frame(f)).unwrap(); }
+    let map = frame(4);
+    let rects: Vec<_> = pbt.tiles().iter().map(|t| t.rect).collect();
+    let t = Instant::now();
+    let mut s = 0.0;
+    for _ in 0..100 { for r in &rects { s += map.cost(*r); } }
+    let e = t.elapsed() / 100;
+    eprintln!("m={m} {} queries {:?} = {:?}/query {s}", rects.len(), e, e / rects.len() as u32);
+    let t = Instant::now();
+    for _ in 0..10 { let mut p = pbt.clone(); p.observe(&map).unwrap(); }
+    eprintln!("clone+observe {:?}", t.elapsed() / 10);
+    let t = Instant::now();
+    for _ in 0..10 { let p = pbt.clone(); std::hint::black_box(p); }
+    eprintln!("clone {:?}", t.elapsed() / 10);
+    }
+}

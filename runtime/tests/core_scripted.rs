@@ -33,6 +33,12 @@ fn contiguous(peers: u32, costs: &[f64]) -> BTreeMap<PeerId, Vec<TileSpec>> {
     (0..peers).map(|p| (PeerId(p), all.iter().skip(p as usize * run).take(run).copied().collect())).collect()
 }
 
+/// Runs until everything has settled (a minute of virtual time is far more than any test
+/// needs).
+fn finish(cluster: &mut Cluster) {
+    cluster.run(cluster.now() + LIMIT);
+}
+
 fn cluster(config: &Config, peers: u32, slots: usize, seed: u64) -> Cluster {
     let peers: Vec<(PeerId, usize)> = (0..peers).map(|p| (PeerId(p), slots)).collect();
     Cluster::new(config, &peers, seed, cost_renderer(MS_PER_UNIT))
@@ -112,7 +118,7 @@ fn every_tile_completes_exactly_once_over_two_frames() {
         let costs = uneven(40);
         for frame in [FrameId(1), FrameId(2)] {
             cluster.start_frame(OWNER, frame, contiguous(peers, &costs)).unwrap();
-            cluster.run(LIMIT);
+            finish(&mut cluster);
             let (_, results) = completion(&cluster, frame);
             assert_all_results(&results, frame, 40);
             let stats = stats(&cluster, frame);
@@ -147,7 +153,7 @@ fn heavy_middle() -> BTreeMap<PeerId, Vec<TileSpec>> {
 fn a_heavy_assignment_is_stolen_from_and_only_when_stealing_is_on() {
     let mut stealing = cluster(&Config::default(), 3, 2, 1);
     stealing.start_frame(OWNER, FrameId(1), heavy_middle()).unwrap();
-    stealing.run(LIMIT);
+    finish(&mut stealing);
     let (with, results) = completion(&stealing, FrameId(1));
     assert_all_results(&results, FrameId(1), 28);
     let stats_on = stats(&stealing, FrameId(1));
@@ -157,7 +163,7 @@ fn a_heavy_assignment_is_stolen_from_and_only_when_stealing_is_on() {
 
     let mut alone = cluster(&no_steal(), 3, 2, 1);
     alone.start_frame(OWNER, FrameId(1), heavy_middle()).unwrap();
-    alone.run(LIMIT);
+    finish(&mut alone);
     let (without, _) = completion(&alone, FrameId(1));
     let stats_off = stats(&alone, FrameId(1));
     assert!(stats_off.values().all(|s| s.steal_requests_sent == 0 && s.tiles_stolen == 0));
@@ -174,7 +180,7 @@ fn a_heavy_assignment_is_stolen_from_and_only_when_stealing_is_on() {
 fn steals_come_from_the_far_end_of_the_victims_queue() {
     let mut cluster = cluster(&Config::default(), 3, 2, 1);
     cluster.start_frame(OWNER, FrameId(1), heavy_middle()).unwrap();
-    cluster.run(LIMIT);
+    finish(&mut cluster);
     let grants: Vec<Vec<u32>> = sent(&cluster)
         .filter(|(from, _, _)| *from == PeerId(1))
         .filter_map(|(_, _, message)| match message {
@@ -204,7 +210,7 @@ fn tiny_leftover(config: Config) -> Cluster {
     let all = tiles(0, &[1.0, 50.0, 0.01, 1.0]);
     let assignments = BTreeMap::from([(PeerId(0), all[..3].to_vec()), (PeerId(1), all[3..].to_vec())]);
     cluster.start_frame(OWNER, FrameId(1), assignments).unwrap();
-    cluster.run(LIMIT);
+    finish(&mut cluster);
     cluster
 }
 
@@ -234,7 +240,7 @@ fn a_peer_lost_mid_frame_costs_time_not_tiles() {
         cluster.start_frame(OWNER, FrameId(1), contiguous(4, &uneven(48))).unwrap();
         cluster.run(Duration::from_millis(20));
         cluster.kill(PeerId(2), true);
-        cluster.run(LIMIT);
+        finish(&mut cluster);
         let (_, results) = completion(&cluster, FrameId(1));
         assert_all_results(&results, FrameId(1), 48);
         let failed = cluster.events().any(|(peer, event)| {
@@ -265,7 +271,7 @@ fn a_thief_dying_with_its_grant_unannounced_costs_no_tile() {
     });
     // The thief's notice to the owner is still on the way: it dies with it.
     cluster.kill(PeerId(2), true);
-    cluster.run(LIMIT);
+    finish(&mut cluster);
     let (_, results) = completion(&cluster, FrameId(1));
     assert_all_results(&results, FrameId(1), 28);
     let Happening::Deliver { message: Message::StealGrant { tiles, .. }, .. } = grant else { unreachable!() };
@@ -295,7 +301,7 @@ fn a_victim_dying_right_after_granting_costs_no_tile() {
     assert!(matches!(cluster.trace().last(), Some(Record::Sent { message: Message::StealGrant { .. }, .. })));
     // The grant is already on the wire and arrives; the victim's other tiles are re-issued.
     cluster.kill(PeerId(1), false);
-    cluster.run(LIMIT);
+    finish(&mut cluster);
     assert_all_results(&completion(&cluster, FrameId(1)).1, FrameId(1), 32);
     assert_no_refusals_or_faults(&cluster);
 }
@@ -305,7 +311,7 @@ fn grants_arriving_after_their_request_timed_out_are_kept() {
     let config = Config { steal_timeout: Duration::from_micros(200), ..Config::default() };
     let mut cluster = cluster(&config, 3, 2, 1);
     cluster.start_frame(OWNER, FrameId(1), heavy_middle()).unwrap();
-    cluster.run(LIMIT);
+    finish(&mut cluster);
     let stats = stats(&cluster, FrameId(1));
     let stolen: u32 = stats.values().map(|s| s.tiles_stolen).sum();
     assert!(stolen > 0);
@@ -325,7 +331,7 @@ fn a_silent_peer_is_declared_failed_and_its_tiles_reissued() {
     cluster.start_frame(OWNER, FrameId(1), contiguous(3, &[10.0; 15])).unwrap();
     cluster.run(Duration::from_millis(15));
     cluster.freeze(PeerId(2));
-    cluster.run(LIMIT);
+    finish(&mut cluster);
     assert_all_results(&completion(&cluster, FrameId(1)).1, FrameId(1), 15);
     let silent = cluster.events().any(|(_, event)| {
         matches!(event, Event::PeerFailed { peer: PeerId(2), reason: Failure::Silent, .. })
@@ -333,7 +339,7 @@ fn a_silent_peer_is_declared_failed_and_its_tiles_reissued() {
     assert!(silent);
     // It comes back after the frame: its late messages are dropped quietly.
     cluster.thaw(PeerId(2));
-    cluster.run(LIMIT);
+    finish(&mut cluster);
     assert_no_refusals_or_faults(&cluster);
 }
 
@@ -401,7 +407,7 @@ fn a_differing_duplicate_from_a_peer_that_comes_back_is_reported() {
     }
     // Peer 2 wakes up with the tile it was rendering, which others are about to render too.
     cluster.thaw(PeerId(2));
-    cluster.run(LIMIT);
+    finish(&mut cluster);
     assert_all_results(&completion(&cluster, FrameId(1)).1, FrameId(1), 15);
     let mismatch = cluster.events().any(|(_, event)| match event {
         Event::FaultyPeer { peer, fault: Fault::Mismatch { first }, .. } => {
@@ -418,7 +424,7 @@ fn traced_run(seed: u64) -> Vec<Record> {
     let mut costs = uneven(30);
     costs.extend([12.0; 30]);
     cluster.start_frame(OWNER, FrameId(1), contiguous(5, &costs)).unwrap();
-    cluster.run(LIMIT);
+    finish(&mut cluster);
     cluster.trace().to_vec()
 }
 
@@ -487,8 +493,9 @@ fn mishap() -> impl Strategy<Value = (u64, u32, Mishap)> {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
-    /// Whatever dies, freezes or races, every frame completes with every tile, and nothing is
-    /// reported faulty (the renderer is deterministic, so every duplicate is identical).
+    /// Whatever dies, freezes, races or overtakes, every frame completes with every tile, and
+    /// nothing is reported faulty (the renderer is deterministic, so every duplicate is
+    /// identical).
     #[test]
     fn no_tile_is_ever_lost(
         peers in 2..7u32,
@@ -497,6 +504,7 @@ proptest! {
         seed in any::<u64>(),
         steal in any::<bool>(),
         latency_us in 50..5000u64,
+        jitter_us in prop_oneof![Just(0u64), 1..5000u64],
         short_steal_timeout in any::<bool>(),
         mishaps in proptest::collection::vec(mishap(), 0..4),
     ) {
@@ -509,6 +517,7 @@ proptest! {
         };
         let mut cluster = cluster(&config, peers, slots, seed);
         cluster.latency = Duration::from_micros(latency_us);
+        cluster.jitter = Duration::from_micros(jitter_us);
         cluster.start_frame(OWNER, FrameId(1), contiguous(peers, &costs)).unwrap();
         let mut mishaps: Vec<_> = mishaps.into_iter().filter(|(_, peer, _)| *peer < peers).collect();
         mishaps.sort_by_key(|(at, _, _)| *at);
@@ -534,7 +543,7 @@ proptest! {
             cluster.run(Duration::from_millis(at_ms));
             cluster.thaw(PeerId(peer));
         }
-        cluster.run(LIMIT);
+        finish(&mut cluster);
         let (_, results) = completion(&cluster, FrameId(1));
         assert_all_results(&results, FrameId(1), costs.len() as u32);
         assert_no_refusals_or_faults(&cluster);

@@ -1,13 +1,14 @@
 //! The comparisons a reader wants, in sentences: how error and time scale with samples, and for
 //! every other knob whether it beats simply rendering longer at the baseline settings.
 //!
-//! The spp ladder is the yardstick: a [`Curve`] of RMSE against time, interpolated linearly in
+//! The spp ladder is the yardstick: a [`Curve`] of relative MSE against time, interpolated linearly in
 //! log-log space between rungs. Outside the ladder nothing is extrapolated; the answer is a bound
 //! ([`Estimate::Below`] or [`Estimate::Above`]), because a power law fitted to noisy rungs would
 //! invent numbers the run did not measure.
 
 use super::Knob;
 use super::bench::Row;
+use super::leaks::LeakCheck;
 use super::report::Run;
 use tracer::geometry::Traversal;
 
@@ -21,11 +22,13 @@ pub enum Estimate {
     Above(f64),
 }
 
-/// RMSE against time along the spp ladder.
+/// Relative MSE against time along the spp ladder. Relative, because absolute errors are
+/// dominated by the brightest pixels (the edges of a visible light), which no knob but samples
+/// changes; the relative error weighs every pixel by its own brightness, as pbrt's tools do.
 pub struct Curve {
-    /// (seconds, RMSE), sorted by seconds.
+    /// (seconds, relMSE), sorted by seconds.
     by_time: Vec<(f64, f64)>,
-    /// The same points sorted by decreasing RMSE.
+    /// The same points sorted by decreasing relMSE.
     by_error: Vec<(f64, f64)>,
 }
 
@@ -34,7 +37,7 @@ impl Curve {
     pub fn of(run: &Run) -> Option<Curve> {
         let points: Vec<(f64, f64)> = run
             .rows_of(Knob::Spp)
-            .map(|r| (r.seconds(), r.metrics.rmse))
+            .map(|r| (r.seconds(), r.metrics.rel_mse))
             .filter(|&(t, e)| t > 0.0 && e > 0.0)
             .collect();
         if points.len() < 2 {
@@ -47,7 +50,7 @@ impl Curve {
         Some(Curve { by_time, by_error })
     }
 
-    /// The baseline's RMSE after `seconds` of rendering.
+    /// The baseline's relMSE after `seconds` of rendering.
     pub fn error_at(&self, seconds: f64) -> Estimate {
         let (first, last) = (self.by_time[0], self.by_time[self.by_time.len() - 1]);
         if seconds < first.0 {
@@ -59,28 +62,28 @@ impl Curve {
         Estimate::Within(log_interpolate(self.by_time.iter().map(|&(t, e)| (t, e)), seconds))
     }
 
-    /// The baseline's time to reach `rmse`.
-    pub fn time_for(&self, rmse: f64) -> Estimate {
+    /// The baseline's time to reach a relMSE of `error`.
+    pub fn time_for(&self, error: f64) -> Estimate {
         let (worst, best) = (self.by_error[0], self.by_error[self.by_error.len() - 1]);
-        if rmse > worst.1 {
+        if error > worst.1 {
             return Estimate::Below(worst.0);
         }
-        if rmse < best.1 {
+        if error < best.1 {
             return Estimate::Above(best.0);
         }
         // Along decreasing error: interpolate in -ln(error), which increases.
         let points = self.by_error.iter().map(|&(t, e)| (1.0 / e, t));
-        Estimate::Within(log_interpolate(points, 1.0 / rmse))
+        Estimate::Within(log_interpolate(points, 1.0 / error))
     }
 
-    /// Whether `row` has a lower RMSE than the baseline reaches in the same time; `None` when the
-    /// ladder cannot tell.
+    /// Whether `row` has a lower relMSE than the baseline reaches in the same time; `None` when
+    /// the ladder cannot tell.
     pub fn beaten_by(&self, row: &Row) -> Option<bool> {
-        let rmse = row.metrics.rmse;
+        let error = row.metrics.rel_mse;
         match self.error_at(row.seconds()) {
-            Estimate::Within(e) => Some(rmse < e),
-            Estimate::Above(e) => (rmse <= e).then_some(true),
-            Estimate::Below(e) => (rmse >= e).then_some(false),
+            Estimate::Within(e) => Some(error < e),
+            Estimate::Above(e) => (error <= e).then_some(true),
+            Estimate::Below(e) => (error >= e).then_some(false),
         }
     }
 }
@@ -244,18 +247,18 @@ fn traversal_sentence(run: &Run) -> Option<String> {
         obvhs.note.replace("differs from the robust traversal's image", "differs from ours").replace("bit-identical to the robust traversal's image", "is bit-identical to ours"),
     );
     if let (Some(r), Some(o)) = (run.leak_check(Traversal::Robust), run.leak_check(Traversal::Obvhs)) {
+        let counts = |c: &LeakCheck| {
+            format!(
+                "{} of {} rays aimed at edges and vertices leaked, {} of {} bounces leaked and {} hit the triangle they \
+                 left ({:.2} Mrays/s)",
+                c.edge_leaks, c.edge_rays, c.bounce_leaks, c.bounce_rays, c.self_hits, c.mrays_per_second()
+            )
+        };
         s += &format!(
-            " On a closed sphere of {} triangles, of {} rays obvhs's leaked {} and hit their own triangle {} times \
-             ({:.2} Mrays/s); ours leaked {} and hit themselves {} times of {} ({:.2} Mrays/s).",
+            " On a closed sphere of {} triangles, with obvhs's traversal {}; with ours {}.",
             o.triangles,
-            o.rays,
-            o.leaks,
-            o.self_hits,
-            o.mrays_per_second(),
-            r.leaks,
-            r.self_hits,
-            r.rays,
-            r.mrays_per_second(),
+            counts(o),
+            counts(r)
         );
     }
     Some(s)

@@ -49,6 +49,9 @@ pub struct LeakCheck {
     /// Primary rays aimed at an edge or a vertex, and how many of them missed the sphere.
     pub edge_rays: u64,
     pub edge_leaks: u64,
+    /// Primary rays aimed inside a triangle, and how many of them missed.
+    pub aimed_rays: u64,
+    pub aimed_leaks: u64,
     /// Secondary rays spawned from a hit inside a triangle, how many missed the sphere, and how
     /// many hit the triangle they left.
     pub bounce_rays: u64,
@@ -59,7 +62,7 @@ pub struct LeakCheck {
 
 impl LeakCheck {
     pub fn leaks(&self) -> u64 {
-        self.edge_leaks + self.bounce_leaks
+        self.edge_leaks + self.aimed_leaks + self.bounce_leaks
     }
 
     pub fn mrays_per_second(&self) -> f64 {
@@ -68,12 +71,14 @@ impl LeakCheck {
 
     pub fn describe(&self) -> String {
         format!(
-            "closed sphere of {} triangles, {:?} traversal: {} of {} rays aimed at edges leaked; of {} bounces {} leaked \
-             and {} hit their own triangle; {:.2} Mrays/s",
+            "closed sphere of {} triangles, {:?} traversal: {} of {} rays aimed at edges or vertices leaked, {} of {} \
+             aimed inside triangles; of {} bounces {} leaked and {} hit their own triangle; {:.2} Mrays/s",
             self.triangles,
             self.traversal,
             self.edge_leaks,
             self.edge_rays,
+            self.aimed_leaks,
+            self.aimed_rays,
             self.bounce_rays,
             self.bounce_leaks,
             self.self_hits,
@@ -104,6 +109,8 @@ pub fn closed_sphere(pool: &rayon::ThreadPool, probes: u32) -> Vec<LeakCheck> {
                 rays: c.edge_rays + c.aimed_rays + c.bounce_rays,
                 edge_rays: c.edge_rays,
                 edge_leaks: c.edge_leaks,
+                aimed_rays: c.aimed_rays,
+                aimed_leaks: c.aimed_leaks,
                 bounce_rays: c.bounce_rays,
                 bounce_leaks: c.bounce_leaks,
                 self_hits: c.self_hits,
@@ -117,8 +124,7 @@ pub fn closed_sphere(pool: &rayon::ThreadPool, probes: u32) -> Vec<LeakCheck> {
 struct Counts {
     edge_rays: u64,
     edge_leaks: u64,
-    /// Primary rays of bounce probes (aimed inside a triangle; a miss counts as an edge leak would,
-    /// but these essentially never miss).
+    /// Primary rays of bounce probes, aimed inside a triangle.
     aimed_rays: u64,
     aimed_leaks: u64,
     bounce_rays: u64,
@@ -199,5 +205,31 @@ mod tests {
         assert_eq!((robust.edge_rays, robust.bounce_rays), (10_000, 10_000), "{}", robust.describe());
         assert_eq!((robust.leaks(), robust.self_hits), (0, 0), "{}", robust.describe());
         assert_eq!(checks[1].edge_rays, 10_000);
+    }
+}
+#[cfg(test)]
+mod scratch {
+    use super::*;
+    #[test]
+    fn scratch_find_leaks() {
+        let scene = tracer::scene::load_str(SPHERE_SCENE).unwrap();
+        let accel = Accel::build(&scene.triangles, BuildQuality::default());
+        let triangles: Vec<[glam::Vec3; 3]> = scene.triangles.iter().map(|t| t.p).collect();
+        for i in 0..200_000u32 {
+            let c = probe(&accel, &triangles, Traversal::Robust, i);
+            if c.edge_leaks + c.bounce_leaks + c.aimed_leaks > 0 {
+                let mut random = PixelSampler::new(PROBE_SEED, 0, i, 0, 0);
+                let origin = CENTER + ORIGIN_RADIUS * random.next_1d().cbrt() * uniform_sphere(random.next_2d());
+                let k = ((random.next_1d() * triangles.len() as f32) as usize).min(triangles.len() - 1);
+                let p = triangles[k];
+                let edge = ((random.next_1d() * 3.0) as usize).min(2);
+                let along = if i % 8 == 0 { 0.0 } else { random.next_1d() };
+                let target = p[edge].lerp(p[(edge + 1) % 3], along);
+                let dir = (target - origin).normalize();
+                let ray = Ray { origin, dir, t_max: f32::INFINITY };
+                let brute = tracer::geometry::intersect_brute_force(&scene.triangles, &ray);
+                eprintln!("probe {i}: edge {} bounce {} tri {k} edge {edge} along {along} origin {origin:?} dir {dir:?} brute {brute:?}", c.edge_leaks, c.bounce_leaks);
+            }
+        }
     }
 }

@@ -1,7 +1,7 @@
-//! accuracy.svg: RMSE against time, log-log, one curve per knob.
+//! accuracy.svg: relative MSE against time, log-log, one curve per knob.
 //!
 //! Log-log because both axes span orders of magnitude and because Monte Carlo noise is a straight
-//! line there (slope -1/2 against time when time grows with samples), so a knob that beats "just
+//! line there (slope -1 against time when time grows with samples), so a knob that beats "just
 //! render longer" shows as a point below the spp curve, and a bias as a curve that flattens. Each
 //! point is labelled with its knob value; the reference's own noise is drawn as a dashed floor.
 
@@ -23,8 +23,8 @@ fn draw(path: &Path, run: &Run) -> Result<(), Box<dyn std::error::Error>> {
         .map(|knob| {
             let points = run
                 .rows_of(knob)
-                .filter(|r| r.seconds() > 0.0 && r.metrics.rmse > 0.0)
-                .map(|r| (r.seconds(), r.metrics.rmse, label(r)))
+                .filter(|r| r.seconds() > 0.0 && r.metrics.rel_mse > 0.0)
+                .map(|r| (r.seconds(), r.metrics.rel_mse, label(r)))
                 .collect::<Vec<_>>();
             (knob, points)
         })
@@ -32,7 +32,7 @@ fn draw(path: &Path, run: &Run) -> Result<(), Box<dyn std::error::Error>> {
         .collect();
     let root = SVGBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE)?;
-    let floor = run.reference.noise_rmse();
+    let floor = run.reference.noise_rel_mse;
     let all = || curves.iter().flat_map(|(_, p)| p.iter());
     let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64);
     for (x, y, _) in all() {
@@ -55,7 +55,7 @@ fn draw(path: &Path, run: &Run) -> Result<(), Box<dyn std::error::Error>> {
     chart
         .configure_mesh()
         .x_desc("seconds per frame (BVH: build + render)")
-        .y_desc("RMSE against the reference")
+        .y_desc("relMSE against the reference")
         .x_label_formatter(&|v| format!("{v:.0e}"))
         .y_label_formatter(&|v| format!("{v:.0e}"))
         .draw()?;

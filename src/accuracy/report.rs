@@ -58,7 +58,7 @@ pub fn write_all(out: &Path, run: &Run) -> anyhow::Result<()> {
 
 const CSV_HEADER: &str = "knob,setting,spp,max_depth,russian_roulette_depth,bvh,traversal,build_seconds,\
 render_seconds,seconds,rays,mrays_per_second,rmse,rel_mse,mae,max_difference,flip,mean_bias,efficiency,\
-leak_check_rays,leaks,self_hits,note";
+sphere_rays,sphere_edge_leaks,sphere_bounce_leaks,sphere_self_hits,note";
 
 /// One line per rung; the leak-check columns are filled on the traversal rungs only.
 pub fn csv(run: &Run) -> String {
@@ -88,7 +88,8 @@ pub fn csv(run: &Run) -> String {
             format!("{:.6}", m.mean_bias()),
             format!("{:.6e}", r.efficiency()),
             check.map_or(String::new(), |c| c.rays.to_string()),
-            check.map_or(String::new(), |c| c.leaks.to_string()),
+            check.map_or(String::new(), |c| (c.edge_leaks + c.aimed_leaks).to_string()),
+            check.map_or(String::new(), |c| c.bounce_leaks.to_string()),
             check.map_or(String::new(), |c| c.self_hits.to_string()),
             r.note.clone(),
         ];
@@ -138,7 +139,7 @@ pub fn markdown(run: &Run) -> String {
         s.russian_roulette_depth.map_or("off".to_owned(), |d| format!("from depth {d}")),
     );
     let _ = writeln!(md, "**Reference**: {}.\n", run.reference.describe());
-    let _ = writeln!(md, "![RMSE against time, log-log, one curve per knob](accuracy.svg)\n");
+    let _ = writeln!(md, "![relMSE against time, log-log, one curve per knob](accuracy.svg)\n");
     let curve = Curve::of(run);
     let findings = findings::sentences(run, curve.as_ref());
     if !findings.is_empty() {
@@ -149,7 +150,7 @@ pub fn markdown(run: &Run) -> String {
         md.push('\n');
     }
     let versus = |r: &Row| match &curve {
-        Some(c) => format!("{} | {}", c.error_at(r.seconds()), c.time_for(r.metrics.rmse)),
+        Some(c) => format!("{} | {}", c.error_at(r.seconds()), c.time_for(r.metrics.rel_mse)),
         None => "- | -".to_owned(),
     };
     let common = |r: &Row| {
@@ -163,7 +164,7 @@ pub fn markdown(run: &Run) -> String {
         )
     };
     const COMMON: &str = "time (s) | RMSE | relMSE | FLIP | mean bias";
-    const VERSUS: &str = "baseline RMSE at equal time | baseline time at equal RMSE";
+    const VERSUS: &str = "baseline relMSE at equal time | baseline time (s) at equal relMSE";
     let mut table = |title: String, head: &str, rows: Vec<String>| {
         if rows.is_empty() {
             return;
@@ -209,11 +210,13 @@ pub fn markdown(run: &Run) -> String {
     );
     table(
         format!("Traversal, at {} spp, and the closed-sphere check", run.knob_spp),
-        &format!("traversal | {COMMON} | Mrays/s | image | sphere rays | sphere Mrays/s | leaks | self-hits"),
+        &format!("traversal | {COMMON} | Mrays/s | image | sphere rays | sphere Mrays/s | primary leaks | bounce leaks | self-hits"),
         run.rows_of(Knob::Traversal)
             .map(|r| {
-                let check = run.leak_check(r.traversal).map_or("- | - | - | -".to_owned(), |c| {
-                    format!("{} | {:.2} | {} | {}", c.rays, c.mrays_per_second(), c.leaks, c.self_hits)
+                let check = run.leak_check(r.traversal).map_or("- | - | - | - | -".to_owned(), |c| {
+                    let primary = format!("{} of {}", c.edge_leaks + c.aimed_leaks, c.edge_rays + c.aimed_rays);
+                    let bounce = format!("{} of {}", c.bounce_leaks, c.bounce_rays);
+                    format!("{} | {:.2} | {primary} | {bounce} | {}", c.rays, c.mrays_per_second(), c.self_hits)
                 });
                 let image = if r.note.is_empty() { "(the baseline)" } else { r.note.as_str() };
                 format!("{} | {} | {:.2} | {} | {}", r.setting, common(r), r.mrays_per_second(), image, check)
@@ -223,10 +226,11 @@ pub fn markdown(run: &Run) -> String {
     if let Source::Rendered { .. } | Source::Cached = run.reference.source {
         let _ = writeln!(
             md,
-            "The reference's own noise (RMSE about {:.3e}) is part of every error above: rungs within about twice \
-             that are limited by the reference, not by the knob. Render it with more samples (`--reference-spp`) to \
-             lower the floor.",
-            run.reference.noise_rmse()
+            "The reference's own noise (RMSE about {:.3e}, relMSE about {:.3e}) is part of every error above: \
+             rungs within about twice that are limited by the reference, not by the knob. Render it with more \
+             samples (`--reference-spp`) to lower the floor.",
+            run.reference.noise_rmse(),
+            run.reference.noise_rel_mse
         );
     }
     md

@@ -23,7 +23,45 @@ impl Rng {
     }
 }
 
+fn sphere_escapes() {
+    // Closed icosphere-like mesh (octahedron subdivided, radial jitter), rays from inside.
+    let mut rng = Rng(9);
+    let mut vertices = vec![Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z];
+    let mut faces: Vec<[u32; 3]> = vec![[0,2,4],[2,1,4],[1,3,4],[3,0,4],[2,0,5],[1,2,5],[3,1,5],[0,3,5]];
+    for _ in 0..5 {
+        let mut mids = std::collections::BTreeMap::new();
+        let mut next = Vec::new();
+        for [a, b, c] in faces {
+            let mut mid = |a: u32, b: u32| *mids.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                vertices.push((vertices[a as usize] + vertices[b as usize]).normalize());
+                vertices.len() as u32 - 1
+            });
+            let (ab, bc, ca) = (mid(a, b), mid(b, c), mid(c, a));
+            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        faces = next;
+    }
+    for v in &mut vertices { *v *= 1.0 + rng.range(-0.05, 0.05); }
+    for (scale, shift) in [(1.0f32, Vec3::ZERO), (1.0, Vec3::new(100.0, -50.0, 30.0)), (1e3, Vec3::new(1e4, 0.0, 0.0))] {
+        let tris: Vec<Triangle> = faces.iter().map(|f| Triangle { p: f.map(|i| vertices[i as usize] * scale + shift), n: None, uv: None, material: 0 }).collect();
+        let accel = Accel::build(&tris, BuildQuality::Medium);
+        let n = 2_000_000;
+        let (mut robust, mut theirs) = (0, 0);
+        for k in 0..n {
+            let origin = shift + if k % 2 == 0 { Vec3::ZERO } else { Vec3::new(0.3, -0.2, 0.1) * scale };
+            let f = &tris[(rng.next_u64() % tris.len() as u64) as usize];
+            let target = match k % 4 { 0 | 1 => f.p[(rng.next_u64() % 3) as usize], 2 => (f.p[0] + f.p[1]) * 0.5, _ => f.p[1] + (f.p[2] - f.p[1]) * rng.unit() };
+            let r = Ray { origin, dir: target - origin, t_max: f32::INFINITY };
+            let mut st = TraversalStats::default();
+            robust += accel.intersect_with(&r, Traversal::Robust, &mut st).is_none() as u32;
+            theirs += accel.intersect_with(&r, Traversal::Obvhs, &mut st).is_none() as u32;
+        }
+        eprintln!("sphere ({} tris) scale {scale} shift {shift}: escapes out of {n}: robust {robust}, obvhs {theirs}", tris.len());
+    }
+}
+
 fn main() {
+    if std::env::args().nth(1).as_deref() == Some("sphere") { return sphere_escapes(); }
     let args: Vec<String> = std::env::args().collect();
     let n_rays: usize = args.get(1).map(|s| s.parse().unwrap()).unwrap_or(500_000);
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/scenes/stanford-dragon/cornell-dragon.obj");
@@ -51,25 +89,34 @@ fn main() {
         _ => BuildQuality::ALL.to_vec(),
     };
     for quality in qualities {
-        let t = Instant::now();
-        let accel = Accel::build(&triangles, quality);
-        let build = t.elapsed();
+        let mut build = std::time::Duration::MAX;
+        let mut accel = None;
+        for _ in 0..3 {
+            let t = Instant::now();
+            accel = Some(Accel::build(&triangles, quality));
+            build = build.min(t.elapsed());
+        }
+        let accel = accel.unwrap();
         eprintln!("{quality:?}: build {:.2} s, {:?}", build.as_secs_f64(), accel);
         for traversal in [Traversal::Robust, Traversal::Obvhs] {
-            let mut stats = TraversalStats::default();
+          let (mut secs, mut osecs) = (f64::MAX, f64::MAX);
+          let (mut stats, mut ostats, mut hits, mut occ) = Default::default();
+          for _rep in 0..3 {
+            stats = TraversalStats::default();
             let t = Instant::now();
-            let mut hits = 0;
+            hits = 0;
             for r in &rays {
                 hits += accel.intersect_with(r, traversal, &mut stats).is_some() as usize;
             }
-            let secs = t.elapsed().as_secs_f64();
+            secs = secs.min(t.elapsed().as_secs_f64());
             let t = Instant::now();
-            let mut occ = 0;
-            let mut ostats = TraversalStats::default();
+            occ = 0;
+            ostats = TraversalStats::default();
             for r in &rays {
                 occ += accel.occluded_with(r, traversal, &mut ostats) as usize;
             }
-            let osecs = t.elapsed().as_secs_f64();
+            osecs = osecs.min(t.elapsed().as_secs_f64());
+          }
             eprintln!(
                 "  {traversal:?}: closest {:.2} Mrays/s (hits {hits}, {:.1} nodes {:.1} tris per ray); any-hit {:.2} Mrays/s ({:.1} tris per ray, occ {occ})",
                 rays.len() as f64 / secs / 1e6,

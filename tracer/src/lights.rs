@@ -1,8 +1,11 @@
 //! The lights of a scene and how next-event estimation samples them.
 //!
 //! Lights are emissive triangles (one-sided: they emit on the side of their winding normal), point
-//! lights and a constant environment. One light is chosen per shading point with probability
-//! proportional to its power, so a large sky quad is not starved by a hundred tiny lamps; the
+//! lights and a constant environment. One light is chosen per shading point: first its kind, each
+//! present kind equally likely, then a light of that kind with probability proportional to its
+//! power, so a large sky quad is not starved by a hundred tiny lamps. Kinds are not weighed by
+//! power against each other because an environment's power depends on the scene's extent (a wide
+//! floor would make it swamp a point light and turn the lamp's rare samples into fireflies). The
 //! choice uses one random number, and the position on the light two more, whatever the light.
 
 use crate::effects::Effects;
@@ -80,21 +83,12 @@ impl Lights {
                 power.push(luminance(radiance) * PI * 4.0 * PI * radius * radius);
             }
         }
-        let total: f64 = power.iter().map(|&p| f64::from(p.max(0.0))).sum();
-        let mut cdf = Vec::with_capacity(power.len());
-        let mut running = 0.0f64;
-        for &p in &power {
-            running += f64::from(p.max(0.0));
-            cdf.push(if total > 0.0 { (running / total) as f32 } else { 0.0 });
-        }
-        if total <= 0.0 || !total.is_finite() {
+        let cdf = choice_cdf(&lights, &power);
+        if cdf.is_empty() {
             // Nothing emits anything measurable: no light is ever chosen.
             lights.clear();
-            cdf.clear();
             triangle_light.iter_mut().for_each(|l| *l = u32::MAX);
             environment_light = None;
-        } else if let Some(last) = cdf.last_mut() {
-            *last = 1.0;
         }
         Self { lights, cdf, triangle_light, environment_light, scene_radius: radius }
     }
@@ -207,6 +201,41 @@ impl Lights {
     pub fn environment_pdf(&self) -> f32 {
         self.environment_light.map_or(0.0, |i| self.choice_pdf(i as usize) / (4.0 * PI))
     }
+}
+
+/// The cumulative choice probabilities: each kind of light with positive total power equally
+/// likely, lights within a kind by power. Empty when no light has positive finite power.
+fn choice_cdf(lights: &[Light], power: &[f32]) -> Vec<f32> {
+    let kind = |light: &Light| match light {
+        Light::Triangle(_) => 0,
+        Light::Point { .. } => 1,
+        Light::Environment { .. } => 2,
+    };
+    let usable = |p: f32| if p.is_finite() && p > 0.0 { f64::from(p) } else { 0.0 };
+    let mut kind_power = [0.0f64; 3];
+    for (light, &p) in lights.iter().zip(power) {
+        kind_power[kind(light)] += usable(p);
+    }
+    let kinds = kind_power.iter().filter(|&&p| p > 0.0).count();
+    if kinds == 0 {
+        return Vec::new();
+    }
+    let mut running = 0.0f64;
+    let mut cdf: Vec<f32> = lights
+        .iter()
+        .zip(power)
+        .map(|(light, &p)| {
+            let total = kind_power[kind(light)];
+            if total > 0.0 {
+                running += usable(p) / total / kinds as f64;
+            }
+            running as f32
+        })
+        .collect();
+    if let Some(last) = cdf.last_mut() {
+        *last = 1.0;
+    }
+    cdf
 }
 
 pub fn luminance(c: Vec3) -> f32 {

@@ -131,43 +131,21 @@ fn quad_grid(n: u32) -> Mesh {
 /// by up to `jitter` (shared vertices move once, so the mesh stays closed).
 fn perturbed_sphere(subdivisions: u32, jitter: f32, rng: &mut Rng) -> Mesh {
     let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut vertices: Vec<Vec3> = [
-        (-1.0, t, 0.0),
-        (1.0, t, 0.0),
-        (-1.0, -t, 0.0),
-        (1.0, -t, 0.0),
-        (0.0, -1.0, t),
-        (0.0, 1.0, t),
-        (0.0, -1.0, -t),
-        (0.0, 1.0, -t),
-        (t, 0.0, -1.0),
-        (t, 0.0, 1.0),
-        (-t, 0.0, -1.0),
-        (-t, 0.0, 1.0),
-    ]
-    .map(|(x, y, z)| Vec3::new(x, y, z).normalize())
-    .to_vec();
+    #[rustfmt::skip]
+    let corners = [
+        (-1.0, t, 0.0), (1.0, t, 0.0), (-1.0, -t, 0.0), (1.0, -t, 0.0),
+        (0.0, -1.0, t), (0.0, 1.0, t), (0.0, -1.0, -t), (0.0, 1.0, -t),
+        (t, 0.0, -1.0), (t, 0.0, 1.0), (-t, 0.0, -1.0), (-t, 0.0, 1.0),
+    ];
+    let mut vertices: Vec<Vec3> = corners
+        .map(|(x, y, z)| Vec3::new(x, y, z).normalize())
+        .to_vec();
+    #[rustfmt::skip]
     let mut faces: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
+        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
+        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
+        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
+        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
     ];
     for _ in 0..subdivisions {
         let mut midpoints = std::collections::BTreeMap::new();
@@ -543,7 +521,7 @@ fn degenerate_triangles_are_never_hit_and_never_give_nan() {
         degenerate.push(tri(shape.map(|v| v * power)));
     }
     // Rays aimed at a vertex, a midpoint, or a point along the segment of each.
-    let mut aimed_at = |t: &Triangle, rng: &mut Rng| {
+    let aimed_at = |t: &Triangle, rng: &mut Rng| {
         let target = match rng.index(3) {
             0 => t.p[rng.index(3)],
             1 => (t.p[0] + t.p[2]) * 0.5,

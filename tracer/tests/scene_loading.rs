@@ -722,3 +722,14 @@ fn shared_sponza_reads_its_textures_despite_the_case_of_their_names() {
             .all(|c| c.is_finite() && c.max_element() <= 1.0)
     }));
 }
+
+#[test]
+fn zz_print_errors() {
+    for toml in ["[render]\nwidht = 4\n", "[render]\nwidth = \"big\"\n", "[render]\nmax_depth = -3\n", "[camera]\nposition = [0, 0, 0]\n"] {
+        println!("{}", load(&[("scene.toml", toml)]).err().unwrap());
+    }
+    println!("{}", load_obj(&good_with("v 1e39 0 0")).err().unwrap());
+    let mut m = GOOD.to_vec(); m[0] = "mtllib gone.mtl";
+    println!("{}", load_obj(&m).err().unwrap());
+    println!("{}", scene::load(Path::new("/nonexistent/x.toml")).err().unwrap());
+}

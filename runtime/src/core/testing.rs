@@ -9,6 +9,7 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
+use super::steal::Rng;
 use super::{Config, Core, Event, FrameError, WorkItem};
 use crate::wire::{self, BYTES_PER_PIXEL, FrameId, Message, PeerId, TileResult, TileSpec};
 
@@ -48,8 +49,12 @@ pub struct Cluster {
     next_seq: u64,
     renderer: Renderer,
     trace: Vec<Record>,
+    rng: Rng,
     /// One-way delay of every message.
     pub latency: Duration,
+    /// Each message is delayed by up to this much more, uniformly at random (from the
+    /// cluster's seed), so that messages overtake each other as they do on QUIC streams.
+    pub jitter: Duration,
     /// How long after a peer dies the others learn of it.
     pub loss_detection: Duration,
     /// Pass every message through the wire encoding.
@@ -86,7 +91,9 @@ impl Cluster {
             next_seq: 0,
             renderer,
             trace: Vec::new(),
+            rng: Rng(seed),
             latency: Duration::from_micros(500),
+            jitter: Duration::ZERO,
             loss_detection: Duration::from_millis(20),
             encode: true,
         }
@@ -241,7 +248,9 @@ impl Cluster {
             let record = Record::Sent { at: now, from: peer, to, message: message.clone() };
             self.trace.push(record);
             if self.nodes.get(&to).is_some_and(|node| !matches!(node.state, NodeState::Dead)) {
-                self.schedule(self.latency, Happening::Deliver { from: peer, to, message });
+                let jitter = self.rng.below(self.jitter.as_nanos() as usize + 1);
+                let delay = self.latency + Duration::from_nanos(jitter as u64);
+                self.schedule(delay, Happening::Deliver { from: peer, to, message });
             }
         }
         while let Some(event) = self.node(peer).core.poll_event() {

@@ -145,8 +145,7 @@ impl ShearedRay {
         }
         let inv_det = 1.0 / det;
         let t = t_scaled * inv_det;
-        // Written so that NaN fails: `!(t <= t_max)` rejects NaN as well as far hits.
-        if !(t <= t_max) {
+        if !t.is_finite() || t > t_max {
             return None;
         }
 
@@ -161,11 +160,8 @@ impl ShearedRay {
         let max_e = e0.abs().max(e1.abs()).max(e2.abs());
         let delta_t =
             3.0 * (gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
-        if !(t > delta_t) {
-            return None;
-        }
-
-        Some(TriangleHit {
+        // Written so that a NaN bound (from a subnormal det) rejects too.
+        (t > delta_t).then_some(TriangleHit {
             t,
             b0: e0 * inv_det,
             b1: e1 * inv_det,
