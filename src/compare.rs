@@ -113,8 +113,13 @@ pub fn compare_files(test: &Path, reference: &Path) -> anyhow::Result<Comparison
     }
     let a = tracer::output::read_exr(test)?;
     let b = tracer::output::read_exr(reference)?;
-    let metrics = Metrics::between(&a, &b)
-        .with_context(|| format!("cannot compare {} with {}", test.display(), reference.display()))?;
+    let metrics = Metrics::between(&a, &b).with_context(|| {
+        format!(
+            "cannot compare {} with {}",
+            test.display(),
+            reference.display()
+        )
+    })?;
     Ok(Comparison {
         test: test.display().to_string(),
         reference: reference.display().to_string(),
@@ -146,7 +151,14 @@ impl Metrics {
             "an image holds a different number of pixels than its size says",
         );
         let mut sums = Sums::default();
-        let mut max = MaxDifference { value: 0.0, x: 0, y: 0, channel: CHANNELS[0], test: 0.0, reference: 0.0 };
+        let mut max = MaxDifference {
+            value: 0.0,
+            x: 0,
+            y: 0,
+            channel: CHANNELS[0],
+            test: 0.0,
+            reference: 0.0,
+        };
         for (index, (a, b)) in test.pixels.iter().zip(&reference.pixels).enumerate() {
             for c in 0..3 {
                 let (ta, tb) = (a[c], b[c]);
@@ -164,8 +176,18 @@ impl Metrics {
                 sums.reference[c] += fb;
                 sums.per_channel[c] += 1;
                 if d.abs() > max.value {
-                    let (x, y) = ((index % test.width as usize) as u32, (index / test.width as usize) as u32);
-                    max = MaxDifference { value: d.abs(), x, y, channel: CHANNELS[c], test: ta, reference: tb };
+                    let (x, y) = (
+                        (index % test.width as usize) as u32,
+                        (index / test.width as usize) as u32,
+                    );
+                    max = MaxDifference {
+                        value: d.abs(),
+                        x,
+                        y,
+                        channel: CHANNELS[c],
+                        test: ta,
+                        reference: tb,
+                    };
                 }
             }
         }
@@ -190,7 +212,11 @@ impl Metrics {
     pub fn mean_bias(&self) -> f64 {
         let sum = |m: [f64; 3]| m.iter().sum::<f64>();
         let reference = sum(self.mean_reference);
-        if reference == 0.0 { 0.0 } else { sum(self.mean_test) / reference - 1.0 }
+        if reference == 0.0 {
+            0.0
+        } else {
+            sum(self.mean_test) / reference - 1.0
+        }
     }
 }
 
@@ -209,12 +235,20 @@ struct Sums {
 /// Mean FLIP of `test` against `reference` after tone mapping both to 8-bit sRGB at
 /// [`FLIP_EXPOSURE`]. The sizes must match (checked by [`Metrics::between`] first).
 pub fn mean_flip(test: &RgbImage, reference: &RgbImage) -> f64 {
-    assert_eq!((test.width, test.height), (reference.width, reference.height), "sizes checked by the caller");
+    assert_eq!(
+        (test.width, test.height),
+        (reference.width, reference.height),
+        "sizes checked by the caller"
+    );
     let eight_bit = |image: &RgbImage| {
         let bytes = tracer::output::tone_map(&image.pixels, FLIP_EXPOSURE);
         nv_flip::FlipImageRgb8::with_data(image.width, image.height, &bytes)
     };
-    let error = nv_flip::flip(eight_bit(reference), eight_bit(test), nv_flip::DEFAULT_PIXELS_PER_DEGREE);
+    let error = nv_flip::flip(
+        eight_bit(reference),
+        eight_bit(test),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    );
     // The mean of the error map itself, in f64: exact, where FLIP's pool keeps a histogram.
     let values = error.to_vec();
     values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len().max(1) as f64
@@ -229,11 +263,19 @@ pub fn channel_names(path: &Path) -> anyhow::Result<Vec<String>> {
         .headers
         .iter()
         .flat_map(|header| {
-            let layer = header.own_attributes.layer_name.as_ref().map(|n| n.to_string());
-            header.channels.list.iter().map(move |channel| match &layer {
-                Some(layer) => format!("{layer}.{}", channel.name),
-                None => channel.name.to_string(),
-            })
+            let layer = header
+                .own_attributes
+                .layer_name
+                .as_ref()
+                .map(|n| n.to_string());
+            header
+                .channels
+                .list
+                .iter()
+                .map(move |channel| match &layer {
+                    Some(layer) => format!("{layer}.{}", channel.name),
+                    None => channel.name.to_string(),
+                })
         })
         .collect();
     names.sort();
@@ -255,7 +297,10 @@ impl Comparison {
             self.channels.join(",")
         );
         out += &format!("  RMSE                 {:.6e}\n", m.rmse);
-        out += &format!("  relative MSE         {:.6e}   mean of (a-b)^2/(b+0.01)^2, as pbrt's imgtool\n", m.rel_mse);
+        out += &format!(
+            "  relative MSE         {:.6e}   mean of (a-b)^2/(b+0.01)^2, as pbrt's imgtool\n",
+            m.rel_mse
+        );
         out += &format!("  mean abs. error      {:.6e}\n", m.mae);
         out += &format!(
             "  largest difference   {:.6e}   pixel ({}, {}) channel {}: test {}, reference {}\n",
@@ -268,7 +313,10 @@ impl Comparison {
             self.flip.mean, self.flip.exposure, self.flip.pixels_per_degree
         );
         if m.non_finite > 0 {
-            out += &format!("  warning: {} channel values are NaN or infinite and were left out\n", m.non_finite);
+            out += &format!(
+                "  warning: {} channel values are NaN or infinite and were left out\n",
+                m.non_finite
+            );
         }
         out
     }
@@ -279,18 +327,27 @@ mod tests {
     use super::*;
 
     fn image(width: u32, height: u32, f: impl Fn(usize) -> [f32; 3]) -> RgbImage {
-        RgbImage { width, height, pixels: (0..(width * height) as usize).map(f).collect() }
+        RgbImage {
+            width,
+            height,
+            pixels: (0..(width * height) as usize).map(f).collect(),
+        }
     }
 
     fn ramp(width: u32, height: u32) -> RgbImage {
-        image(width, height, |i| [i as f32 * 0.125, 0.5, 2.0 - i as f32 * 0.25])
+        image(width, height, |i| {
+            [i as f32 * 0.125, 0.5, 2.0 - i as f32 * 0.25]
+        })
     }
 
     #[test]
     fn an_image_against_itself_is_zero_on_every_metric() {
         let a = ramp(4, 3);
         let m = Metrics::between(&a, &a).unwrap();
-        assert_eq!((m.mse, m.rmse, m.rel_mse, m.mae, m.max_difference.value), (0.0, 0.0, 0.0, 0.0, 0.0));
+        assert_eq!(
+            (m.mse, m.rmse, m.rel_mse, m.mae, m.max_difference.value),
+            (0.0, 0.0, 0.0, 0.0, 0.0)
+        );
         assert_eq!(m.mean_bias(), 0.0);
         assert_eq!(mean_flip(&a, &a), 0.0);
     }
@@ -308,7 +365,10 @@ mod tests {
         assert_eq!(m.rel_mse, 0.0625 / (0.51 * 0.51) / n);
         assert_eq!(m.mae, 0.25 / n);
         let d = &m.max_difference;
-        assert_eq!((d.value, d.x, d.y, d.channel, d.test, d.reference), (0.25, 1, 1, "G", 0.75, 0.5));
+        assert_eq!(
+            (d.value, d.x, d.y, d.channel, d.test, d.reference),
+            (0.25, 1, 1, "G", 0.75, 0.5)
+        );
         assert_eq!(m.mean_test, [0.5, 0.5 + 0.25 / 4.0, 0.5]);
         assert_eq!(m.mean_reference, [0.5; 3]);
         assert!(mean_flip(&test, &reference) > 0.0);
@@ -320,14 +380,25 @@ mod tests {
         let test = image(3, 3, |i| reference.pixels[i].map(|c| c + 0.25));
         let m = Metrics::between(&test, &reference).unwrap();
         assert_eq!((m.rmse, m.mae, m.max_difference.value), (0.25, 0.25, 0.25));
-        let expected: f64 = reference.pixels.iter().flatten().map(|&b| 0.0625 / (f64::from(b) + 0.01).powi(2)).sum();
+        let expected: f64 = reference
+            .pixels
+            .iter()
+            .flatten()
+            .map(|&b| 0.0625 / (f64::from(b) + 0.01).powi(2))
+            .sum();
         assert!((m.rel_mse - expected / 27.0).abs() < 1e-12 * expected);
     }
 
     #[test]
     fn non_finite_values_are_counted_and_left_out() {
         let reference = image(2, 1, |_| [1.0; 3]);
-        let test = image(2, 1, |i| if i == 0 { [f32::NAN, 1.0, 1.0] } else { [1.0, 1.0, 2.0] });
+        let test = image(2, 1, |i| {
+            if i == 0 {
+                [f32::NAN, 1.0, 1.0]
+            } else {
+                [1.0, 1.0, 2.0]
+            }
+        });
         let m = Metrics::between(&test, &reference).unwrap();
         assert_eq!(m.non_finite, 1);
         assert_eq!(m.mae, 1.0 / 5.0);
@@ -336,7 +407,9 @@ mod tests {
 
     #[test]
     fn different_sizes_are_an_error_naming_both() {
-        let error = Metrics::between(&ramp(4, 3), &ramp(3, 4)).unwrap_err().to_string();
+        let error = Metrics::between(&ramp(4, 3), &ramp(3, 4))
+            .unwrap_err()
+            .to_string();
         assert!(error.contains("4x3") && error.contains("3x4"), "{error}");
     }
 }

@@ -179,40 +179,59 @@ fn proportional_cuts(prefix: &[f64], shares: &[f64]) -> Vec<usize> {
 /// The banded cut of the module docs, or `None` if no band was found.
 fn band_cuts(prefix: &[f64], shares: &[f64], largest: f64, preferred: &[usize]) -> Option<Vec<usize>> {
     let (n, p, total) = (prefix.len() - 1, shares.len(), prefix[prefix.len() - 1]);
-    // Shortest allowed runs: the smallest point at least `lambda * u_k` past the last.
-    let shortest = |lambda: f64| -> Option<Vec<usize>> {
-        let mut chain = Vec::with_capacity(p + 1);
-        chain.push(0);
+    // Shortest allowed runs: cut `k + 1` at the first point at least `lambda * u_k` past cut
+    // `k`; `visit` sees each cut. False if a run would end past the last tile.
+    let shortest = |lambda: f64, mut visit: Option<&mut Vec<usize>>| -> bool {
+        let mut at = 0;
         for &share in shares {
-            let target = prefix[chain[chain.len() - 1]] + lambda * share;
+            let target = prefix[at] + lambda * share;
             if target > total {
-                return None;
+                return false;
             }
-            chain.push(prefix.partition_point(|&s| s < target));
+            at = prefix.partition_point(|&s| s < target);
+            if let Some(chain) = visit.as_deref_mut() {
+                chain.push(at);
+            }
         }
-        Some(chain)
+        true
     };
-    // The largest feasible lambda, by bisection: feasibility is monotone in lambda.
-    let mut lambda = 0.0;
-    if shortest(total).is_some() {
+    // Longest allowed runs from the shortest-run chain's `lambda`: the largest point at most
+    // `lambda * u_k + L` past the last. Whether that reaches the last tile.
+    let longest = |lambda: f64, high: &mut Vec<usize>| -> bool {
+        high.clear();
+        high.push(0);
+        for &share in shares {
+            let limit = prefix[high[high.len() - 1]] + lambda * share + largest;
+            high.push(prefix.partition_point(|&s| s <= limit) - 1);
+        }
+        high[p] == n
+    };
+    // The largest feasible lambda, by bisection: feasibility is monotone in lambda. Every hop
+    // of the shortest-run chain overshoots its target by less than L, so lambda = W - P L is
+    // feasible, and no lambda above W is. A lambda a little below the largest usually does as
+    // well, so bisection first stops at a relative 1e-9, and goes on down to adjacent floats
+    // only if the longest-run chain then falls short.
+    let (mut lambda, mut infeasible) = ((total - p as f64 * largest).max(0.0), total);
+    if shortest(total, None) {
         lambda = total;
-    } else {
-        let mut infeasible = total;
-        for _ in 0..100 {
+    }
+    let (mut low, mut high) = (Vec::with_capacity(p + 1), Vec::with_capacity(p + 1));
+    for tolerance in [1e-9 * total, 0.0] {
+        while lambda < infeasible {
             let mid = 0.5 * (lambda + infeasible);
-            if mid <= lambda || mid >= infeasible {
+            if mid <= lambda || mid >= infeasible || infeasible - lambda <= tolerance {
                 break;
             }
-            if shortest(mid).is_some() { lambda = mid } else { infeasible = mid }
+            if shortest(mid, None) { lambda = mid } else { infeasible = mid }
         }
-    }
-    let low = shortest(lambda)?;
-    // Longest allowed runs: the largest point at most `lambda * u_k + L` past the last.
-    let mut high = Vec::with_capacity(p + 1);
-    high.push(0);
-    for &share in shares {
-        let limit = prefix[high[high.len() - 1]] + lambda * share + largest;
-        high.push(prefix.partition_point(|&s| s <= limit) - 1);
+        low.clear();
+        low.push(0);
+        if !shortest(lambda, Some(&mut low)) {
+            return None;
+        }
+        if longest(lambda, &mut high) {
+            break;
+        }
     }
     if high[p] < n {
         return None;

@@ -182,15 +182,14 @@ impl Partitioner {
     }
 }
 
-/// Deals `tiles` by `order`: the one assignment path both balancers share.
+/// Deals tiles of predicted `costs` by `order`: the one assignment path both balancers share.
 pub(crate) fn deal(
-    tiles: &[Tile],
+    costs: impl Iterator<Item = f64>,
     order: Order,
     peers: usize,
     weights: Option<&[f64]>,
 ) -> Result<Assignment, Error> {
-    let costs: Vec<f64> = tiles.iter().map(|tile| tile.predicted).collect();
-    assign::assign(&costs, order, peers, weights)
+    assign::assign(&costs.collect::<Vec<f64>>(), order, peers, weights)
 }
 
 /// Predicts the next frame's cost of any rectangle from the frames observed so far.

@@ -90,7 +90,7 @@ impl Regular {
 
     /// Deals the tiles to `peers` peers, optionally weighted by peer speed.
     pub fn assign(&self, peers: usize, weights: Option<&[f64]>) -> Result<Assignment, Error> {
-        deal(&self.tiles(), self.order, peers, weights)
+        deal(self.predicted.iter().copied(), self.order, peers, weights)
     }
 }
 

@@ -64,3 +64,13 @@ fn scratch3() {
     eprintln!("clone {:?}", t.elapsed() / 10);
     }
 }
+#[test]
+fn scratch4() {
+    let m = 16384;
+    let mut pbt = Pbt::new(1920, 1080, &Config { leaves: m, ..Config::default() }).unwrap();
+    for f in 0..4 { pbt.observe(&frame(f)).unwrap(); }
+    let map = frame(4);
+    let t = Instant::now();
+    for _ in 0..100 { let mut p = pbt.clone(); p.observe(&map).unwrap(); std::hint::black_box(p); }
+    eprintln!("clone+observe {:?}", t.elapsed() / 100);
+}

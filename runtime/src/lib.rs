@@ -6,7 +6,9 @@
 //!   `core::testing`, a virtual-time cluster of cores for tests and the simulator.
 //! - [`wire`]: the messages peers exchange and their pure, bounded postcard encoding.
 //! - [`net`]: the QUIC transport that moves encoded messages between peers.
+//! - [`node`]: the driver: the owner and peer roles, the in-process cluster, rendering on rayon.
 
 pub mod core;
+pub mod node;
 pub mod net;
 pub mod wire;

@@ -42,7 +42,11 @@ pub const MAX_COST_BYTES_PER_PIXEL: u64 = 8;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Message {
     /// First message of the dialing side. Must stay variant 0 with `version` first.
-    Hello { version: u32, peer: PeerId, slots: u32 },
+    Hello {
+        version: u32,
+        peer: PeerId,
+        slots: u32,
+    },
     /// Reply to `Hello`. Must stay variant 1 with `version` first.
     Welcome { version: u32, peer: PeerId },
     /// Where the other peers listen, so that peers can steal from each other directly.
@@ -53,21 +57,39 @@ pub enum Message {
     SceneReady,
     /// The owner gives tiles of `frame` to the receiver (its initial set, or re-issued tiles).
     /// `peers` are the frame's live participants: the receiver steals only from them.
-    Assign { frame: FrameId, peers: Vec<PeerId>, tiles: Vec<TileSpec> },
+    Assign {
+        frame: FrameId,
+        peers: Vec<PeerId>,
+        tiles: Vec<TileSpec>,
+    },
     /// A thief asks for work; `remaining` is the predicted work it still holds.
     StealRequest { frame: FrameId, remaining: f64 },
     /// The victim's answer: tiles from the far end of its queue.
-    StealGrant { frame: FrameId, tiles: Vec<TileSpec> },
+    StealGrant {
+        frame: FrameId,
+        tiles: Vec<TileSpec>,
+    },
     /// The victim's answer when giving would not pay for the transfer.
     StealRefuse { frame: FrameId },
     /// A thief tells the owner which tiles it took from `victim`, so the owner's ledger knows
     /// who holds them. `stolen` counts the grants the thief has received this frame.
-    StealNotice { frame: FrameId, victim: PeerId, tiles: Vec<TileId>, stolen: u32 },
+    StealNotice {
+        frame: FrameId,
+        victim: PeerId,
+        tiles: Vec<TileId>,
+        stolen: u32,
+    },
     /// A peer's report to the owner: alive, and idle (holding no work of the frame) or not.
     /// `assigned`, `stolen` and `done` count the `Assign`s and grants the peer has received and
     /// the `TileDone`s it has sent this frame, so that the owner, whose messages may arrive in
     /// any order, can tell a current idle report from one overtaken by events.
-    Status { frame: FrameId, idle: bool, assigned: u32, stolen: u32, done: u32 },
+    Status {
+        frame: FrameId,
+        idle: bool,
+        assigned: u32,
+        stolen: u32,
+        done: u32,
+    },
     /// A finished tile, sent to the owner by whoever rendered it.
     TileDone(TileResult),
     /// The owner has every tile of `frame`; peers drop what is left of it.
@@ -224,7 +246,11 @@ pub enum WireError {
     #[error("peer speaks protocol version {theirs}, we speak {ours}")]
     VersionMismatch { theirs: u32, ours: u32 },
     #[error("{what}: {len} exceeds the limit of {max}")]
-    Limit { what: &'static str, len: u64, max: u64 },
+    Limit {
+        what: &'static str,
+        len: u64,
+        max: u64,
+    },
     #[error("invalid {what}")]
     Invalid { what: &'static str },
 }
@@ -238,7 +264,10 @@ pub fn encode(message: &Message) -> Vec<u8> {
 /// Decodes and validates one message. Pure and total: any input gives a message or an error.
 pub fn decode(bytes: &[u8], limits: &Limits) -> Result<Message, WireError> {
     if bytes.len() > limits.max_message_bytes {
-        return Err(WireError::TooLong { len: bytes.len(), max: limits.max_message_bytes });
+        return Err(WireError::TooLong {
+            len: bytes.len(),
+            max: limits.max_message_bytes,
+        });
     }
     check_handshake_version(bytes)?;
     let (message, rest) = postcard::take_from_bytes::<Message>(bytes)?;
@@ -257,7 +286,10 @@ fn check_handshake_version(bytes: &[u8]) -> Result<(), WireError> {
         return Ok(());
     };
     if variant <= 1 && theirs != PROTOCOL_VERSION {
-        return Err(WireError::VersionMismatch { theirs, ours: PROTOCOL_VERSION });
+        return Err(WireError::VersionMismatch {
+            theirs,
+            ours: PROTOCOL_VERSION,
+        });
     }
     Ok(())
 }
@@ -301,7 +333,11 @@ fn validate(message: &Message, limits: &Limits) -> Result<(), WireError> {
 
 fn bound(what: &'static str, len: usize, max: usize) -> Result<(), WireError> {
     if len > max {
-        return Err(WireError::Limit { what, len: len as u64, max: max as u64 });
+        return Err(WireError::Limit {
+            what,
+            len: len as u64,
+            max: max as u64,
+        });
     }
     Ok(())
 }
@@ -321,7 +357,9 @@ pub(crate) fn check_cost(cost: f64) -> Result<(), WireError> {
     if cost.is_finite() && cost >= 0.0 {
         Ok(())
     } else {
-        Err(WireError::Invalid { what: "predicted cost" })
+        Err(WireError::Invalid {
+            what: "predicted cost",
+        })
     }
 }
 
@@ -329,7 +367,9 @@ pub(crate) fn check_cost(cost: f64) -> Result<(), WireError> {
 pub(crate) fn check_rect(rect: Rect, limits: &Limits) -> Result<(), WireError> {
     let inside = rect.x.checked_add(rect.w).is_some() && rect.y.checked_add(rect.h).is_some();
     if rect.w == 0 || rect.h == 0 || !inside {
-        return Err(WireError::Invalid { what: "tile rectangle" });
+        return Err(WireError::Invalid {
+            what: "tile rectangle",
+        });
     }
     if rect.area() > limits.max_tile_pixels {
         return Err(WireError::Limit {
@@ -352,7 +392,9 @@ pub(crate) fn check_result(result: &TileResult, limits: &Limits) -> Result<(), W
 pub(crate) fn check_buffers(result: &TileResult) -> Result<(), WireError> {
     let area = result.rect.area();
     if result.pixels.len() as u64 != area * BYTES_PER_PIXEL {
-        return Err(WireError::Invalid { what: "pixel buffer length for the tile's rectangle" });
+        return Err(WireError::Invalid {
+            what: "pixel buffer length for the tile's rectangle",
+        });
     }
     let max_costs = area * MAX_COST_BYTES_PER_PIXEL;
     if result.costs.len() as u64 > max_costs {
@@ -373,7 +415,9 @@ fn check_file_name(name: &str) -> Result<(), WireError> {
         || name.starts_with('/')
         || name.split('/').any(bad_component);
     if bad {
-        return Err(WireError::Invalid { what: "scene file name" });
+        return Err(WireError::Invalid {
+            what: "scene file name",
+        });
     }
     Ok(())
 }

@@ -77,12 +77,22 @@ pub fn render(world: &World, pool: &rayon::ThreadPool) -> Timed {
         .flat_map(|ty| (0..width.div_ceil(TILE)).map(move |tx| (tx, ty)))
         .map(|(tx, ty)| {
             let (x, y) = (tx * TILE, ty * TILE);
-            Rect { x, y, w: TILE.min(width - x), h: TILE.min(height - y) }
+            Rect {
+                x,
+                y,
+                w: TILE.min(width - x),
+                h: TILE.min(height - y),
+            }
         })
         .collect();
     let once = || {
         let started = Instant::now();
-        let outputs: Vec<_> = pool.install(|| tiles.par_iter().map(|&rect| tracer::render_tile(world, 0, rect)).collect());
+        let outputs: Vec<_> = pool.install(|| {
+            tiles
+                .par_iter()
+                .map(|&rect| tracer::render_tile(world, 0, rect))
+                .collect()
+        });
         let mut film = Film::new(width, height);
         for output in &outputs {
             film.insert(output.rect, &output.pixels, &output.cost);
@@ -95,7 +105,11 @@ pub fn render(world: &World, pool: &rayon::ThreadPool) -> Timed {
     Timed {
         rays: film.stats.rays + film.stats.shadow_rays,
         invalid_samples: film.stats.invalid_samples,
-        image: RgbImage { width, height, pixels: film.pixels },
+        image: RgbImage {
+            width,
+            height,
+            pixels: film.pixels,
+        },
         seconds,
     }
 }
@@ -125,7 +139,12 @@ pub struct Bench<'a> {
 impl<'a> Bench<'a> {
     pub fn new(world: World, pool: &'a rayon::ThreadPool, reference: &'a Reference) -> Self {
         let baseline = world.scene.settings.clone();
-        Bench { world, pool, reference, baseline }
+        Bench {
+            world,
+            pool,
+            reference,
+            baseline,
+        }
     }
 
     pub fn world(&self) -> &World {
@@ -137,7 +156,10 @@ impl<'a> Bench<'a> {
         let rungs = (0..32).map(|k| 1u32 << k).take_while(|&spp| spp <= max_spp);
         rungs
             .map(|spp| {
-                let settings = RenderSettings { samples_per_pixel: spp, ..self.baseline.clone() };
+                let settings = RenderSettings {
+                    samples_per_pixel: spp,
+                    ..self.baseline.clone()
+                };
                 self.measure(Knob::Spp, format!("{spp} spp"), settings).0
             })
             .collect()
@@ -148,7 +170,11 @@ impl<'a> Bench<'a> {
         [Some(1), Some(2), Some(4), Some(8), Some(16), None]
             .into_iter()
             .map(|max_depth| {
-                let settings = RenderSettings { samples_per_pixel: spp, max_depth, ..self.baseline.clone() };
+                let settings = RenderSettings {
+                    samples_per_pixel: spp,
+                    max_depth,
+                    ..self.baseline.clone()
+                };
                 let label = max_depth.map_or("unlimited".to_owned(), |d| format!("depth {d}"));
                 self.measure(Knob::Depth, label, settings).0
             })
@@ -177,7 +203,10 @@ impl<'a> Bench<'a> {
     /// bit-identical to the default quality's (it must be: the traversal finds the closest hit
     /// whatever the tree).
     pub fn bvh_ladder(&mut self, spp: u32) -> Vec<Row> {
-        let settings = RenderSettings { samples_per_pixel: spp, ..self.baseline.clone() };
+        let settings = RenderSettings {
+            samples_per_pixel: spp,
+            ..self.baseline.clone()
+        };
         self.world.scene.settings = settings.clone();
         let default_image = render(&self.world, self.pool).image;
         let rows = BuildQuality::ALL
@@ -192,7 +221,8 @@ impl<'a> Bench<'a> {
                     again.elapsed().as_secs_f64()
                 });
                 self.world.accel = accel;
-                let (mut row, image) = self.measure(Knob::Bvh, format!("{quality:?}"), settings.clone());
+                let (mut row, image) =
+                    self.measure(Knob::Bvh, format!("{quality:?}"), settings.clone());
                 row.bvh = quality;
                 row.build_seconds = build_seconds;
                 row.note = difference_note(&image, &default_image, "the default BVH's image");
@@ -205,17 +235,25 @@ impl<'a> Bench<'a> {
 
     /// Our robust traversal and obvhs's own, at `spp`.
     pub fn traversal_ladder(&mut self, spp: u32) -> Vec<Row> {
-        let settings = RenderSettings { samples_per_pixel: spp, ..self.baseline.clone() };
+        let settings = RenderSettings {
+            samples_per_pixel: spp,
+            ..self.baseline.clone()
+        };
         let mut rows = Vec::new();
         let mut robust_image = None;
         for traversal in [Traversal::Robust, Traversal::Obvhs] {
             self.world.traversal = traversal;
-            let (mut row, image) =
-                self.measure(Knob::Traversal, format!("{traversal:?}").to_lowercase(), settings.clone());
+            let (mut row, image) = self.measure(
+                Knob::Traversal,
+                format!("{traversal:?}").to_lowercase(),
+                settings.clone(),
+            );
             row.traversal = traversal;
             match &robust_image {
                 None => robust_image = Some(image),
-                Some(robust) => row.note = difference_note(&image, robust, "the robust traversal's image"),
+                Some(robust) => {
+                    row.note = difference_note(&image, robust, "the robust traversal's image")
+                }
             }
             rows.push(row);
         }
@@ -225,7 +263,12 @@ impl<'a> Bench<'a> {
 
     /// Renders with `settings` and measures the image against the reference; returns the image
     /// too, for ladders that compare rungs with each other.
-    fn measure(&mut self, knob: Knob, setting: String, settings: RenderSettings) -> (Row, RgbImage) {
+    fn measure(
+        &mut self,
+        knob: Knob,
+        setting: String,
+        settings: RenderSettings,
+    ) -> (Row, RgbImage) {
         self.world.scene.settings = settings.clone();
         let timed = render(&self.world, self.pool);
         let reference = self.reference.image();
@@ -267,12 +310,21 @@ impl<'a> Bench<'a> {
 
 /// "identical to WHAT", or how much `image` differs from `other`.
 fn difference_note(image: &RgbImage, other: &RgbImage, what: &str) -> String {
-    let bits = |i: &RgbImage| i.pixels.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
+    let bits = |i: &RgbImage| {
+        i.pixels
+            .iter()
+            .flatten()
+            .map(|c| c.to_bits())
+            .collect::<Vec<_>>()
+    };
     let (a, b) = (bits(image), bits(other));
     let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();
     if differing == 0 {
         return format!("bit-identical to {what}");
     }
     let largest = Metrics::between(image, other).map_or(f64::NAN, |m| m.max_difference.value);
-    format!("differs from {what} in {differing} of {} values (largest {largest:.3e})", a.len())
+    format!(
+        "differs from {what} in {differing} of {} values (largest {largest:.3e})",
+        a.len()
+    )
 }

@@ -22,6 +22,16 @@ pub enum Estimate {
     Above(f64),
 }
 
+impl std::fmt::Display for Estimate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Estimate::Within(v) => write!(f, "{v:.3e}"),
+            Estimate::Below(v) => write!(f, "< {v:.3e}"),
+            Estimate::Above(v) => write!(f, "> {v:.3e}"),
+        }
+    }
+}
+
 /// Relative MSE against time along the spp ladder. Relative, because absolute errors are
 /// dominated by the brightest pixels (the edges of a visible light), which no knob but samples
 /// changes; the relative error weighs every pixel by its own brightness, as pbrt's tools do.
@@ -59,7 +69,10 @@ impl Curve {
         if seconds > last.0 {
             return Estimate::Below(last.1);
         }
-        Estimate::Within(log_interpolate(self.by_time.iter().map(|&(t, e)| (t, e)), seconds))
+        Estimate::Within(log_interpolate(
+            self.by_time.iter().map(|&(t, e)| (t, e)),
+            seconds,
+        ))
     }
 
     /// The baseline's time to reach a relMSE of `error`.
@@ -108,125 +121,224 @@ fn log_interpolate(points: impl Iterator<Item = (f64, f64)>, x: f64) -> f64 {
 /// The least-squares slope of ln(y) against ln(x); points with a non-positive coordinate are
 /// left out. NaN with fewer than two points.
 pub fn loglog_slope(points: &[(f64, f64)]) -> f64 {
-    let logs: Vec<(f64, f64)> =
-        points.iter().filter(|(x, y)| *x > 0.0 && *y > 0.0).map(|(x, y)| (x.ln(), y.ln())).collect();
+    let logs: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|(x, y)| *x > 0.0 && *y > 0.0)
+        .map(|(x, y)| (x.ln(), y.ln()))
+        .collect();
     let n = logs.len() as f64;
-    let (mx, my) = (logs.iter().map(|p| p.0).sum::<f64>() / n, logs.iter().map(|p| p.1).sum::<f64>() / n);
+    let (mx, my) = (
+        logs.iter().map(|p| p.0).sum::<f64>() / n,
+        logs.iter().map(|p| p.1).sum::<f64>() / n,
+    );
     let sxy: f64 = logs.iter().map(|(x, y)| (x - mx) * (y - my)).sum();
     let sxx: f64 = logs.iter().map(|(x, _)| (x - mx) * (x - mx)).sum();
-    if logs.len() < 2 || sxx == 0.0 { f64::NAN } else { sxy / sxx }
+    if logs.len() < 2 || sxx == 0.0 {
+        f64::NAN
+    } else {
+        sxy / sxx
+    }
 }
 
-/// The findings of a run, one sentence (or two) per knob measured.
+/// The findings of a run, a few sentences per knob measured.
 pub fn sentences(run: &Run, curve: Option<&Curve>) -> Vec<String> {
     let mut out = Vec::new();
-    let spp: Vec<&Row> = run.rows_of(Knob::Spp).collect();
-    if spp.len() >= 2 {
-        let n = |r: &Row| f64::from(r.settings.samples_per_pixel);
-        let rmse_slope = loglog_slope(&spp.iter().map(|r| (n(r), r.metrics.rmse)).collect::<Vec<_>>());
-        let time_slope = loglog_slope(&spp.iter().map(|r| (n(r), r.seconds())).collect::<Vec<_>>());
-        let (first, last) = (spp[0], spp[spp.len() - 1]);
-        let mut s = format!(
-            "Samples: RMSE falls as spp^{rmse_slope:.3} from {} to {} spp (Monte Carlo predicts -0.5) while time grows \
-             as spp^{time_slope:.3}, so halving the error costs {:.1}x the time. At {} spp the frame takes {:.3} s for \
-             RMSE {:.3e}; at {} spp {:.4} s for RMSE {:.3e}.",
-            first.settings.samples_per_pixel,
-            last.settings.samples_per_pixel,
-            2f64.powf(-time_slope / rmse_slope),
-            last.settings.samples_per_pixel,
-            last.seconds(),
-            last.metrics.rmse,
-            first.settings.samples_per_pixel,
-            first.seconds(),
-            first.metrics.rmse,
-        );
-        let noise = run.reference.noise_mse;
-        if noise > 0.0 {
-            let net: Vec<(f64, f64)> =
-                spp.iter().map(|r| (n(r), (r.metrics.mse - noise).max(0.0).sqrt())).collect();
-            s += &format!(
-                " Net of the reference's own noise the slope is {:.3}; that noise is {:.0}% of the error at {} spp.",
-                loglog_slope(&net),
-                100.0 * (noise / last.metrics.mse).sqrt(),
-                last.settings.samples_per_pixel,
-            );
-        }
-        out.push(s);
-    }
-    let depth: Vec<&Row> = run.rows_of(Knob::Depth).collect();
-    if let Some(unlimited) = depth.iter().find(|r| r.settings.max_depth.is_none()) {
-        let capped: Vec<&&Row> = depth.iter().filter(|r| r.settings.max_depth.is_some()).collect();
-        let close = capped.iter().find(|r| r.metrics.mean_bias().abs() < 0.01);
-        let mut s = match (capped.first(), close) {
-            (Some(shallowest), Some(close)) => format!(
-                "Depth: a cap at {} makes the image {} on average, a bias no number of samples removes; \
-                 the shallowest cap within 1% of the reference's mean is {}, at {:.0}% of unlimited depth's time.",
-                shallowest.setting,
-                brightness(shallowest.metrics.mean_bias()),
-                close.setting,
-                100.0 * close.seconds() / unlimited.seconds(),
-            ),
-            (Some(shallowest), None) => format!(
-                "Depth: a cap at {} makes the image {} on average; no cap measured comes within 1% of the \
-                 reference's mean.",
-                shallowest.setting,
-                brightness(shallowest.metrics.mean_bias()),
-            ),
-            _ => String::new(),
-        };
-        if let Some(curve) = curve {
-            let (won, lost): (Vec<&&&Row>, Vec<&&&Row>) =
-                capped.iter().filter(|r| curve.beaten_by(r).is_some()).partition(|r| curve.beaten_by(r) == Some(true));
-            let names = |rows: &[&&&Row]| rows.iter().map(|r| r.setting.as_str()).collect::<Vec<_>>().join(", ");
-            s += &format!(
-                " At equal time, {} beat{} rendering more samples at unlimited depth, and {} {} not.",
-                if won.is_empty() { "no cap".to_owned() } else { names(&won) },
-                if won.len() == 1 { "s" } else { "" },
-                if lost.is_empty() { "none".to_owned() } else { names(&lost) },
-                if lost.len() == 1 { "does" } else { "do" },
-            );
-        }
-        out.push(s);
-    }
-    let roulette: Vec<&Row> = run.rows_of(Knob::Roulette).collect();
-    let off = roulette.iter().find(|r| r.settings.russian_roulette_depth.is_none());
-    let best = roulette.iter().max_by(|a, b| a.efficiency().total_cmp(&b.efficiency()));
-    if let (Some(off), Some(best)) = (off, best) {
-        out.push(format!(
-            "Russian roulette: the most efficient setting is {} ({:.2}x the efficiency 1/(relMSE x time) of no roulette: \
-             {:.3} s against {:.3} s, relMSE {:.3e} against {:.3e}).",
-            best.setting,
-            best.efficiency() / off.efficiency(),
-            best.seconds(),
-            off.seconds(),
-            best.metrics.rel_mse,
-            off.metrics.rel_mse,
-        ));
-    }
+    out.extend(spp_sentence(run));
+    out.extend(depth_sentence(run, curve));
+    out.extend(roulette_sentence(run, curve));
     out.extend(bvh_sentence(run));
     out.extend(traversal_sentence(run));
     out
 }
 
+fn spp_sentence(run: &Run) -> Option<String> {
+    let spp: Vec<&Row> = run.rows_of(Knob::Spp).collect();
+    if spp.len() < 2 {
+        return None;
+    }
+    let n = |r: &Row| f64::from(r.settings.samples_per_pixel);
+    let fit = |y: &dyn Fn(&Row) -> f64| {
+        loglog_slope(&spp.iter().map(|r| (n(r), y(r))).collect::<Vec<_>>())
+    };
+    let (rmse_slope, time_slope) = (fit(&|r| r.metrics.rmse), fit(&|r| r.seconds()));
+    let (first, last) = (spp[0], spp[spp.len() - 1]);
+    let mut s = format!(
+        "Samples: RMSE falls as spp^{rmse_slope:.3} from {} to {} spp (Monte Carlo predicts -0.5) while time \
+         grows as spp^{time_slope:.3}, so halving the error costs {:.1}x the time. {} spp take {:.4} s for RMSE \
+         {:.3e} (relMSE {:.3e}); {} spp take {:.3} s for RMSE {:.3e} (relMSE {:.3e}).",
+        first.settings.samples_per_pixel,
+        last.settings.samples_per_pixel,
+        2f64.powf(-time_slope / rmse_slope),
+        first.settings.samples_per_pixel,
+        first.seconds(),
+        first.metrics.rmse,
+        first.metrics.rel_mse,
+        last.settings.samples_per_pixel,
+        last.seconds(),
+        last.metrics.rmse,
+        last.metrics.rel_mse,
+    );
+    let noise = run.reference.noise_mse;
+    if noise > 0.0 {
+        let net = fit(&|r| (r.metrics.mse - noise).max(0.0).sqrt());
+        s += &format!(
+            " Net of the reference's own noise the slope is {net:.3}; that noise is {:.0}% of the RMSE at {} spp.",
+            100.0 * (noise / last.metrics.mse).sqrt(),
+            last.settings.samples_per_pixel,
+        );
+    }
+    Some(s)
+}
+
+fn depth_sentence(run: &Run, curve: Option<&Curve>) -> Option<String> {
+    let depth: Vec<&Row> = run.rows_of(Knob::Depth).collect();
+    let unlimited = depth.iter().find(|r| r.settings.max_depth.is_none())?;
+    let capped: Vec<&Row> = depth
+        .iter()
+        .copied()
+        .filter(|r| r.settings.max_depth.is_some())
+        .collect();
+    let shallowest = capped.first()?;
+    let mut s = format!(
+        "Depth: a cap at {} makes the image {} on average, a bias no number of samples removes.",
+        shallowest.setting,
+        brightness(shallowest.metrics.mean_bias()),
+    );
+    s += &match capped.iter().find(|r| r.metrics.mean_bias().abs() < 0.01) {
+        Some(close) => format!(
+            " The shallowest cap within 1% of the reference's mean brightness is {}, at {:.0}% of unlimited depth's time.",
+            close.setting,
+            100.0 * close.seconds() / unlimited.seconds(),
+        ),
+        None => " No cap measured comes within 1% of the reference's mean brightness.".to_owned(),
+    };
+    if let Some(curve) = curve {
+        s += &beats_more_samples(curve, &capped, "unlimited depth");
+    }
+    Some(s)
+}
+
+fn roulette_sentence(run: &Run, curve: Option<&Curve>) -> Option<String> {
+    let roulette: Vec<&Row> = run.rows_of(Knob::Roulette).collect();
+    let off = roulette
+        .iter()
+        .find(|r| r.settings.russian_roulette_depth.is_none())?;
+    let best = roulette
+        .iter()
+        .max_by(|a, b| a.efficiency().total_cmp(&b.efficiency()))?;
+    let mut s = format!(
+        "Russian roulette: the most efficient setting is {} ({:.2}x the efficiency 1/(relMSE x time) of no \
+         roulette: {:.3} s against {:.3} s, relMSE {:.3e} against {:.3e}).",
+        best.setting,
+        best.efficiency() / off.efficiency(),
+        best.seconds(),
+        off.seconds(),
+        best.metrics.rel_mse,
+        off.metrics.rel_mse,
+    );
+    if let Some(curve) = curve {
+        s += &beats_more_samples(curve, &roulette, "the baseline");
+    }
+    Some(s)
+}
+
+/// " At equal time, A and B beat rendering more samples at WHAT, and C does not. For its relMSE
+/// the baseline needs ...": the rungs set against the spp ladder, and the equal-error numbers of
+/// the most efficient rung.
+fn beats_more_samples(curve: &Curve, rows: &[&Row], what: &str) -> String {
+    let judged: Vec<(&Row, bool)> = rows
+        .iter()
+        .filter_map(|r| curve.beaten_by(r).map(|won| (*r, won)))
+        .collect();
+    let names = |won: bool| -> Vec<&str> {
+        judged
+            .iter()
+            .filter(|(_, w)| *w == won)
+            .map(|(r, _)| r.setting.as_str())
+            .collect()
+    };
+    let (won, lost) = (names(true), names(false));
+    let verb = |rungs: &[&str], one: &'static str, many: &'static str| {
+        if rungs.len() == 1 { one } else { many }
+    };
+    let mut s = match (won.is_empty(), lost.is_empty()) {
+        (true, true) => return String::new(),
+        (false, true) => {
+            format!(" At equal time, every rung beats rendering more samples at {what}.")
+        }
+        (true, false) => format!(" At equal time, no rung beats rendering more samples at {what}."),
+        (false, false) => format!(
+            " At equal time, {} {} rendering more samples at {what}, and {} {} not.",
+            join_and(won.iter().copied()),
+            verb(&won, "beats", "beat"),
+            join_and(lost.iter().copied()),
+            verb(&lost, "does", "do"),
+        ),
+    };
+    if let Some(best) = rows
+        .iter()
+        .max_by(|a, b| a.efficiency().total_cmp(&b.efficiency()))
+    {
+        s += &format!(
+            " At equal error, {} reaches relMSE {:.3e} in {:.3} s, where more samples at the baseline need {} s.",
+            best.setting,
+            best.metrics.rel_mse,
+            best.seconds(),
+            curve.time_for(best.metrics.rel_mse),
+        );
+    }
+    s
+}
+
+/// "a", "a and b", "a, b and c".
+fn join_and<'a>(names: impl Iterator<Item = &'a str>) -> String {
+    let names: Vec<&str> = names.collect();
+    match names.split_last() {
+        None => String::new(),
+        Some((last, [])) => (*last).to_owned(),
+        Some((last, rest)) => format!("{} and {last}", rest.join(", ")),
+    }
+}
+
 /// "12.3% darker" or "0.4% brighter".
 fn brightness(bias: f64) -> String {
-    format!("{:.1}% {}", 100.0 * bias.abs(), if bias < 0.0 { "darker" } else { "brighter" })
+    format!(
+        "{:.1}% {}",
+        100.0 * bias.abs(),
+        if bias < 0.0 { "darker" } else { "brighter" }
+    )
 }
 
 fn bvh_sentence(run: &Run) -> Option<String> {
     let rows: Vec<&Row> = run.rows_of(Knob::Bvh).collect();
-    let fastest = rows.iter().min_by(|a, b| a.seconds().total_cmp(&b.seconds()))?;
-    let slowest = rows.iter().max_by(|a, b| a.seconds().total_cmp(&b.seconds()))?;
-    let changed: Vec<&str> = rows.iter().filter(|r| !r.note.starts_with("bit-identical")).map(|r| r.setting.as_str()).collect();
+    let fastest = rows
+        .iter()
+        .min_by(|a, b| a.seconds().total_cmp(&b.seconds()))?;
+    let slowest = rows
+        .iter()
+        .max_by(|a, b| a.seconds().total_cmp(&b.seconds()))?;
+    let changed: Vec<&str> = rows
+        .iter()
+        .filter(|r| !r.note.starts_with("bit-identical"))
+        .map(|r| r.setting.as_str())
+        .collect();
     let images = if changed.is_empty() {
-        format!("All {} build qualities gave bit-identical images.", rows.len())
+        format!(
+            "All {} build qualities gave bit-identical images.",
+            rows.len()
+        )
     } else {
-        format!("The images of {} DIFFER from the default quality's: the BVH must never change an image.", changed.join(", "))
+        format!(
+            "The images of {} DIFFER from the default quality's: the BVH must never change an image.",
+            changed.join(", ")
+        )
     };
     Some(format!(
         "BVH: {images} Builds took {:.2e} to {:.2e} s; build plus render is lowest for {} ({:.4} s, of which the build is \
          {:.1}%) and highest for {} ({:.4} s).",
-        rows.iter().map(|r| r.build_seconds).fold(f64::INFINITY, f64::min),
+        rows.iter()
+            .map(|r| r.build_seconds)
+            .fold(f64::INFINITY, f64::min),
         rows.iter().map(|r| r.build_seconds).fold(0.0, f64::max),
         fastest.setting,
         fastest.seconds(),
@@ -237,21 +349,42 @@ fn bvh_sentence(run: &Run) -> Option<String> {
 }
 
 fn traversal_sentence(run: &Run) -> Option<String> {
-    let robust = run.rows_of(Knob::Traversal).find(|r| r.traversal == Traversal::Robust)?;
-    let obvhs = run.rows_of(Knob::Traversal).find(|r| r.traversal == Traversal::Obvhs)?;
+    let robust = run
+        .rows_of(Knob::Traversal)
+        .find(|r| r.traversal == Traversal::Robust)?;
+    let obvhs = run
+        .rows_of(Knob::Traversal)
+        .find(|r| r.traversal == Traversal::Obvhs)?;
     let mut s = format!(
         "Traversal: obvhs's own traversal renders at {:.2} Mrays/s against {:.2} for ours ({:.2}x), and its image {}.",
         obvhs.mrays_per_second(),
         robust.mrays_per_second(),
         obvhs.mrays_per_second() / robust.mrays_per_second(),
-        obvhs.note.replace("differs from the robust traversal's image", "differs from ours").replace("bit-identical to the robust traversal's image", "is bit-identical to ours"),
+        obvhs
+            .note
+            .replace(
+                "differs from the robust traversal's image",
+                "differs from ours"
+            )
+            .replace(
+                "bit-identical to the robust traversal's image",
+                "is bit-identical to ours"
+            ),
     );
-    if let (Some(r), Some(o)) = (run.leak_check(Traversal::Robust), run.leak_check(Traversal::Obvhs)) {
+    if let (Some(r), Some(o)) = (
+        run.leak_check(Traversal::Robust),
+        run.leak_check(Traversal::Obvhs),
+    ) {
         let counts = |c: &LeakCheck| {
             format!(
                 "{} of {} rays aimed at edges and vertices leaked, {} of {} bounces leaked and {} hit the triangle they \
                  left ({:.2} Mrays/s)",
-                c.edge_leaks, c.edge_rays, c.bounce_leaks, c.bounce_rays, c.self_hits, c.mrays_per_second()
+                c.edge_leaks,
+                c.edge_rays,
+                c.bounce_leaks,
+                c.bounce_rays,
+                c.self_hits,
+                c.mrays_per_second()
             )
         };
         s += &format!(
@@ -270,16 +403,32 @@ mod tests {
 
     #[test]
     fn the_slope_of_a_power_law_is_its_exponent() {
-        let points: Vec<(f64, f64)> = (0..8).map(|k| (2f64.powi(k), 3.0 * 2f64.powi(k).powf(-0.5))).collect();
+        let points: Vec<(f64, f64)> = (0..8)
+            .map(|k| (2f64.powi(k), 3.0 * 2f64.powi(k).powf(-0.5)))
+            .collect();
         assert!((loglog_slope(&points) + 0.5).abs() < 1e-12);
         assert!(loglog_slope(&points[..1]).is_nan());
     }
 
     #[test]
+    fn names_are_joined_as_in_a_sentence() {
+        assert_eq!(join_and(["a"].into_iter()), "a");
+        assert_eq!(join_and(["a", "b", "c"].into_iter()), "a, b and c");
+        assert_eq!(join_and(std::iter::empty()), "");
+    }
+
+    #[test]
     fn interpolation_is_linear_in_log_log() {
-        let curve = Curve { by_time: vec![(1.0, 1.0), (4.0, 0.5)], by_error: vec![(1.0, 1.0), (4.0, 0.5)] };
-        assert!(matches!(curve.error_at(2.0), Estimate::Within(e) if (e - 0.5f64.sqrt()).abs() < 1e-12));
-        assert!(matches!(curve.time_for(0.5f64.sqrt()), Estimate::Within(t) if (t - 2.0).abs() < 1e-12));
+        let curve = Curve {
+            by_time: vec![(1.0, 1.0), (4.0, 0.5)],
+            by_error: vec![(1.0, 1.0), (4.0, 0.5)],
+        };
+        assert!(
+            matches!(curve.error_at(2.0), Estimate::Within(e) if (e - 0.5f64.sqrt()).abs() < 1e-12)
+        );
+        assert!(
+            matches!(curve.time_for(0.5f64.sqrt()), Estimate::Within(t) if (t - 2.0).abs() < 1e-12)
+        );
         assert_eq!(curve.error_at(0.5), Estimate::Above(1.0));
         assert_eq!(curve.error_at(8.0), Estimate::Below(0.5));
         assert_eq!(curve.time_for(2.0), Estimate::Below(1.0));

@@ -15,13 +15,12 @@
 //! - `bench`: the timed render of a whole frame, and the one-knob-at-a-time ladders.
 //! - `reference`: the reference image: analytic, cached, or rendered and cached.
 //! - `leaks`: robust against obvhs's traversal on a closed sphere: leaks and self-hits.
-//! - `report`: accuracy.csv and accuracy.md; `findings`: the comparisons in sentences;
-//!   `plot`: accuracy.svg.
+//! - `report`: accuracy.csv, accuracy.md and accuracy.svg.
+//! - `findings`: the equal-time and equal-error comparisons, in sentences.
 
 mod bench;
 mod findings;
 mod leaks;
-mod plot;
 mod reference;
 mod report;
 
@@ -99,7 +98,13 @@ pub enum Knob {
 }
 
 impl Knob {
-    pub const ALL: [Knob; 5] = [Knob::Spp, Knob::Depth, Knob::Roulette, Knob::Bvh, Knob::Traversal];
+    pub const ALL: [Knob; 5] = [
+        Knob::Spp,
+        Knob::Depth,
+        Knob::Roulette,
+        Knob::Bvh,
+        Knob::Traversal,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -113,10 +118,21 @@ impl Knob {
 }
 
 pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
-    ensure!(args.max_spp >= 1 && args.knob_spp >= 1, "samples per pixel must be at least 1");
-    ensure!(args.reference_spp.is_none_or(|n| n >= 2), "the reference needs at least 2 samples per pixel");
+    ensure!(
+        args.max_spp >= 1 && args.knob_spp >= 1,
+        "samples per pixel must be at least 1"
+    );
+    ensure!(
+        args.reference_spp.is_none_or(|n| n >= 2),
+        "the reference needs at least 2 samples per pixel"
+    );
     let mut scene = tracer::scene::load(&args.scene)?;
-    let (width, height) = image_size(args.width, args.height, scene.settings.width, scene.settings.height)?;
+    let (width, height) = image_size(
+        args.width,
+        args.height,
+        scene.settings.width,
+        scene.settings.height,
+    )?;
     let scene_settings = scene.settings.clone();
     scene.settings = RenderSettings {
         width,
@@ -128,12 +144,17 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
         frames: 1,
     };
     let files_hash = reference::hash_scene_files(&args.scene, &scene.files)?;
-    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let threads = args
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
     let effects = Effects::of(&scene);
     let accel = Accel::build(&scene.triangles, BuildQuality::default());
     let mut world = World::new(scene, accel, effects);
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
 
     println!(
         "{}: {}x{}, {} triangles, effects {}, {} threads; baseline: unlimited depth, roulette from depth {}, robust traversal, {:?} BVH",
@@ -146,10 +167,20 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
         world.scene.settings.russian_roulette_depth.unwrap_or(0),
         BuildQuality::default(),
     );
-    let reference_spp = args.reference_spp.unwrap_or(args.max_spp.saturating_mul(4)).max(2);
+    let reference_spp = args
+        .reference_spp
+        .unwrap_or(args.max_spp.saturating_mul(4))
+        .max(2);
     let reference = match args.analytic_mean {
         Some(Rgb(mean)) => reference::Reference::analytic(width, height, mean),
-        None => reference::Reference::cached_or_rendered(&args.out, &args.scene, files_hash, reference_spp, &mut world, &pool)?,
+        None => reference::Reference::cached_or_rendered(
+            &args.out,
+            &args.scene,
+            files_hash,
+            reference_spp,
+            &mut world,
+            &pool,
+        )?,
     };
     println!("reference: {}", reference.describe());
 
@@ -195,17 +226,27 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
 
 /// The image size: the flags, or the scene's size scaled so its longer side is [`DEFAULT_SIZE`]
 /// pixels; a single flag keeps the scene's aspect ratio.
-fn image_size(width: Option<u32>, height: Option<u32>, scene_w: u32, scene_h: u32) -> anyhow::Result<(u32, u32)> {
+fn image_size(
+    width: Option<u32>,
+    height: Option<u32>,
+    scene_w: u32,
+    scene_h: u32,
+) -> anyhow::Result<(u32, u32)> {
     let aspect = f64::from(scene_w) / f64::from(scene_h);
     let scaled = |v: f64| (v.round() as u32).max(1);
     let size = match (width, height) {
         (Some(w), Some(h)) => (w, h),
         (Some(w), None) => (w, scaled(f64::from(w) / aspect)),
         (None, Some(h)) => (scaled(f64::from(h) * aspect), h),
-        (None, None) if scene_w >= scene_h => (DEFAULT_SIZE, scaled(f64::from(DEFAULT_SIZE) / aspect)),
+        (None, None) if scene_w >= scene_h => {
+            (DEFAULT_SIZE, scaled(f64::from(DEFAULT_SIZE) / aspect))
+        }
         (None, None) => (scaled(f64::from(DEFAULT_SIZE) * aspect), DEFAULT_SIZE),
     };
-    ensure!(size.0 > 0 && size.1 > 0, "the image must be at least 1x1 pixels");
+    ensure!(
+        size.0 > 0 && size.1 > 0,
+        "the image must be at least 1x1 pixels"
+    );
     Ok(size)
 }
 

@@ -74,7 +74,11 @@ struct Sidecar {
 impl Reference {
     pub fn analytic(width: u32, height: u32, mean: [f32; 3]) -> Self {
         Reference {
-            image: RgbImage { width, height, pixels: vec![mean; width as usize * height as usize] },
+            image: RgbImage {
+                width,
+                height,
+                pixels: vec![mean; width as usize * height as usize],
+            },
             source: Source::Analytic(mean),
             spp: 0,
             noise_mse: 0.0,
@@ -113,14 +117,21 @@ impl Reference {
         };
         println!("rendering the reference: {spp} spp in two halves with seeds of its own ...");
         let half = |seed: u64, samples: u32, world: &mut World| {
-            world.scene.settings = RenderSettings { samples_per_pixel: samples, seed, ..baseline.clone() };
+            world.scene.settings = RenderSettings {
+                samples_per_pixel: samples,
+                seed,
+                ..baseline.clone()
+            };
             bench::render(world, pool)
         };
         let a = half(key.seeds[0], spp / 2, world);
         let b = half(key.seeds[1], spp - spp / 2, world);
         world.scene.settings = baseline;
         // Weighted by sample count, so an odd `spp` still gives the mean of all its samples.
-        let (wa, wb) = ((spp / 2) as f32 / spp as f32, (spp - spp / 2) as f32 / spp as f32);
+        let (wa, wb) = (
+            (spp / 2) as f32 / spp as f32,
+            (spp - spp / 2) as f32 / spp as f32,
+        );
         let pixels: Vec<[f32; 3]> = a
             .image
             .pixels
@@ -128,16 +139,37 @@ impl Reference {
             .zip(&b.image.pixels)
             .map(|(p, q)| std::array::from_fn(|c| wa * p[c] + wb * q[c]))
             .collect();
-        let (noise_mse, noise_rel_mse) = half_difference_noise(&a.image.pixels, &b.image.pixels, &pixels);
-        let image = RgbImage { width: key.width, height: key.height, pixels };
+        let (noise_mse, noise_rel_mse) =
+            half_difference_noise(&a.image.pixels, &b.image.pixels, &pixels);
+        let image = RgbImage {
+            width: key.width,
+            height: key.height,
+            pixels,
+        };
         let render_seconds = a.seconds + b.seconds;
         // The old sidecar goes first: a crash before the new one is written leaves no cache.
         let _ = std::fs::remove_file(&sidecar_path);
         tracer::output::write_exr(&exr_path, image.width, image.height, &image.pixels)?;
-        let sidecar = Sidecar { scene: scene.display().to_string(), key, render_seconds, noise_mse, noise_rel_mse };
-        std::fs::write(&sidecar_path, serde_json::to_string_pretty(&sidecar)? + "\n")
-            .with_context(|| format!("cannot write {}", sidecar_path.display()))?;
-        Ok(Reference { image, source: Source::Rendered { stale }, spp, noise_mse, noise_rel_mse, render_seconds })
+        let sidecar = Sidecar {
+            scene: scene.display().to_string(),
+            key,
+            render_seconds,
+            noise_mse,
+            noise_rel_mse,
+        };
+        std::fs::write(
+            &sidecar_path,
+            serde_json::to_string_pretty(&sidecar)? + "\n",
+        )
+        .with_context(|| format!("cannot write {}", sidecar_path.display()))?;
+        Ok(Reference {
+            image,
+            source: Source::Rendered { stale },
+            spp,
+            noise_mse,
+            noise_rel_mse,
+            render_seconds,
+        })
     }
 
     pub fn image(&self) -> &RgbImage {
@@ -160,10 +192,15 @@ impl Reference {
             )
         };
         match &self.source {
-            Source::Analytic(m) => format!("analytic, every pixel ({}, {}, {}) exactly", m[0], m[1], m[2]),
+            Source::Analytic(m) => format!(
+                "analytic, every pixel ({}, {}, {}) exactly",
+                m[0], m[1], m[2]
+            ),
             Source::Cached => format!("cached ({})", rendered()),
             Source::Rendered { stale: None } => format!("rendered ({})", rendered()),
-            Source::Rendered { stale: Some(why) } => format!("rendered, the cache was stale: {why} ({})", rendered()),
+            Source::Rendered { stale: Some(why) } => {
+                format!("rendered, the cache was stale: {why} ({})", rendered())
+            }
         }
     }
 }
@@ -187,13 +224,21 @@ fn half_difference_noise(a: &[[f32; 3]], b: &[[f32; 3]], mean: &[[f32; 3]]) -> (
 /// The cached reference, or why it cannot be used (missing, unreadable, or made differently).
 fn read_cache(exr: &Path, sidecar: &Path, key: &Key) -> Result<Reference, Option<String>> {
     let text = std::fs::read_to_string(sidecar).map_err(|_| None)?;
-    let cached: Sidecar = serde_json::from_str(&text).map_err(|e| Some(format!("{}: {e}", sidecar.display())))?;
+    let cached: Sidecar =
+        serde_json::from_str(&text).map_err(|e| Some(format!("{}: {e}", sidecar.display())))?;
     if cached.key != *key {
         return Err(Some(key_differences(&cached.key, key)));
     }
     let image = tracer::output::read_exr(exr).map_err(|e| Some(e.to_string()))?;
     if (image.width, image.height) != (key.width, key.height) {
-        return Err(Some(format!("{} is {}x{}, not {}x{}", exr.display(), image.width, image.height, key.width, key.height)));
+        return Err(Some(format!(
+            "{} is {}x{}, not {}x{}",
+            exr.display(),
+            image.width,
+            image.height,
+            key.width,
+            key.height
+        )));
     }
     Ok(Reference {
         image,
@@ -208,14 +253,19 @@ fn read_cache(exr: &Path, sidecar: &Path, key: &Key) -> Result<Reference, Option
 /// "width 64 -> 128, spp 256 -> 4096": the fields of the key that changed.
 fn key_differences(cached: &Key, wanted: &Key) -> String {
     let (old, new) = (serde_json::to_value(cached), serde_json::to_value(wanted));
-    let (Ok(serde_json::Value::Object(old)), Ok(serde_json::Value::Object(new))) = (old, new) else {
+    let (Ok(serde_json::Value::Object(old)), Ok(serde_json::Value::Object(new))) = (old, new)
+    else {
         return "its settings differ".to_owned();
     };
     let mut out = String::new();
     for (name, value) in &new {
         let before = old.get(name).cloned().unwrap_or(serde_json::Value::Null);
         if before != *value {
-            let _ = write!(out, "{}{name} {before} -> {value}", if out.is_empty() { "" } else { ", " });
+            let _ = write!(
+                out,
+                "{}{name} {before} -> {value}",
+                if out.is_empty() { "" } else { ", " }
+            );
         }
     }
     out
@@ -227,7 +277,8 @@ pub fn hash_scene_files(scene: &Path, files: &[String]) -> anyhow::Result<String
     let mut hasher = blake3::Hasher::new();
     for name in files {
         let path = root.join(name);
-        let bytes = std::fs::read(&path).with_context(|| format!("cannot read {} to hash it", path.display()))?;
+        let bytes = std::fs::read(&path)
+            .with_context(|| format!("cannot read {} to hash it", path.display()))?;
         hasher.update(name.as_bytes());
         hasher.update(&(name.len() as u64).to_le_bytes());
         hasher.update(&(bytes.len() as u64).to_le_bytes());
@@ -264,7 +315,11 @@ mod tests {
             effects: "diffuse".into(),
             tessera_version: "0.1.0".into(),
         };
-        let other = Key { width: 128, spp: 4096, ..key.clone() };
+        let other = Key {
+            width: 128,
+            spp: 4096,
+            ..key.clone()
+        };
         let differences = key_differences(&key, &other);
         let mut parts: Vec<&str> = differences.split(", ").collect();
         parts.sort();

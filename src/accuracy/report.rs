@@ -9,11 +9,11 @@
 
 use super::Knob;
 use super::bench::{ROULETTE_DEPTH_CAP, Row};
-use super::findings::{self, Curve, Estimate};
+use super::findings::{self, Curve};
 use super::leaks::LeakCheck;
-use super::plot;
 use super::reference::{Reference, Source};
 use anyhow::Context;
+use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::Path;
 use tracer::geometry::Traversal;
@@ -53,7 +53,7 @@ pub fn write_all(out: &Path, run: &Run) -> anyhow::Result<()> {
     };
     write("accuracy.csv", csv(run))?;
     write("accuracy.md", markdown(run))?;
-    plot::write_svg(&out.join("accuracy.svg"), run)
+    write_svg(&out.join("accuracy.svg"), run)
 }
 
 const CSV_HEADER: &str = "knob,setting,spp,max_depth,russian_roulette_depth,bvh,traversal,build_seconds,\
@@ -66,13 +66,17 @@ pub fn csv(run: &Run) -> String {
     out.push('\n');
     for r in run.rows {
         let m = &r.metrics;
-        let check = (r.knob == Knob::Traversal).then(|| run.leak_check(r.traversal)).flatten();
+        let check = (r.knob == Knob::Traversal)
+            .then(|| run.leak_check(r.traversal))
+            .flatten();
         let fields = [
             r.knob.name().to_owned(),
             r.setting.clone(),
             r.settings.samples_per_pixel.to_string(),
             depth_name(r.settings.max_depth),
-            r.settings.russian_roulette_depth.map_or("off".to_owned(), |d| d.to_string()),
+            r.settings
+                .russian_roulette_depth
+                .map_or("off".to_owned(), |d| d.to_string()),
             format!("{:?}", r.bvh).to_lowercase(),
             format!("{:?}", r.traversal).to_lowercase(),
             format!("{:.6}", r.build_seconds),
@@ -88,7 +92,9 @@ pub fn csv(run: &Run) -> String {
             format!("{:.6}", m.mean_bias()),
             format!("{:.6e}", r.efficiency()),
             check.map_or(String::new(), |c| c.rays.to_string()),
-            check.map_or(String::new(), |c| (c.edge_leaks + c.aimed_leaks).to_string()),
+            check.map_or(String::new(), |c| {
+                (c.edge_leaks + c.aimed_leaks).to_string()
+            }),
             check.map_or(String::new(), |c| c.bounce_leaks.to_string()),
             check.map_or(String::new(), |c| c.self_hits.to_string()),
             r.note.clone(),
@@ -101,7 +107,11 @@ pub fn csv(run: &Run) -> String {
 }
 
 fn csv_field(field: &str) -> String {
-    if field.contains([',', '"', '\n']) { format!("\"{}\"", field.replace('"', "\"\"")) } else { field.to_owned() }
+    if field.contains([',', '"', '\n']) {
+        format!("\"{}\"", field.replace('"', "\"\""))
+    } else {
+        field.to_owned()
+    }
 }
 
 pub fn depth_name(depth: Option<u32>) -> String {
@@ -136,10 +146,14 @@ pub fn markdown(run: &Run) -> String {
         b.seed,
         s.samples_per_pixel,
         depth_name(s.max_depth),
-        s.russian_roulette_depth.map_or("off".to_owned(), |d| format!("from depth {d}")),
+        s.russian_roulette_depth
+            .map_or("off".to_owned(), |d| format!("from depth {d}")),
     );
     let _ = writeln!(md, "**Reference**: {}.\n", run.reference.describe());
-    let _ = writeln!(md, "![relMSE against time, log-log, one curve per knob](accuracy.svg)\n");
+    let _ = writeln!(
+        md,
+        "![relMSE against time, log-log, one curve per knob](accuracy.svg)\n"
+    );
     let curve = Curve::of(run);
     let findings = findings::sentences(run, curve.as_ref());
     if !findings.is_empty() {
@@ -150,7 +164,11 @@ pub fn markdown(run: &Run) -> String {
         md.push('\n');
     }
     let versus = |r: &Row| match &curve {
-        Some(c) => format!("{} | {}", c.error_at(r.seconds()), c.time_for(r.metrics.rel_mse)),
+        Some(c) => format!(
+            "{} | {}",
+            c.error_at(r.seconds()),
+            c.time_for(r.metrics.rel_mse)
+        ),
         None => "- | -".to_owned(),
     };
     let common = |r: &Row| {
@@ -180,24 +198,46 @@ pub fn markdown(run: &Run) -> String {
         "Samples per pixel".into(),
         &format!("spp | {COMMON} | Mrays/s"),
         run.rows_of(Knob::Spp)
-            .map(|r| format!("{} | {} | {:.2}", r.settings.samples_per_pixel, common(r), r.mrays_per_second()))
+            .map(|r| {
+                format!(
+                    "{} | {} | {:.2}",
+                    r.settings.samples_per_pixel,
+                    common(r),
+                    r.mrays_per_second()
+                )
+            })
             .collect(),
     );
     table(
         format!("Maximum path depth, at {} spp", run.knob_spp),
         &format!("max depth | {COMMON} | {VERSUS}"),
-        run.rows_of(Knob::Depth).map(|r| format!("{} | {} | {}", r.setting, common(r), versus(r))).collect(),
+        run.rows_of(Knob::Depth)
+            .map(|r| format!("{} | {} | {}", r.setting, common(r), versus(r)))
+            .collect(),
     );
     let roulette: Vec<&Row> = run.rows_of(Knob::Roulette).collect();
-    let best = roulette.iter().map(|r| r.efficiency()).fold(0.0f64, f64::max);
+    let best = roulette
+        .iter()
+        .map(|r| r.efficiency())
+        .fold(0.0f64, f64::max);
     table(
-        format!("Russian roulette, at {} spp, depth capped at {ROULETTE_DEPTH_CAP}", run.knob_spp),
+        format!(
+            "Russian roulette, at {} spp, depth capped at {ROULETTE_DEPTH_CAP}",
+            run.knob_spp
+        ),
         &format!("roulette | {COMMON} | efficiency 1/(relMSE x s) | of the best | {VERSUS}"),
         roulette
             .iter()
             .map(|r| {
                 let e = r.efficiency();
-                format!("{} | {} | {:.4e} | {:.2} | {}", r.setting, common(r), e, e / best, versus(r))
+                format!(
+                    "{} | {} | {:.4e} | {:.2} | {}",
+                    r.setting,
+                    common(r),
+                    e,
+                    e / best,
+                    versus(r)
+                )
             })
             .collect(),
     );
@@ -205,21 +245,57 @@ pub fn markdown(run: &Run) -> String {
         format!("BVH build quality, at {} spp", run.knob_spp),
         &format!("quality | build (s) | render (s) | {COMMON} | image"),
         run.rows_of(Knob::Bvh)
-            .map(|r| format!("{} | {:.6} | {:.4} | {} | {}", r.setting, r.build_seconds, r.render_seconds, common(r), r.note))
+            .map(|r| {
+                format!(
+                    "{} | {:.6} | {:.4} | {} | {}",
+                    r.setting,
+                    r.build_seconds,
+                    r.render_seconds,
+                    common(r),
+                    r.note
+                )
+            })
             .collect(),
     );
     table(
-        format!("Traversal, at {} spp, and the closed-sphere check", run.knob_spp),
-        &format!("traversal | {COMMON} | Mrays/s | image | sphere rays | sphere Mrays/s | primary leaks | bounce leaks | self-hits"),
+        format!(
+            "Traversal, at {} spp, and the closed-sphere check",
+            run.knob_spp
+        ),
+        &format!(
+            "traversal | {COMMON} | Mrays/s | image | sphere rays | sphere Mrays/s | primary leaks | bounce leaks | self-hits"
+        ),
         run.rows_of(Knob::Traversal)
             .map(|r| {
-                let check = run.leak_check(r.traversal).map_or("- | - | - | - | -".to_owned(), |c| {
-                    let primary = format!("{} of {}", c.edge_leaks + c.aimed_leaks, c.edge_rays + c.aimed_rays);
-                    let bounce = format!("{} of {}", c.bounce_leaks, c.bounce_rays);
-                    format!("{} | {:.2} | {primary} | {bounce} | {}", c.rays, c.mrays_per_second(), c.self_hits)
-                });
-                let image = if r.note.is_empty() { "(the baseline)" } else { r.note.as_str() };
-                format!("{} | {} | {:.2} | {} | {}", r.setting, common(r), r.mrays_per_second(), image, check)
+                let check =
+                    run.leak_check(r.traversal)
+                        .map_or("- | - | - | - | -".to_owned(), |c| {
+                            let primary = format!(
+                                "{} of {}",
+                                c.edge_leaks + c.aimed_leaks,
+                                c.edge_rays + c.aimed_rays
+                            );
+                            let bounce = format!("{} of {}", c.bounce_leaks, c.bounce_rays);
+                            format!(
+                                "{} | {:.2} | {primary} | {bounce} | {}",
+                                c.rays,
+                                c.mrays_per_second(),
+                                c.self_hits
+                            )
+                        });
+                let image = if r.note.is_empty() {
+                    "(the baseline)"
+                } else {
+                    r.note.as_str()
+                };
+                format!(
+                    "{} | {} | {:.2} | {} | {}",
+                    r.setting,
+                    common(r),
+                    r.mrays_per_second(),
+                    image,
+                    check
+                )
             })
             .collect(),
     );
@@ -236,12 +312,139 @@ pub fn markdown(run: &Run) -> String {
     md
 }
 
-impl std::fmt::Display for Estimate {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match *self {
-            Estimate::Within(v) => write!(f, "{v:.3e}"),
-            Estimate::Below(v) => write!(f, "< {v:.3e}"),
-            Estimate::Above(v) => write!(f, "> {v:.3e}"),
+const SIZE: (u32, u32) = (960, 640);
+
+/// accuracy.svg: relative MSE against time, log-log, one curve per knob. Log-log because both
+/// axes span orders of magnitude and because Monte Carlo noise is a straight line there (slope -1
+/// against time when time grows with samples), so a knob that beats "just render longer" shows as
+/// a point below the spp curve, and a bias as a curve that flattens. Each point is labelled with
+/// its knob value; the reference's own noise is drawn as a dashed floor.
+pub fn write_svg(path: &Path, run: &Run) -> anyhow::Result<()> {
+    draw(path, run).map_err(|e| anyhow::anyhow!("cannot draw {}: {e}", path.display()))
+}
+
+fn draw(path: &Path, run: &Run) -> Result<(), Box<dyn std::error::Error>> {
+    let curves: Vec<(Knob, Vec<(f64, f64, String)>)> = Knob::ALL
+        .into_iter()
+        .map(|knob| {
+            let points = run
+                .rows_of(knob)
+                .filter(|r| r.seconds() > 0.0 && r.metrics.rel_mse > 0.0)
+                .map(|r| (r.seconds(), r.metrics.rel_mse, label(r)))
+                .collect::<Vec<_>>();
+            (knob, points)
+        })
+        .filter(|(_, points)| !points.is_empty())
+        .collect();
+    let root = SVGBackend::new(path, SIZE).into_drawing_area();
+    root.fill(&WHITE)?;
+    let floor = run.reference.noise_rel_mse;
+    let all = || curves.iter().flat_map(|(_, p)| p.iter());
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64);
+    for (x, y, _) in all() {
+        (x0, x1, y0, y1) = (x0.min(*x), x1.max(*x), y0.min(*y), y1.max(*y));
+    }
+    if floor > 0.0 {
+        (y0, y1) = (y0.min(floor), y1.max(floor));
+    }
+    if !x0.is_finite() || !y0.is_finite() {
+        // Nothing measured with a positive time and error: an empty chart says so.
+        (x0, x1, y0, y1) = (1e-3, 1.0, 1e-3, 1.0);
+    }
+    let (x0, x1, y0, y1) = (x0 / 1.5, x1 * 1.5, y0 / 1.5, y1 * 1.5);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "Error against time: {} ({}x{})",
+                run.scene, run.width, run.height
+            ),
+            ("sans-serif", 20),
+        )
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("seconds per frame (BVH: build + render)")
+        .y_desc("relMSE against the reference")
+        .x_labels(8)
+        .y_labels(8)
+        .max_light_lines(2)
+        .light_line_style(BLACK.mix(0.05))
+        .x_label_formatter(&|v| format!("{v:.0e}"))
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .draw()?;
+    for (knob, points) in &curves {
+        let color = colour(*knob);
+        let legend = match knob {
+            Knob::Spp => "samples per pixel".to_owned(),
+            other => format!("{} (at {} spp)", other.name(), run.knob_spp),
+        };
+        chart
+            .draw_series(
+                LineSeries::new(points.iter().map(|p| (p.0, p.1)), color.stroke_width(2))
+                    .point_size(3),
+            )?
+            .label(legend)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        // The BVH and traversal rungs sit on top of each other (same image, similar time): their
+        // labels would be a smudge, and the legend and the tables name them.
+        if matches!(knob, Knob::Spp | Knob::Depth | Knob::Roulette) {
+            chart.draw_series(points.iter().map(|(x, y, text)| {
+                Text::new(
+                    text.clone(),
+                    (*x, *y),
+                    ("sans-serif", 11).into_font().color(&color),
+                )
+            }))?;
         }
+    }
+    if floor > 0.0 {
+        chart
+            .draw_series(DashedLineSeries::new(
+                vec![(x0, floor), (x1, floor)],
+                6,
+                4,
+                BLACK.mix(0.5).stroke_width(1),
+            ))?
+            .label("reference's own noise")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// The short label beside a point: the knob's value alone (the legend names the knob).
+fn label(row: &Row) -> String {
+    match row.knob {
+        Knob::Spp => row.settings.samples_per_pixel.to_string(),
+        Knob::Depth => row
+            .settings
+            .max_depth
+            .map_or("unlimited".to_owned(), |d| d.to_string()),
+        Knob::Roulette => row
+            .settings
+            .russian_roulette_depth
+            .map_or("off".to_owned(), |d| format!("rr {d}")),
+        Knob::Bvh | Knob::Traversal => row.setting.clone(),
+    }
+}
+
+fn colour(knob: Knob) -> RGBColor {
+    match knob {
+        Knob::Spp => RGBColor(31, 119, 180),
+        Knob::Depth => RGBColor(214, 39, 40),
+        Knob::Roulette => RGBColor(44, 160, 44),
+        Knob::Bvh => RGBColor(255, 127, 14),
+        Knob::Traversal => RGBColor(148, 103, 189),
     }
 }

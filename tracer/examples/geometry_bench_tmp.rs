@@ -1,6 +1,16 @@
 // Throwaway measurement for the geometry report; deleted after use.
 use glam::Vec3;
 use std::time::Instant;
+
+/// This thread's CPU time in seconds (utime + stime from /proc), less sensitive to other
+/// processes sharing the two cores than wall time.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap();
+    let after = &stat[stat.rfind(')').unwrap() + 2..];
+    let f: Vec<&str> = after.split_whitespace().collect();
+    let ticks: f64 = f[11].parse::<f64>().unwrap() + f[12].parse::<f64>().unwrap();
+    ticks / 100.0
+}
 use tracer::geometry::*;
 use tracer::scene::Triangle;
 
@@ -46,7 +56,7 @@ fn sphere_escapes() {
         let tris: Vec<Triangle> = faces.iter().map(|f| Triangle { p: f.map(|i| vertices[i as usize] * scale + shift), n: None, uv: None, material: 0 }).collect();
         let accel = Accel::build(&tris, BuildQuality::Medium);
         let n = 2_000_000;
-        let (mut robust, mut theirs) = (0, 0);
+        let (mut robust, mut theirs) = (0, [0u32; 4]);
         for k in 0..n {
             let origin = shift + if k % 2 == 0 { Vec3::ZERO } else { Vec3::new(0.3, -0.2, 0.1) * scale };
             let f = &tris[(rng.next_u64() % tris.len() as u64) as usize];
@@ -54,9 +64,9 @@ fn sphere_escapes() {
             let r = Ray { origin, dir: target - origin, t_max: f32::INFINITY };
             let mut st = TraversalStats::default();
             robust += accel.intersect_with(&r, Traversal::Robust, &mut st).is_none() as u32;
-            theirs += accel.intersect_with(&r, Traversal::Obvhs, &mut st).is_none() as u32;
+            theirs[k % 4] += accel.intersect_with(&r, Traversal::Obvhs, &mut st).is_none() as u32;
         }
-        eprintln!("sphere ({} tris) scale {scale} shift {shift}: escapes out of {n}: robust {robust}, obvhs {theirs}", tris.len());
+        eprintln!("sphere ({} tris) scale {scale} shift {shift}: escapes out of {n}: robust {robust}, obvhs {theirs:?} (vertex, vertex, edge midpoint, random edge point)", tris.len());
     }
 }
 
@@ -77,13 +87,27 @@ fn main() {
     }
     eprintln!("loaded {} triangles in {:?}", triangles.len(), t.elapsed());
     let mut rng = Rng(42);
-    let rays: Vec<Ray> = (0..n_rays)
+    let mut rays: Vec<Ray> = (0..n_rays)
         .map(|_| Ray {
             origin: Vec3::new(rng.range(-0.95, 0.95), rng.range(0.05, 1.9), rng.range(-0.95, 0.95)),
             dir: rng.direction(),
             t_max: f32::INFINITY,
         })
         .collect();
+    if args.get(3).map(|s| s.as_str()) == Some("camera") {
+        // The reference camera: eye (0, 1, 3.9) toward (0, 1, 0), vertical fov 39.3077 degrees.
+        let n = (n_rays as f64).sqrt() as usize;
+        let tan = (39.3077f32.to_radians() / 2.0).tan();
+        rays.clear();
+        for j in 0..n {
+            for i in 0..n {
+                let x = ((i as f32 + 0.5) / n as f32 * 2.0 - 1.0) * tan;
+                let y = (1.0 - (j as f32 + 0.5) / n as f32 * 2.0) * tan;
+                rays.push(Ray { origin: Vec3::new(0.0, 1.0, 3.9), dir: Vec3::new(x, y, -1.0).normalize(), t_max: f32::INFINITY });
+            }
+        }
+        eprintln!("camera rays: {}", rays.len());
+    }
     let qualities: Vec<BuildQuality> = match args.get(2).map(|s| s.as_str()) {
         Some("medium") => vec![BuildQuality::Medium],
         _ => BuildQuality::ALL.to_vec(),
@@ -92,9 +116,9 @@ fn main() {
         let mut build = std::time::Duration::MAX;
         let mut accel = None;
         for _ in 0..3 {
-            let t = Instant::now();
+            let t = cpu_seconds();
             accel = Some(Accel::build(&triangles, quality));
-            build = build.min(t.elapsed());
+            build = build.min(std::time::Duration::from_secs_f64(cpu_seconds() - t));
         }
         let accel = accel.unwrap();
         eprintln!("{quality:?}: build {:.2} s, {:?}", build.as_secs_f64(), accel);
@@ -103,19 +127,19 @@ fn main() {
           let (mut stats, mut ostats, mut hits, mut occ) = Default::default();
           for _rep in 0..3 {
             stats = TraversalStats::default();
-            let t = Instant::now();
+            let t = cpu_seconds();
             hits = 0;
             for r in &rays {
                 hits += accel.intersect_with(r, traversal, &mut stats).is_some() as usize;
             }
-            secs = secs.min(t.elapsed().as_secs_f64());
-            let t = Instant::now();
+            secs = secs.min(cpu_seconds() - t);
+            let t = cpu_seconds();
             occ = 0;
             ostats = TraversalStats::default();
             for r in &rays {
                 occ += accel.occluded_with(r, traversal, &mut ostats) as usize;
             }
-            osecs = osecs.min(t.elapsed().as_secs_f64());
+            osecs = osecs.min(cpu_seconds() - t);
           }
             eprintln!(
                 "  {traversal:?}: closest {:.2} Mrays/s (hits {hits}, {:.1} nodes {:.1} tris per ray); any-hit {:.2} Mrays/s ({:.1} tris per ray, occ {occ})",

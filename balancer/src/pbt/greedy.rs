@@ -10,6 +10,7 @@
 
 use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
+use std::mem::take;
 
 use super::tree::Tree;
 use crate::Update;
@@ -20,10 +21,22 @@ use crate::partition::Predictor;
 /// only so that a bug cannot hang a frame, and [`Update::capped`] reports if it ever bites.
 const MOVES_PER_LEAF: usize = 8;
 
+/// The heaps' storage, kept between updates so that an update need not allocate.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Scratch {
+    splits: Vec<Entry>,
+    merges: Vec<Reverse<Entry>>,
+}
+
 /// Brings `tree` to `target` leaves (as near as the image allows), then trades splits for
 /// merges while that lowers the variance of the leaf estimates. Leaf estimates must be current.
-pub(super) fn restructure(tree: &mut Tree, predictor: &Predictor, target: usize) -> Update {
-    let mut greedy = Greedy::new(tree, predictor);
+pub(super) fn restructure(
+    tree: &mut Tree,
+    predictor: &Predictor,
+    target: usize,
+    scratch: &mut Scratch,
+) -> Update {
+    let mut greedy = Greedy::new(tree, predictor, scratch);
     let mut update = Update::default();
     while greedy.tree.leaf_count() < target {
         let Some(split) = greedy.best_split(None) else { break };
@@ -36,9 +49,10 @@ pub(super) fn restructure(tree: &mut Tree, predictor: &Predictor, target: usize)
         update.merges += 1;
     }
     let cap = MOVES_PER_LEAF * greedy.tree.leaf_count() + 64;
+    let mut moves = 0;
     loop {
         let Some((split, merge)) = greedy.best_pair() else { break };
-        if update.merges >= cap {
+        if moves >= cap {
             update.capped = true;
             break;
         }
@@ -46,16 +60,17 @@ pub(super) fn restructure(tree: &mut Tree, predictor: &Predictor, target: usize)
         greedy.merge(merge);
         update.splits += 1;
         update.merges += 1;
+        moves += 1;
     }
+    greedy.finish(scratch);
     update
 }
 
-/// A split candidate made exact: the leaf, its halves' product, and its halves' estimates.
+/// A split candidate made exact: the leaf and its halves' product.
 #[derive(Clone, Copy)]
 struct Split {
     node: u32,
     gain: f64,
-    halves: [f64; 2],
 }
 
 struct Greedy<'a> {
@@ -68,18 +83,26 @@ struct Greedy<'a> {
 }
 
 impl<'a> Greedy<'a> {
-    fn new(tree: &'a mut Tree, predictor: &'a Predictor) -> Self {
+    fn new(tree: &'a mut Tree, predictor: &'a Predictor, scratch: &mut Scratch) -> Self {
         let root = predictor.estimate(tree.node(0).rect);
         let scale = if root > 0.0 { 1.0 / root } else { 1.0 };
-        let (mut splits, mut merges) = (Vec::new(), Vec::new());
-        tree.walk(|node| {
+        let (mut splits, mut merges) = (take(&mut scratch.splits), take(&mut scratch.merges));
+        for node in tree.live() {
             if tree.splittable(node) {
                 splits.push(Entry::optimistic(tree, node, scale));
             } else if tree.mergeable(node) {
                 merges.push(Reverse(Entry::merge(tree, node, scale)));
             }
-        });
+        }
         Greedy { tree, predictor, scale, splits: splits.into(), merges: merges.into() }
+    }
+
+    /// Hands the heaps' storage back, emptied.
+    fn finish(self, scratch: &mut Scratch) {
+        scratch.splits = self.splits.into_vec();
+        scratch.splits.clear();
+        scratch.merges = self.merges.into_vec();
+        scratch.merges.clear();
     }
 
     /// The split+merge pair that lowers the variance most, if any lowers it: the best split
@@ -112,11 +135,13 @@ impl<'a> Greedy<'a> {
                 self.splits.pop();
             } else if !top.exact {
                 self.splits.pop();
-                self.splits.push(Entry::exact(self.tree, self.predictor, top.node, self.scale));
+                let [a, b] = self.halves(top.node);
+                let key = (a * self.scale) * (b * self.scale);
+                self.splits.push(Entry { key, exact: true, ..top });
             } else if not_under.is_some() && self.tree.parent(top.node) == not_under {
                 held.extend(self.splits.pop());
             } else {
-                break Some(Split { node: top.node, gain: top.key, halves: top.halves });
+                break Some(Split { node: top.node, gain: top.key });
             }
         };
         self.splits.extend(held);
@@ -142,7 +167,8 @@ impl<'a> Greedy<'a> {
     }
 
     fn split(&mut self, split: Split) {
-        let halves = self.tree.split(split.node, split.halves);
+        let estimates = self.halves(split.node);
+        let halves = self.tree.split(split.node, estimates);
         self.refresh(split.node);
         for half in halves {
             self.refresh(half);
@@ -159,6 +185,13 @@ impl<'a> Greedy<'a> {
         if let Some(parent) = self.tree.parent(node) {
             self.refresh(parent);
         }
+    }
+
+    /// The estimates of splittable leaf `node`'s halves.
+    fn halves(&self, node: u32) -> [f64; 2] {
+        // Invariant: only splittable leaves, of two or more pixels, are asked for their halves.
+        let (a, b) = self.tree.node(node).rect.halves().expect("split candidates have 2+ pixels");
+        [self.predictor.estimate(a), self.predictor.estimate(b)]
     }
 
     /// Invalidates `node`'s old entries and files it as whatever candidate it now is.
@@ -180,24 +213,13 @@ struct Entry {
     generation: u32,
     /// For split entries: whether `key` is the halves' product rather than its upper bound.
     exact: bool,
-    /// For exact split entries: the halves' estimates.
-    halves: [f64; 2],
 }
 
 impl Entry {
     /// A split entry keyed by the bound `(a / 2)^2` on the halves' product.
     fn optimistic(tree: &Tree, node: u32, scale: f64) -> Entry {
         let half = 0.5 * tree.node(node).estimate * scale;
-        Entry { key: half * half, node, generation: tree.node(node).generation, exact: false, halves: [0.0; 2] }
-    }
-
-    /// A split entry keyed by the halves' product, from two cost-map queries.
-    fn exact(tree: &Tree, predictor: &Predictor, node: u32, scale: f64) -> Entry {
-        // Invariant: split entries are only made for splittable leaves.
-        let (a, b) = tree.node(node).rect.halves().expect("split candidates have 2+ pixels");
-        let halves = [predictor.estimate(a), predictor.estimate(b)];
-        let key = (halves[0] * scale) * (halves[1] * scale);
-        Entry { key, node, generation: tree.node(node).generation, exact: true, halves }
+        Entry { key: half * half, node, generation: tree.node(node).generation, exact: false }
     }
 
     /// A merge entry keyed by the product of the two leaf children's estimates.
@@ -205,7 +227,7 @@ impl Entry {
         // Invariant: merge entries are only made for mergeable nodes, which have children.
         let [a, b] = tree.children(node).expect("merge candidates have children");
         let key = (tree.node(a).estimate * scale) * (tree.node(b).estimate * scale);
-        Entry { key, node, generation: tree.node(node).generation, exact: true, halves: [0.0; 2] }
+        Entry { key, node, generation: tree.node(node).generation, exact: true }
     }
 }
 

@@ -82,6 +82,7 @@ pub struct Pbt {
     predictor: Predictor,
     /// The leaves, depth-first: the tile order.
     leaves: Vec<u32>,
+    scratch: greedy::Scratch,
 }
 
 impl Pbt {
@@ -102,6 +103,7 @@ impl Pbt {
             tree: Tree::new(image),
             predictor: Predictor::new(width, height, config.smoothing),
             leaves: Vec::new(),
+            scratch: greedy::Scratch::default(),
         };
         pbt.leaves = pbt.tree.leaves();
         pbt.refresh_estimates();
@@ -156,7 +158,8 @@ impl Pbt {
     /// Deals the tiles to `peers` peers (contiguous runs by default), optionally weighted by
     /// peer speed.
     pub fn assign(&self, peers: usize, weights: Option<&[f64]>) -> Result<Assignment, Error> {
-        deal(&self.tiles(), self.order, peers, weights)
+        let costs = self.leaves.iter().map(|&leaf| self.tree.node(leaf).estimate);
+        deal(costs, self.order, peers, weights)
     }
 
     fn refresh_estimates(&mut self) {
@@ -167,7 +170,7 @@ impl Pbt {
     }
 
     fn restructure(&mut self) -> Update {
-        let update = greedy::restructure(&mut self.tree, &self.predictor, self.target);
+        let update = greedy::restructure(&mut self.tree, &self.predictor, self.target, &mut self.scratch);
         self.leaves = self.tree.leaves();
         update
     }

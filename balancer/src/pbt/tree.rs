@@ -23,6 +23,8 @@ pub(super) struct Node {
     pub(super) forced: bool,
     /// Predicted cost; kept current for leaves only.
     pub(super) estimate: f64,
+    /// In the tree, rather than a freed slot awaiting reuse.
+    pub(super) live: bool,
 }
 
 #[derive(Clone, Debug)]
@@ -121,13 +123,22 @@ impl Tree {
     pub(super) fn merge(&mut self, node: u32, estimate: f64) {
         debug_assert!(self.mergeable(node));
         let first = self.node(node).first_child;
-        self.bump(first);
-        self.bump(first + 1);
+        for child in [first, first + 1] {
+            self.bump(child);
+            self.nodes[child as usize].live = false;
+        }
         self.free.push(first);
         let node = &mut self.nodes[node as usize];
         node.first_child = NONE;
         node.estimate = estimate;
         self.leaves -= 1;
+    }
+
+    /// The indices of the live nodes, in arena order: cheaper than [`Self::walk`] when the
+    /// order does not matter.
+    pub(super) fn live(&self) -> impl Iterator<Item = u32> + '_ {
+        let live = self.nodes.iter().enumerate().filter(|(_, node)| node.live);
+        live.map(|(index, _)| index as u32)
     }
 
     /// Visits every live node depth-first, first child before second, parents before children.
@@ -154,6 +165,6 @@ impl Tree {
 
     fn fresh(rect: Rect, parent: u32, generation: u32) -> Node {
         let forced = !rect.within_aspect(MAX_ASPECT);
-        Node { rect, parent, first_child: NONE, generation, forced, estimate: 0.0 }
+        Node { rect, parent, first_child: NONE, generation, forced, estimate: 0.0, live: true }
     }
 }

@@ -11,9 +11,9 @@ pub struct Config {
     /// Whether peers steal from each other at all. Off, each peer renders its assignment plus
     /// whatever the owner re-issues to it, and refuses every steal request.
     pub steal: bool,
-    /// Tiles a peer tries to keep waiting beyond those in its renderer's slots. With fewer
-    /// waiting, it steals even before it can estimate its work rate. With 0 it steals, before an
-    /// estimate exists, only when a slot would otherwise idle.
+    /// Tiles a peer keeps committed to its renderer beyond those in its slots: never given to
+    /// thieves, and with fewer than this waiting it steals even before it can estimate its work
+    /// rate. With 0 it steals, before an estimate exists, only when a slot would otherwise idle.
     pub prefetch_depth: usize,
     /// The low-water mark, in round trips: a peer steals when the predicted work it holds would
     /// last less than this many round trips at its measured work rate, so that stolen tiles

@@ -10,14 +10,34 @@ use crate::wire::{FrameId, PeerId, TileId, TileResult};
 #[derive(Clone, Debug, PartialEq)]
 pub enum Event {
     /// (Owner) every tile of `frame` is in; `results` holds one result per tile, by tile id.
-    FrameComplete { frame: FrameId, elapsed: Duration, results: Vec<TileResult> },
+    FrameComplete {
+        frame: FrameId,
+        elapsed: Duration,
+        results: Vec<TileResult>,
+        /// Who sent each of `results`, in the same order (for statistics and Gantt charts).
+        rendered_by: Vec<PeerId>,
+    },
     /// (Owner) a participant's statistics for `frame`, its own included.
-    PeerStats { frame: FrameId, peer: PeerId, stats: PeerStats },
+    PeerStats {
+        frame: FrameId,
+        peer: PeerId,
+        stats: PeerStats,
+    },
     /// (Owner) a participant is gone for the rest of `frame`; `reissued` of its tiles went to
     /// live peers. After a `Silent` failure the driver should close the connection.
-    PeerFailed { frame: FrameId, peer: PeerId, reason: Failure, reissued: usize },
+    PeerFailed {
+        frame: FrameId,
+        peer: PeerId,
+        reason: Failure,
+        reissued: usize,
+    },
     /// (Owner) `peer` sent something that cannot be right. Its result was not used.
-    FaultyPeer { frame: FrameId, peer: PeerId, tile: TileId, fault: Fault },
+    FaultyPeer {
+        frame: FrameId,
+        peer: PeerId,
+        tile: TileId,
+        fault: Fault,
+    },
     /// (Peer) the owner of `frame` is gone; this peer dropped the frame.
     OwnerLost { frame: FrameId },
 }

@@ -71,7 +71,11 @@ impl Ledger {
         for (&peer, tiles) in &assignments {
             ledger.peers.insert(peer, PeerView::new(now));
             for spec in tiles {
-                let entry = Entry { spec: *spec, holders: vec![peer], result: None };
+                let entry = Entry {
+                    spec: *spec,
+                    holders: vec![peer],
+                    result: None,
+                };
                 ledger.tiles.insert(spec.id, entry);
             }
         }
@@ -127,8 +131,17 @@ impl Ledger {
         out: &mut Outbox,
     ) -> Option<Event> {
         let (frame, tile) = (self.frame, result.tile);
-        let fault = |fault| Some(Event::FaultyPeer { frame, peer: from, tile, fault });
-        let Some(entry) = self.tiles.get_mut(&tile) else { return fault(Fault::UnknownTile) };
+        let fault = |fault| {
+            Some(Event::FaultyPeer {
+                frame,
+                peer: from,
+                tile,
+                fault,
+            })
+        };
+        let Some(entry) = self.tiles.get_mut(&tile) else {
+            return fault(Fault::UnknownTile);
+        };
         if result.rect != entry.spec.rect {
             return fault(Fault::WrongRect);
         }
@@ -196,11 +209,13 @@ impl Ledger {
         counts: [u32; 3],
         out: &mut Outbox,
     ) {
-        let Some(view) = self.peers.get_mut(&from) else { return };
+        let Some(view) = self.peers.get_mut(&from) else {
+            return;
+        };
         if idle {
-            let newest = view.idle_report.map_or(counts, |old| {
-                [0, 1, 2].map(|i| old[i].max(counts[i]))
-            });
+            let newest = view
+                .idle_report
+                .map_or(counts, |old| [0, 1, 2].map(|i| old[i].max(counts[i])));
             view.idle_report = Some(newest);
         }
         if view.idle() {
@@ -215,7 +230,9 @@ impl Ledger {
         reason: Failure,
         out: &mut Outbox,
     ) {
-        let Some(view) = self.peers.get_mut(&peer).filter(|view| view.alive) else { return };
+        let Some(view) = self.peers.get_mut(&peer).filter(|view| view.alive) else {
+            return;
+        };
         view.alive = false;
         let mut orphans = Vec::new();
         for (id, entry) in &mut self.tiles {
@@ -228,7 +245,12 @@ impl Ledger {
         let reissued = orphans.len();
         self.reissue(now, orphans, out);
         let frame = self.frame;
-        out.events.push_back(Event::PeerFailed { frame, peer, reason, reissued });
+        out.events.push_back(Event::PeerFailed {
+            frame,
+            peer,
+            reason,
+            reissued,
+        });
         self.reissue_if_all_idle(now, out);
     }
 
@@ -254,7 +276,10 @@ impl Ledger {
 
     /// Makes sure the owner looks for silent peers by `deadline`.
     fn watch(&mut self, deadline: Duration) {
-        self.next_check = Some(self.next_check.map_or(deadline, |check| check.min(deadline)));
+        self.next_check = Some(
+            self.next_check
+                .map_or(deadline, |check| check.min(deadline)),
+        );
     }
 
     /// Participants that may hold work, with the instant their silence becomes a failure.
@@ -266,7 +291,11 @@ impl Ledger {
     }
 
     fn reissue_if_all_idle(&mut self, now: Duration, out: &mut Outbox) {
-        let all_idle = self.peers.values().filter(|view| view.alive).all(PeerView::idle);
+        let all_idle = self
+            .peers
+            .values()
+            .filter(|view| view.alive)
+            .all(PeerView::idle);
         if self.missing > 0 && all_idle {
             let missing: Vec<TileId> = self
                 .tiles
@@ -286,7 +315,11 @@ impl Ledger {
             return;
         }
         let live = self.live_peers();
-        let idle: Vec<PeerId> = live.iter().copied().filter(|p| self.peers[p].idle()).collect();
+        let idle: Vec<PeerId> = live
+            .iter()
+            .copied()
+            .filter(|p| self.peers[p].idle())
+            .collect();
         let targets = match (idle.is_empty(), live.is_empty()) {
             (false, _) => idle,
             (true, false) => live.clone(),
@@ -301,7 +334,10 @@ impl Ledger {
             let specs = chunk
                 .iter()
                 .map(|id| {
-                    let entry = self.tiles.get_mut(id).expect("invariant: re-issued ids exist");
+                    let entry = self
+                        .tiles
+                        .get_mut(id)
+                        .expect("invariant: re-issued ids exist");
                     if !entry.holders.contains(&target) {
                         entry.holders.push(target);
                     }
@@ -321,25 +357,48 @@ impl Ledger {
         tiles: Vec<TileSpec>,
         out: &mut Outbox,
     ) {
-        let view = self.peers.get_mut(&peer).expect("invariant: tiles go to participants");
+        let view = self
+            .peers
+            .get_mut(&peer)
+            .expect("invariant: tiles go to participants");
         view.assigns_sent += 1;
         view.last_heard = view.last_heard.max(now);
         self.watch(now + self.peer_timeout);
-        out.send(peer, Message::Assign { frame: self.frame, peers, tiles });
+        out.send(
+            peer,
+            Message::Assign {
+                frame: self.frame,
+                peers,
+                tiles,
+            },
+        );
     }
 
     fn live_peers(&self) -> Vec<PeerId> {
-        self.peers.iter().filter(|(_, view)| view.alive).map(|(peer, _)| *peer).collect()
+        self.peers
+            .iter()
+            .filter(|(_, view)| view.alive)
+            .map(|(peer, _)| *peer)
+            .collect()
     }
 
     /// Reports the frame and tells every live participant that it is over.
     fn complete(&mut self, now: Duration, out: &mut Outbox) {
-        let results = std::mem::take(&mut self.tiles)
+        let (rendered_by, results) = std::mem::take(&mut self.tiles)
             .into_values()
-            .map(|entry| entry.result.expect("invariant: complete only when no tile is missing").1)
-            .collect();
+            .map(|entry| {
+                entry
+                    .result
+                    .expect("invariant: complete only when no tile is missing")
+            })
+            .unzip();
         let elapsed = now.saturating_sub(self.started);
-        out.events.push_back(Event::FrameComplete { frame: self.frame, elapsed, results });
+        out.events.push_back(Event::FrameComplete {
+            frame: self.frame,
+            elapsed,
+            results,
+            rendered_by,
+        });
         for peer in self.live_peers() {
             out.send(peer, Message::FrameDone { frame: self.frame });
         }

@@ -129,7 +129,10 @@ impl Core {
                 return Err(FrameError::UnknownPeer(*peer));
             }
             for tile in tiles {
-                let limits = wire::Limits { max_tile_pixels: u64::MAX, ..wire::Limits::default() };
+                let limits = wire::Limits {
+                    max_tile_pixels: u64::MAX,
+                    ..wire::Limits::default()
+                };
                 let valid = wire::check_rect(tile.rect, &limits).is_ok()
                     && wire::check_cost(tile.predicted).is_ok();
                 if !valid {
@@ -144,12 +147,19 @@ impl Core {
             return Err(FrameError::NoTiles);
         }
         let timeout = self.config.peer_timeout;
-        self.ledger = Some(Ledger::start(now, self.id(), frame, assignments, timeout, &mut self.out));
+        self.ledger = Some(Ledger::start(
+            now,
+            self.id(),
+            frame,
+            assignments,
+            timeout,
+            &mut self.out,
+        ));
         self.settle(now);
         Ok(())
     }
 
-    /// A message from `from`. On error nothing changed, and the driver should close the
+    /// A message from `from`. On error the message was ignored, and the driver should close the
     /// connection (then report it with [`Core::handle_peer_lost`]).
     pub fn handle_message(
         &mut self,
@@ -241,11 +251,21 @@ impl Core {
     }
 
     fn split(&mut self, now: Duration) -> (&mut Worker, Ctx<'_>) {
-        let cx = Ctx { now, config: &self.config, connected: &self.connected, out: &mut self.out };
+        let cx = Ctx {
+            now,
+            config: &self.config,
+            connected: &self.connected,
+            out: &mut self.out,
+        };
         (&mut self.worker, cx)
     }
 
-    fn dispatch(&mut self, now: Duration, from: PeerId, message: Message) -> Result<(), ProtocolError> {
+    fn dispatch(
+        &mut self,
+        now: Duration,
+        from: PeerId,
+        message: Message,
+    ) -> Result<(), ProtocolError> {
         let kind = message.kind();
         let (worker, mut cx) = self.split(now);
         match message {
@@ -255,33 +275,52 @@ impl Core {
             | Message::Scene { .. }
             | Message::SceneReady
             | Message::Goodbye { .. } => return Err(ProtocolError::NotForCore { kind }),
-            Message::Assign { frame, peers, tiles } => {
-                worker.on_assign(&mut cx, from, frame, peers, tiles)
-            }
+            Message::Assign {
+                frame,
+                peers,
+                tiles,
+            } => worker.on_assign(&mut cx, from, frame, peers, tiles),
             Message::StealRequest { frame, remaining } => {
                 worker.on_steal_request(&mut cx, from, frame, remaining)
             }
             Message::StealGrant { frame, tiles } => worker.on_grant(&mut cx, from, frame, tiles),
             Message::StealRefuse { frame } => worker.on_refuse(&mut cx, from, frame),
             Message::FrameDone { frame } => worker.on_frame_done(&mut cx, from, frame),
-            Message::StealNotice { frame, victim, tiles, stolen } => {
+            Message::StealNotice {
+                frame,
+                victim,
+                tiles,
+                stolen,
+            } => {
                 if let Some(ledger) = ledger_for(&mut self.ledger, self.last_owned, frame, kind)? {
                     ledger.on_notice(now, from, victim, &tiles, stolen, &mut self.out);
                 }
             }
-            Message::Status { frame, idle, assigned, stolen, done } => {
+            Message::Status {
+                frame,
+                idle,
+                assigned,
+                stolen,
+                done,
+            } => {
                 if let Some(ledger) = ledger_for(&mut self.ledger, self.last_owned, frame, kind)? {
                     ledger.on_status(now, from, idle, [assigned, stolen, done], &mut self.out);
                 }
             }
             Message::TileDone(result) => {
-                if let Some(ledger) = ledger_for(&mut self.ledger, self.last_owned, result.frame, kind)? {
+                if let Some(ledger) =
+                    ledger_for(&mut self.ledger, self.last_owned, result.frame, kind)?
+                {
                     ledger.on_result(now, from, result, &mut self.out);
                 }
             }
             Message::FrameStats { frame, stats } => {
                 ledger_for(&mut self.ledger, self.last_owned, frame, kind)?;
-                self.out.events.push_back(Event::PeerStats { frame, peer: from, stats });
+                self.out.events.push_back(Event::PeerStats {
+                    frame,
+                    peer: from,
+                    stats,
+                });
             }
         }
         Ok(())
@@ -301,7 +340,7 @@ impl Core {
             if let Some(ledger) = self.ledger.take_if(|ledger| ledger.is_complete()) {
                 self.last_owned = Some(ledger.frame());
             }
-            self.worker.fill_slots(now);
+            self.worker.fill_slots(now, self.config.prefetch_depth);
             let (worker, mut cx) = self.split(now);
             worker.maybe_steal(&mut cx);
             worker.report_idle(&mut cx);
@@ -329,7 +368,7 @@ fn ledger_for<'a>(
 
 /// What a handler needs besides the worker: the time, the policy, the connections and the
 /// outputs.
-pub(crate) struct Ctx<'a> {
+struct Ctx<'a> {
     now: Duration,
     config: &'a Config,
     connected: &'a BTreeSet<PeerId>,
@@ -337,7 +376,7 @@ pub(crate) struct Ctx<'a> {
 }
 
 /// The core's outputs. Messages to this peer itself are delivered locally, never transmitted.
-pub(crate) struct Outbox {
+struct Outbox {
     me: PeerId,
     transmits: VecDeque<(PeerId, Message)>,
     local: VecDeque<Message>,
@@ -346,7 +385,12 @@ pub(crate) struct Outbox {
 
 impl Outbox {
     fn new(me: PeerId) -> Self {
-        Self { me, transmits: VecDeque::new(), local: VecDeque::new(), events: VecDeque::new() }
+        Self {
+            me,
+            transmits: VecDeque::new(),
+            local: VecDeque::new(),
+            events: VecDeque::new(),
+        }
     }
 
     fn send(&mut self, to: PeerId, message: Message) {

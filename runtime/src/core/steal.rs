@@ -2,7 +2,7 @@
 //!
 //! A peer steals before it runs dry, not after: when the work it holds would last less than a
 //! few round trips (the low-water mark, from its measured work rate and round-trip time), so the
-//! grant lands in its prefetch queue while its renderer is still busy. A victim gives from the
+//! grant lands while its renderer is still busy with its prefetched tiles. A victim gives from the
 //! far end of its queue, which its own renderer would reach last, about half the difference
 //! between its work and the thief's, and refuses when that would not pay for the transfer. The
 //! rules are written out in `core/README.md`.
@@ -43,7 +43,12 @@ pub(super) struct Estimates {
 
 impl Estimates {
     pub(super) fn new(config: &Config, seed: u64) -> Self {
-        Self { slot_rate: None, rtt: config.initial_rtt, rtt_measured: false, rng: Rng(seed) }
+        Self {
+            slot_rate: None,
+            rtt: config.initial_rtt,
+            rtt_measured: false,
+            rng: Rng(seed),
+        }
     }
 
     /// Folds in one rendered tile: its predicted cost and how long a slot took over it.
@@ -57,13 +62,19 @@ impl Estimates {
 
     /// Folds in one round-trip measurement, smoothed as TCP does.
     pub(super) fn sample_rtt(&mut self, rtt: Duration) {
-        self.rtt = if self.rtt_measured { (self.rtt * 7 + rtt) / 8 } else { rtt };
+        self.rtt = if self.rtt_measured {
+            (self.rtt * 7 + rtt) / 8
+        } else {
+            rtt
+        };
         self.rtt_measured = true;
     }
 
     /// Seconds this peer needs for `work`, if it has measured its rate yet.
     fn seconds_for(&self, work: f64, slots: usize) -> Option<f64> {
-        self.slot_rate.filter(|r| *r > 0.0).map(|r| work / (r * slots.max(1) as f64))
+        self.slot_rate
+            .filter(|r| *r > 0.0)
+            .map(|r| work / (r * slots.max(1) as f64))
     }
 }
 
@@ -82,7 +93,9 @@ impl Worker {
 
     /// Whether this peer is below its low-water mark.
     fn wants_work(&self, config: &Config, now: Duration) -> bool {
-        let Some(state) = &self.frame else { return false };
+        let Some(state) = &self.frame else {
+            return false;
+        };
         let waiting = state.queue.len() + state.prefetch.len();
         if (waiting == 0 && self.in_flight.len() < self.slots) || waiting < config.prefetch_depth {
             return true;
@@ -104,10 +117,19 @@ impl Worker {
         if !cx.config.steal || !self.wants_work(cx.config, cx.now) {
             return;
         }
-        let Self { me, frame, estimates, .. } = self;
+        let Self {
+            me,
+            frame,
+            estimates,
+            ..
+        } = self;
         let Some(state) = frame else { return };
-        let victims: Vec<PeerId> =
-            state.peers.iter().copied().filter(|p| p != me && cx.connected.contains(p)).collect();
+        let victims: Vec<PeerId> = state
+            .peers
+            .iter()
+            .copied()
+            .filter(|p| p != me && cx.connected.contains(p))
+            .collect();
         if victims.is_empty() {
             return;
         }
@@ -119,16 +141,27 @@ impl Worker {
             tried: 0,
         });
         if round.tried >= victims.len() {
-            state.thief = Thief::Backoff { until: cx.now + cx.config.steal_backoff };
+            state.thief = Thief::Backoff {
+                until: cx.now + cx.config.steal_backoff,
+            };
             state.round = None;
             return;
         }
         let victim = victims[(round.start + round.tried) % victims.len()];
         let remaining = self.remaining_work(cx.now);
         let state = self.frame.as_mut().expect("invariant: matched Some above");
-        state.thief = Thief::Asking { victim, sent: cx.now };
+        state.thief = Thief::Asking {
+            victim,
+            sent: cx.now,
+        };
         self.stats.steal_requests_sent += 1;
-        cx.out.send(victim, Message::StealRequest { frame: state.id, remaining });
+        cx.out.send(
+            victim,
+            Message::StealRequest {
+                frame: state.id,
+                remaining,
+            },
+        );
     }
 
     /// Answers a thief: a grant from the far end of the queue, or a refusal.
@@ -150,7 +183,10 @@ impl Worker {
             cx.out.send(thief, Message::StealRefuse { frame });
             return;
         }
-        let state = self.frame.as_mut().expect("invariant: a grant needs a running frame");
+        let state = self
+            .frame
+            .as_mut()
+            .expect("invariant: a grant needs a running frame");
         let tiles: Vec<TileSpec> = state.queue.split_off(state.queue.len() - count).into();
         let given: f64 = tiles.iter().map(|tile| tile.predicted).sum();
         state.queue_work = shrink(state.queue_work, given, state.queue.is_empty());
@@ -160,23 +196,34 @@ impl Worker {
 
     /// How many tiles from the back of the queue to give a thief holding `thief_remaining`: as
     /// many as fit in half the difference between the two peers' work (at most half the queue),
-    /// or none when that is worth less than the transfer.
+    /// or none when that is worth less than the transfer. A first tile larger than half the
+    /// difference is still given if it is smaller than the whole difference: the pair then
+    /// finishes sooner, and the tile cannot come back (the thief would hold the lesser share).
     fn grant_size(&self, config: &Config, now: Duration, thief_remaining: f64) -> usize {
         let Some(state) = &self.frame else { return 0 };
-        let target = (self.remaining_work(now) - thief_remaining) / 2.0;
+        let difference = self.remaining_work(now) - thief_remaining;
         let most = config.max_grant_tiles.min(state.queue.len().div_ceil(2));
         let (mut count, mut given) = (0, 0.0);
         for tile in state.queue.iter().rev().take(most) {
-            if given + tile.predicted > target {
+            let fits = given + tile.predicted <= difference / 2.0;
+            let first_pays = count == 0 && tile.predicted < difference;
+            if !(fits || first_pays) {
                 break;
             }
             count += 1;
             given += tile.predicted;
         }
-        let worth_time = self.estimates.seconds_for(given, self.slots).is_none_or(|seconds| {
-            seconds >= config.min_grant_rtts * self.estimates.rtt.as_secs_f64()
-        });
-        if given > 0.0 && given >= config.min_steal_cost && worth_time { count } else { 0 }
+        let worth_time = self
+            .estimates
+            .seconds_for(given, self.slots)
+            .is_none_or(|seconds| {
+                seconds >= config.min_grant_rtts * self.estimates.rtt.as_secs_f64()
+            });
+        if given > 0.0 && given >= config.min_steal_cost && worth_time {
+            count
+        } else {
+            0
+        }
     }
 
     /// Keeps granted tiles, however late they come: the victim has already let go of them.
@@ -191,7 +238,10 @@ impl Worker {
             tracing::debug!(%frame, %victim, "grant for a finished frame: dropped");
             return;
         };
-        if let Thief::Asking { victim: asked, sent } = state.thief
+        if let Thief::Asking {
+            victim: asked,
+            sent,
+        } = state.thief
             && asked == victim
         {
             self.estimates.sample_rtt(cx.now.saturating_sub(sent));
@@ -208,16 +258,26 @@ impl Worker {
         }
         state.stolen += 1;
         self.stats.tiles_stolen += tiles.len() as u32;
-        state.prefetch_work += tiles.iter().map(|tile| tile.predicted).sum::<f64>();
+        state.queue_work += tiles.iter().map(|tile| tile.predicted).sum::<f64>();
         let ids = tiles.iter().map(|tile| tile.id).collect();
-        state.prefetch.extend(tiles);
-        let notice = Message::StealNotice { frame, victim, tiles: ids, stolen: state.stolen };
+        state.queue.extend(tiles);
+        let notice = Message::StealNotice {
+            frame,
+            victim,
+            tiles: ids,
+            stolen: state.stolen,
+        };
         state.send_to_owner(cx, notice);
     }
 
     pub(super) fn on_refuse(&mut self, cx: &mut Ctx, victim: PeerId, frame: FrameId) {
-        let Some(state) = self.frame.as_mut().filter(|state| state.id == frame) else { return };
-        if let Thief::Asking { victim: asked, sent } = state.thief
+        let Some(state) = self.frame.as_mut().filter(|state| state.id == frame) else {
+            return;
+        };
+        if let Thief::Asking {
+            victim: asked,
+            sent,
+        } = state.thief
             && asked == victim
         {
             self.estimates.sample_rtt(cx.now.saturating_sub(sent));

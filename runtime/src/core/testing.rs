@@ -25,20 +25,50 @@ pub type Renderer = Box<dyn FnMut(PeerId, &WorkItem) -> Rendered>;
 /// One thing that happens to one peer at one instant.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Happening {
-    Deliver { from: PeerId, to: PeerId, message: Message },
-    Rendered { peer: PeerId, result: TileResult },
-    Lost { peer: PeerId, lost: PeerId },
-    Timeout { peer: PeerId },
+    Deliver {
+        from: PeerId,
+        to: PeerId,
+        message: Message,
+    },
+    Rendered {
+        peer: PeerId,
+        result: TileResult,
+    },
+    Lost {
+        peer: PeerId,
+        lost: PeerId,
+    },
+    Timeout {
+        peer: PeerId,
+    },
 }
 
 /// The log of a run, in order.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Record {
-    Sent { at: Duration, from: PeerId, to: PeerId, message: Message },
-    Started { at: Duration, peer: PeerId, item: WorkItem },
-    Event { at: Duration, peer: PeerId, event: Event },
+    Sent {
+        at: Duration,
+        from: PeerId,
+        to: PeerId,
+        message: Message,
+    },
+    Started {
+        at: Duration,
+        peer: PeerId,
+        item: WorkItem,
+    },
+    Event {
+        at: Duration,
+        peer: PeerId,
+        event: Event,
+    },
     /// A core refused a message with a `ProtocolError`; a real driver would close the connection.
-    Refused { at: Duration, peer: PeerId, from: PeerId, error: String },
+    Refused {
+        at: Duration,
+        peer: PeerId,
+        from: PeerId,
+        error: String,
+    },
 }
 
 /// Several cores, their renderers and the network between them.
@@ -82,7 +112,13 @@ impl Cluster {
             for &(other, _) in peers {
                 core.handle_peer_connected(Duration::ZERO, other);
             }
-            nodes.insert(peer, Node { core, state: NodeState::Up });
+            nodes.insert(
+                peer,
+                Node {
+                    core,
+                    state: NodeState::Up,
+                },
+            );
         }
         Self {
             now: Duration::ZERO,
@@ -145,7 +181,12 @@ impl Cluster {
         self.now = self.now.max(at);
         let happening = match timeout {
             Some(peer) => Happening::Timeout { peer },
-            None => self.agenda.pop_first().expect("invariant: `next` saw an entry").1,
+            None => {
+                self.agenda
+                    .pop_first()
+                    .expect("invariant: `next` saw an entry")
+                    .1
+            }
         };
         self.apply(happening.clone());
         Some(happening)
@@ -161,7 +202,9 @@ impl Cluster {
             .min();
         let next = self.agenda.first_key_value().map(|(key, _)| key.0);
         match (timeout, next) {
-            (Some((at, peer)), next) if next.is_none_or(|next| at <= next) => Some((at, Some(peer))),
+            (Some((at, peer)), next) if next.is_none_or(|next| at <= next) => {
+                Some((at, Some(peer)))
+            }
             (_, next) => Some((next?, None)),
         }
     }
@@ -178,7 +221,13 @@ impl Cluster {
         });
         let others: Vec<PeerId> = self.live_peers().filter(|&other| other != peer).collect();
         for other in others {
-            self.schedule(self.loss_detection, Happening::Lost { peer: other, lost: peer });
+            self.schedule(
+                self.loss_detection,
+                Happening::Lost {
+                    peer: other,
+                    lost: peer,
+                },
+            );
         }
     }
 
@@ -226,7 +275,12 @@ impl Cluster {
                 };
                 if let Err(error) = node.core.handle_message(now, from, message) {
                     let error = error.to_string();
-                    self.trace.push(Record::Refused { at: now, peer, from, error });
+                    self.trace.push(Record::Refused {
+                        at: now,
+                        peer,
+                        from,
+                        error,
+                    });
                 }
             }
             Happening::Rendered { result, .. } => node.core.handle_tile_rendered(now, result),
@@ -240,31 +294,58 @@ impl Cluster {
     fn flush(&mut self, peer: PeerId) {
         let now = self.now;
         while let Some(item) = self.node(peer).core.poll_work() {
-            self.trace.push(Record::Started { at: now, peer, item });
+            self.trace.push(Record::Started {
+                at: now,
+                peer,
+                item,
+            });
             let Rendered { duration, result } = (self.renderer)(peer, &item);
             self.schedule(duration, Happening::Rendered { peer, result });
         }
         while let Some((to, message)) = self.node(peer).core.poll_transmit() {
-            let record = Record::Sent { at: now, from: peer, to, message: message.clone() };
+            let record = Record::Sent {
+                at: now,
+                from: peer,
+                to,
+                message: message.clone(),
+            };
             self.trace.push(record);
-            if self.nodes.get(&to).is_some_and(|node| !matches!(node.state, NodeState::Dead)) {
+            if self
+                .nodes
+                .get(&to)
+                .is_some_and(|node| !matches!(node.state, NodeState::Dead))
+            {
                 let jitter = self.rng.below(self.jitter.as_nanos() as usize + 1);
                 let delay = self.latency + Duration::from_nanos(jitter as u64);
-                self.schedule(delay, Happening::Deliver { from: peer, to, message });
+                self.schedule(
+                    delay,
+                    Happening::Deliver {
+                        from: peer,
+                        to,
+                        message,
+                    },
+                );
             }
         }
         while let Some(event) = self.node(peer).core.poll_event() {
-            self.trace.push(Record::Event { at: now, peer, event });
+            self.trace.push(Record::Event {
+                at: now,
+                peer,
+                event,
+            });
         }
     }
 
     fn schedule(&mut self, after: Duration, happening: Happening) {
-        self.agenda.insert((self.now + after, self.next_seq), happening);
+        self.agenda
+            .insert((self.now + after, self.next_seq), happening);
         self.next_seq += 1;
     }
 
     fn node(&mut self, peer: PeerId) -> &mut Node {
-        self.nodes.get_mut(&peer).expect("invariant: tests name peers of the cluster")
+        self.nodes
+            .get_mut(&peer)
+            .expect("invariant: tests name peers of the cluster")
     }
 
     fn live_peers(&self) -> impl Iterator<Item = PeerId> + '_ {
@@ -286,7 +367,9 @@ pub fn cost_renderer(seconds_per_unit: f64) -> Renderer {
 pub fn synthetic_result(item: &WorkItem) -> TileResult {
     let len = item.tile.rect.area() * BYTES_PER_PIXEL;
     let seed = item.frame.0.wrapping_mul(31) ^ u64::from(item.tile.id.0).wrapping_mul(131);
-    let pixels = (0..len).map(|i| (seed.wrapping_add(i) % 251) as u8).collect();
+    let pixels = (0..len)
+        .map(|i| (seed.wrapping_add(i) % 251) as u8)
+        .collect();
     TileResult {
         frame: item.frame,
         tile: item.tile.id,

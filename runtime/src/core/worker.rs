@@ -1,9 +1,12 @@
 //! The peer's side of a frame: its queues, its renderer's slots, and what it owes the owner.
 //!
-//! Every peer, the owner included, runs one worker. Its tiles wait in two queues: `queue` holds
-//! the tiles the owner gave it, in partition order, rendered from the front and given to thieves
-//! from the back; `prefetch` holds tiles it stole, which nobody can steal again, so that a peer
-//! that just paid a round trip for work keeps it. Stealing itself lives in `steal.rs`.
+//! Every peer, the owner included, runs one worker. Its tiles wait in two queues. `queue` holds
+//! the tiles the owner gave it, in partition order, and those it stole after them; it is rendered
+//! from the front and given to thieves from the back, so stolen work can move on again to
+//! whoever needs it most, as in rayon. `prefetch` holds the next `prefetch_depth` tiles, taken
+//! from the front of `queue` and committed to this peer's renderer: never given away, so that a
+//! victim cannot be robbed of the work that keeps its renderer busy during its own next steal.
+//! Stealing itself lives in `steal.rs`.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
@@ -59,7 +62,10 @@ pub(super) struct InFlight {
 
 impl Worker {
     pub(super) fn new(me: PeerId, slots: usize, estimates: Estimates) -> Self {
-        let stats = PeerStats { slots: slots as u32, ..PeerStats::default() };
+        let stats = PeerStats {
+            slots: slots as u32,
+            ..PeerStats::default()
+        };
         Self {
             me,
             slots,
@@ -95,7 +101,15 @@ impl Worker {
             tracing::debug!(%frame, %from, "tiles of a finished frame: dropped");
             return;
         }
-        if self.frame.as_ref().is_some_and(|running| running.id < frame) {
+        let running = self
+            .frame
+            .as_ref()
+            .map(|running| (running.id, running.owner));
+        if running.is_some_and(|(id, owner)| id == frame && owner != from) {
+            tracing::warn!(%frame, %from, "tiles from a peer that does not own the frame: dropped");
+            return;
+        }
+        if running.is_some_and(|(id, _)| id < frame) {
             // The owner started a new frame, so the old one is complete even though its
             // `FrameDone` has not arrived (or was lost with a connection).
             self.finish_frame(cx);
@@ -138,7 +152,9 @@ impl Worker {
 
     /// Ends the running frame: reports its statistics to its owner and drops its leftovers.
     fn finish_frame(&mut self, cx: &mut Ctx) {
-        let Some(state) = self.frame.take() else { return };
+        let Some(state) = self.frame.take() else {
+            return;
+        };
         let now = cx.now;
         for flight in self.in_flight.values_mut() {
             self.stats.busy += now.saturating_sub(flight.accounted_from);
@@ -150,7 +166,13 @@ impl Worker {
         stats.wall = now.saturating_sub(state.started);
         stats.idle = (stats.wall * stats.slots).saturating_sub(stats.busy);
         self.stats.slots = self.slots as u32;
-        cx.out.send(state.owner, Message::FrameStats { frame: state.id, stats });
+        cx.out.send(
+            state.owner,
+            Message::FrameStats {
+                frame: state.id,
+                stats,
+            },
+        );
     }
 
     /// Forgets tiles of `frame` the driver has not yet taken with `poll_work`.
@@ -173,13 +195,16 @@ impl Worker {
         let now = cx.now;
         self.stats.busy += now.saturating_sub(flight.accounted_from);
         self.stats.tiles_rendered += 1;
-        self.estimates.sample_rate(flight.predicted, now.saturating_sub(flight.started));
+        self.estimates
+            .sample_rate(flight.predicted, now.saturating_sub(flight.started));
         match &mut self.frame {
             Some(state) if state.id == result.frame => {
                 state.done += 1;
                 state.send_to_owner(cx, Message::TileDone(result));
             }
-            _ => tracing::debug!(frame = %result.frame, tile = %result.tile, "result of a finished frame: dropped"),
+            _ => {
+                tracing::debug!(frame = %result.frame, tile = %result.tile, "result of a finished frame: dropped")
+            }
         }
     }
 
@@ -199,29 +224,44 @@ impl Worker {
         }
     }
 
-    /// Hands queued tiles to free renderer slots: own tiles first, stolen ones after.
-    pub(super) fn fill_slots(&mut self, now: Duration) {
+    /// Hands tiles to free renderer slots (from `prefetch`, then `queue`), then tops `prefetch`
+    /// up to `depth` from the front of `queue`.
+    pub(super) fn fill_slots(&mut self, now: Duration, depth: usize) {
         let Some(state) = &mut self.frame else { return };
         while self.in_flight.len() < self.slots {
-            let tile = if let Some(tile) = state.queue.pop_front() {
-                state.queue_work = shrink(state.queue_work, tile.predicted, state.queue.is_empty());
-                tile
-            } else if let Some(tile) = state.prefetch.pop_front() {
+            let tile = if let Some(tile) = state.prefetch.pop_front() {
                 let empty = state.prefetch.is_empty();
                 state.prefetch_work = shrink(state.prefetch_work, tile.predicted, empty);
+                tile
+            } else if let Some(tile) = state.pop_queue() {
                 tile
             } else {
                 break;
             };
-            let flight = InFlight { predicted: tile.predicted, started: now, accounted_from: now };
+            let flight = InFlight {
+                predicted: tile.predicted,
+                started: now,
+                accounted_from: now,
+            };
             self.in_flight.insert((state.id, tile.id), flight);
-            self.ready.push_back(WorkItem { frame: state.id, tile });
+            self.ready.push_back(WorkItem {
+                frame: state.id,
+                tile,
+            });
+        }
+        while state.prefetch.len() < depth
+            && let Some(tile) = state.pop_queue()
+        {
+            state.prefetch_work += tile.predicted;
+            state.prefetch.push_back(tile);
         }
     }
 
     /// Tiles of the running frame in the renderer.
     pub(super) fn frame_in_flight(&self, frame: FrameId) -> impl Iterator<Item = &InFlight> {
-        self.in_flight.range((frame, TileId(0))..=(frame, TileId(u32::MAX))).map(|(_, f)| f)
+        self.in_flight
+            .range((frame, TileId(0))..=(frame, TileId(u32::MAX)))
+            .map(|(_, f)| f)
     }
 
     /// Tells the owner, once per change, that this peer holds no work of the frame.
@@ -243,9 +283,14 @@ impl Worker {
 
     /// Sends a heartbeat if the owner has heard nothing from this peer for a while.
     pub(super) fn heartbeat(&mut self, cx: &mut Ctx) {
-        let Some(due) = self.heartbeat_due(cx.config.heartbeat_interval) else { return };
+        let Some(due) = self.heartbeat_due(cx.config.heartbeat_interval) else {
+            return;
+        };
         if cx.now >= due {
-            let state = self.frame.as_mut().expect("invariant: a heartbeat is due only in a frame");
+            let state = self
+                .frame
+                .as_mut()
+                .expect("invariant: a heartbeat is due only in a frame");
             let status = state.status(false);
             state.send_to_owner(cx, status);
         }
@@ -279,6 +324,12 @@ impl FrameState {
         }
     }
 
+    fn pop_queue(&mut self) -> Option<TileSpec> {
+        let tile = self.queue.pop_front()?;
+        self.queue_work = shrink(self.queue_work, tile.predicted, self.queue.is_empty());
+        Some(tile)
+    }
+
     pub(super) fn send_to_owner(&mut self, cx: &mut Ctx, message: Message) {
         self.last_to_owner = cx.now;
         cx.out.send(self.owner, message);
@@ -290,12 +341,22 @@ impl FrameState {
 
     fn status(&self, idle: bool) -> Message {
         let [assigned, stolen, done] = self.counts();
-        Message::Status { frame: self.id, idle, assigned, stolen, done }
+        Message::Status {
+            frame: self.id,
+            idle,
+            assigned,
+            stolen,
+            done,
+        }
     }
 }
 
 /// Subtracts a tile's cost from a running sum, resetting it to exactly zero when its queue
 /// empties so that rounding errors cannot accumulate over a frame.
 pub(super) fn shrink(sum: f64, cost: f64, now_empty: bool) -> f64 {
-    if now_empty { 0.0 } else { (sum - cost).max(0.0) }
+    if now_empty {
+        0.0
+    } else {
+        (sum - cost).max(0.0)
+    }
 }

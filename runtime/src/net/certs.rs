@@ -321,3 +321,74 @@ fn read_pem<T: PemObject>(path: &Path, what: &'static str) -> Result<T, CertErro
         problem: e.to_string(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keygen_files_load_back_and_are_never_overwritten() {
+        let dir = tempfile::tempdir().expect("a temporary directory");
+        let cluster = ClusterCerts::generate(3).expect("generating certificates");
+        cluster.write_pem(dir.path()).expect("writing PEM files");
+
+        let loaded = PeerIdentity::load(dir.path(), 2).expect("loading peer 2");
+        assert_eq!(loaded.index(), 2);
+        assert_eq!(loaded.cert(), cluster.peers()[2].cert());
+        assert_eq!(loaded.ca(), cluster.peers()[2].ca());
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(dir.path().join("peer-2-key.pem"))
+                .expect("the key file exists")
+                .permissions()
+                .mode();
+            assert_eq!(mode & 0o077, 0, "private key readable by others: {mode:o}");
+        }
+
+        assert!(matches!(
+            cluster.write_pem(dir.path()),
+            Err(CertError::Exists { .. })
+        ));
+        assert!(matches!(
+            PeerIdentity::load(dir.path(), 3),
+            Err(CertError::Io { .. })
+        ));
+
+        // Peer 0's certificate and key under peer 1's name: the certificate does not name peer 1.
+        let renamed = tempfile::tempdir().expect("a temporary directory");
+        for (from, to) in [
+            ("ca.pem", "ca.pem"),
+            ("peer-0.pem", "peer-1.pem"),
+            ("peer-0-key.pem", "peer-1-key.pem"),
+        ] {
+            std::fs::copy(dir.path().join(from), renamed.path().join(to)).expect("copying");
+        }
+        assert!(matches!(
+            PeerIdentity::load(renamed.path(), 1),
+            Err(CertError::WrongPeer { index: 1 })
+        ));
+
+        // Another cluster's CA: peer 0's certificate was not issued by it.
+        let foreign = tempfile::tempdir().expect("a temporary directory");
+        ClusterCerts::generate(1)
+            .expect("generating certificates")
+            .write_pem(foreign.path())
+            .expect("writing PEM files");
+        std::fs::copy(foreign.path().join("ca.pem"), renamed.path().join("ca.pem"))
+            .expect("copying");
+        for file in ["peer-0.pem", "peer-0-key.pem"] {
+            std::fs::copy(dir.path().join(file), renamed.path().join(file)).expect("copying");
+        }
+        assert!(matches!(
+            PeerIdentity::load(renamed.path(), 0),
+            Err(CertError::NotIssuedByCa { index: 0, .. })
+        ));
+
+        std::fs::write(renamed.path().join("ca.pem"), "not PEM").expect("writing");
+        assert!(matches!(
+            PeerIdentity::load(renamed.path(), 0),
+            Err(CertError::Pem { .. })
+        ));
+    }
+}

@@ -243,11 +243,14 @@ impl CloseReason {
     }
 }
 
+/// The caller's decoding function, its error reduced to the text logged and sent to the peer.
+type Decoder<M> = Box<dyn Fn(&[u8]) -> Result<M, String> + Send + Sync>;
+
 /// What the endpoint's tasks share.
 pub(super) struct Shared<M> {
     endpoint: Endpoint,
     pub(super) config: Config,
-    pub(super) decode: Box<dyn Fn(&[u8]) -> Result<M, String> + Send + Sync>,
+    pub(super) decode: Decoder<M>,
     pub(super) events: mpsc::Sender<Event<M>>,
     connections: Mutex<BTreeMap<ConnId, Arc<PeerConn>>>,
     next_id: AtomicU64,

@@ -148,10 +148,10 @@ fn read_failure(error: ReadError) -> Failure {
 /// Accounts for a finished read task. A panic there came from the decoder, on this peer's bytes:
 /// tokio contained it, and the connection goes as for any undecodable message.
 fn reaped(done: Result<(), tokio::task::JoinError>, conn: ConnId, peer: &PeerConn) {
-    if let Err(error) = done {
-        if error.is_panic() {
-            violation(peer, conn, CloseCode::Malformed, "the decoder panicked");
-        }
+    if let Err(error) = done
+        && error.is_panic()
+    {
+        violation(peer, conn, CloseCode::Malformed, "the decoder panicked");
     }
 }
 

@@ -8,7 +8,11 @@ use proptest::prelude::*;
 use super::*;
 
 fn tile(id: u32, w: u32, h: u32) -> TileSpec {
-    TileSpec { id: TileId(id), rect: Rect::new(8, 16, w, h), predicted: 2.5 }
+    TileSpec {
+        id: TileId(id),
+        rect: Rect::new(8, 16, w, h),
+        predicted: 2.5,
+    }
 }
 
 fn result(w: u32, h: u32) -> TileResult {
@@ -24,11 +28,27 @@ fn result(w: u32, h: u32) -> TileResult {
 
 /// One message of every kind.
 fn samples() -> Vec<Message> {
-    let stats = PeerStats { slots: 4, busy: Duration::from_millis(1500), ..PeerStats::default() };
+    let stats = PeerStats {
+        slots: 4,
+        busy: Duration::from_millis(1500),
+        ..PeerStats::default()
+    };
     vec![
-        Message::Hello { version: PROTOCOL_VERSION, peer: PeerId(2), slots: 8 },
-        Message::Welcome { version: PROTOCOL_VERSION, peer: PeerId(0) },
-        Message::Peers { peers: vec![PeerAddress { peer: PeerId(1), addr: "10.0.0.7:4433".into() }] },
+        Message::Hello {
+            version: PROTOCOL_VERSION,
+            peer: PeerId(2),
+            slots: 8,
+        },
+        Message::Welcome {
+            version: PROTOCOL_VERSION,
+            peer: PeerId(0),
+        },
+        Message::Peers {
+            peers: vec![PeerAddress {
+                peer: PeerId(1),
+                addr: "10.0.0.7:4433".into(),
+            }],
+        },
         Message::Scene {
             files: vec![SceneFile {
                 name: "meshes/bunny.obj".into(),
@@ -37,16 +57,42 @@ fn samples() -> Vec<Message> {
             }],
         },
         Message::SceneReady,
-        Message::Assign { frame: FrameId(1), peers: vec![PeerId(0), PeerId(1)], tiles: vec![tile(1, 4, 2)] },
-        Message::StealRequest { frame: FrameId(1), remaining: 0.25 },
-        Message::StealGrant { frame: FrameId(1), tiles: vec![tile(4, 2, 2), tile(5, 2, 1)] },
+        Message::Assign {
+            frame: FrameId(1),
+            peers: vec![PeerId(0), PeerId(1)],
+            tiles: vec![tile(1, 4, 2)],
+        },
+        Message::StealRequest {
+            frame: FrameId(1),
+            remaining: 0.25,
+        },
+        Message::StealGrant {
+            frame: FrameId(1),
+            tiles: vec![tile(4, 2, 2), tile(5, 2, 1)],
+        },
         Message::StealRefuse { frame: FrameId(1) },
-        Message::StealNotice { frame: FrameId(1), victim: PeerId(3), tiles: vec![TileId(4)], stolen: 2 },
-        Message::Status { frame: FrameId(1), idle: true, assigned: 1, stolen: 2, done: 3 },
+        Message::StealNotice {
+            frame: FrameId(1),
+            victim: PeerId(3),
+            tiles: vec![TileId(4)],
+            stolen: 2,
+        },
+        Message::Status {
+            frame: FrameId(1),
+            idle: true,
+            assigned: 1,
+            stolen: 2,
+            done: 3,
+        },
         Message::TileDone(result(3, 2)),
         Message::FrameDone { frame: FrameId(1) },
-        Message::FrameStats { frame: FrameId(1), stats },
-        Message::Goodbye { reason: GoodbyeReason::BadScene },
+        Message::FrameStats {
+            frame: FrameId(1),
+            stats,
+        },
+        Message::Goodbye {
+            reason: GoodbyeReason::BadScene,
+        },
     ]
 }
 
@@ -60,7 +106,11 @@ fn every_message_survives_a_round_trip() {
 
 #[test]
 fn a_different_version_is_named_as_such() {
-    let hello = Message::Hello { version: PROTOCOL_VERSION + 1, peer: PeerId(1), slots: 1 };
+    let hello = Message::Hello {
+        version: PROTOCOL_VERSION + 1,
+        peer: PeerId(1),
+        slots: 1,
+    };
     match decode(&encode(&hello), &Limits::default()) {
         Err(WireError::VersionMismatch { theirs, ours }) => {
             assert_eq!((theirs, ours), (PROTOCOL_VERSION + 1, PROTOCOL_VERSION));
@@ -81,47 +131,121 @@ fn pixel_buffers_must_fit_the_rectangle() {
     let mut short = result(3, 2);
     short.pixels.pop();
     let bytes = encode(&Message::TileDone(short));
-    assert!(matches!(decode(&bytes, &Limits::default()), Err(WireError::Invalid { .. })));
+    assert!(matches!(
+        decode(&bytes, &Limits::default()),
+        Err(WireError::Invalid { .. })
+    ));
 
     let mut costly = result(3, 2);
     costly.costs = vec![0; 6 * 8 + 1];
     let bytes = encode(&Message::TileDone(costly));
-    assert!(matches!(decode(&bytes, &Limits::default()), Err(WireError::Limit { .. })));
+    assert!(matches!(
+        decode(&bytes, &Limits::default()),
+        Err(WireError::Limit { .. })
+    ));
 }
 
 #[test]
 fn limits_bound_counts_and_sizes() {
-    let limits = Limits { max_tiles_per_message: 1, ..Limits::default() };
-    let grant = Message::StealGrant { frame: FrameId(1), tiles: vec![tile(1, 1, 1), tile(2, 1, 1)] };
-    assert!(matches!(decode(&encode(&grant), &limits), Err(WireError::Limit { .. })));
+    let limits = Limits {
+        max_tiles_per_message: 1,
+        ..Limits::default()
+    };
+    let grant = Message::StealGrant {
+        frame: FrameId(1),
+        tiles: vec![tile(1, 1, 1), tile(2, 1, 1)],
+    };
+    assert!(matches!(
+        decode(&encode(&grant), &limits),
+        Err(WireError::Limit { .. })
+    ));
 
     let bytes = encode(&samples()[3]);
-    let limits = Limits { max_message_bytes: bytes.len() - 1, ..Limits::default() };
-    assert!(matches!(decode(&bytes, &limits), Err(WireError::TooLong { .. })));
+    let limits = Limits {
+        max_message_bytes: bytes.len() - 1,
+        ..Limits::default()
+    };
+    assert!(matches!(
+        decode(&bytes, &limits),
+        Err(WireError::TooLong { .. })
+    ));
 
-    let limits = Limits { max_file_bytes: 3, ..Limits::default() };
-    assert!(matches!(decode(&bytes, &limits), Err(WireError::Limit { .. })));
+    let limits = Limits {
+        max_file_bytes: 3,
+        ..Limits::default()
+    };
+    assert!(matches!(
+        decode(&bytes, &limits),
+        Err(WireError::Limit { .. })
+    ));
 
-    let huge = Message::StealGrant { frame: FrameId(1), tiles: vec![tile(1, 1 << 13, 1 << 12)] };
-    let limits = Limits { max_tile_pixels: 1 << 24, ..Limits::default() };
-    assert!(matches!(decode(&encode(&huge), &limits), Err(WireError::Limit { .. })));
+    let huge = Message::StealGrant {
+        frame: FrameId(1),
+        tiles: vec![tile(1, 1 << 13, 1 << 12)],
+    };
+    let limits = Limits {
+        max_tile_pixels: 1 << 24,
+        ..Limits::default()
+    };
+    assert!(matches!(
+        decode(&encode(&huge), &limits),
+        Err(WireError::Limit { .. })
+    ));
 }
 
 #[test]
 fn hostile_values_are_refused() {
     let refused = |message: Message| decode(&encode(&message), &Limits::default()).is_err();
     for predicted in [f64::NAN, f64::INFINITY, -1.0] {
-        let spec = TileSpec { predicted, ..tile(1, 2, 2) };
-        assert!(refused(Message::StealGrant { frame: FrameId(1), tiles: vec![spec] }));
+        let spec = TileSpec {
+            predicted,
+            ..tile(1, 2, 2)
+        };
+        assert!(refused(Message::StealGrant {
+            frame: FrameId(1),
+            tiles: vec![spec]
+        }));
     }
-    assert!(refused(Message::StealRequest { frame: FrameId(1), remaining: f64::NAN }));
-    let empty = TileSpec { rect: Rect::new(0, 0, 0, 4), ..tile(1, 1, 1) };
-    assert!(refused(Message::Assign { frame: FrameId(1), peers: vec![], tiles: vec![empty] }));
-    let overflowing = TileSpec { rect: Rect::new(u32::MAX, 0, 2, 1), ..tile(1, 1, 1) };
-    assert!(refused(Message::Assign { frame: FrameId(1), peers: vec![], tiles: vec![overflowing] }));
-    for name in ["../etc/passwd", "/abs", "a//b", "a/./b", "", "c:\\x", "a\0b"] {
-        let file = SceneFile { name: name.into(), hash: [0; 32], bytes: vec![] };
-        assert!(refused(Message::Scene { files: vec![file] }), "{name:?} accepted");
+    assert!(refused(Message::StealRequest {
+        frame: FrameId(1),
+        remaining: f64::NAN
+    }));
+    let empty = TileSpec {
+        rect: Rect::new(0, 0, 0, 4),
+        ..tile(1, 1, 1)
+    };
+    assert!(refused(Message::Assign {
+        frame: FrameId(1),
+        peers: vec![],
+        tiles: vec![empty]
+    }));
+    let overflowing = TileSpec {
+        rect: Rect::new(u32::MAX, 0, 2, 1),
+        ..tile(1, 1, 1)
+    };
+    assert!(refused(Message::Assign {
+        frame: FrameId(1),
+        peers: vec![],
+        tiles: vec![overflowing]
+    }));
+    for name in [
+        "../etc/passwd",
+        "/abs",
+        "a//b",
+        "a/./b",
+        "",
+        "c:\\x",
+        "a\0b",
+    ] {
+        let file = SceneFile {
+            name: name.into(),
+            hash: [0; 32],
+            bytes: vec![],
+        };
+        assert!(
+            refused(Message::Scene { files: vec![file] }),
+            "{name:?} accepted"
+        );
     }
 }
 
@@ -129,16 +253,25 @@ fn hostile_values_are_refused() {
 fn trailing_bytes_are_refused() {
     let mut bytes = encode(&Message::SceneReady);
     bytes.push(0);
-    assert!(matches!(decode(&bytes, &Limits::default()), Err(WireError::Trailing(1))));
+    assert!(matches!(
+        decode(&bytes, &Limits::default()),
+        Err(WireError::Trailing(1))
+    ));
 }
 
 #[test]
 fn a_claimed_length_beyond_the_input_fails_without_allocating_it() {
     // A StealGrant claiming 2^32 tiles, followed by nothing.
-    let mut bytes = encode(&Message::StealGrant { frame: FrameId(1), tiles: vec![] });
+    let mut bytes = encode(&Message::StealGrant {
+        frame: FrameId(1),
+        tiles: vec![],
+    });
     bytes.pop();
     bytes.extend_from_slice(&[0xff, 0xff, 0xff, 0xff, 0x0f]);
-    assert!(matches!(decode(&bytes, &Limits::default()), Err(WireError::Malformed(_))));
+    assert!(matches!(
+        decode(&bytes, &Limits::default()),
+        Err(WireError::Malformed(_))
+    ));
 }
 
 proptest! {

@@ -42,6 +42,9 @@ pub struct Hit {
 /// Counted traversal work: the deterministic cost measure of a tile.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TraversalStats {
+    /// Bounding boxes tested against a ray: the root, then both children of every inner node
+    /// opened.
     pub nodes: u64,
+    /// Ray/triangle tests.
     pub triangles: u64,
 }

@@ -81,6 +81,49 @@ pub(crate) struct CameraKeySpec {
     pub vfov: Option<Fov>,
 }
 
+/// The pose keys of `[camera]` or of one of its keys; missing ones are `None`.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Pose {
+    pub position: Option<Point>,
+    pub look_at: Option<Point>,
+    pub up: Option<Point>,
+    pub vfov: Option<Fov>,
+}
+
+impl Pose {
+    /// This pose with its missing keys taken from `fallback`.
+    pub(crate) fn or(self, fallback: Pose) -> Pose {
+        Pose {
+            position: self.position.or(fallback.position),
+            look_at: self.look_at.or(fallback.look_at),
+            up: self.up.or(fallback.up),
+            vfov: self.vfov.or(fallback.vfov),
+        }
+    }
+}
+
+impl CameraSpec {
+    pub(crate) fn pose(&self) -> Pose {
+        Pose {
+            position: self.position,
+            look_at: self.look_at,
+            up: self.up,
+            vfov: self.vfov,
+        }
+    }
+}
+
+impl CameraKeySpec {
+    pub(crate) fn pose(&self) -> Pose {
+        Pose {
+            position: self.position,
+            look_at: self.look_at,
+            up: self.up,
+            vfov: self.vfov,
+        }
+    }
+}
+
 /// One `[[object]]`: an OBJ file or a procedural shape, plus an optional transform. Which keys
 /// apply to which kind is checked by the loader, which knows the table's span.
 #[derive(Debug, Default, Deserialize)]

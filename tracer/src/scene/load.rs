@@ -170,7 +170,8 @@ impl Builder<'_> {
         if let Some(path) = &o.obj {
             let at = (self.toml, line_of(self.text, path.span().start));
             let (resolved, bytes) = self.log.read(Some(at), path.get_ref())?;
-            let mesh = obj::load(&mut self.log, &resolved, &bytes)?;
+            let defined = |name: &str| self.table.defines(name);
+            let mesh = obj::load(&mut self.log, &resolved, &bytes, &defined)?;
             return self.place_obj(o, resolved, mesh, default_material);
         }
         let kind = o
@@ -201,9 +202,9 @@ impl Builder<'_> {
         let mut ids = BTreeMap::new();
         for local in used {
             let id = match local {
-                NO_MATERIAL => {
-                    default_material.expect("faces without usemtl have a default: checked above")
-                }
+                // Faces before any `usemtl` were checked above to have a default.
+                NO_MATERIAL => default_material
+                    .ok_or_else(|| SceneError::in_file(&path, "faces without a material"))?,
                 local => self
                     .table
                     .mtl_material(&mut self.log, &mesh.materials[local as usize])?,
@@ -271,46 +272,9 @@ impl Builder<'_> {
 
 fn camera_track(file: &str, text: &str, spec: &SceneSpec) -> Result<CameraTrack, SceneError> {
     let c = spec.camera.get_ref();
-    let camera_line = line_of(text, spec.camera.span().start);
-    let pose = |line: usize,
-                position: Option<format::Point>,
-                look_at: Option<format::Point>,
-                up: Option<format::Point>,
-                vfov: Option<format::Fov>| {
-        let err = |detail: &str| SceneError::at_line(file, line, format!("camera: {detail}"));
-        let position = position
-            .or(c.position)
-            .ok_or_else(|| err("needs `position`"))?
-            .0;
-        let look_at = look_at
-            .or(c.look_at)
-            .ok_or_else(|| err("needs `look_at`"))?
-            .0;
-        let up = up.or(c.up).map_or(Vec3::Y, |u| u.0);
-        let forward = look_at - position;
-        if forward == Vec3::ZERO {
-            return Err(err("`look_at` equals `position`"));
-        }
-        if forward.cross(up).length_squared() <= f32::MIN_POSITIVE || !forward.cross(up).is_finite()
-        {
-            return Err(err("`up` is zero or parallel to the view direction"));
-        }
-        let vfov_degrees = vfov.or(c.vfov).map_or(40.0, |v| v.0);
-        Ok(Camera {
-            position,
-            look_at,
-            up,
-            vfov_degrees,
-        })
-    };
     if c.keys.is_empty() {
-        return Ok(CameraTrack::fixed(pose(
-            camera_line,
-            None,
-            None,
-            None,
-            None,
-        )?));
+        let line = line_of(text, spec.camera.span().start);
+        return Ok(CameraTrack::fixed(camera(file, line, c.pose())?));
     }
     let mut keys = Vec::with_capacity(c.keys.len());
     let mut frames = BTreeMap::new();
@@ -324,15 +288,39 @@ fn camera_track(file: &str, text: &str, spec: &SceneSpec) -> Result<CameraTrack,
             );
             return Err(SceneError::at_line(file, line, detail));
         }
+        let camera = camera(file, line, k.pose().or(c.pose()))?;
         keys.push(CameraKey {
             frame: k.frame,
-            camera: pose(line, k.position, k.look_at, k.up, k.vfov)?,
+            camera,
         });
     }
     Ok(
         CameraTrack::new(keys)
             .expect("keys are non-empty and their frames distinct: checked above"),
     )
+}
+
+/// The camera of a complete pose; `line` is where the pose is given.
+fn camera(file: &str, line: usize, pose: format::Pose) -> Result<Camera, SceneError> {
+    let err = |detail: &str| SceneError::at_line(file, line, format!("camera: {detail}"));
+    let position = pose.position.ok_or_else(|| err("needs `position`"))?.0;
+    let look_at = pose.look_at.ok_or_else(|| err("needs `look_at`"))?.0;
+    let up = pose.up.map_or(Vec3::Y, |u| u.0);
+    let forward = look_at - position;
+    if forward == Vec3::ZERO {
+        return Err(err("`look_at` equals `position`"));
+    }
+    let right = forward.cross(up);
+    if !right.is_finite() || right.length_squared() <= f32::MIN_POSITIVE {
+        return Err(err("`up` is zero or parallel to the view direction"));
+    }
+    let vfov_degrees = pose.vfov.map_or(40.0, |v| v.0);
+    Ok(Camera {
+        position,
+        look_at,
+        up,
+        vfov_degrees,
+    })
 }
 
 fn point_light(l: &format::LightSpec) -> PointLight {

@@ -72,7 +72,7 @@ impl<'a> MaterialTable<'a> {
                 format!("material `{name}` is not defined: add a [materials.{name}] table");
             return Err(SceneError::at_line(self.toml, line, detail));
         };
-        let material = self.from_spec(log, definition, spec)?;
+        let material = self.define(log, definition, spec)?;
         self.used_defined.insert(name.get_ref().clone());
         Ok(self.add(key, material))
     }
@@ -99,6 +99,11 @@ impl<'a> MaterialTable<'a> {
         Ok(self.add(key, material))
     }
 
+    /// Whether the TOML defines a material `name`.
+    pub(crate) fn defines(&self, name: &str) -> bool {
+        self.defined.contains_key(name)
+    }
+
     /// A TOML material table that nothing used: most likely a misspelt name.
     pub(crate) fn unused_definition(&self) -> Option<SceneError> {
         let (name, _) = self
@@ -120,7 +125,8 @@ impl<'a> MaterialTable<'a> {
         id
     }
 
-    fn from_spec(
+    /// The material a `[materials.NAME]` table defines.
+    fn define(
         &mut self,
         log: &mut FileLog,
         name: &Spanned<String>,

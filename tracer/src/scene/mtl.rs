@@ -129,6 +129,17 @@ pub(crate) fn parse(file: &str, bytes: &[u8]) -> Result<Vec<MtlMaterial>, SceneE
 }
 
 impl MtlMaterial {
+    /// A material known only by name: a `usemtl` that names a material of the scene's TOML,
+    /// which replaces it, so its values are never read.
+    pub(crate) fn named(name: &str, file: &str, line: usize) -> Self {
+        MtlMaterial {
+            name: name.to_owned(),
+            file: file.to_owned(),
+            line,
+            ..Default::default()
+        }
+    }
+
     /// The material this MTL entry maps to. `load_texture` gets the `map_Kd` name as written
     /// and its line, and returns the texture's index in the scene.
     pub(crate) fn to_material(

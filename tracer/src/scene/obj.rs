@@ -29,8 +29,14 @@ pub(crate) struct ObjMesh {
 
 pub(crate) const NO_MATERIAL: u32 = u32::MAX;
 
-/// Reads, validates and triangulates the OBJ file `path` and its MTL files.
-pub(crate) fn load(log: &mut FileLog, path: &str, bytes: &[u8]) -> Result<ObjMesh, SceneError> {
+/// Reads, validates and triangulates the OBJ file `path` and its MTL files. A `usemtl` name may
+/// also be one the scene defines (`defined`), which then needs no MTL entry.
+pub(crate) fn load(
+    log: &mut FileLog,
+    path: &str,
+    bytes: &[u8],
+    defined: &dyn Fn(&str) -> bool,
+) -> Result<ObjMesh, SceneError> {
     let scan = scan(path, bytes)?;
     let mut materials: Vec<MtlMaterial> = Vec::new();
     for (name, line) in &scan.mtllibs {
@@ -38,12 +44,16 @@ pub(crate) fn load(log: &mut FileLog, path: &str, bytes: &[u8]) -> Result<ObjMes
         materials.extend(mtl::parse(&mtl_path, &mtl_bytes)?);
     }
     // The last definition of a name wins, as in tobj (which resolves `usemtl` through this map).
-    let by_name: HashMap<String, usize> = materials
+    let mut by_name: HashMap<String, usize> = materials
         .iter()
         .enumerate()
         .map(|(i, m)| (m.name.clone(), i))
         .collect();
     for (name, line) in &scan.usemtls {
+        if !by_name.contains_key(name) && defined(name) {
+            by_name.insert(name.clone(), materials.len());
+            materials.push(MtlMaterial::named(name, path, *line));
+        }
         if !by_name.contains_key(name) {
             let libraries = scan
                 .mtllibs
@@ -51,10 +61,12 @@ pub(crate) fn load(log: &mut FileLog, path: &str, bytes: &[u8]) -> Result<ObjMes
                 .map(|(n, _)| n.as_str())
                 .collect::<Vec<_>>();
             let detail = if libraries.is_empty() {
-                format!("`usemtl {name}` but the file has no `mtllib`")
+                format!(
+                    "`usemtl {name}`: the file has no `mtllib` and the scene no [materials.{name}]"
+                )
             } else {
                 format!(
-                    "`usemtl {name}`: no material of that name in {}",
+                    "`usemtl {name}`: no material of that name in {} or the scene",
                     libraries.join(", ")
                 )
             };
@@ -74,6 +86,8 @@ pub(crate) fn load(log: &mut FileLog, path: &str, bytes: &[u8]) -> Result<ObjMes
             ..Default::default()
         })
         .collect();
+    // tobj's features (merging, reordering) add fields; the update keeps this valid with them.
+    #[allow(clippy::needless_update)]
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
@@ -225,11 +239,10 @@ fn scan(file: &str, bytes: &[u8]) -> Result<Scan, SceneError> {
             _ => {}
         }
     }
-    // tobj resolves `usemtl` against the libraries loaded so far, so one library goes first.
+    // tobj resolves `usemtl` against the libraries loaded so far, so one library, holding every
+    // material the faces may name, goes first.
     let mut canonical = String::with_capacity(body.len() + 16);
-    if !mtllibs.is_empty() {
-        canonical.push_str("mtllib all\n");
-    }
+    canonical.push_str("mtllib all\n");
     canonical.push_str(&body);
     let mut usemtls: Vec<(String, usize)> = usemtls.into_iter().collect();
     usemtls.sort_by_key(|(_, line)| *line);

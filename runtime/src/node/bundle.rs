@@ -1,0 +1,136 @@
+//! What crosses the wire besides scheduling: the scene's files, and tiles' pixels and costs.
+//!
+//! A peer shares no filesystem with the frame owner, so the owner sends every file the scene was
+//! read from, each with its blake3 hash; the peer checks every hash and loads the scene from
+//! memory with the same loader the owner used. Pixels travel as little-endian `f32` triples and
+//! costs as little-endian `u64` block counts, so a tile's bits arrive unchanged.
+
+use crate::wire::{SceneFile, TileResult};
+use std::path::Path;
+use tracer::scene::{MemoryFiles, SceneError};
+use tracer::{Scene, TileCost, TileOutput};
+
+/// Why a scene could not be shipped or received.
+#[derive(Debug, thiserror::Error)]
+pub enum BundleError {
+    #[error("{path}: {source}")]
+    Read { path: String, source: std::io::Error },
+    #[error("scene file {name} does not match its hash")]
+    HashMismatch { name: String },
+    #[error("the scene has no files")]
+    Empty,
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+}
+
+/// Reads every file `scene` was loaded from (relative to the folder of `toml_path`), hashed.
+/// The TOML comes first, as in `Scene::files`.
+pub fn scene_files(toml_path: &Path, scene: &Scene) -> Result<Vec<SceneFile>, BundleError> {
+    let root = toml_path.parent().unwrap_or(Path::new(""));
+    scene
+        .files
+        .iter()
+        .map(|name| {
+            let path = root.join(name);
+            let bytes = std::fs::read(&path)
+                .map_err(|source| BundleError::Read { path: path.display().to_string(), source })?;
+            Ok(SceneFile { name: name.clone(), hash: *blake3::hash(&bytes).as_bytes(), bytes })
+        })
+        .collect()
+}
+
+/// Checks every file's hash and loads the scene from them; the first file is the TOML.
+pub fn load_scene(files: Vec<SceneFile>) -> Result<Scene, BundleError> {
+    let toml = files.first().ok_or(BundleError::Empty)?.name.clone();
+    let mut memory = MemoryFiles::new();
+    for file in files {
+        if *blake3::hash(&file.bytes).as_bytes() != file.hash {
+            return Err(BundleError::HashMismatch { name: file.name });
+        }
+        memory.insert(&file.name, file.bytes);
+    }
+    Ok(tracer::scene::load_from(&memory, &toml)?)
+}
+
+/// A content hash of a whole scene, for logs: peers print it so a user can see they agree.
+pub fn scene_digest(files: &[SceneFile]) -> String {
+    let mut hasher = blake3::Hasher::new();
+    for file in files {
+        hasher.update(file.name.as_bytes());
+        hasher.update(&file.hash);
+    }
+    hasher.finalize().to_hex()[..16].to_owned()
+}
+
+/// Pixels as little-endian `f32` triples.
+pub fn encode_pixels(pixels: &[[f32; 3]]) -> Vec<u8> {
+    pixels.iter().flatten().flat_map(|c| c.to_le_bytes()).collect()
+}
+
+/// The inverse of [`encode_pixels`]; `None` when the length is not a whole number of pixels.
+pub fn decode_pixels(bytes: &[u8]) -> Option<Vec<[f32; 3]>> {
+    if bytes.len() % 12 != 0 {
+        return None;
+    }
+    Some(
+        bytes
+            .chunks_exact(12)
+            .map(|p| std::array::from_fn(|c| f32::from_le_bytes(p[4 * c..4 * c + 4].try_into().expect("chunks of 12 hold three 4-byte floats"))))
+            .collect(),
+    )
+}
+
+/// A tile's cost: rays, then work, then the block counts, all little-endian `u64`.
+pub fn encode_cost(cost: &TileCost) -> Vec<u8> {
+    [cost.rays, cost.work].iter().chain(&cost.blocks).flat_map(|v| v.to_le_bytes()).collect()
+}
+
+/// The inverse of [`encode_cost`]; `None` when malformed.
+pub fn decode_cost(bytes: &[u8]) -> Option<TileCost> {
+    if bytes.len() % 8 != 0 || bytes.len() < 16 {
+        return None;
+    }
+    let mut values = bytes
+        .chunks_exact(8)
+        .map(|v| u64::from_le_bytes(v.try_into().expect("chunks of 8 are 8 bytes")));
+    let rays = values.next()?;
+    let work = values.next()?;
+    Some(TileCost { rays, work, blocks: values.collect() })
+}
+
+/// A rendered tile as the wire carries it.
+pub fn tile_result(frame: crate::wire::FrameId, tile: crate::wire::TileId, output: &TileOutput) -> TileResult {
+    TileResult {
+        frame,
+        tile,
+        rect: balancer::Rect::new(output.rect.x, output.rect.y, output.rect.w, output.rect.h),
+        pixels: encode_pixels(&output.pixels),
+        costs: encode_cost(&output.cost),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixels_and_costs_round_trip_bit_for_bit() {
+        let pixels = vec![[0.1, -0.0, f32::MIN_POSITIVE], [1e30, 3.5, 0.0]];
+        let back = decode_pixels(&encode_pixels(&pixels)).unwrap();
+        let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back), bits(&pixels));
+        let cost = TileCost { rays: 7, work: 99, blocks: vec![1, u64::MAX, 0] };
+        assert_eq!(decode_cost(&encode_cost(&cost)), Some(cost));
+        assert_eq!(decode_pixels(&[0; 13]), None);
+        assert_eq!(decode_cost(&[0; 12]), None);
+    }
+
+    #[test]
+    fn a_tampered_scene_file_is_refused() {
+        let toml = b"[camera]\nposition = [0, 0, -1]\nlook_at = [0, 0, 0]\n".to_vec();
+        let mut file = SceneFile { name: "s.toml".into(), hash: *blake3::hash(&toml).as_bytes(), bytes: toml };
+        assert!(load_scene(vec![file.clone()]).is_ok());
+        file.bytes.push(b'\n');
+        assert!(matches!(load_scene(vec![file]), Err(BundleError::HashMismatch { .. })));
+    }
+}

@@ -1,0 +1,144 @@
+//! The driver: tokio + quinn around the sans-IO [`crate::core`]. It moves bytes and timers and
+//! renders on a rayon pool; every scheduling decision is the core's.
+//!
+//! - [`owner`]: the frame owner (`tessera serve`, and peer 0 of the in-process default).
+//! - [`peer`]: any other peer (`tessera peer`).
+//! - `session`: the event loop both share: link events, render results and the core's timer.
+//! - [`bundle`]: the scene's files and tiles' pixels and costs as the wire carries them.
+//! - [`run_local`]: several peers in one process over real QUIC on loopback, certificates made
+//!   in memory: the default of `tessera render`.
+
+pub mod bundle;
+pub mod owner;
+pub mod peer;
+mod session;
+
+pub use owner::{Job, Owner, PeerReport};
+pub use peer::run_peer;
+pub use session::LocalTile;
+
+use crate::net::{BindError, ClusterCerts, ConnectError};
+use crate::wire::{PeerId, TileId};
+use std::net::{Ipv4Addr, SocketAddr};
+use std::time::Duration;
+use tracer::geometry::{Accel, BuildQuality};
+use tracer::{Effects, Film, Scene, World};
+
+/// How a node runs: its renderer, its policy and its transport's bounds.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Rendering threads, and so the tiles the core keeps in flight.
+    pub threads: usize,
+    pub core: crate::core::Config,
+    pub net: crate::net::Config,
+    pub limits: crate::wire::Limits,
+    /// Seeds victim choice (mixed with the peer id by the core).
+    pub seed: u64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        // The scene travels in one message: allow scenes up to 64 MiB (the Stanford dragon's
+        // OBJ is 32 MB). Chunked scene transfer would lift this; it is not written yet.
+        let net = crate::net::Config { max_message_bytes: 64 << 20, ..crate::net::Config::default() };
+        let limits = crate::wire::Limits { max_message_bytes: 64 << 20, ..crate::wire::Limits::default() };
+        Self { threads: 1, core: crate::core::Config::default(), net, limits, seed: 0 }
+    }
+}
+
+/// Why a node stopped before the render was done.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    #[error(transparent)]
+    Bind(#[from] BindError),
+    #[error(transparent)]
+    Connect(#[from] ConnectError),
+    #[error(transparent)]
+    Certs(#[from] crate::net::CertError),
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    #[error(transparent)]
+    Bundle(#[from] bundle::BundleError),
+    #[error(transparent)]
+    Frame(#[from] crate::core::FrameError),
+    #[error(transparent)]
+    Balancer(#[from] balancer::Error),
+    #[error("{0} came back with malformed pixels or costs")]
+    BadTile(TileId),
+    #[error("the transport stopped")]
+    Stopped,
+    #[error("writing a frame: {0}")]
+    Sink(String),
+    #[error("a peer task failed: {0}")]
+    Peer(String),
+}
+
+/// One finished frame, as the owner assembled it.
+#[derive(Debug)]
+pub struct CompletedFrame {
+    pub frame: u32,
+    pub film: Film,
+    pub tiles: Vec<TileRecord>,
+    /// From starting the frame to its last tile, in seconds.
+    pub seconds: f64,
+    pub rays: u64,
+}
+
+/// One tile of a finished frame.
+#[derive(Clone, Debug)]
+pub struct TileRecord {
+    pub rect: balancer::Rect,
+    pub predicted: f64,
+    /// Measured counted work.
+    pub measured: u64,
+    /// Who rendered it.
+    pub peer: PeerId,
+}
+
+/// Where finished frames go (the CLI writes them to disk).
+pub trait FrameSink: Send {
+    fn frame(&mut self, frame: CompletedFrame) -> Result<(), String>;
+}
+
+/// Builds the BVH and lights of a scene; `effects` forces an effect set (default: the scene's).
+pub fn prepare_world(scene: Scene, effects: Option<Effects>) -> World {
+    let effects = effects.unwrap_or_else(|| Effects::of(&scene));
+    let accel = Accel::build(&scene.triangles, BuildQuality::default());
+    World::new(scene, accel, effects)
+}
+
+/// What an in-process cluster run reports.
+pub struct LocalRun {
+    pub peers: PeerReport,
+    /// Tiles each peer rendered, with times since its own start (for the Gantt chart).
+    pub timelines: Vec<(PeerId, Vec<LocalTile>)>,
+}
+
+/// Renders `job` with `peers` peers in this process (peer 0 is the owner), each with
+/// `options.threads` rendering threads, over QUIC on 127.0.0.1 with certificates made in memory.
+pub async fn run_local(job: Job, peers: usize, options: Options, sink: &mut dyn FrameSink) -> Result<LocalRun, NodeError> {
+    let peers = peers.max(1);
+    let certs = ClusterCerts::generate(peers as u32)?;
+    let loopback = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
+    let owner = Owner::bind(loopback, &certs.peers()[0], options.clone())?;
+    let owner_addr = owner.local_addr()?;
+    let mut tasks = Vec::new();
+    for identity in certs.peers()[1..].iter().cloned() {
+        let options = options.clone();
+        tasks.push(tokio::spawn(async move {
+            let id = PeerId(identity.index());
+            run_peer(owner_addr, loopback, &identity, options).await.map(|tiles| (id, tiles))
+        }));
+    }
+    let report = owner.run(job, peers - 1, sink).await?;
+    let mut timelines = Vec::new();
+    for task in tasks {
+        match tokio::time::timeout(Duration::from_secs(10), task).await {
+            Ok(Ok(Ok(timeline))) => timelines.push(timeline),
+            Ok(Ok(Err(error))) => return Err(NodeError::Peer(error.to_string())),
+            Ok(Err(join)) => return Err(NodeError::Peer(join.to_string())),
+            Err(_) => return Err(NodeError::Peer("a peer did not stop after the render".into())),
+        }
+    }
+    Ok(LocalRun { peers: report, timelines })
+}

@@ -1,0 +1,136 @@
+//! A peer that is not the frame owner: joins the owner, loads the scene it is sent, connects to
+//! the other peers so that it can steal from them, and renders until the owner says goodbye.
+
+use super::session::{check_hello, Renderer, Session, Step};
+use super::{bundle, NodeError, Options};
+use crate::core::{Core, Event as CoreEvent};
+use crate::net::{CloseCode, ConnId, Expect, Link, PeerIdentity};
+use crate::wire::{GoodbyeReason, Message, PeerId, PROTOCOL_VERSION};
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+/// Joins the owner at `owner`, renders until the render is over, and returns this peer's tiles
+/// rendered (for the Gantt chart) when the owner says goodbye.
+pub async fn run_peer(
+    owner: SocketAddr,
+    listen: SocketAddr,
+    identity: &PeerIdentity,
+    options: Options,
+) -> Result<Vec<super::LocalTile>, NodeError> {
+    let me = PeerId(identity.index());
+    let (link, events) = Link::bind(listen, identity, options.net.clone(), super::session::decoder(options.limits.clone()))?;
+    let core = Core::new(me, options.threads, options.core.clone(), options.seed);
+    let mut session = Session::new(core, link, events);
+    let owner_conn = session.link.connect(owner, Expect::Peer(0)).await?;
+    session.send_conn(owner_conn, &Message::Hello { version: PROTOCOL_VERSION, peer: me, slots: options.threads as u32 });
+
+    // Connections whose handshake is under way: inbound ones wait for Hello, outbound for Welcome.
+    let mut inbound: BTreeMap<ConnId, crate::net::PeerCertificate> = BTreeMap::new();
+    let mut outbound: BTreeMap<ConnId, PeerId> = BTreeMap::new();
+    // Where the peers we dial listen: their certificates were required at connect time.
+    let mut dialing: BTreeMap<SocketAddr, PeerId> = BTreeMap::new();
+    loop {
+        match session.step().await {
+            Step::Connected { conn, remote, outbound: true, .. } => {
+                // TLS already checked the certificate we asked for (`Expect::Peer`), so the
+                // connection is bound to its peer at once: a message overtaking the Welcome
+                // (every message has its own stream) still finds its sender.
+                let peer = if conn == owner_conn { Some(PeerId(0)) } else { dialing.get(&remote).copied() };
+                match peer {
+                    Some(peer) => {
+                        session.peers.bind(conn, peer);
+                        if conn != owner_conn {
+                            session.send_conn(conn, &Message::Hello { version: PROTOCOL_VERSION, peer: me, slots: options.threads as u32 });
+                        }
+                        outbound.insert(conn, peer);
+                    }
+                    None => session.close(conn, CloseCode::Protocol, "a connection nobody dialed"),
+                }
+            }
+            Step::Connected { conn, certificate, .. } => {
+                inbound.insert(conn, certificate);
+            }
+            Step::Control { conn, message } => {
+                if let Some(certificate) = inbound.remove(&conn) {
+                    match check_hello(&message, &certificate) {
+                        Ok((peer, _)) if peer > me => {
+                            session.send_conn(conn, &Message::Welcome { version: PROTOCOL_VERSION, peer: me });
+                            session.peers.bind(conn, peer);
+                            let now = session.now();
+                            session.core.handle_peer_connected(now, peer);
+                            session.flush();
+                        }
+                        Ok((peer, _)) => session.close(conn, CloseCode::Protocol, &format!("{peer} should not dial {me}")),
+                        Err(reason) => session.close(conn, CloseCode::Identity, &reason),
+                    }
+                    continue;
+                }
+                match message {
+                    Message::Welcome { version, peer } if outbound.get(&conn) == Some(&peer) => {
+                        outbound.remove(&conn);
+                        if version != PROTOCOL_VERSION {
+                            session.close(conn, CloseCode::Protocol, "another protocol version");
+                            continue;
+                        }
+                        if conn != owner_conn {
+                            let now = session.now();
+                            session.core.handle_peer_connected(now, peer);
+                            session.flush();
+                        }
+                    }
+                    Message::Scene { files } if conn == owner_conn => {
+                        let digest = bundle::scene_digest(&files);
+                        let loaded = tokio::task::spawn_blocking(move || bundle::load_scene(files)).await;
+                        let scene = match loaded {
+                            Ok(Ok(scene)) => scene,
+                            Ok(Err(error)) => {
+                                session.send_conn(conn, &Message::Goodbye { reason: GoodbyeReason::BadScene });
+                                return Err(error.into());
+                            }
+                            Err(join) => return Err(NodeError::Io(std::io::Error::other(join))),
+                        };
+                        let world = tokio::task::spawn_blocking(move || Arc::new(super::prepare_world(scene, None)))
+                            .await
+                            .map_err(|e| NodeError::Io(std::io::Error::other(e)))?;
+                        let (renderer, results) = Renderer::new(options.threads, world)?;
+                        session.set_renderer(renderer, results);
+                        tracing::info!(%me, "scene {digest} loaded");
+                        session.send_conn(conn, &Message::SceneReady);
+                        let now = session.now();
+                        session.core.handle_peer_connected(now, PeerId(0));
+                        session.flush();
+                    }
+                    Message::Peers { peers } if conn == owner_conn => {
+                        for address in peers.into_iter().filter(|a| a.peer < me && a.peer != PeerId(0)) {
+                            let Ok(addr) = address.addr.parse::<SocketAddr>() else {
+                                tracing::warn!(addr = address.addr, "unusable peer address");
+                                continue;
+                            };
+                            dialing.insert(addr, address.peer);
+                            let link = session.link.clone();
+                            tokio::spawn(async move {
+                                if let Err(error) = link.connect(addr, Expect::Peer(address.peer.0)).await {
+                                    tracing::warn!(peer = %address.peer, %error, "cannot reach peer; stealing from the others");
+                                }
+                            });
+                        }
+                    }
+                    Message::Goodbye { .. } if conn == owner_conn => break,
+                    Message::Goodbye { .. } => {}
+                    other => session.close(conn, CloseCode::Protocol, &format!("unexpected {}", other.kind())),
+                }
+            }
+            Step::Closed { conn, .. } if conn == owner_conn => break,
+            Step::Closed { conn, .. } => {
+                inbound.remove(&conn);
+                outbound.remove(&conn);
+            }
+            Step::Core(CoreEvent::OwnerLost { frame }) => tracing::warn!(%frame, "the owner is gone"),
+            Step::Core(event) => tracing::debug!(?event, "core event"),
+            Step::Stopped => break,
+        }
+    }
+    session.link.shutdown().await;
+    Ok(std::mem::take(&mut session.local_tiles))
+}

@@ -1,0 +1,295 @@
+//! The driver loop shared by the frame owner and every other peer: it moves bytes between the
+//! QUIC [`Link`] and the scheduling [`Core`], hands tiles to the rayon renderer, and keeps the
+//! core's timer. The core decides everything; this only carries.
+
+use super::bundle;
+use crate::core::{Core, Event as CoreEvent, WorkItem};
+use crate::net::{CloseCode, ConnId, Event as NetEvent, Link, PeerCertificate};
+use crate::wire::{self, Message, PeerId, PROTOCOL_VERSION};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::sync::mpsc;
+use tracer::World;
+
+/// A decoded message and the size it had on the wire.
+pub(crate) type Incoming = (Message, usize);
+
+/// The decoder handed to the transport: pure, bounded (see [`wire::decode`]).
+pub(crate) fn decoder(limits: wire::Limits) -> impl Fn(&[u8]) -> Result<Incoming, wire::WireError> + Send + Sync + 'static {
+    move |bytes| wire::decode(bytes, &limits).map(|message| (message, bytes.len()))
+}
+
+/// Renders tiles on a rayon pool of its own and posts the results back to the async loop.
+/// Rendering never runs on a tokio worker: a tile can take seconds.
+pub(crate) struct Renderer {
+    pool: rayon::ThreadPool,
+    world: Arc<World>,
+    done: mpsc::UnboundedSender<(WorkItem, tracer::TileOutput, Duration)>,
+}
+
+impl Renderer {
+    pub(crate) fn new(
+        threads: usize,
+        world: Arc<World>,
+    ) -> std::io::Result<(Self, mpsc::UnboundedReceiver<(WorkItem, tracer::TileOutput, Duration)>)> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.max(1))
+            .thread_name(|i| format!("render-{i}"))
+            .build()
+            .map_err(std::io::Error::other)?;
+        let (done, results) = mpsc::unbounded_channel();
+        Ok((Self { pool, world, done }, results))
+    }
+
+    fn submit(&self, item: WorkItem) {
+        let world = self.world.clone();
+        let done = self.done.clone();
+        self.pool.spawn(move || {
+            let started = Instant::now();
+            let rect = tracer::Rect { x: item.tile.rect.x, y: item.tile.rect.y, w: item.tile.rect.w, h: item.tile.rect.h };
+            let frame = u32::try_from(item.frame.0).unwrap_or(u32::MAX);
+            let output = tracer::render_tile(&world, frame, rect);
+            // The loop may be gone at shutdown; the tile is then simply not needed.
+            let _ = done.send((item, output, started.elapsed()));
+        });
+    }
+}
+
+/// Which connection is which peer. A connection is known by its peer only after the handshake.
+#[derive(Default)]
+pub(crate) struct Peers {
+    by_conn: BTreeMap<ConnId, PeerId>,
+    by_peer: BTreeMap<PeerId, ConnId>,
+}
+
+impl Peers {
+    pub(crate) fn bind(&mut self, conn: ConnId, peer: PeerId) {
+        self.by_conn.insert(conn, peer);
+        self.by_peer.insert(peer, conn);
+    }
+
+    pub(crate) fn peer(&self, conn: ConnId) -> Option<PeerId> {
+        self.by_conn.get(&conn).copied()
+    }
+
+    pub(crate) fn conn(&self, peer: PeerId) -> Option<ConnId> {
+        self.by_peer.get(&peer).copied()
+    }
+
+    /// Forgets `conn`; returns its peer if that peer has no newer connection.
+    pub(crate) fn forget(&mut self, conn: ConnId) -> Option<PeerId> {
+        let peer = self.by_conn.remove(&conn)?;
+        if self.by_peer.get(&peer) == Some(&conn) {
+            self.by_peer.remove(&peer);
+            return Some(peer);
+        }
+        None
+    }
+
+    pub(crate) fn ids(&self) -> impl Iterator<Item = PeerId> + '_ {
+        self.by_peer.keys().copied()
+    }
+}
+
+/// One tile rendered here, for the Gantt chart.
+#[derive(Clone, Debug)]
+pub struct LocalTile {
+    pub frame: u64,
+    pub tile: u32,
+    pub start: Duration,
+    pub end: Duration,
+}
+
+/// What one step of the loop produced that the role above it must handle.
+pub(crate) enum Step {
+    /// A core event (frame complete, peer failed, ...).
+    Core(CoreEvent),
+    /// A message the core does not take (handshake, scene, goodbye), from a connection.
+    Control { conn: ConnId, message: Message },
+    /// A connection completed its TLS handshake.
+    Connected { conn: ConnId, certificate: PeerCertificate, remote: std::net::SocketAddr, outbound: bool },
+    /// A connection is gone; `peer` if it was a known peer.
+    Closed { conn: ConnId, peer: Option<PeerId> },
+    /// The transport stopped.
+    Stopped,
+}
+
+/// The machinery of one peer: core, link, renderer, timer.
+pub(crate) struct Session {
+    pub(crate) core: Core,
+    pub(crate) link: Link<Incoming>,
+    events: mpsc::Receiver<NetEvent<Incoming>>,
+    pub(crate) peers: Peers,
+    renderer: Option<Renderer>,
+    results: Option<mpsc::UnboundedReceiver<(WorkItem, tracer::TileOutput, Duration)>>,
+    epoch: Instant,
+    pending: std::collections::VecDeque<Step>,
+    pub(crate) local_tiles: Vec<LocalTile>,
+}
+
+impl Session {
+    pub(crate) fn new(core: Core, link: Link<Incoming>, events: mpsc::Receiver<NetEvent<Incoming>>) -> Self {
+        Self {
+            core,
+            link,
+            events,
+            peers: Peers::default(),
+            renderer: None,
+            results: None,
+            epoch: Instant::now(),
+            pending: Default::default(),
+            local_tiles: Vec::new(),
+        }
+    }
+
+    /// Time since the session started: the core's clock, read only here.
+    pub(crate) fn now(&self) -> Duration {
+        self.epoch.elapsed()
+    }
+
+    pub(crate) fn set_renderer(&mut self, renderer: Renderer, results: mpsc::UnboundedReceiver<(WorkItem, tracer::TileOutput, Duration)>) {
+        self.renderer = Some(renderer);
+        self.results = Some(results);
+    }
+
+    /// Sends a message to a connection, without waiting: every message has its own stream, so
+    /// order between messages is not kept anyway, and a slow peer must not stall the loop.
+    pub(crate) fn send_conn(&mut self, conn: ConnId, message: &Message) {
+        let bytes = wire::encode(message);
+        self.core.record_bytes(bytes.len() as u64, 0);
+        let link = self.link.clone();
+        let kind = message.kind();
+        tokio::spawn(async move {
+            if let Err(error) = link.send(conn, &bytes).await {
+                tracing::debug!(%error, kind, "a message was not sent");
+            }
+        });
+    }
+
+    pub(crate) fn send(&mut self, peer: PeerId, message: &Message) {
+        match self.peers.conn(peer) {
+            Some(conn) => self.send_conn(conn, message),
+            None => tracing::debug!(%peer, kind = message.kind(), "no connection to send on"),
+        }
+    }
+
+    pub(crate) fn close(&mut self, conn: ConnId, code: CloseCode, reason: &str) {
+        tracing::warn!(?conn, ?code, "closing a connection: {reason}");
+        self.link.close(conn, code, reason);
+    }
+
+    /// Drains the core's outputs: messages out, tiles to the renderer, events up.
+    pub(crate) fn flush(&mut self) {
+        while let Some((peer, message)) = self.core.poll_transmit() {
+            self.send(peer, &message);
+        }
+        while let Some(item) = self.core.poll_work() {
+            match &self.renderer {
+                Some(renderer) => renderer.submit(item),
+                None => tracing::error!("the core handed out work before the scene was loaded"),
+            }
+        }
+        while let Some(event) = self.core.poll_event() {
+            self.pending.push_back(Step::Core(event));
+        }
+    }
+
+    /// Waits for the next thing that happens and returns what the role must handle.
+    pub(crate) async fn step(&mut self) -> Step {
+        loop {
+            if let Some(step) = self.pending.pop_front() {
+                return step;
+            }
+            let deadline = self.core.poll_timeout().map(|t| tokio::time::Instant::from_std(self.epoch + t));
+            let sleep = async {
+                match deadline {
+                    Some(deadline) => tokio::time::sleep_until(deadline).await,
+                    None => std::future::pending().await,
+                }
+            };
+            let results = async {
+                match &mut self.results {
+                    Some(results) => results.recv().await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                event = self.events.recv() => match event {
+                    None => return Step::Stopped,
+                    Some(event) => if let Some(step) = self.on_net(event) { return step; },
+                },
+                Some((item, output, took)) = results => {
+                    let now = self.now();
+                    self.local_tiles.push(LocalTile { frame: item.frame.0, tile: item.tile.id.0, start: now.saturating_sub(took), end: now });
+                    let result = bundle::tile_result(item.frame, item.tile.id, &output);
+                    self.core.handle_tile_rendered(now, result);
+                }
+                () = sleep => {
+                    let now = self.now();
+                    self.core.handle_timeout(now);
+                }
+            }
+            self.flush();
+        }
+    }
+
+    fn on_net(&mut self, event: NetEvent<Incoming>) -> Option<Step> {
+        match event {
+            NetEvent::Connected { conn, remote, direction, certificate } => Some(Step::Connected {
+                conn,
+                certificate,
+                remote,
+                outbound: direction == crate::net::Direction::Outbound,
+            }),
+            NetEvent::Closed { conn, reason } => {
+                let peer = self.peers.forget(conn);
+                if let Some(peer) = peer {
+                    tracing::info!(%peer, ?reason, "peer left");
+                    let now = self.now();
+                    self.core.handle_peer_lost(now, peer);
+                    self.flush();
+                }
+                Some(Step::Closed { conn, peer })
+            }
+            NetEvent::Message { conn, message: (message, len) } => {
+                self.core.record_bytes(0, len as u64);
+                let Some(peer) = self.peers.peer(conn) else {
+                    return Some(Step::Control { conn, message });
+                };
+                match message {
+                    Message::Hello { .. }
+                    | Message::Welcome { .. }
+                    | Message::Peers { .. }
+                    | Message::Scene { .. }
+                    | Message::SceneReady
+                    | Message::Goodbye { .. } => Some(Step::Control { conn, message }),
+                    message => {
+                        let now = self.now();
+                        if let Err(error) = self.core.handle_message(now, peer, message) {
+                            self.close(conn, CloseCode::Protocol, &error.to_string());
+                        }
+                        None
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The reply to a `Hello` that carries the right version and an identity the certificate
+/// vouches for, or the reason to refuse it.
+pub(crate) fn check_hello(message: &Message, certificate: &PeerCertificate) -> Result<(PeerId, u32), String> {
+    match *message {
+        Message::Hello { version, peer, slots } => {
+            if version != PROTOCOL_VERSION {
+                return Err(format!("protocol version {version}, we speak {PROTOCOL_VERSION}"));
+            }
+            if !certificate.certifies(peer.0) {
+                return Err(format!("claims to be {peer}, but its certificate does not say so"));
+            }
+            Ok((peer, slots))
+        }
+        ref other => Err(format!("expected Hello, got {}", other.kind())),
+    }
+}
