@@ -40,9 +40,20 @@ pub struct RenderArgs {
     /// Image height in pixels (default: the scene's).
     #[arg(long)]
     pub height: Option<u32>,
-    /// Rendering threads (default: all cores).
+    /// Peers in this process, each with its own rendering threads, talking QUIC on loopback
+    /// with certificates made in memory. Peer 0 owns the frames. `--peers 1` renders alone.
+    #[arg(long, default_value_t = 2)]
+    pub peers: usize,
+    /// Rendering threads in all, shared evenly by the peers (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Turn work stealing between peers off (each renders its initial set only).
+    #[arg(long)]
+    pub no_steal: bool,
+    /// Write a Gantt chart (SVG): one row per peer over time, each tile a bar coloured by
+    /// whether it was the peer's own or taken from another peer.
+    #[arg(long)]
+    pub gantt: Option<PathBuf>,
     /// Seed of the pixel sampler (default: the scene's).
     #[arg(long)]
     pub seed: Option<u64>,

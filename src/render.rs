@@ -1,28 +1,30 @@
-//! `tessera render`: load a scene, then for each frame cut it into tiles with the chosen balancer,
-//! render the tiles on a rayon pool, assemble and write the frame, and feed the measured costs back
-//! to the balancer for the next frame.
+//! `tessera render`: load a scene, start peers in this process (peer 0 owns the frames), and let
+//! them render every frame: the PBT (or a grid) deals initial tile sets, peers steal from each
+//! other over QUIC, and the owner writes each frame and feeds its measured costs back to the
+//! balancer.
 
 use crate::cli::{BalancerKind, EffectsChoice, RenderArgs};
-use crate::report::{self, FrameStats, Progress, StatsFile, TileStats};
+use crate::report::{self, FrameStats, PeerFrameStats, Progress, StatsFile, TileStats};
 use anyhow::Context;
-use rayon::prelude::*;
+use runtime::node::{self, CompletedFrame, FrameSink, Job};
+use std::sync::Arc;
 use std::time::Instant;
-use tracer::geometry::{Accel, BuildQuality};
-use tracer::{Effects, Film, Scene, World};
+use tracer::{Effects, Scene, World};
 
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let started = Instant::now();
     let scene = load_scene(args)?;
+    let files = node::bundle::scene_files(&args.scene, &scene)?;
     let settings = scene.settings.clone();
+    let peers = args.peers.max(1);
     let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
-    let world = prepare_world(scene, args.effects);
+    let world = Arc::new(prepare_world(scene, args.effects));
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
-
-    let mut partitioner = partitioner(args.balancer, args.tiles, settings.width, settings.height)?;
-    let progress = Progress::new(settings.frames, partitioner.tiles().len() as u64);
+    let partitioner = partitioner(args.balancer, args.tiles, settings.width, settings.height)?;
+    let tiles = partitioner.tiles().len();
+    let progress = Progress::new(settings.frames);
     progress.line(&format!(
-        "{}: {}x{}, {} spp, {} frames, {} triangles, effects {}, {} threads, {:?} balancer with {} tiles",
+        "{}: {}x{}, {} spp, {} frames, {} triangles, effects {}; {} peers x {} threads, {:?} balancer with {} tiles, stealing {}",
         args.scene.display(),
         settings.width,
         settings.height,
@@ -30,80 +32,118 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         settings.frames,
         world.scene.triangles.len(),
         world.effects,
-        threads,
+        peers,
+        (threads / peers).max(1),
         args.balancer,
-        partitioner.tiles().len(),
+        tiles,
+        if args.no_steal { "off" } else { "on" },
     ));
-    let mut stats = StatsFile {
-        scene: args.scene.display().to_string(),
-        width: settings.width,
-        height: settings.height,
-        samples_per_pixel: settings.samples_per_pixel,
-        balancer: format!("{:?}", args.balancer).to_lowercase(),
-        effects: world.effects.to_string(),
-        peers: 1,
-        frames: Vec::new(),
+    let mut sink = Sink {
+        args,
+        progress,
+        stats: StatsFile {
+            scene: args.scene.display().to_string(),
+            width: settings.width,
+            height: settings.height,
+            samples_per_pixel: settings.samples_per_pixel,
+            balancer: format!("{:?}", args.balancer).to_lowercase(),
+            effects: world.effects.to_string(),
+            peers,
+            frames: Vec::new(),
+        },
+        rays: 0,
     };
-    let mut total_rays = 0u64;
+    let options = node::Options {
+        threads: (threads / peers).max(1),
+        core: runtime::core::Config { steal: !args.no_steal, ..runtime::core::Config::default() },
+        seed: settings.seed,
+        ..node::Options::default()
+    };
+    let job = Job { world, files, frames: settings.frames, partitioner };
+    let tokio = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     let render_started = Instant::now();
-    for frame in 0..settings.frames {
-        progress.frame_started(frame, settings.frames);
-        let tiles = partitioner.tiles();
-        let frame_started = Instant::now();
-        let rendered: Vec<_> = pool.install(|| {
-            tiles
-                .par_iter()
-                .map(|tile| {
-                    let begun = Instant::now();
-                    let output = tracer::render_tile(&world, frame, to_tracer(tile.rect));
-                    progress.tile_done();
-                    (output, begun.elapsed())
-                })
-                .collect()
-        });
-        let seconds = frame_started.elapsed().as_secs_f64();
-        let mut film = Film::new(settings.width, settings.height);
-        let mut frame_stats = FrameStats { frame, seconds, ..FrameStats::default() };
-        for (tile, (output, took)) in tiles.iter().zip(&rendered) {
-            film.insert(output.rect, &output.pixels, &output.cost);
-            film.stats.add(&output.stats);
-            frame_stats.tiles.push(TileStats {
-                rect: [tile.rect.x, tile.rect.y, tile.rect.w, tile.rect.h],
-                predicted: tile.predicted,
-                measured: output.cost.work,
-                seconds: took.as_secs_f64(),
-                peer: 0,
-            });
-        }
-        frame_stats.rays = film.stats.rays + film.stats.shadow_rays;
-        frame_stats.work = film.stats.work();
-        frame_stats.summarise_leaves();
-        total_rays += frame_stats.rays;
-        write_frame(args, frame, &film, &frame_stats)?;
-        partitioner
-            .observe(&cost_map(&film))
-            .context("the balancer rejected the frame's cost map")?;
-        if film.stats.invalid_samples > 0 {
-            tracing::warn!("frame {frame}: {} non-finite samples were dropped", film.stats.invalid_samples);
-        }
-        stats.frames.push(frame_stats);
-    }
-    progress.finish();
+    let run = tokio.block_on(node::run_local(job, peers, options, &mut sink))?;
     let render_seconds = render_started.elapsed().as_secs_f64();
+    sink.progress.finish();
+    let mut stats = sink.stats;
+    for ((frame, peer), peer_stats) in &run.peers {
+        if let Some(entry) = stats.frames.get_mut(*frame as usize) {
+            entry.peers.push(PeerFrameStats::new(peer.0, peer_stats));
+        }
+    }
     if let Some(path) = &args.stats {
         report::write_stats(path, &stats)?;
     }
+    if let Some(path) = &args.gantt {
+        report::write_gantt(path, &stats, &run.timelines)?;
+    }
     println!(
-        "rendered {} frames of {}x{} in {:.2} s ({:.2} s total): {:.2} Mrays/s, output in {}",
+        "rendered {} frames of {}x{} with {} peers in {:.2} s ({:.2} s in all): {:.2} Mrays/s; output in {}",
         settings.frames,
         settings.width,
         settings.height,
+        peers,
         render_seconds,
         started.elapsed().as_secs_f64(),
-        total_rays as f64 / render_seconds / 1e6,
+        sink.rays as f64 / render_seconds / 1e6,
         args.out.display(),
     );
     Ok(())
+}
+
+/// Writes each finished frame and keeps its statistics.
+struct Sink<'a> {
+    args: &'a RenderArgs,
+    progress: Progress,
+    stats: StatsFile,
+    rays: u64,
+}
+
+impl FrameSink for Sink<'_> {
+    fn frame(&mut self, done: CompletedFrame) -> Result<(), String> {
+        self.write(&done).map_err(|e| format!("{e:#}"))?;
+        self.rays += done.rays;
+        self.progress.frame_done(done.frame, done.seconds);
+        let mut frame = FrameStats {
+            frame: done.frame,
+            seconds: done.seconds,
+            rays: done.rays,
+            work: done.tiles.iter().map(|t| t.measured).sum(),
+            tiles: done
+                .tiles
+                .iter()
+                .map(|t| TileStats {
+                    tile: t.tile.0,
+                    rect: [t.rect.x, t.rect.y, t.rect.w, t.rect.h],
+                    predicted: t.predicted,
+                    measured: t.measured,
+                    peer: t.peer.0,
+                    initial_peer: t.initial.0,
+                })
+                .collect(),
+            ..FrameStats::default()
+        };
+        frame.summarise_leaves();
+        self.stats.frames.push(frame);
+        Ok(())
+    }
+}
+
+impl Sink<'_> {
+    fn write(&self, done: &CompletedFrame) -> anyhow::Result<()> {
+        let (args, film) = (self.args, &done.film);
+        let name = |ext: &str| args.out.join(format!("frame-{:04}.{ext}", done.frame));
+        tracer::output::write_exr(&name("exr"), film.width, film.height, &film.pixels)?;
+        tracer::output::write_png(&name("png"), film.width, film.height, &film.pixels, args.exposure)?;
+        if args.tile_map {
+            let preview = tracer::output::tone_map(&film.pixels, args.exposure);
+            let path = args.out.join(format!("tiles-{:04}.png", done.frame));
+            let costs: Vec<([u32; 4], u64)> =
+                done.tiles.iter().map(|t| ([t.rect.x, t.rect.y, t.rect.w, t.rect.h], t.measured)).collect();
+            report::write_tile_map(&path, film.width, film.height, &preview, &costs)?;
+        }
+        Ok(())
+    }
 }
 
 /// Loads the scene and applies the command line's overrides.
@@ -120,28 +160,13 @@ pub fn load_scene(args: &RenderArgs) -> anyhow::Result<Scene> {
     Ok(scene)
 }
 
-/// Builds the BVH and the lights.
+/// Builds the BVH and the lights, with the effect set the flags ask for.
 pub fn prepare_world(scene: Scene, effects: EffectsChoice) -> World {
     let effects = match effects {
-        EffectsChoice::Auto => Effects::of(&scene),
-        EffectsChoice::All => Effects::ALL,
+        EffectsChoice::Auto => None,
+        EffectsChoice::All => Some(Effects::ALL),
     };
-    let built = Instant::now();
-    let accel = Accel::build(&scene.triangles, BuildQuality::default());
-    tracing::debug!("BVH over {} triangles built in {:.3} s", scene.triangles.len(), built.elapsed().as_secs_f64());
-    World::new(scene, accel, effects)
-}
-
-fn write_frame(args: &RenderArgs, frame: u32, film: &Film, stats: &FrameStats) -> anyhow::Result<()> {
-    let name = |ext: &str| args.out.join(format!("frame-{frame:04}.{ext}"));
-    tracer::output::write_exr(&name("exr"), film.width, film.height, &film.pixels)?;
-    tracer::output::write_png(&name("png"), film.width, film.height, &film.pixels, args.exposure)?;
-    if args.tile_map {
-        let preview = tracer::output::tone_map(&film.pixels, args.exposure);
-        let path = args.out.join(format!("tiles-{frame:04}.png"));
-        report::write_tile_map(&path, film.width, film.height, &preview, &stats.tiles)?;
-    }
-    Ok(())
+    node::prepare_world(scene, effects)
 }
 
 /// The balancer the flags ask for. `--tiles M` is the PBT's leaf count, or for the regular grid
@@ -159,14 +184,3 @@ pub fn partitioner(kind: BalancerKind, tiles: usize, width: u32, height: u32) ->
     };
     Ok(balancer::Partitioner::new(width, height, &config)?)
 }
-
-/// The frame's per-block counted work as the balancer's cost map.
-fn cost_map(film: &Film) -> balancer::CostMap {
-    balancer::CostMap::from_counts(film.width, film.height, tracer::BLOCK_SIZE, &film.block_work)
-        .expect("the film's block grid matches its size and counted work is never negative")
-}
-
-fn to_tracer(r: balancer::Rect) -> tracer::Rect {
-    tracer::Rect { x: r.x, y: r.y, w: r.w, h: r.h }
-}
-

@@ -7,39 +7,33 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 use std::io::IsTerminal;
 use std::path::Path;
-use std::time::Duration;
 
-/// Progress over all tiles of all frames.
+/// Progress over the frames of a render.
 pub struct Progress {
     bar: Option<ProgressBar>,
 }
 
 impl Progress {
-    pub fn new(frames: u32, tiles_per_frame: u64) -> Self {
+    pub fn new(frames: u32) -> Self {
         let bar = std::io::stderr().is_terminal().then(|| {
-            let bar = ProgressBar::new(u64::from(frames) * tiles_per_frame);
+            let bar = ProgressBar::new(u64::from(frames));
             bar.set_style(
-                ProgressStyle::with_template(
-                    "{spinner} frame {msg} [{bar:40}] {pos}/{len} tiles, {elapsed} elapsed, ETA {eta}",
-                )
-                .expect("the template is a valid indicatif template")
-                .progress_chars("=> "),
+                ProgressStyle::with_template("[{bar:40}] frame {pos}/{len}, {elapsed} elapsed, ETA {eta} {msg}")
+                    .expect("the template is a valid indicatif template")
+                    .progress_chars("=> "),
             );
             bar
         });
         Self { bar }
     }
 
-    pub fn frame_started(&self, frame: u32, frames: u32) {
-        if let Some(bar) = &self.bar {
-            bar.set_message(format!("{}/{}", frame + 1, frames));
-        }
-    }
-
-    /// Called from rendering threads whenever a tile is done.
-    pub fn tile_done(&self) {
-        if let Some(bar) = &self.bar {
-            bar.inc(1);
+    pub fn frame_done(&self, frame: u32, seconds: f64) {
+        match &self.bar {
+            Some(bar) => {
+                bar.set_message(format!("(last {seconds:.2} s)"));
+                bar.inc(1);
+            }
+            None => tracing::info!("frame {frame} done in {seconds:.3} s"),
         }
     }
 
@@ -87,21 +81,62 @@ pub struct FrameStats {
     /// Largest measured leaf cost divided by the mean: 1 is a perfect partition.
     pub leaf_cost_max_over_mean: f64,
     pub tiles: Vec<TileStats>,
+    /// Each peer's own account of the frame.
+    pub peers: Vec<PeerFrameStats>,
+}
+
+/// One peer's account of one frame (times in seconds of slot time: a peer with 2 rendering
+/// threads busy for 1 s reports 2 s busy).
+#[derive(Debug, Default, Serialize)]
+pub struct PeerFrameStats {
+    pub peer: u32,
+    pub threads: u32,
+    pub busy_seconds: f64,
+    pub idle_seconds: f64,
+    pub tiles_rendered: u32,
+    /// Tiles this peer took from others.
+    pub tiles_stolen: u32,
+    /// Tiles this peer gave to thieves.
+    pub tiles_given: u32,
+    pub steal_requests_sent: u32,
+    pub steal_requests_refused: u32,
+    pub bytes_sent: u64,
+    pub bytes_received: u64,
+}
+
+impl PeerFrameStats {
+    pub fn new(peer: u32, s: &runtime::core::PeerStats) -> Self {
+        Self {
+            peer,
+            threads: s.slots,
+            busy_seconds: s.busy.as_secs_f64(),
+            idle_seconds: s.idle.as_secs_f64(),
+            tiles_rendered: s.tiles_rendered,
+            tiles_stolen: s.tiles_stolen,
+            tiles_given: s.tiles_given,
+            steal_requests_sent: s.steal_requests_sent,
+            steal_requests_refused: s.steal_requests_refused,
+            bytes_sent: s.bytes_sent,
+            bytes_received: s.bytes_received,
+        }
+    }
 }
 
 /// One tile of one frame.
 #[derive(Debug, Default, Serialize)]
 pub struct TileStats {
+    /// The tile's index in the frame's partition (depth-first leaf order for the PBT).
+    pub tile: u32,
     /// `[x, y, w, h]` in pixels, origin at the top-left.
     pub rect: [u32; 4],
     /// The balancer's prediction, in counted work.
     pub predicted: f64,
     /// The measured counted work.
     pub measured: u64,
-    /// Wall time spent rendering the tile, in seconds.
-    pub seconds: f64,
     /// The peer that rendered it (0 is the frame owner).
     pub peer: u32,
+    /// The peer whose initial set held it; differs from `peer` when stolen or re-issued.
+    pub initial_peer: u32,
 }
 
 impl FrameStats {
@@ -132,14 +167,13 @@ pub fn write_tile_map(
     width: u32,
     height: u32,
     preview: &[u8],
-    tiles: &[TileStats],
+    tiles: &[([u32; 4], u64)],
 ) -> anyhow::Result<()> {
     let mut image = image::RgbImage::from_raw(width, height, preview.to_vec())
         .ok_or_else(|| anyhow::anyhow!("preview has the wrong size"))?;
-    let max = tiles.iter().map(|t| t.measured).max().unwrap_or(1).max(1) as f32;
-    for tile in tiles {
-        let [x0, y0, w, h] = tile.rect;
-        let heat = tile.measured as f32 / max;
+    let max = tiles.iter().map(|t| t.1).max().unwrap_or(1).max(1) as f32;
+    for &([x0, y0, w, h], measured) in tiles {
+        let heat = measured as f32 / max;
         let tint = [255.0 * heat, 64.0, 255.0 * (1.0 - heat)];
         for y in y0..y0 + h {
             for x in x0..x0 + w {
@@ -157,6 +191,25 @@ pub fn write_tile_map(
     Ok(())
 }
 
-pub fn seconds(d: Duration) -> f64 {
-    d.as_secs_f64()
+/// Draws the `--gantt` chart: one row per peer, each tile a bar, orange where the tile came
+/// from another peer's initial set.
+pub fn write_gantt(
+    path: &Path,
+    stats: &StatsFile,
+    timelines: &[(runtime::wire::PeerId, Vec<runtime::node::LocalTile>)],
+) -> anyhow::Result<()> {
+    let mut bars = Vec::new();
+    for (peer, tiles) in timelines {
+        for t in tiles {
+            let stolen = stats
+                .frames
+                .get(t.frame as usize)
+                .and_then(|f| f.tiles.iter().find(|r| r.tile == t.tile))
+                .is_some_and(|r| r.initial_peer != peer.0);
+            bars.push(sim::plot::GanttBar { row: peer.0, start: t.start.as_secs_f64(), end: t.end.as_secs_f64(), stolen });
+        }
+    }
+    let rows = timelines.iter().map(|(p, _)| p.0 + 1).max().unwrap_or(1);
+    sim::plot::gantt_svg(path, &format!("{} ({} peers)", stats.scene, stats.peers), rows, &bars)?;
+    Ok(())
 }

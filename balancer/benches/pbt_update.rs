@@ -19,10 +19,20 @@ fn main() {
 /// that inside a disc of radius 160 pixels whose centre moves 24 pixels a frame, and a mild
 /// left-to-right gradient so that no two blocks tie.
 fn frame(frame: u32) -> CostMap {
-    let (cx, cy) = (300.0 + 24.0 * f64::from(frame), 400.0 + 6.0 * f64::from(frame));
+    let (cx, cy) = (
+        300.0 + 24.0 * f64::from(frame),
+        400.0 + 6.0 * f64::from(frame),
+    );
     CostMap::from_fn(WIDTH, HEIGHT, BLOCK, |c, r| {
-        let (x, y) = (f64::from(c * BLOCK + BLOCK / 2), f64::from(r * BLOCK + BLOCK / 2));
-        let per_pixel = if (x - cx).hypot(y - cy) < 160.0 { 1280.0 } else { 64.0 };
+        let (x, y) = (
+            f64::from(c * BLOCK + BLOCK / 2),
+            f64::from(r * BLOCK + BLOCK / 2),
+        );
+        let per_pixel = if (x - cx).hypot(y - cy) < 160.0 {
+            1280.0
+        } else {
+            64.0
+        };
         (per_pixel + x / 64.0).round() * 64.0
     })
     .expect("the synthetic map is valid")
@@ -30,7 +40,15 @@ fn frame(frame: u32) -> CostMap {
 
 /// A tree that has followed the spot for a few frames, and the next frame's map.
 fn steady(leaves: usize) -> (Pbt, CostMap) {
-    let mut pbt = Pbt::new(WIDTH, HEIGHT, &Config { leaves, ..Config::default() }).expect("valid");
+    let mut pbt = Pbt::new(
+        WIDTH,
+        HEIGHT,
+        &Config {
+            leaves,
+            ..Config::default()
+        },
+    )
+    .expect("valid");
     for f in 0..4 {
         pbt.observe(&frame(f)).expect("same size");
     }
@@ -40,16 +58,20 @@ fn steady(leaves: usize) -> (Pbt, CostMap) {
 #[divan::bench(args = LEAVES)]
 fn update_and_assign(bencher: Bencher, leaves: usize) {
     let (pbt, next) = steady(leaves);
-    bencher.with_inputs(|| pbt.clone()).bench_local_values(|mut pbt| {
-        pbt.observe(&next).expect("same size");
-        pbt.assign(PEERS, None).expect("valid peers")
-    });
+    bencher
+        .with_inputs(|| pbt.clone())
+        .bench_local_values(|mut pbt| {
+            pbt.observe(&next).expect("same size");
+            pbt.assign(PEERS, None).expect("valid peers")
+        });
 }
 
 #[divan::bench(args = LEAVES)]
 fn update_only(bencher: Bencher, leaves: usize) {
     let (pbt, next) = steady(leaves);
-    bencher.with_inputs(|| pbt.clone()).bench_local_values(|mut pbt| pbt.observe(&next).expect("same size"));
+    bencher
+        .with_inputs(|| pbt.clone())
+        .bench_local_values(|mut pbt| pbt.observe(&next).expect("same size"));
 }
 
 #[divan::bench(args = LEAVES)]

@@ -12,20 +12,31 @@
 //! within `L` of its share `W / P`. The simple greedy cut does not give this: cutting at the
 //! last prefix sum below each boundary `k * W / P` only keeps each run within `L` of its share,
 //! so two runs may differ by nearly `2L` (tiles `[1.01, 9, 9.99, 9, 1]` to 3 peers: that greedy
-//! gives runs 1.01, 18.99, 10 although 10.01, 9.99, 10 exist).
+//! gives runs 1.01, 18.99, 10 although 10.01, 9.99, 10 exist), and rounding each cut to the
+//! nearest boundary still allows more than `L`.
 //!
-//! How: call the prefix sums `S_0 = 0 <= S_1 <= ... <= S_n = W` points. For a given `lambda`,
-//! the cut positions reachable after `k` runs each within its band form a contiguous range of
-//! points, because the windows `[S_i + lambda u_k, S_i + lambda u_k + L]` of neighbouring points
-//! overlap (neighbours are at most `L` apart). The range's ends follow two greedy chains (always
-//! the shortest allowed run, always the longest), so checking a `lambda` costs `O(P log n)`. The
-//! largest `lambda` whose shortest-run chain still fits is found by bisection, the longest-run
-//! chain confirms `W` is reachable, and the cuts are recovered backwards, each the one nearest
-//! the plain proportional cut within what the band allows. That a band always exists is checked
-//! on every call, exhaustively for small cases in our tests and by property tests; it is not
-//! proven here. Should the check ever fail (or rounding defeat it), the cut falls back to the
-//! proportional cut at the prefix sum *nearest* each boundary, which provably keeps each run
-//! within `L` of its share: each cut is within `L / 2` of its boundary.
+//! How: call the prefix sums `S_0 = 0 <= S_1 <= ... <= S_n = W` points; neighbours are at
+//! most `L` apart. For a given `lambda`, the cut positions reachable after `k` runs each within
+//! its band form a contiguous range of points, because the windows
+//! `[S_i + lambda u_k, S_i + lambda u_k + L]` of neighbouring points overlap. The range's ends
+//! follow two greedy chains (always the shortest allowed run, always the longest), so checking
+//! a `lambda` costs `O(P log n)`. We take the largest `lambda*` whose shortest-run chain fits
+//! within the tiles (by bisection: fitting is monotone in `lambda`), and recover the cuts
+//! backwards, each the one nearest the plain proportional cut that the band allows.
+//!
+//! Why `lambda*` always works, i.e. its longest-run chain reaches `W`: `lambda*` exists, since
+//! `lambda = 0` fits, nothing above `W` does, and a chain only jumps just *after* a target meets
+//! a point. For a slightly larger `lambda* + e` the shortest-run chain no longer fits: at some
+//! run `k` its target passes `W`. But from any point `x`, the first point at or past
+//! `x + (lambda* + e) u` is at most one gap, so at most `L`, after the last point at or before
+//! `x + lambda* u` (for `e` small enough), so it is no further than the longest run from `x` at
+//! `lambda*`. Run by run, then, the longest-run chain at `lambda*` stays level with or ahead of
+//! the failing chain, and at run `k` its window `[.., x + lambda* u_k + L]` reaches past
+//! `W - e u_k + L >= W`: it takes the last point, `W`. Both ends of the reachable range are
+//! thus fine and `W` is in it. (Floating-point rounding could in principle break a comparison
+//! by an ulp; should a step then find no cut, we fall back to the proportional cut at the
+//! prefix sum *nearest* each boundary, which still keeps each run within `L` of its share, as
+//! each cut is within `L / 2` of its boundary.)
 //!
 //! Where prefix sums tie (tiles predicted to cost nothing), cuts prefer the proportional tile
 //! count, so free tiles are still spread. If every tile is predicted to cost nothing, tiles are
@@ -55,7 +66,10 @@ impl Assignment {
 
     /// The sum of `costs[tile]` over each peer's run.
     pub fn run_costs(&self, costs: &[f64]) -> Vec<f64> {
-        self.runs.iter().map(|run| run.iter().map(|&tile| costs[tile]).sum()).collect()
+        self.runs
+            .iter()
+            .map(|run| run.iter().map(|&tile| costs[tile]).sum())
+            .collect()
     }
 }
 
@@ -79,7 +93,10 @@ pub fn assign(
         }
     };
     let runs = match order {
-        Order::Contiguous => contiguous(costs, weights)?.into_iter().map(Iterator::collect).collect(),
+        Order::Contiguous => contiguous(costs, weights)?
+            .into_iter()
+            .map(Iterator::collect)
+            .collect(),
         Order::RoundRobin => round_robin(costs.len(), weights)?,
     };
     Ok(Assignment { runs })
@@ -89,7 +106,11 @@ pub fn assign(
 /// describe.
 pub fn contiguous(costs: &[f64], weights: &[f64]) -> Result<Vec<Range<usize>>, Error> {
     let shares = normalise(weights)?;
-    if let Some((index, &value)) = costs.iter().enumerate().find(|(_, c)| !(c.is_finite() && **c >= 0.0)) {
+    if let Some((index, &value)) = costs
+        .iter()
+        .enumerate()
+        .find(|(_, c)| !(c.is_finite() && **c >= 0.0))
+    {
         return Err(Error::InvalidTileCost { index, value });
     }
     let by_count = costs.iter().all(|&cost| cost == 0.0);
@@ -101,7 +122,11 @@ pub fn contiguous(costs: &[f64], weights: &[f64]) -> Result<Vec<Range<usize>>, E
     if !prefix[costs.len()].is_finite() {
         return Err(Error::Overflow);
     }
-    let largest = if by_count { 1.0 } else { costs.iter().fold(0.0, |a: f64, &b| a.max(b)) };
+    let largest = if by_count {
+        1.0
+    } else {
+        costs.iter().fold(0.0, |a: f64, &b| a.max(b))
+    };
     let proportional = proportional_cuts(&prefix, &shares);
     let cuts = band_cuts(&prefix, &shares, largest, &proportional).unwrap_or(proportional);
     Ok(cuts.windows(2).map(|pair| pair[0]..pair[1]).collect())
@@ -117,7 +142,8 @@ pub fn round_robin(tiles: usize, weights: &[f64]) -> Result<Vec<Vec<usize>>, Err
             *credit += share;
         }
         // The first peer with the most credit: a deterministic tie-break.
-        let best = (0..credit.len()).fold(0, |best, p| if credit[p] > credit[best] { p } else { best });
+        let best =
+            (0..credit.len()).fold(0, |best, p| if credit[p] > credit[best] { p } else { best });
         credit[best] -= 1.0;
         runs[best].push(tile);
     }
@@ -177,7 +203,12 @@ fn proportional_cuts(prefix: &[f64], shares: &[f64]) -> Vec<usize> {
 }
 
 /// The banded cut of the module docs, or `None` if no band was found.
-fn band_cuts(prefix: &[f64], shares: &[f64], largest: f64, preferred: &[usize]) -> Option<Vec<usize>> {
+fn band_cuts(
+    prefix: &[f64],
+    shares: &[f64],
+    largest: f64,
+    preferred: &[usize],
+) -> Option<Vec<usize>> {
     let (n, p, total) = (prefix.len() - 1, shares.len(), prefix[prefix.len() - 1]);
     // Shortest allowed runs: cut `k + 1` at the first point at least `lambda * u_k` past cut
     // `k`; `visit` sees each cut. False if a run would end past the last tile.
@@ -222,7 +253,11 @@ fn band_cuts(prefix: &[f64], shares: &[f64], largest: f64, preferred: &[usize]) 
             if mid <= lambda || mid >= infeasible || infeasible - lambda <= tolerance {
                 break;
             }
-            if shortest(mid, None) { lambda = mid } else { infeasible = mid }
+            if shortest(mid, None) {
+                lambda = mid
+            } else {
+                infeasible = mid
+            }
         }
         low.clear();
         low.push(0);
@@ -242,7 +277,9 @@ fn band_cuts(prefix: &[f64], shares: &[f64], largest: f64, preferred: &[usize]) 
     for k in (1..p).rev() {
         let end = prefix[cuts[k + 1]];
         let step = lambda * shares[k];
-        let latest = prefix.partition_point(|&s| s + step <= end).checked_sub(1)?;
+        let latest = prefix
+            .partition_point(|&s| s + step <= end)
+            .checked_sub(1)?;
         let earliest = prefix.partition_point(|&s| s + step + largest < end);
         let (from, to) = (earliest.max(low[k]), latest.min(high[k]).min(cuts[k + 1]));
         if from > to {
@@ -258,7 +295,9 @@ mod tests {
     use super::*;
 
     fn run_costs(costs: &[f64], runs: &[Range<usize>]) -> Vec<f64> {
-        runs.iter().map(|run| costs[run.clone()].iter().sum()).collect()
+        runs.iter()
+            .map(|run| costs[run.clone()].iter().sum())
+            .collect()
     }
 
     #[test]
@@ -293,7 +332,10 @@ mod tests {
 
     #[test]
     fn free_tiles_are_spread_by_count() {
-        assert_eq!(contiguous(&[0.0; 6], &[1.0; 3]).unwrap(), vec![0..2, 2..4, 4..6]);
+        assert_eq!(
+            contiguous(&[0.0; 6], &[1.0; 3]).unwrap(),
+            vec![0..2, 2..4, 4..6]
+        );
         // One expensive tile among free ones: the cut lands where the count says.
         let runs = contiguous(&[0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0, 0.0], &[1.0; 2]).unwrap();
         assert_eq!(runs, vec![0..4, 4..8]);
@@ -301,17 +343,28 @@ mod tests {
 
     #[test]
     fn round_robin_deals_in_turn_and_by_weight() {
-        assert_eq!(round_robin(5, &[1.0; 2]).unwrap(), vec![vec![0, 2, 4], vec![1, 3]]);
+        assert_eq!(
+            round_robin(5, &[1.0; 2]).unwrap(),
+            vec![vec![0, 2, 4], vec![1, 3]]
+        );
         let runs = round_robin(6, &[2.0, 1.0]).unwrap();
         assert_eq!(runs.iter().map(Vec::len).collect::<Vec<_>>(), vec![4, 2]);
     }
 
     #[test]
     fn bad_peers_and_weights_are_errors() {
-        assert_eq!(assign(&[1.0], Order::Contiguous, 0, None).unwrap_err(), Error::NoPeers);
+        assert_eq!(
+            assign(&[1.0], Order::Contiguous, 0, None).unwrap_err(),
+            Error::NoPeers
+        );
         let mismatch = assign(&[1.0], Order::Contiguous, 2, Some(&[1.0]));
         assert!(matches!(mismatch, Err(Error::Weights(_))));
-        for weights in [[f64::NAN, 1.0], [-1.0, 1.0], [0.0, 0.0], [f64::INFINITY, 1.0]] {
+        for weights in [
+            [f64::NAN, 1.0],
+            [-1.0, 1.0],
+            [0.0, 0.0],
+            [f64::INFINITY, 1.0],
+        ] {
             let result = assign(&[1.0], Order::RoundRobin, 2, Some(&weights));
             assert!(matches!(result, Err(Error::Weights(_))), "{weights:?}");
         }

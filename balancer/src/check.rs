@@ -20,13 +20,27 @@ pub enum PartitionError {
     #[error("tile {index} ({rect:?}) has no pixels")]
     Empty { index: usize, rect: Rect },
     #[error("tile {index} ({rect:?}) reaches outside the {width}x{height} image")]
-    OutOfBounds { index: usize, rect: Rect, width: u32, height: u32 },
+    OutOfBounds {
+        index: usize,
+        rect: Rect,
+        width: u32,
+        height: u32,
+    },
     #[error("tile {index} ({rect:?}) is longer than {max_aspect} times its width plus one pixel")]
-    Aspect { index: usize, rect: Rect, max_aspect: f64 },
+    Aspect {
+        index: usize,
+        rect: Rect,
+        max_aspect: f64,
+    },
     #[error("{found} tiles where {expected} were expected")]
     Count { expected: usize, found: usize },
     #[error("tiles {first} ({first_rect:?}) and {second} ({second_rect:?}) overlap")]
-    Overlap { first: usize, first_rect: Rect, second: usize, second_rect: Rect },
+    Overlap {
+        first: usize,
+        first_rect: Rect,
+        second: usize,
+        second_rect: Rect,
+    },
     #[error("the tiles cover {covered} of the image's {total} pixels")]
     Gap { covered: u64, total: u64 },
 }
@@ -48,18 +62,35 @@ pub fn check_partition(
             return Err(PartitionError::Empty { index, rect });
         }
         if !rect.inside(width, height) {
-            return Err(PartitionError::OutOfBounds { index, rect, width, height });
+            return Err(PartitionError::OutOfBounds {
+                index,
+                rect,
+                width,
+                height,
+            });
         }
         if let Some(max_aspect) = max_aspect.filter(|&bound| !rect.within_aspect(bound)) {
-            return Err(PartitionError::Aspect { index, rect, max_aspect });
+            return Err(PartitionError::Aspect {
+                index,
+                rect,
+                max_aspect,
+            });
         }
     }
     if let Some(expected) = expected_count.filter(|&expected| expected != tiles.len()) {
-        return Err(PartitionError::Count { expected, found: tiles.len() });
+        return Err(PartitionError::Count {
+            expected,
+            found: tiles.len(),
+        });
     }
     if let Some((first, second)) = first_overlap(tiles) {
         let (first_rect, second_rect) = (tiles[first], tiles[second]);
-        return Err(PartitionError::Overlap { first, first_rect, second, second_rect });
+        return Err(PartitionError::Overlap {
+            first,
+            first_rect,
+            second,
+            second_rect,
+        });
     }
     let covered: u64 = tiles.iter().map(Rect::area).sum();
     let total = Rect::image(width, height).area();
@@ -88,15 +119,15 @@ fn first_overlap(tiles: &[Rect]) -> Option<(usize, usize)> {
             live.remove(&top);
             continue;
         }
-        if let Some((_, &(above_bottom, above))) = live.range(..=top).next_back() {
-            if above_bottom > top {
-                return Some((above.min(index), above.max(index)));
-            }
+        if let Some((_, &(above_bottom, above))) = live.range(..=top).next_back()
+            && above_bottom > top
+        {
+            return Some((above.min(index), above.max(index)));
         }
-        if let Some((&below_top, &(_, below))) = live.range(top..).next() {
-            if below_top < bottom {
-                return Some((below.min(index), below.max(index)));
-            }
+        if let Some((&below_top, &(_, below))) = live.range(top..).next()
+            && below_top < bottom
+        {
+            return Some((below.min(index), below.max(index)));
         }
         live.insert(top, (bottom, index));
     }
@@ -108,13 +139,24 @@ mod tests {
     use super::*;
 
     fn quadrants() -> Vec<Rect> {
-        vec![Rect::new(0, 0, 2, 2), Rect::new(2, 0, 2, 2), Rect::new(0, 2, 2, 2), Rect::new(2, 2, 2, 2)]
+        vec![
+            Rect::new(0, 0, 2, 2),
+            Rect::new(2, 0, 2, 2),
+            Rect::new(0, 2, 2, 2),
+            Rect::new(2, 2, 2, 2),
+        ]
     }
 
     #[test]
     fn accepts_an_exact_cover() {
-        assert_eq!(check_partition(4, 4, &quadrants(), Some(4), Some(2.0)), Ok(()));
-        assert_eq!(check_partition(1, 1, &[Rect::new(0, 0, 1, 1)], Some(1), Some(2.0)), Ok(()));
+        assert_eq!(
+            check_partition(4, 4, &quadrants(), Some(4), Some(2.0)),
+            Ok(())
+        );
+        assert_eq!(
+            check_partition(1, 1, &[Rect::new(0, 0, 1, 1)], Some(1), Some(2.0)),
+            Ok(())
+        );
     }
 
     #[test]
@@ -134,21 +176,39 @@ mod tests {
         );
         // A tile nested inside another.
         let nested = [Rect::new(0, 0, 4, 4), Rect::new(1, 1, 1, 1)];
-        assert!(matches!(check_partition(4, 4, &nested, None, None), Err(PartitionError::Overlap { .. })));
+        assert!(matches!(
+            check_partition(4, 4, &nested, None, None),
+            Err(PartitionError::Overlap { .. })
+        ));
     }
 
     #[test]
     fn reports_gaps_bounds_counts_and_aspect() {
         let mut tiles = quadrants();
         tiles[3] = Rect::new(2, 2, 1, 2);
-        assert_eq!(check_partition(4, 4, &tiles, None, None), Err(PartitionError::Gap { covered: 14, total: 16 }));
+        assert_eq!(
+            check_partition(4, 4, &tiles, None, None),
+            Err(PartitionError::Gap {
+                covered: 14,
+                total: 16
+            })
+        );
         let out = [Rect::new(0, 0, 5, 4)];
-        assert!(matches!(check_partition(4, 4, &out, None, None), Err(PartitionError::OutOfBounds { index: 0, .. })));
+        assert!(matches!(
+            check_partition(4, 4, &out, None, None),
+            Err(PartitionError::OutOfBounds { index: 0, .. })
+        ));
         let empty = [Rect::new(0, 0, 0, 4)];
-        assert!(matches!(check_partition(4, 4, &empty, None, None), Err(PartitionError::Empty { .. })));
+        assert!(matches!(
+            check_partition(4, 4, &empty, None, None),
+            Err(PartitionError::Empty { .. })
+        ));
         assert_eq!(
             check_partition(4, 4, &quadrants(), Some(5), None),
-            Err(PartitionError::Count { expected: 5, found: 4 })
+            Err(PartitionError::Count {
+                expected: 5,
+                found: 4
+            })
         );
         let strips = [Rect::new(0, 0, 1, 4), Rect::new(1, 0, 3, 4)];
         assert!(matches!(

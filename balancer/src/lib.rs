@@ -54,7 +54,10 @@ pub enum Error {
     #[error("{rect:?} lies outside the {width}x{height} image")]
     OutOfBounds { rect: Rect, width: u32, height: u32 },
     #[error("the cost map covers {found:?} pixels but the partition covers {expected:?}")]
-    MapSize { expected: (u32, u32), found: (u32, u32) },
+    MapSize {
+        expected: (u32, u32),
+        found: (u32, u32),
+    },
     #[error("invalid config: {0}")]
     Config(&'static str),
     #[error("cannot assign tiles to zero peers")]

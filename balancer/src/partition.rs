@@ -54,6 +54,7 @@ pub struct Config {
     /// `[0, 1)`; a new prediction is `smoothing * old + (1 - smoothing) * measured`, block by
     /// block. Default 0: off, the prediction is the last frame's measurement, which is what
     /// temporal coherence of a moving scene calls for. Raise it for noisy cost measurements.
+    /// The first measurement is taken as it is: there is nothing yet to blend it with.
     pub smoothing: f64,
 }
 
@@ -81,7 +82,10 @@ pub enum Grid {
 
 impl Default for Grid {
     fn default() -> Self {
-        Grid::Count { columns: 16, rows: 16 }
+        Grid::Count {
+            columns: 16,
+            rows: 16,
+        }
     }
 }
 
@@ -99,7 +103,13 @@ pub enum Order {
 
 impl Default for Config {
     fn default() -> Self {
-        Config { kind: Kind::Pbt, leaves: 256, grid: Grid::default(), order: Order::Contiguous, smoothing: 0.0 }
+        Config {
+            kind: Kind::Pbt,
+            leaves: 256,
+            grid: Grid::default(),
+            order: Order::Contiguous,
+            smoothing: 0.0,
+        }
     }
 }
 
@@ -112,9 +122,9 @@ impl Config {
         match self.kind {
             Kind::Pbt if self.leaves == 0 => Err(Error::Config("a PBT needs at least one leaf")),
             Kind::Regular => match self.grid {
-                Grid::Count { columns: 0, .. } | Grid::Count { rows: 0, .. } => {
-                    Err(Error::Config("a grid needs at least one column and one row"))
-                }
+                Grid::Count { columns: 0, .. } | Grid::Count { rows: 0, .. } => Err(Error::Config(
+                    "a grid needs at least one column and one row",
+                )),
                 Grid::Size { width: 0, .. } | Grid::Size { height: 0, .. } => {
                     Err(Error::Config("grid tiles need at least one pixel a side"))
                 }
@@ -204,7 +214,12 @@ pub(crate) struct Predictor {
 
 impl Predictor {
     pub(crate) fn new(width: u32, height: u32, smoothing: f64) -> Self {
-        Predictor { width, height, smoothing, map: None }
+        Predictor {
+            width,
+            height,
+            smoothing,
+            map: None,
+        }
     }
 
     /// Predicted cost of `rect`: the (smoothed) measured cost, or before any measurement its

@@ -25,39 +25,80 @@ impl Regular {
         if width == 0 || height == 0 {
             return Err(Error::EmptyImage { width, height });
         }
-        let config = Config { kind: crate::Kind::Regular, ..config.clone() };
+        let config = Config {
+            kind: crate::Kind::Regular,
+            ..config.clone()
+        };
         config.validate()?;
         let (xs, ys) = match config.grid {
             Grid::Count { columns, rows } => {
                 if columns > width || rows > height {
-                    return Err(Error::Config("a grid cannot have more columns or rows than pixels"));
+                    return Err(Error::Config(
+                        "a grid cannot have more columns or rows than pixels",
+                    ));
                 }
                 (even_cuts(width, columns), even_cuts(height, rows))
             }
-            Grid::Size { width: tile_width, height: tile_height } => {
-                (sized_cuts(width, tile_width), sized_cuts(height, tile_height))
-            }
+            Grid::Size {
+                width: tile_width,
+                height: tile_height,
+            } => (
+                sized_cuts(width, tile_width),
+                sized_cuts(height, tile_height),
+            ),
         };
         let rects: Vec<Rect> = ys
             .windows(2)
-            .flat_map(|y| xs.windows(2).map(move |x| Rect::new(x[0], y[0], x[1] - x[0], y[1] - y[0])))
+            .flat_map(|y| {
+                xs.windows(2)
+                    .map(move |x| Rect::new(x[0], y[0], x[1] - x[0], y[1] - y[0]))
+            })
             .collect();
         let predictor = Predictor::new(width, height, config.smoothing);
         let predicted = rects.iter().map(|&rect| predictor.estimate(rect)).collect();
-        Ok(Regular { width, height, order: config.order, rects, predicted, predictor })
+        Ok(Regular {
+            width,
+            height,
+            order: config.order,
+            rects,
+            predicted,
+            predictor,
+        })
     }
 
     /// `columns` x `rows` tiles whose sides differ by at most a pixel, dealt in contiguous runs.
     pub fn grid(width: u32, height: u32, columns: u32, rows: u32) -> Result<Self, Error> {
         let grid = Grid::Count { columns, rows };
-        Regular::new(width, height, &Config { grid, ..Config::default() })
+        Regular::new(
+            width,
+            height,
+            &Config {
+                grid,
+                ..Config::default()
+            },
+        )
     }
 
     /// Tiles of `tile_width` x `tile_height` pixels from the top-left corner (partial at the
     /// right and bottom edges), dealt in contiguous runs.
-    pub fn tile_size(width: u32, height: u32, tile_width: u32, tile_height: u32) -> Result<Self, Error> {
-        let grid = Grid::Size { width: tile_width, height: tile_height };
-        Regular::new(width, height, &Config { grid, ..Config::default() })
+    pub fn tile_size(
+        width: u32,
+        height: u32,
+        tile_width: u32,
+        tile_height: u32,
+    ) -> Result<Self, Error> {
+        let grid = Grid::Size {
+            width: tile_width,
+            height: tile_height,
+        };
+        Regular::new(
+            width,
+            height,
+            &Config {
+                grid,
+                ..Config::default()
+            },
+        )
     }
 
     /// The same grid, dealt in `order`.
@@ -76,7 +117,9 @@ impl Regular {
     /// The tiles, row-major, with their predicted costs.
     pub fn tiles(&self) -> Vec<Tile> {
         let tiles = self.rects.iter().zip(&self.predicted);
-        tiles.map(|(&rect, &predicted)| Tile { rect, predicted }).collect()
+        tiles
+            .map(|(&rect, &predicted)| Tile { rect, predicted })
+            .collect()
     }
 
     /// Takes the measured costs of the frame just rendered: new predictions, same grid.
@@ -103,7 +146,9 @@ impl From<Regular> for Partitioner {
 /// `parts + 1` cut positions `floor(extent * i / parts)`: `parts` spans of `floor` or `ceil` of
 /// `extent / parts` pixels.
 fn even_cuts(extent: u32, parts: u32) -> Vec<u32> {
-    (0..=parts).map(|i| (u64::from(extent) * u64::from(i) / u64::from(parts)) as u32).collect()
+    (0..=parts)
+        .map(|i| (u64::from(extent) * u64::from(i) / u64::from(parts)) as u32)
+        .collect()
 }
 
 /// Cut positions every `size` pixels, the last span partial.
@@ -144,7 +189,10 @@ mod tests {
         let regular = Regular::tile_size(10, 5, 4, 4).unwrap();
         let widths: Vec<(u32, u32)> = rects(&regular).iter().map(|r| (r.w, r.h)).collect();
         assert_eq!(widths, vec![(4, 4), (4, 4), (2, 4), (4, 1), (4, 1), (2, 1)]);
-        assert_eq!(check_partition(10, 5, &rects(&regular), Some(6), None), Ok(()));
+        assert_eq!(
+            check_partition(10, 5, &rects(&regular), Some(6), None),
+            Ok(())
+        );
     }
 
     #[test]
@@ -163,7 +211,10 @@ mod tests {
         let regular = Regular::grid(8, 8, 4, 1).unwrap();
         let contiguous = regular.assign(2, None).unwrap();
         assert_eq!(contiguous.runs, vec![vec![0, 1], vec![2, 3]]);
-        let interleaved = regular.with_order(Order::RoundRobin).assign(2, None).unwrap();
+        let interleaved = regular
+            .with_order(Order::RoundRobin)
+            .assign(2, None)
+            .unwrap();
         assert_eq!(interleaved.runs, vec![vec![0, 2], vec![1, 3]]);
     }
 
@@ -171,7 +222,13 @@ mod tests {
     fn impossible_grids_are_errors() {
         assert!(matches!(Regular::grid(4, 4, 5, 1), Err(Error::Config(_))));
         assert!(matches!(Regular::grid(4, 4, 0, 1), Err(Error::Config(_))));
-        assert!(matches!(Regular::tile_size(4, 4, 0, 1), Err(Error::Config(_))));
-        assert!(matches!(Regular::grid(0, 4, 1, 1), Err(Error::EmptyImage { .. })));
+        assert!(matches!(
+            Regular::tile_size(4, 4, 0, 1),
+            Err(Error::Config(_))
+        ));
+        assert!(matches!(
+            Regular::grid(0, 4, 1, 1),
+            Err(Error::EmptyImage { .. })
+        ));
     }
 }

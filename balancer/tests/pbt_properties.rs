@@ -14,7 +14,10 @@ fn rects(pbt: &Pbt) -> Vec<Rect> {
 }
 
 fn config(leaves: usize) -> Config {
-    Config { leaves, ..Config::default() }
+    Config {
+        leaves,
+        ..Config::default()
+    }
 }
 
 /// The parent of `leaf` in the full halving hierarchy of `image`: the tree a PBT's nodes are
@@ -24,7 +27,11 @@ fn parent_of(image: Rect, leaf: Rect) -> Option<Rect> {
     while node != leaf {
         let (a, b) = node.halves()?;
         parent = Some(node);
-        node = if a.x <= leaf.x && a.y <= leaf.y && leaf.right() <= a.right() && leaf.bottom() <= a.bottom() {
+        node = if a.x <= leaf.x
+            && a.y <= leaf.y
+            && leaf.right() <= a.right()
+            && leaf.bottom() <= a.bottom()
+        {
             a
         } else {
             b
@@ -36,7 +43,11 @@ fn parent_of(image: Rect, leaf: Rect) -> Option<Rect> {
 /// Asserts that no split+merge pair would lower the variance of `map`'s costs over the leaves:
 /// for every splittable leaf `a` and every unforced node `q` with two leaf children `b, c`,
 /// other than `a`'s parent, `cost(a1) * cost(a2) <= cost(b) * cost(c)`.
-fn assert_no_improving_pair(image: Rect, leaves: &[Rect], map: &CostMap) -> Result<(), TestCaseError> {
+fn assert_no_improving_pair(
+    image: Rect,
+    leaves: &[Rect],
+    map: &CostMap,
+) -> Result<(), TestCaseError> {
     let set: HashSet<Rect> = leaves.iter().copied().collect();
     // The two best split gains under distinct parents.
     let mut best: Vec<(f64, Option<Rect>)> = Vec::new();
@@ -62,7 +73,10 @@ fn assert_no_improving_pair(image: Rect, leaves: &[Rect], map: &CostMap) -> Resu
             Some((gain, parent)) if parent != Some(q) => gain,
             _ => second.map_or(0.0, |(gain, _)| gain),
         };
-        prop_assert!(gain <= loss + 1e-9 * gain.max(loss), "split gaining {gain} beats merging {q:?} at {loss}");
+        prop_assert!(
+            gain <= loss + 1e-9 * gain.max(loss),
+            "split gaining {gain} beats merging {q:?} at {loss}"
+        );
     }
     Ok(())
 }
@@ -156,16 +170,25 @@ proptest! {
 fn all_zero_and_all_huge_maps_leave_a_sane_tree() {
     for (w, h) in [(64, 48), (1, 40), (200, 5)] {
         let mut pbt = Pbt::new(w, h, &config(32)).unwrap();
-        for layout in [Layout::Random(vec![0.0; common::block_count(w, h, 4)]), Layout::Random(vec![1e30; common::block_count(w, h, 4)])] {
+        for layout in [
+            Layout::Random(vec![0.0; common::block_count(w, h, 4)]),
+            Layout::Random(vec![1e30; common::block_count(w, h, 4)]),
+        ] {
             let map = layout.map(w, h, 4);
             let update = pbt.observe(&map).unwrap();
             assert!(!update.capped);
             let expected = expected_leaves(w, h, 32);
-            assert_eq!(check_partition(w, h, &rects(&pbt), Some(expected), Some(2.0)), Ok(()));
+            assert_eq!(
+                check_partition(w, h, &rects(&pbt), Some(expected), Some(2.0)),
+                Ok(())
+            );
             let sum: f64 = pbt.tiles().iter().map(|t| t.predicted).sum();
             assert!(close(sum, map.total()), "{sum} vs {}", map.total());
             let assignment = pbt.assign(5, None).unwrap();
-            assert_eq!(assignment.runs.iter().map(Vec::len).sum::<usize>(), pbt.leaf_count());
+            assert_eq!(
+                assignment.runs.iter().map(Vec::len).sum::<usize>(),
+                pbt.leaf_count()
+            );
         }
     }
 }

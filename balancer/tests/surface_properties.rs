@@ -32,7 +32,9 @@ fn costs() -> impl Strategy<Value = Vec<f64>> {
 
 fn weights() -> impl Strategy<Value = Vec<f64>> {
     proptest::collection::vec(prop_oneof![1 => Just(0.0), 6 => 0.1f64..4.0], 1..12)
-        .prop_filter("some peer must have a positive weight", |w| w.iter().any(|&x| x > 0.0))
+        .prop_filter("some peer must have a positive weight", |w| {
+            w.iter().any(|&x| x > 0.0)
+        })
 }
 
 proptest! {
@@ -107,7 +109,7 @@ proptest! {
         for y in y0..y1 {
             for x in x0..x1 {
                 let (c, r) = (x / block, y / block);
-                brute += map.block_cost(c, r).unwrap() / map.block_rect(c, r).area() as f64;
+                brute += map.block_cost(c, r).unwrap() / map.block_rect(c, r).unwrap().area() as f64;
             }
         }
         // Double-double prefix sums are good to about 2^-104 of the map's total.
@@ -183,7 +185,10 @@ proptest! {
 }
 
 fn ordered(a: f64, b: f64, extent: u32) -> (u32, u32) {
-    let (a, b) = ((a * f64::from(extent)) as u32, (b * f64::from(extent)) as u32);
+    let (a, b) = (
+        (a * f64::from(extent)) as u32,
+        (b * f64::from(extent)) as u32,
+    );
     let (lo, hi) = (a.min(b), a.max(b));
     (lo.min(extent - 1), (hi + 1).min(extent))
 }
@@ -200,9 +205,13 @@ fn a_band_exists_for_every_small_integer_case() {
             for peers in 2..=4 {
                 for weights in [vec![1.0; peers], (1..=peers).map(|p| p as f64).collect()] {
                     let runs = contiguous(&costs, &weights).unwrap();
-                    let run_costs: Vec<f64> = runs.iter().map(|r| costs[r.clone()].iter().sum()).collect();
+                    let run_costs: Vec<f64> =
+                        runs.iter().map(|r| costs[r.clone()].iter().sum()).collect();
                     if total > 0.0 {
-                        assert!(within_band(&run_costs, &weights, largest, total), "{costs:?} {weights:?} -> {run_costs:?}");
+                        assert!(
+                            within_band(&run_costs, &weights, largest, total),
+                            "{costs:?} {weights:?} -> {run_costs:?}"
+                        );
                     }
                 }
             }
@@ -214,7 +223,15 @@ fn a_band_exists_for_every_small_integer_case() {
 fn the_common_surface_drives_either_balancer() {
     let map = CostMap::from_fn(64, 32, 8, |c, r| if c < 2 && r < 2 { 100.0 } else { 1.0 }).unwrap();
     for kind in [Kind::Pbt, Kind::Regular] {
-        let config = Config { kind, leaves: 16, grid: Grid::Count { columns: 4, rows: 4 }, ..Config::default() };
+        let config = Config {
+            kind,
+            leaves: 16,
+            grid: Grid::Count {
+                columns: 4,
+                rows: 4,
+            },
+            ..Config::default()
+        };
         let mut partitioner = Partitioner::new(64, 32, &config).unwrap();
         partitioner.observe(&map).unwrap();
         let tiles = partitioner.tiles();

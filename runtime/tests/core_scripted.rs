@@ -86,6 +86,21 @@ fn completion(cluster: &Cluster, frame: FrameId) -> (Duration, Vec<TileResult>) 
     first
 }
 
+/// Who the owner says rendered each tile of `frame`, by tile id.
+fn rendered_by(cluster: &Cluster, frame: FrameId) -> Vec<PeerId> {
+    cluster
+        .events()
+        .find_map(|(_, event)| match event {
+            Event::FrameComplete {
+                frame: f,
+                rendered_by,
+                ..
+            } if *f == frame => Some(rendered_by.clone()),
+            _ => None,
+        })
+        .unwrap_or_else(|| panic!("{frame} did not complete"))
+}
+
 fn stats(cluster: &Cluster, frame: FrameId) -> BTreeMap<PeerId, PeerStats> {
     cluster
         .events()
@@ -175,6 +190,10 @@ fn every_tile_completes_exactly_once_over_two_frames() {
             renders.values().all(|by| by.len() == 1),
             "a tile was rendered twice"
         );
+        for frame in [FrameId(1), FrameId(2)] {
+            let by: Vec<PeerId> = (0..40).map(|t| renders[&(frame, TileId(t))][0]).collect();
+            assert_eq!(rendered_by(&cluster, frame), by);
+        }
         assert_no_refusals_or_faults(&cluster);
     }
 }

@@ -25,9 +25,9 @@ pub enum Estimate {
 impl std::fmt::Display for Estimate {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match *self {
-            Estimate::Within(v) => write!(f, "{v:.3e}"),
-            Estimate::Below(v) => write!(f, "< {v:.3e}"),
-            Estimate::Above(v) => write!(f, "> {v:.3e}"),
+            Estimate::Within(v) => write!(f, "{}", significant(v)),
+            Estimate::Below(v) => write!(f, "< {}", significant(v)),
+            Estimate::Above(v) => write!(f, "> {}", significant(v)),
         }
     }
 }
@@ -164,8 +164,8 @@ fn spp_sentence(run: &Run) -> Option<String> {
     let (first, last) = (spp[0], spp[spp.len() - 1]);
     let mut s = format!(
         "Samples: RMSE falls as spp^{rmse_slope:.3} from {} to {} spp (Monte Carlo predicts -0.5) while time \
-         grows as spp^{time_slope:.3}, so halving the error costs {:.1}x the time. {} spp take {:.4} s for RMSE \
-         {:.3e} (relMSE {:.3e}); {} spp take {:.3} s for RMSE {:.3e} (relMSE {:.3e}).",
+         grows as spp^{time_slope:.3}, so halving the error costs {:.1}x the time. At {} spp a frame takes {:.4} \
+         s for RMSE {:.3e} (relMSE {:.3e}); at {} spp {:.3} s for RMSE {:.3e} (relMSE {:.3e}).",
         first.settings.samples_per_pixel,
         last.settings.samples_per_pixel,
         2f64.powf(-time_slope / rmse_slope),
@@ -300,6 +300,19 @@ fn join_and<'a>(names: impl Iterator<Item = &'a str>) -> String {
     }
 }
 
+/// Four significant digits: plain decimals between 0.001 and 10000, scientific notation outside.
+pub fn significant(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let magnitude = v.abs().log10().floor();
+    if (-3.0..4.0).contains(&magnitude) {
+        format!("{v:.*}", (3.0 - magnitude).max(0.0) as usize)
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
 /// "12.3% darker" or "0.4% brighter".
 fn brightness(bias: f64) -> String {
     format!(
@@ -333,18 +346,23 @@ fn bvh_sentence(run: &Run) -> Option<String> {
             changed.join(", ")
         )
     };
+    let build = |pick: fn(f64, f64) -> f64, start: f64| {
+        rows.iter().map(|r| r.build_seconds).fold(start, pick)
+    };
+    let largest_share = rows
+        .iter()
+        .map(|r| r.build_seconds / r.seconds())
+        .fold(0.0, f64::max);
     Some(format!(
-        "BVH: {images} Builds took {:.2e} to {:.2e} s; build plus render is lowest for {} ({:.4} s, of which the build is \
-         {:.1}%) and highest for {} ({:.4} s).",
-        rows.iter()
-            .map(|r| r.build_seconds)
-            .fold(f64::INFINITY, f64::min),
-        rows.iter().map(|r| r.build_seconds).fold(0.0, f64::max),
-        fastest.setting,
+        "BVH: {images} Builds took {} to {} s, at most {:.2}% of a frame; build plus render ranged from {:.4} s \
+         ({}) to {:.4} s ({}).",
+        significant(build(f64::min, f64::INFINITY)),
+        significant(build(f64::max, 0.0)),
+        100.0 * largest_share,
         fastest.seconds(),
-        100.0 * fastest.build_seconds / fastest.seconds(),
-        slowest.setting,
+        fastest.setting,
         slowest.seconds(),
+        slowest.setting,
     ))
 }
 
@@ -408,6 +426,15 @@ mod tests {
             .collect();
         assert!((loglog_slope(&points) + 0.5).abs() < 1e-12);
         assert!(loglog_slope(&points[..1]).is_nan());
+    }
+
+    #[test]
+    fn numbers_keep_four_significant_digits() {
+        assert_eq!(significant(0.39754), "0.3975");
+        assert_eq!(significant(12.3456), "12.35");
+        assert_eq!(significant(0.0012344), "0.001234");
+        assert_eq!(significant(4.07e-6), "4.070e-6");
+        assert_eq!(significant(0.0), "0");
     }
 
     #[test]

@@ -128,7 +128,7 @@ pub fn markdown(run: &Run) -> String {
     let _ = writeln!(
         md,
         "{}x{} pixels, {} triangles, {} rendering threads, frame 0. Times are wall-clock seconds of a whole \
-         frame (renders under {} s are repeated and the median kept). Errors are against the reference, over \
+         frame (renders under {} s are repeated and the fastest run kept). Errors are against the reference, over \
          all pixels and channels: RMSE, relMSE = mean (a-b)^2/(b+0.01)^2, mean FLIP (8-bit sRGB at exposure 1), \
          and the mean bias (how much brighter or darker the whole image is).\n",
         run.width,

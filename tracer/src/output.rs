@@ -26,12 +26,19 @@ pub enum OutputError {
 /// Writes `pixels` (`width` x `height`, linear RGB) as a 32-bit float RGB OpenEXR file.
 pub fn write_exr(path: &Path, width: u32, height: u32, pixels: &[[f32; 3]]) -> Result<(), OutputError> {
     assert_eq!(pixels.len(), width as usize * height as usize, "pixel count must match the size");
+    use exr::prelude::*;
     let tmp = temporary(path);
-    exr::prelude::write_rgb_file(&tmp, width as usize, height as usize, |x, y| {
-        let p = pixels[y * width as usize + x];
+    let channels = SpecificChannels::rgb(|position: Vec2<usize>| {
+        let p = pixels[position.y() * width as usize + position.x()];
         (p[0], p[1], p[2])
-    })
-    .map_err(|e| OutputError::Exr { path: path.to_owned(), message: e.to_string() })?;
+    });
+    // Written on one thread: parallel compression stores chunks in the order they finish, so
+    // the same pixels would give different bytes from run to run.
+    Image::from_channels((width as usize, height as usize), channels)
+        .write()
+        .non_parallel()
+        .to_file(&tmp)
+        .map_err(|e| OutputError::Exr { path: path.to_owned(), message: e.to_string() })?;
     std::fs::rename(&tmp, path).map_err(|source| OutputError::Io { path: path.to_owned(), source })
 }
 

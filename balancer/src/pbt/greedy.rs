@@ -39,19 +39,22 @@ pub(super) fn restructure(
     let mut greedy = Greedy::new(tree, predictor, scratch);
     let mut update = Update::default();
     while greedy.tree.leaf_count() < target {
-        let Some(split) = greedy.best_split(None) else { break };
+        let Some(split) = greedy.best_split(None) else {
+            break;
+        };
         greedy.split(split);
         update.splits += 1;
     }
     while greedy.tree.leaf_count() > target {
-        let Some((node, _)) = greedy.best_merge(None) else { break };
+        let Some((node, _)) = greedy.best_merge(None) else {
+            break;
+        };
         greedy.merge(node);
         update.merges += 1;
     }
     let cap = MOVES_PER_LEAF * greedy.tree.leaf_count() + 64;
     let mut moves = 0;
-    loop {
-        let Some((split, merge)) = greedy.best_pair() else { break };
+    while let Some((split, merge)) = greedy.best_pair() {
         if moves >= cap {
             update.capped = true;
             break;
@@ -94,7 +97,13 @@ impl<'a> Greedy<'a> {
                 merges.push(Reverse(Entry::merge(tree, node, scale)));
             }
         }
-        Greedy { tree, predictor, scale, splits: splits.into(), merges: merges.into() }
+        Greedy {
+            tree,
+            predictor,
+            scale,
+            splits: splits.into(),
+            merges: merges.into(),
+        }
     }
 
     /// Hands the heaps' storage back, emptied.
@@ -137,11 +146,18 @@ impl<'a> Greedy<'a> {
                 self.splits.pop();
                 let [a, b] = self.halves(top.node);
                 let key = (a * self.scale) * (b * self.scale);
-                self.splits.push(Entry { key, exact: true, ..top });
+                self.splits.push(Entry {
+                    key,
+                    exact: true,
+                    ..top
+                });
             } else if not_under.is_some() && self.tree.parent(top.node) == not_under {
                 held.extend(self.splits.pop());
             } else {
-                break Some(Split { node: top.node, gain: top.key });
+                break Some(Split {
+                    node: top.node,
+                    gain: top.key,
+                });
             }
         };
         self.splits.extend(held);
@@ -190,7 +206,12 @@ impl<'a> Greedy<'a> {
     /// The estimates of splittable leaf `node`'s halves.
     fn halves(&self, node: u32) -> [f64; 2] {
         // Invariant: only splittable leaves, of two or more pixels, are asked for their halves.
-        let (a, b) = self.tree.node(node).rect.halves().expect("split candidates have 2+ pixels");
+        let (a, b) = self
+            .tree
+            .node(node)
+            .rect
+            .halves()
+            .expect("split candidates have 2+ pixels");
         [self.predictor.estimate(a), self.predictor.estimate(b)]
     }
 
@@ -198,14 +219,16 @@ impl<'a> Greedy<'a> {
     fn refresh(&mut self, node: u32) {
         self.tree.bump(node);
         if self.tree.splittable(node) {
-            self.splits.push(Entry::optimistic(self.tree, node, self.scale));
+            self.splits
+                .push(Entry::optimistic(self.tree, node, self.scale));
         } else if self.tree.mergeable(node) {
-            self.merges.push(Reverse(Entry::merge(self.tree, node, self.scale)));
+            self.merges
+                .push(Reverse(Entry::merge(self.tree, node, self.scale)));
         }
     }
 }
 
-/// A heap entry. Ordered by key, ties to the lower node index, so that pops are deterministic.
+/// A heap entry. Ordered by key, then by node index, so that pops are deterministic.
 #[derive(Clone, Copy, Debug)]
 struct Entry {
     key: f64,
@@ -219,7 +242,12 @@ impl Entry {
     /// A split entry keyed by the bound `(a / 2)^2` on the halves' product.
     fn optimistic(tree: &Tree, node: u32, scale: f64) -> Entry {
         let half = 0.5 * tree.node(node).estimate * scale;
-        Entry { key: half * half, node, generation: tree.node(node).generation, exact: false }
+        Entry {
+            key: half * half,
+            node,
+            generation: tree.node(node).generation,
+            exact: false,
+        }
     }
 
     /// A merge entry keyed by the product of the two leaf children's estimates.
@@ -227,13 +255,20 @@ impl Entry {
         // Invariant: merge entries are only made for mergeable nodes, which have children.
         let [a, b] = tree.children(node).expect("merge candidates have children");
         let key = (tree.node(a).estimate * scale) * (tree.node(b).estimate * scale);
-        Entry { key, node, generation: tree.node(node).generation, exact: true }
+        Entry {
+            key,
+            node,
+            generation: tree.node(node).generation,
+            exact: true,
+        }
     }
 }
 
 impl Ord for Entry {
     fn cmp(&self, other: &Self) -> Ordering {
-        self.key.total_cmp(&other.key).then_with(|| other.node.cmp(&self.node))
+        self.key
+            .total_cmp(&other.key)
+            .then_with(|| other.node.cmp(&self.node))
     }
 }
 

@@ -12,7 +12,7 @@
 //! `long <= 2 * short + 1` (2:1 up to one pixel of integer rounding; see [`crate::rect`]).
 //! An image outside that bound (wider than about 2:1) first gets the *forced* cuts it needs:
 //! nodes whose rectangle breaks the bound are always cut and never merged, so the tree never has
-//! fewer leaves than those cuts make (a 1x1000 image has at least 334-ish tiles of 1x2 or 1x3).
+//! fewer leaves than those cuts make (a 1x1000 image keeps at least 488 tiles of 1x2 and 1x3).
 //! A single pixel cannot be cut, so the tree never has more leaves than pixels. Within those
 //! limits it has exactly the configured `m` leaves.
 //!
@@ -46,7 +46,7 @@
 //! largest, merge the cheapest pair", ranks moves by what they actually gain: a leaf whose cost
 //! sits in one half gains nothing from a split however large it is, and a pair `b, c` with
 //! `c = 0` costs nothing to merge.) Candidates live in two heaps with lazy deletion by
-//! generation counters, so a move is O(log m); see [`greedy`](self) for the details.
+//! generation counters, so a move is O(log m) (details in the private `greedy` module).
 //!
 //! **Termination.** Since `sum e^2 = e_root^2 - 2 * sum over internal nodes n of P(n)` with
 //! `P(n)` the product of `n`'s halves' estimates, minimising the variance is maximising
@@ -92,7 +92,10 @@ impl Pbt {
         if width == 0 || height == 0 {
             return Err(Error::EmptyImage { width, height });
         }
-        let config = Config { kind: crate::Kind::Pbt, ..config.clone() };
+        let config = Config {
+            kind: crate::Kind::Pbt,
+            ..config.clone()
+        };
         config.validate()?;
         let image = Rect::image(width, height);
         let mut pbt = Pbt {
@@ -133,7 +136,10 @@ impl Pbt {
     pub fn tiles(&self) -> Vec<Tile> {
         let tile = |&leaf: &u32| {
             let node = self.tree.node(leaf);
-            Tile { rect: node.rect, predicted: node.estimate }
+            Tile {
+                rect: node.rect,
+                predicted: node.estimate,
+            }
         };
         self.leaves.iter().map(tile).collect()
     }
@@ -158,7 +164,10 @@ impl Pbt {
     /// Deals the tiles to `peers` peers (contiguous runs by default), optionally weighted by
     /// peer speed.
     pub fn assign(&self, peers: usize, weights: Option<&[f64]>) -> Result<Assignment, Error> {
-        let costs = self.leaves.iter().map(|&leaf| self.tree.node(leaf).estimate);
+        let costs = self
+            .leaves
+            .iter()
+            .map(|&leaf| self.tree.node(leaf).estimate);
         deal(costs, self.order, peers, weights)
     }
 
@@ -170,7 +179,12 @@ impl Pbt {
     }
 
     fn restructure(&mut self) -> Update {
-        let update = greedy::restructure(&mut self.tree, &self.predictor, self.target, &mut self.scratch);
+        let update = greedy::restructure(
+            &mut self.tree,
+            &self.predictor,
+            self.target,
+            &mut self.scratch,
+        );
         self.leaves = self.tree.leaves();
         update
     }

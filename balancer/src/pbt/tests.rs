@@ -5,19 +5,28 @@ use super::*;
 use crate::check_partition;
 
 fn config(leaves: usize) -> Config {
-    Config { leaves, ..Config::default() }
+    Config {
+        leaves,
+        ..Config::default()
+    }
 }
 
 /// An 8x4 image in 1-pixel blocks with the given pixel costs, zero elsewhere.
 fn pixels(costs: &[((u32, u32), f64)]) -> CostMap {
     CostMap::from_fn(8, 4, 1, |x, y| {
-        costs.iter().find(|(at, _)| *at == (x, y)).map_or(0.0, |(_, cost)| *cost)
+        costs
+            .iter()
+            .find(|(at, _)| *at == (x, y))
+            .map_or(0.0, |(_, cost)| *cost)
     })
     .unwrap()
 }
 
 fn summary(pbt: &Pbt) -> Vec<(Rect, f64)> {
-    pbt.tiles().iter().map(|tile| (tile.rect, tile.predicted)).collect()
+    pbt.tiles()
+        .iter()
+        .map(|tile| (tile.rect, tile.predicted))
+        .collect()
 }
 
 #[test]
@@ -48,7 +57,14 @@ fn one_profitable_pair_then_a_stop() {
     // Round 2: best split A's top (3 * 3 = 9), but the only merge is A itself (6 * 2 = 12),
     // A's top's own parent; the other pairing, split the right 4x4 (1 * 3 = 3) and merge A
     // (12), does not gain either. Stop.
-    assert_eq!(update, Update { splits: 1, merges: 1, capped: false });
+    assert_eq!(
+        update,
+        Update {
+            splits: 1,
+            merges: 1,
+            capped: false
+        }
+    );
     assert_eq!(
         summary(&pbt),
         vec![
@@ -65,13 +81,26 @@ fn the_cheapest_merge_is_skipped_when_it_is_the_split_leafs_parent() {
     // A = 8 with halves 4 and 4 (gain 16), its sibling D = 0, so the cheapest merge is A, D
     // (8 * 0 = 0): A's own parent. B = 2 with halves 1 and 1 (gain 1), C = 3 in one pixel.
     let mut pbt = Pbt::new(8, 4, &config(4)).unwrap();
-    let map = pixels(&[((0, 0), 4.0), ((0, 2), 4.0), ((4, 0), 1.0), ((4, 2), 1.0), ((6, 0), 3.0)]);
+    let map = pixels(&[
+        ((0, 0), 4.0),
+        ((0, 2), 4.0),
+        ((4, 0), 1.0),
+        ((4, 2), 1.0),
+        ((6, 0), 3.0),
+    ]);
     let update = pbt.observe(&map).unwrap();
     // Pairings: (split A, next merge B, C at 2 * 3 = 6) gains 16 - 6 = 10; (next split not
     // under A's parent, B at 1, merge A, D at 0) gains 1. Take the first: sum of squares
     // 64+0+4+9 = 77 -> 16+16+0+25 = 57, down by 20 = 2 * 10. Then the best split is the
     // right 4x4 (2 * 3 = 6) against the only merge, A (4 * 4 = 16): stop.
-    assert_eq!(update, Update { splits: 1, merges: 1, capped: false });
+    assert_eq!(
+        update,
+        Update {
+            splits: 1,
+            merges: 1,
+            capped: false
+        }
+    );
     assert_eq!(
         summary(&pbt),
         vec![
@@ -94,7 +123,10 @@ fn a_wide_image_keeps_its_forced_cuts() {
     pbt.set_leaves(20).unwrap();
     assert_eq!(pbt.leaf_count(), 20);
     let rects: Vec<Rect> = pbt.tiles().iter().map(|tile| tile.rect).collect();
-    assert_eq!(check_partition(100, 10, &rects, Some(20), Some(2.0)), Ok(()));
+    assert_eq!(
+        check_partition(100, 10, &rects, Some(20), Some(2.0)),
+        Ok(())
+    );
 }
 
 #[test]
@@ -118,14 +150,20 @@ fn growing_and_shrinking_keep_a_partition() {
         pbt.set_leaves(leaves).unwrap();
         let rects: Vec<Rect> = pbt.tiles().iter().map(|tile| tile.rect).collect();
         let expected = leaves.min(64 * 48);
-        assert_eq!(check_partition(64, 48, &rects, Some(expected), Some(2.0)), Ok(()));
+        assert_eq!(
+            check_partition(64, 48, &rects, Some(expected), Some(2.0)),
+            Ok(())
+        );
     }
     assert!(pbt.set_leaves(0).is_err());
 }
 
 #[test]
 fn smoothing_blends_successive_measurements() {
-    let smooth = Config { smoothing: 0.25, ..config(8) };
+    let smooth = Config {
+        smoothing: 0.25,
+        ..config(8)
+    };
     let mut pbt = Pbt::new(16, 8, &smooth).unwrap();
     let first = CostMap::from_fn(16, 8, 4, |c, _| f64::from(c)).unwrap();
     let second = CostMap::from_fn(16, 8, 4, |_, r| 10.0 * f64::from(r)).unwrap();
@@ -142,16 +180,34 @@ fn smoothing_blends_successive_measurements() {
 fn a_map_of_another_size_is_refused() {
     let mut pbt = Pbt::new(16, 8, &config(8)).unwrap();
     let map = CostMap::from_fn(8, 16, 4, |_, _| 1.0).unwrap();
-    assert_eq!(pbt.observe(&map).unwrap_err(), Error::MapSize { expected: (16, 8), found: (8, 16) });
-    assert_eq!(Pbt::new(0, 8, &config(8)).unwrap_err(), Error::EmptyImage { width: 0, height: 8 });
+    assert_eq!(
+        pbt.observe(&map).unwrap_err(),
+        Error::MapSize {
+            expected: (16, 8),
+            found: (8, 16)
+        }
+    );
+    assert_eq!(
+        Pbt::new(0, 8, &config(8)).unwrap_err(),
+        Error::EmptyImage {
+            width: 0,
+            height: 8
+        }
+    );
 }
 
 #[test]
 fn the_same_inputs_give_the_same_tiles() {
     let maps: Vec<CostMap> = (0..4)
         .map(|frame| {
-            CostMap::from_fn(96, 64, 8, |c, r| if (c + frame) % 5 == 0 && r % 3 == 1 { 50.0 } else { 1.0 })
-                .unwrap()
+            CostMap::from_fn(96, 64, 8, |c, r| {
+                if (c + frame) % 5 == 0 && r % 3 == 1 {
+                    50.0
+                } else {
+                    1.0
+                }
+            })
+            .unwrap()
         })
         .collect();
     let run = || {

@@ -39,7 +39,11 @@ impl Tree {
     /// The root over `image` with every forced cut made: the smallest tree whose leaves all keep
     /// the aspect bound. Leaf estimates are zero.
     pub(super) fn new(image: Rect) -> Self {
-        let mut tree = Tree { nodes: vec![Tree::fresh(image, NONE, 0)], free: Vec::new(), leaves: 1 };
+        let mut tree = Tree {
+            nodes: vec![Tree::fresh(image, NONE, 0)],
+            free: Vec::new(),
+            leaves: 1,
+        };
         let mut stack = vec![0];
         while let Some(node) = stack.pop() {
             if tree.nodes[node as usize].forced {
@@ -85,7 +89,9 @@ impl Tree {
     /// An unforced node whose children are both leaves.
     pub(super) fn mergeable(&self, node: u32) -> bool {
         !self.node(node).forced
-            && self.children(node).is_some_and(|[a, b]| self.is_leaf(a) && self.is_leaf(b))
+            && self
+                .children(node)
+                .is_some_and(|[a, b]| self.is_leaf(a) && self.is_leaf(b))
     }
 
     pub(super) fn bump(&mut self, node: u32) {
@@ -97,7 +103,11 @@ impl Tree {
     pub(super) fn split(&mut self, node: u32, estimates: [f64; 2]) -> [u32; 2] {
         debug_assert!(self.is_leaf(node));
         // Invariant: callers split only leaves of at least two pixels.
-        let (a, b) = self.node(node).rect.halves().expect("only leaves of 2+ pixels are split");
+        let (a, b) = self
+            .node(node)
+            .rect
+            .halves()
+            .expect("only leaves of 2+ pixels are split");
         let first = match self.free.pop() {
             Some(first) => {
                 for (slot, rect) in [(first, a), (first + 1, b)] {
@@ -108,7 +118,8 @@ impl Tree {
             }
             None => {
                 let first = u32::try_from(self.nodes.len()).expect("fewer than 2^32 nodes");
-                self.nodes.extend([Tree::fresh(a, node, 0), Tree::fresh(b, node, 0)]);
+                self.nodes
+                    .extend([Tree::fresh(a, node, 0), Tree::fresh(b, node, 0)]);
                 first
             }
         };
@@ -165,6 +176,14 @@ impl Tree {
 
     fn fresh(rect: Rect, parent: u32, generation: u32) -> Node {
         let forced = !rect.within_aspect(MAX_ASPECT);
-        Node { rect, parent, first_child: NONE, generation, forced, estimate: 0.0, live: true }
+        Node {
+            rect,
+            parent,
+            first_child: NONE,
+            generation,
+            forced,
+            estimate: 0.0,
+            live: true,
+        }
     }
 }

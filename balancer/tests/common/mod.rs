@@ -33,16 +33,37 @@ pub enum Layout {
     /// Independent block costs, row-major.
     Random(Vec<f64>),
     /// A hot disc over a uniform floor, like a bright object moving through a dim scene.
-    Spot { cx: f64, cy: f64, radius: f64, peak: f64, floor: f64 },
+    Spot {
+        cx: f64,
+        cy: f64,
+        radius: f64,
+        peak: f64,
+        floor: f64,
+    },
 }
 
 impl Layout {
     pub fn map(&self, width: u32, height: u32, block: u32) -> CostMap {
         match self {
-            Layout::Random(costs) => CostMap::from_blocks(width, height, block, costs.clone()).unwrap(),
-            Layout::Spot { cx, cy, radius, peak, floor } => CostMap::from_fn(width, height, block, |c, r| {
-                let (x, y) = (f64::from(c * block) / f64::from(width), f64::from(r * block) / f64::from(height));
-                if (x - cx).hypot(y - cy) < *radius { *peak } else { *floor }
+            Layout::Random(costs) => {
+                CostMap::from_blocks(width, height, block, costs.clone()).unwrap()
+            }
+            Layout::Spot {
+                cx,
+                cy,
+                radius,
+                peak,
+                floor,
+            } => CostMap::from_fn(width, height, block, |c, r| {
+                let (x, y) = (
+                    f64::from(c * block) / f64::from(width),
+                    f64::from(r * block) / f64::from(height),
+                );
+                if (x - cx).hypot(y - cy) < *radius {
+                    *peak
+                } else {
+                    *floor
+                }
             })
             .unwrap(),
         }
@@ -57,8 +78,20 @@ pub fn block_count(width: u32, height: u32, block: u32) -> usize {
 pub fn layout(blocks: usize) -> impl Strategy<Value = Layout> {
     prop_oneof![
         proptest::collection::vec(cost_value(), blocks).prop_map(Layout::Random),
-        (0.0f64..1.0, 0.0f64..1.0, 0.02f64..0.5, cost_value(), prop_oneof![Just(0.0), 0.0f64..10.0])
-            .prop_map(|(cx, cy, radius, peak, floor)| Layout::Spot { cx, cy, radius, peak, floor }),
+        (
+            0.0f64..1.0,
+            0.0f64..1.0,
+            0.02f64..0.5,
+            cost_value(),
+            prop_oneof![Just(0.0), 0.0f64..10.0]
+        )
+            .prop_map(|(cx, cy, radius, peak, floor)| Layout::Spot {
+                cx,
+                cy,
+                radius,
+                peak,
+                floor
+            }),
     ]
 }
 
@@ -66,7 +99,13 @@ pub fn layout(blocks: usize) -> impl Strategy<Value = Layout> {
 pub fn frames(max_leaves: usize) -> impl Strategy<Value = (u32, u32, usize, u32, Vec<Layout>)> {
     (image(), 1..=max_leaves, 1u32..=12, 1usize..=4).prop_flat_map(|((w, h), m, block, count)| {
         let blocks = block_count(w, h, block);
-        (Just(w), Just(h), Just(m), Just(block), proptest::collection::vec(layout(blocks), count))
+        (
+            Just(w),
+            Just(h),
+            Just(m),
+            Just(block),
+            proptest::collection::vec(layout(blocks), count),
+        )
     })
 }
 

@@ -87,12 +87,15 @@ pub struct CompletedFrame {
 /// One tile of a finished frame.
 #[derive(Clone, Debug)]
 pub struct TileRecord {
+    pub tile: TileId,
     pub rect: balancer::Rect,
     pub predicted: f64,
     /// Measured counted work.
     pub measured: u64,
     /// Who rendered it.
     pub peer: PeerId,
+    /// Whose initial set it was in; differs from `peer` when it was stolen or re-issued.
+    pub initial: PeerId,
 }
 
 /// Where finished frames go (the CLI writes them to disk).
@@ -130,8 +133,8 @@ pub async fn run_local(job: Job, peers: usize, options: Options, sink: &mut dyn 
             run_peer(owner_addr, loopback, &identity, options).await.map(|tiles| (id, tiles))
         }));
     }
-    let report = owner.run(job, peers - 1, sink).await?;
-    let mut timelines = Vec::new();
+    let (report, own_tiles) = owner.run(job, peers - 1, sink).await?;
+    let mut timelines = vec![(PeerId(0), own_tiles)];
     for task in tasks {
         match tokio::time::timeout(Duration::from_secs(10), task).await {
             Ok(Ok(Ok(timeline))) => timelines.push(timeline),

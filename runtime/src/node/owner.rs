@@ -45,8 +45,8 @@ impl Owner {
     }
 
     /// Waits for `expect` peers to join, then renders every frame of `job`, handing each finished
-    /// frame to `sink`. Returns what the peers reported.
-    pub async fn run(mut self, job: Job, expect: usize, sink: &mut dyn FrameSink) -> Result<PeerReport, NodeError> {
+    /// frame to `sink`. Returns what the peers reported, and the tiles rendered here.
+    pub async fn run(mut self, job: Job, expect: usize, sink: &mut dyn FrameSink) -> Result<(PeerReport, Vec<super::LocalTile>), NodeError> {
         let (renderer, results) = super::session::Renderer::new(self.options.threads, job.world.clone())?;
         self.session.set_renderer(renderer, results);
         let joined = self.admit(&job.files, expect).await?;
@@ -75,7 +75,7 @@ impl Owner {
         // Give the goodbyes a moment to leave before the endpoint closes.
         tokio::time::sleep(std::time::Duration::from_millis(50)).await;
         self.session.link.shutdown().await;
-        Ok(report)
+        Ok((report, std::mem::take(&mut self.session.local_tiles)))
     }
 
     /// Admits peers until `expect` have loaded the scene; then tells each where the others are.
@@ -156,6 +156,8 @@ impl Owner {
                 .collect();
             initial.insert(*peer, specs);
         }
+        let owners: BTreeMap<TileId, PeerId> =
+            initial.iter().flat_map(|(&peer, specs)| specs.iter().map(move |spec| (spec.id, peer))).collect();
         let now = self.session.now();
         let started = Instant::now();
         self.session.core.start_frame(now, FrameId(u64::from(frame)), initial)?;
@@ -165,7 +167,7 @@ impl Owner {
                 Step::Core(CoreEvent::FrameComplete { frame: done, results, rendered_by, .. }) if done.0 == u64::from(frame) => {
                     let seconds = started.elapsed().as_secs_f64();
                     let results = rendered_by.into_iter().zip(results).collect();
-                    return self.assemble(frame, &tiles, results, world, seconds, partitioner);
+                    return self.assemble(frame, &tiles, &owners, results, world, seconds, partitioner);
                 }
                 Step::Core(CoreEvent::PeerStats { frame, peer, stats }) => {
                     report.insert((frame.0, peer), stats);
@@ -195,6 +197,7 @@ impl Owner {
         &mut self,
         frame: u32,
         tiles: &[balancer::Tile],
+        owners: &BTreeMap<TileId, PeerId>,
         results: Vec<(PeerId, crate::wire::TileResult)>,
         world: &World,
         seconds: f64,
@@ -215,7 +218,8 @@ impl Owner {
             film.insert(rect, &pixels, &cost);
             rays += cost.rays;
             let predicted = tiles.get(result.tile.0 as usize).map_or(0.0, |t| t.predicted);
-            records.push(TileRecord { rect: result.rect, predicted, measured: cost.work, peer });
+            let initial = owners.get(&result.tile).copied().unwrap_or(peer);
+            records.push(TileRecord { tile: result.tile, rect: result.rect, predicted, measured: cost.work, peer, initial });
         }
         let map = balancer::CostMap::from_counts(film.width, film.height, tracer::BLOCK_SIZE, &film.block_work)?;
         partitioner.observe(&map)?;

@@ -16,7 +16,7 @@
 //! triangle then sees bit-identical shear factors, which the watertightness argument needs.
 
 use super::Ray;
-use glam::Vec3;
+use glam::{Vec3, Vec3Swizzles};
 
 /// Where a ray meets a triangle: the distance along the ray and the barycentric coordinates of
 /// the hit point with respect to the triangle's vertices 0, 1 and 2.
@@ -62,10 +62,10 @@ pub(crate) const fn gamma(n: u32) -> f32 {
 /// +z axis, computed once so that every triangle sees bit-identical factors.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ShearedRay {
-    origin: Vec3,
-    kx: usize,
-    ky: usize,
+    /// The axis that becomes z; x and y follow cyclically (`kx = kz + 1`, `ky = kz + 2`).
     kz: usize,
+    /// The ray origin, permuted.
+    origin: Vec3,
     sx: f32,
     sy: f32,
     sz: f32,
@@ -86,23 +86,21 @@ impl ShearedRay {
         let ky = (kx + 1) % 3;
         let d = ray.dir;
         ShearedRay {
-            origin: ray.origin,
-            kx,
-            ky,
             kz,
+            origin: permute(ray.origin, kz),
             sx: -d[kx] / d[kz],
             sy: -d[ky] / d[kz],
             sz: 1.0 / d[kz],
         }
     }
 
-    /// Moves a vertex into the ray's frame: translated, permuted and sheared in x and y. The z
-    /// shear (scaling by `sz`) is applied later, only when the edge tests pass, as in pbrt.
+    /// Moves a vertex, already permuted, into the ray's frame: translated and sheared in x and
+    /// y. The z shear (scaling by `sz`) is applied later, only when the edge tests pass, as in
+    /// pbrt. Permuting before translating gives the same values as pbrt's order.
     #[inline(always)]
     fn transform(&self, p: Vec3) -> Vec3 {
         let v = p - self.origin;
-        let (x, y, z) = (v[self.kx], v[self.ky], v[self.kz]);
-        Vec3::new(x + self.sx * z, y + self.sy * z, z)
+        Vec3::new(v.x + self.sx * v.z, v.y + self.sy * v.z, v.z)
     }
 
     /// The test itself, for a triangle already known not to be degenerate. Accepts hits in the
@@ -110,9 +108,12 @@ impl ShearedRay {
     /// current closest distance and still see exact ties, which it breaks by triangle index.
     #[inline(always)]
     pub(crate) fn intersect(&self, p: &[Vec3; 3], t_max: f32) -> Option<TriangleHit> {
-        let p0t = self.transform(p[0]);
-        let p1t = self.transform(p[1]);
-        let p2t = self.transform(p[2]);
+        // Permuting whole vertices (a branch taken the same way for every triangle of a ray)
+        // rather than indexing each coordinate by kx, ky, kz.
+        let [p0, p1, p2] = p.map(|v| permute(v, self.kz));
+        let p0t = self.transform(p0);
+        let p1t = self.transform(p1);
+        let p2t = self.transform(p2);
 
         let mut e0 = p1t.x * p2t.y - p1t.y * p2t.x;
         let mut e1 = p2t.x * p0t.y - p2t.y * p0t.x;
@@ -167,6 +168,15 @@ impl ShearedRay {
             b1: e1 * inv_det,
             b2: e2 * inv_det,
         })
+    }
+}
+
+/// `v` with axis `kz` moved to z and the others following cyclically.
+fn permute(v: Vec3, kz: usize) -> Vec3 {
+    match kz {
+        0 => v.yzx(),
+        1 => v.zxy(),
+        _ => v,
     }
 }
 

@@ -61,13 +61,24 @@ pub struct CostMapBuilder {
 
 impl CostMap {
     /// A map from the cost of every block, row-major (`columns() * rows()` of them).
-    pub fn from_blocks(width: u32, height: u32, block: u32, costs: Vec<f64>) -> Result<Self, Error> {
+    pub fn from_blocks(
+        width: u32,
+        height: u32,
+        block: u32,
+        costs: Vec<f64>,
+    ) -> Result<Self, Error> {
         let mut builder = Self::builder(width, height, block)?;
         if costs.len() != builder.costs.len() {
-            return Err(Error::BlockCount { expected: builder.costs.len(), found: costs.len() });
+            return Err(Error::BlockCount {
+                expected: builder.costs.len(),
+                found: costs.len(),
+            });
         }
         for (index, &cost) in costs.iter().enumerate() {
-            let (column, row) = (index as u32 % builder.columns, index as u32 / builder.columns);
+            let (column, row) = (
+                index as u32 % builder.columns,
+                index as u32 / builder.columns,
+            );
             builder.add_block(column, row, cost)?;
         }
         builder.build()
@@ -75,7 +86,12 @@ impl CostMap {
 
     /// A map from counted work per block, row-major. Counts above 2^53 round to the nearest f64.
     pub fn from_counts(width: u32, height: u32, block: u32, counts: &[u64]) -> Result<Self, Error> {
-        Self::from_blocks(width, height, block, counts.iter().map(|&c| c as f64).collect())
+        Self::from_blocks(
+            width,
+            height,
+            block,
+            counts.iter().map(|&c| c as f64).collect(),
+        )
     }
 
     /// A map whose block `(column, row)` costs `cost(column, row)`.
@@ -104,7 +120,14 @@ impl CostMap {
         }
         let (columns, rows) = (width.div_ceil(block), height.div_ceil(block));
         let costs = vec![0.0; columns as usize * rows as usize];
-        Ok(CostMapBuilder { width, height, block, columns, rows, costs })
+        Ok(CostMapBuilder {
+            width,
+            height,
+            block,
+            columns,
+            rows,
+            costs,
+        })
     }
 
     pub fn width(&self) -> u32 {
@@ -142,10 +165,14 @@ impl CostMap {
             .then(|| self.blocks[(row * self.columns + column) as usize])
     }
 
-    /// The pixels of one block (partial at the right and bottom edges).
-    pub fn block_rect(&self, column: u32, row: u32) -> Rect {
-        let (x, y) = (column * self.block, row * self.block);
-        Rect::new(x, y, self.block.min(self.width - x), self.block.min(self.height - y))
+    /// The pixels of one block (partial at the right and bottom edges), `None` outside the
+    /// block grid.
+    pub fn block_rect(&self, column: u32, row: u32) -> Option<Rect> {
+        (column < self.columns && row < self.rows).then(|| {
+            let (x, y) = (column * self.block, row * self.block);
+            let (w, h) = (self.block.min(self.width - x), self.block.min(self.height - y));
+            Rect::new(x, y, w, h)
+        })
     }
 
     /// Cost of the pixels of `rect` (the part outside the image costs nothing): exact for
@@ -163,7 +190,8 @@ impl CostMap {
         let mut total = 0.0;
         match &self.sat_low {
             None => {
-                let c: [[f64; 4]; 4] = std::array::from_fn(|j| std::array::from_fn(|i| self.sat[at(j, i)]));
+                let c: [[f64; 4]; 4] =
+                    std::array::from_fn(|j| std::array::from_fn(|i| self.sat[at(j, i)]));
                 for j in 0..3 {
                     for i in 0..3 {
                         let sum = ((c[j + 1][i + 1] - c[j][i + 1]) - c[j + 1][i]) + c[j][i];
@@ -173,11 +201,17 @@ impl CostMap {
             }
             Some(low) => {
                 let c: [[Dd; 4]; 4] = std::array::from_fn(|j| {
-                    std::array::from_fn(|i| Dd { hi: self.sat[at(j, i)], lo: low[at(j, i)] })
+                    std::array::from_fn(|i| Dd {
+                        hi: self.sat[at(j, i)],
+                        lo: low[at(j, i)],
+                    })
                 });
                 for j in 0..3 {
                     for i in 0..3 {
-                        let sum = c[j + 1][i + 1].sub(c[j][i + 1]).sub(c[j + 1][i]).add(c[j][i]);
+                        let sum = c[j + 1][i + 1]
+                            .sub(c[j][i + 1])
+                            .sub(c[j + 1][i])
+                            .add(c[j][i]);
                         total += xs.weights[i] * ys.weights[j] * sum.value().max(0.0);
                     }
                 }
@@ -194,10 +228,19 @@ impl CostMap {
             (newer.width, newer.height, newer.block)
         );
         let blocks = self.blocks.iter().zip(newer.blocks.iter());
-        let blended = blocks.map(|(old, new)| keep * old + (1.0 - keep) * new).collect();
+        let blended = blocks
+            .map(|(old, new)| keep * old + (1.0 - keep) * new)
+            .collect();
         let (width, height, block) = (self.width, self.height, self.block);
         let (columns, rows) = (self.columns, self.rows);
-        let builder = CostMapBuilder { width, height, block, columns, rows, costs: blended };
+        let builder = CostMapBuilder {
+            width,
+            height,
+            block,
+            columns,
+            rows,
+            costs: blended,
+        };
         // Invariant: convex combinations of finite non-negative maps are finite and non-negative.
         builder.build().expect("a blend of two valid maps is valid")
     }
@@ -207,10 +250,24 @@ impl CostMapBuilder {
     /// Adds `cost` to block `(column, row)`.
     pub fn add_block(&mut self, column: u32, row: u32, cost: f64) -> Result<(), Error> {
         if column >= self.columns || row >= self.rows {
-            let rect = Rect::new(column.saturating_mul(self.block), row.saturating_mul(self.block), self.block, self.block);
-            return Err(Error::OutOfBounds { rect, width: self.width, height: self.height });
+            let rect = Rect::new(
+                column.saturating_mul(self.block),
+                row.saturating_mul(self.block),
+                self.block,
+                self.block,
+            );
+            return Err(Error::OutOfBounds {
+                rect,
+                width: self.width,
+                height: self.height,
+            });
         }
-        let rect = Rect::new(column * self.block, row * self.block, self.block, self.block);
+        let rect = Rect::new(
+            column * self.block,
+            row * self.block,
+            self.block,
+            self.block,
+        );
         validate(cost, rect)?;
         self.costs[(row * self.columns + column) as usize] += cost;
         Ok(())
@@ -222,7 +279,11 @@ impl CostMapBuilder {
     pub fn add_rect(&mut self, rect: Rect, cost: f64) -> Result<(), Error> {
         validate(cost, rect)?;
         if rect.is_empty() || !rect.inside(self.width, self.height) {
-            return Err(Error::OutOfBounds { rect, width: self.width, height: self.height });
+            return Err(Error::OutOfBounds {
+                rect,
+                width: self.width,
+                height: self.height,
+            });
         }
         let (first_column, last_column) = (rect.x / self.block, (rect.x + rect.w - 1) / self.block);
         let (first_row, last_row) = (rect.y / self.block, (rect.y + rect.h - 1) / self.block);
@@ -262,7 +323,10 @@ impl CostMapBuilder {
             block: self.block,
             columns: self.columns,
             rows: self.rows,
-            shift: self.block.is_power_of_two().then(|| self.block.trailing_zeros()),
+            shift: self
+                .block
+                .is_power_of_two()
+                .then(|| self.block.trailing_zeros()),
             blocks: self.costs.into(),
             sat: sat.iter().map(|dd| dd.hi).collect(),
             sat_low,
@@ -271,7 +335,11 @@ impl CostMapBuilder {
 }
 
 fn validate(cost: f64, rect: Rect) -> Result<(), Error> {
-    if cost.is_finite() && cost >= 0.0 { Ok(()) } else { Err(Error::InvalidCost { value: cost, rect }) }
+    if cost.is_finite() && cost >= 0.0 {
+        Ok(())
+    } else {
+        Err(Error::InvalidCost { value: cost, rect })
+    }
 }
 
 /// Pixels shared by the spans `start..start + len` and `block_start..block_start + block`.
@@ -303,15 +371,25 @@ impl Segments {
         // The fraction of block `b`'s pixels that `covered` pixels are; exactly 1 when whole.
         let fraction = |covered: u32, b: u32| {
             let span = block.min(extent - b * block);
-            if covered == span { 1.0 } else { f64::from(covered) / f64::from(span) }
+            if covered == span {
+                1.0
+            } else {
+                f64::from(covered) / f64::from(span)
+            }
         };
         if first == last {
             let end = first + 1;
-            Segments { bounds: [first, end, end, end], weights: [fraction(hi - lo, first), 0.0, 0.0] }
+            Segments {
+                bounds: [first, end, end, end],
+                weights: [fraction(hi - lo, first), 0.0, 0.0],
+            }
         } else {
             let head = fraction((first + 1) * block - lo, first);
             let tail = fraction(hi - last * block, last);
-            Segments { bounds: [first, first + 1, last, last + 1], weights: [head, 1.0, tail] }
+            Segments {
+                bounds: [first, first + 1, last, last + 1],
+                weights: [head, 1.0, tail],
+            }
         }
     }
 }
@@ -333,7 +411,10 @@ impl Dd {
     }
 
     fn sub(self, other: Dd) -> Dd {
-        self.add(Dd { hi: -other.hi, lo: -other.lo })
+        self.add(Dd {
+            hi: -other.hi,
+            lo: -other.lo,
+        })
     }
 
     fn value(self) -> f64 {
@@ -356,116 +437,4 @@ fn two_sum(a: f64, b: f64) -> (f64, f64) {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A 10x6 image in 4-pixel blocks: block columns 4, 4, 2 wide; block rows 4, 2 tall.
-    fn hand_map() -> CostMap {
-        CostMap::from_blocks(10, 6, 4, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap()
-    }
-
-    #[test]
-    fn aligned_rectangles_sum_whole_blocks() {
-        let map = hand_map();
-        assert_eq!((map.columns(), map.rows()), (3, 2));
-        assert_eq!(map.total(), 21.0);
-        assert_eq!(map.cost(Rect::image(10, 6)), 21.0);
-        assert_eq!(map.cost(Rect::new(0, 0, 8, 4)), 1.0 + 2.0);
-        // Columns 1..3 of row 1, the last ones partial blocks covered entirely.
-        assert_eq!(map.cost(Rect::new(4, 4, 6, 2)), 5.0 + 6.0);
-        assert_eq!(map.block_rect(2, 1), Rect::new(8, 4, 2, 2));
-    }
-
-    #[test]
-    fn cut_blocks_are_charged_by_area() {
-        let map = hand_map();
-        // Half of block 0 (2 of its 4 columns) and half of block 1.
-        assert_eq!(map.cost(Rect::new(2, 0, 4, 4)), 0.5 * 1.0 + 0.5 * 2.0);
-        // Half of the 2-pixel-wide edge block 2.
-        assert_eq!(map.cost(Rect::new(8, 0, 1, 4)), 0.5 * 3.0);
-        // One pixel of the 2x2 corner block 5.
-        assert_eq!(map.cost(Rect::new(9, 5, 1, 1)), 6.0 / 4.0);
-        // x 3..9 covers 1/4 of block column 0, all of column 1 and 1/2 of the 2-pixel column 2;
-        // y 2..5 covers 2/4 of block row 0 and 1/2 of the 2-pixel row 1.
-        let expected = 0.5 * (0.25 * 1.0 + 2.0 + 0.5 * 3.0) + 0.5 * (0.25 * 4.0 + 5.0 + 0.5 * 6.0);
-        assert_eq!(map.cost(Rect::new(3, 2, 6, 3)), expected);
-    }
-
-    #[test]
-    fn the_part_outside_the_image_costs_nothing() {
-        let map = hand_map();
-        assert_eq!(map.cost(Rect::new(8, 4, 100, 100)), 6.0);
-        assert_eq!(map.cost(Rect::new(10, 0, 5, 5)), 0.0);
-        assert_eq!(map.cost(Rect::new(0, 0, 0, 5)), 0.0);
-    }
-
-    #[test]
-    fn small_costs_survive_next_to_huge_ones() {
-        // Without double-double prefix sums every rectangle whose corners see the 1e30 block
-        // would lose its ones to cancellation.
-        let map = CostMap::from_fn(16, 16, 1, |c, r| if (c, r) == (7, 7) { 1e30 } else { 1.0 })
-            .unwrap();
-        for (x0, x1) in (0..16).flat_map(|a| (a + 1..=16).map(move |b| (a, b))) {
-            for (y0, y1) in (0..16).flat_map(|a| (a + 1..=16).map(move |b| (a, b))) {
-                let rect = Rect::new(x0, y0, x1 - x0, y1 - y0);
-                let ones = rect.area() as f64;
-                let expected = if rect.overlaps(&Rect::new(7, 7, 1, 1)) { 1e30 + (ones - 1.0) } else { ones };
-                assert_eq!(map.cost(rect), expected, "{rect:?}");
-            }
-        }
-    }
-
-    #[test]
-    fn bad_costs_and_shapes_are_errors() {
-        let nan = CostMap::from_blocks(4, 4, 2, vec![0.0, f64::NAN, 0.0, 0.0]);
-        assert!(matches!(nan, Err(Error::InvalidCost { rect: Rect { x: 2, y: 0, .. }, .. })));
-        let negative = CostMap::from_blocks(4, 4, 2, vec![0.0, 0.0, -1.0, 0.0]);
-        assert!(matches!(negative, Err(Error::InvalidCost { value: -1.0, .. })));
-        let infinite = CostMap::from_blocks(4, 4, 2, vec![f64::INFINITY, 0.0, 0.0, 0.0]);
-        assert!(matches!(infinite, Err(Error::InvalidCost { .. })));
-        assert_eq!(
-            CostMap::from_blocks(4, 4, 2, vec![0.0; 3]).unwrap_err(),
-            Error::BlockCount { expected: 4, found: 3 }
-        );
-        assert_eq!(CostMap::builder(4, 4, 0).unwrap_err(), Error::ZeroBlock);
-        assert_eq!(CostMap::builder(0, 4, 2).unwrap_err(), Error::EmptyImage { width: 0, height: 4 });
-        let overflow = CostMap::from_blocks(2, 1, 1, vec![f64::MAX, f64::MAX]);
-        assert_eq!(overflow.unwrap_err(), Error::Overflow);
-    }
-
-    #[test]
-    fn zero_and_huge_costs_are_fine() {
-        let zero = CostMap::from_blocks(5, 3, 2, vec![0.0; 6]).unwrap();
-        assert_eq!(zero.cost(Rect::new(1, 1, 3, 2)), 0.0);
-        let huge = CostMap::from_blocks(4, 4, 2, vec![1e30; 4]).unwrap();
-        assert_eq!(huge.total(), 4e30);
-        assert_eq!(huge.cost(Rect::new(1, 0, 2, 2)), 1e30);
-    }
-
-    #[test]
-    fn builder_spreads_a_rectangle_over_the_blocks_it_touches() {
-        let mut builder = CostMap::builder(10, 6, 4).unwrap();
-        // x 2..6 is half in block column 0 and half in column 1; y 0..4 is block row 0.
-        builder.add_rect(Rect::new(2, 0, 4, 4), 8.0).unwrap();
-        // Two tiles sharing edge block 5: their shares add up.
-        builder.add_rect(Rect::new(8, 4, 1, 2), 3.0).unwrap();
-        builder.add_rect(Rect::new(9, 4, 1, 2), 4.0).unwrap();
-        builder.add_block(0, 1, 0.5).unwrap();
-        let map = builder.build().unwrap();
-        let blocks: Vec<_> = (0..2).flat_map(|r| (0..3).map(move |c| (c, r))).collect();
-        let costs: Vec<_> = blocks.iter().map(|&(c, r)| map.block_cost(c, r).unwrap()).collect();
-        assert_eq!(costs, vec![4.0, 4.0, 0.0, 0.5, 0.0, 7.0]);
-        let mut builder = CostMap::builder(10, 6, 4).unwrap();
-        assert!(matches!(builder.add_block(3, 0, 1.0), Err(Error::OutOfBounds { .. })));
-        assert!(matches!(builder.add_rect(Rect::new(8, 0, 3, 1), 1.0), Err(Error::OutOfBounds { .. })));
-        assert!(matches!(builder.add_rect(Rect::new(0, 0, 1, 1), f64::NAN), Err(Error::InvalidCost { .. })));
-    }
-
-    #[test]
-    fn counts_are_exact() {
-        let counts = [3u64, 1 << 40, 7, 0];
-        let map = CostMap::from_counts(4, 4, 2, &counts).unwrap();
-        assert_eq!(map.total(), (3 + (1u64 << 40) + 7) as f64);
-        assert_eq!(map.cost(Rect::new(0, 2, 4, 2)), 7.0);
-    }
-}
+mod tests;
