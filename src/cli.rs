@@ -13,8 +13,14 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Render a scene (all frames of its animation) to EXR and PNG files.
+    /// Render a scene (all frames of its animation) with peers in this process.
     Render(RenderArgs),
+    /// Own the frames of a render whose peers are other processes or machines (`tessera peer`).
+    Serve(ServeArgs),
+    /// Join a render served by `tessera serve`, and render until it is over.
+    Peer(PeerArgs),
+    /// Make a cluster certificate authority and peer certificates for `serve` and `peer`.
+    Keygen(KeygenArgs),
     /// Compare two OpenEXR images (B is the reference): RMSE, relative MSE, FLIP, ...
     Compare(crate::compare::CompareArgs),
     /// Measure what accuracy costs in time: error against time for each accuracy knob.
@@ -23,6 +29,62 @@ pub enum Command {
 
 #[derive(Debug, clap::Args)]
 pub struct RenderArgs {
+    #[command(flatten)]
+    pub job: FrameArgs,
+    /// Peers in this process, each with its own rendering threads, talking QUIC on loopback
+    /// with certificates made in memory. Peer 0 owns the frames. `--peers 1` renders alone.
+    #[arg(long, default_value_t = 2)]
+    pub peers: usize,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct ServeArgs {
+    #[command(flatten)]
+    pub job: FrameArgs,
+    /// The address to listen on for peers, e.g. 0.0.0.0:4433.
+    #[arg(long)]
+    pub listen: std::net::SocketAddr,
+    /// The folder `tessera keygen` wrote (this node uses peer 0's certificate).
+    #[arg(long)]
+    pub certs: PathBuf,
+    /// Peers to wait for before the first frame.
+    #[arg(long)]
+    pub expect: usize,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct PeerArgs {
+    /// The address of `tessera serve`.
+    #[arg(long)]
+    pub join: std::net::SocketAddr,
+    /// The folder holding `ca.pem` and this peer's `peer-K.pem` / `peer-K-key.pem`.
+    #[arg(long)]
+    pub certs: PathBuf,
+    /// Which peer certificate to use (default: the only `peer-K-key.pem` in the folder, K >= 1).
+    #[arg(long)]
+    pub index: Option<u32>,
+    /// Rendering threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// The address to listen on for other peers (default: any port on all interfaces).
+    #[arg(long, default_value = "0.0.0.0:0")]
+    pub listen: std::net::SocketAddr,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct KeygenArgs {
+    /// Folder to write `ca.pem`, `ca-key.pem` and `peer-K.pem` / `peer-K-key.pem` to. Existing
+    /// files are never overwritten.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Certificates to make: peer 0 is the frame owner (`serve`), peers 1.. join it.
+    #[arg(long, default_value_t = 8)]
+    pub peers: u32,
+}
+
+/// What to render and how; shared by `render` and `serve`.
+#[derive(Debug, clap::Args)]
+pub struct FrameArgs {
     /// The scene file (TOML; see scenes/README.md).
     pub scene: PathBuf,
     /// Output folder for frame-NNNN.exr and frame-NNNN.png (created if missing).
@@ -40,18 +102,14 @@ pub struct RenderArgs {
     /// Image height in pixels (default: the scene's).
     #[arg(long)]
     pub height: Option<u32>,
-    /// Peers in this process, each with its own rendering threads, talking QUIC on loopback
-    /// with certificates made in memory. Peer 0 owns the frames. `--peers 1` renders alone.
-    #[arg(long, default_value_t = 2)]
-    pub peers: usize,
-    /// Rendering threads in all, shared evenly by the peers (default: all cores).
+    /// Rendering threads of this process, shared evenly by its peers (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
     /// Turn work stealing between peers off (each renders its initial set only).
     #[arg(long)]
     pub no_steal: bool,
-    /// Write a Gantt chart (SVG): one row per peer over time, each tile a bar coloured by
-    /// whether it was the peer's own or taken from another peer.
+    /// Where to write the Gantt chart (SVG; default: OUT/gantt.svg): one row per peer over
+    /// time, each tile a bar coloured by whether it was the peer's own or taken from another.
     #[arg(long)]
     pub gantt: Option<PathBuf>,
     /// Seed of the pixel sampler (default: the scene's).
@@ -66,7 +124,8 @@ pub struct RenderArgs {
     /// Which light-transport effects to pay for: those the scene calls for, or all of them.
     #[arg(long, value_enum, default_value_t = EffectsChoice::Auto)]
     pub effects: EffectsChoice,
-    /// Write per-frame statistics (tiles, costs, times) as JSON to this file.
+    /// Where to write per-frame statistics (tiles, costs, times, per-peer accounts) as JSON
+    /// (default: OUT/stats.json).
     #[arg(long)]
     pub stats: Option<PathBuf>,
     /// Write OUT/tiles-NNNN.png per frame: the image dimmed, tile borders, tiles tinted by cost.

@@ -1,13 +1,16 @@
 //! `tessera`: the command line. Thin: it parses arguments, sets up logging and calls the crates.
 //!
 //! - `cli`: the argument definitions (clap); `--help` is generated from their doc comments.
-//! - `render`: `tessera render`, one process rendering an animation, balanced by the PBT or a grid.
+//! - `render`: `tessera render` (peers in this process) and `tessera serve` (the frame owner of a
+//!   cluster of processes): frames balanced by the PBT or a grid, stolen between peers.
+//! - `cluster`: `tessera keygen` and `tessera peer`.
 //! - `report`: progress on a terminal, log lines elsewhere, the stats JSON and the tile-map PNGs.
 //! - `compare`: `tessera compare`, the error metrics of one image against another.
 //! - `accuracy`: `tessera accuracy`, what accuracy costs in time, as a table and a plot.
 
 mod accuracy;
 mod cli;
+mod cluster;
 mod compare;
 mod render;
 mod report;
@@ -26,6 +29,9 @@ fn main() -> anyhow::Result<()> {
         .init();
     match cli.command {
         cli::Command::Render(args) => render::run(&args),
+        cli::Command::Serve(args) => render::serve(&args),
+        cli::Command::Peer(args) => cluster::peer(&args),
+        cli::Command::Keygen(args) => cluster::keygen(&args),
         cli::Command::Compare(args) => compare::run(&args),
         cli::Command::Accuracy(args) => accuracy::run(&args),
     }

@@ -3,28 +3,63 @@
 //! other over QUIC, and the owner writes each frame and feeds its measured costs back to the
 //! balancer.
 
-use crate::cli::{BalancerKind, EffectsChoice, RenderArgs};
+use crate::cli::{BalancerKind, EffectsChoice, FrameArgs, RenderArgs, ServeArgs};
 use crate::report::{self, FrameStats, PeerFrameStats, Progress, StatsFile, TileStats};
 use anyhow::Context;
+use runtime::net::PeerIdentity;
 use runtime::node::{self, CompletedFrame, FrameSink, Job};
 use std::sync::Arc;
 use std::time::Instant;
 use tracer::{Effects, Scene, World};
 
+/// `tessera render`: every peer in this process.
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
+    let peers = args.peers.max(1);
+    let threads = args.job.threads.unwrap_or_else(available_threads);
+    let options = options(&args.job, (threads / peers).max(1));
+    execute(&args.job, peers, threads, |job, sink| {
+        let tokio = tokio_runtime()?;
+        Ok(tokio.block_on(node::run_local(job, peers, options, sink))?)
+    })
+}
+
+/// `tessera serve`: this process owns the frames (peer 0) and renders too; `--expect` peers
+/// join it from other processes or machines.
+pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
+    let identity = PeerIdentity::load(&args.certs, 0)
+        .with_context(|| format!("loading peer 0's certificate from {}", args.certs.display()))?;
+    let threads = args.job.threads.unwrap_or_else(available_threads);
+    let options = options(&args.job, threads);
+    execute(&args.job, args.expect + 1, threads, |job, sink| {
+        let tokio = tokio_runtime()?;
+        tokio.block_on(async {
+            let owner = node::Owner::bind(args.listen, &identity, options)?;
+            tracing::info!("listening on {}; waiting for {} peers", owner.local_addr()?, args.expect);
+            let (peers, own) = owner.run(job, args.expect, sink).await?;
+            Ok(node::LocalRun { peers, timelines: vec![(runtime::wire::PeerId(0), own)] })
+        })
+    })
+}
+
+/// Loads the scene, runs `drive` with a sink that writes frames, and writes the statistics,
+/// the Gantt chart and a one-line summary.
+fn execute(
+    args: &FrameArgs,
+    peers: usize,
+    threads: usize,
+    drive: impl FnOnce(Job, &mut Sink<'_>) -> anyhow::Result<node::LocalRun>,
+) -> anyhow::Result<()> {
     let started = Instant::now();
     let scene = load_scene(args)?;
     let files = node::bundle::scene_files(&args.scene, &scene)?;
     let settings = scene.settings.clone();
-    let peers = args.peers.max(1);
-    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let world = Arc::new(prepare_world(scene, args.effects));
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let partitioner = partitioner(args.balancer, args.tiles, settings.width, settings.height)?;
     let tiles = partitioner.tiles().len();
     let progress = Progress::new(settings.frames);
     progress.line(&format!(
-        "{}: {}x{}, {} spp, {} frames, {} triangles, effects {}; {} peers x {} threads, {:?} balancer with {} tiles, stealing {}",
+        "{}: {}x{}, {} spp, {} frames, {} triangles, effects {}; {} peers, {} threads here, {:?} balancer with {} tiles, stealing {}",
         args.scene.display(),
         settings.width,
         settings.height,
@@ -33,7 +68,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         world.scene.triangles.len(),
         world.effects,
         peers,
-        (threads / peers).max(1),
+        threads,
         args.balancer,
         tiles,
         if args.no_steal { "off" } else { "on" },
@@ -53,16 +88,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         },
         rays: 0,
     };
-    let options = node::Options {
-        threads: (threads / peers).max(1),
-        core: runtime::core::Config { steal: !args.no_steal, ..runtime::core::Config::default() },
-        seed: settings.seed,
-        ..node::Options::default()
-    };
     let job = Job { world, files, frames: settings.frames, partitioner };
-    let tokio = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     let render_started = Instant::now();
-    let run = tokio.block_on(node::run_local(job, peers, options, &mut sink))?;
+    let run = drive(job, &mut sink)?;
     let render_seconds = render_started.elapsed().as_secs_f64();
     sink.progress.finish();
     let mut stats = sink.stats;
@@ -71,14 +99,12 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             entry.peers.push(PeerFrameStats::new(peer.0, peer_stats));
         }
     }
-    if let Some(path) = &args.stats {
-        report::write_stats(path, &stats)?;
-    }
-    if let Some(path) = &args.gantt {
-        report::write_gantt(path, &stats, &run.timelines)?;
-    }
+    let stats_path = args.stats.clone().unwrap_or_else(|| args.out.join("stats.json"));
+    report::write_stats(&stats_path, &stats)?;
+    let gantt_path = args.gantt.clone().unwrap_or_else(|| args.out.join("gantt.svg"));
+    report::write_gantt(&gantt_path, &stats, &run.timelines)?;
     println!(
-        "rendered {} frames of {}x{} with {} peers in {:.2} s ({:.2} s in all): {:.2} Mrays/s; output in {}",
+        "rendered {} frames of {}x{} with {} peers in {:.2} s ({:.2} s in all): {:.2} Mrays/s; frames, stats.json and gantt.svg in {}",
         settings.frames,
         settings.width,
         settings.height,
@@ -91,9 +117,27 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn options(args: &FrameArgs, threads: usize) -> node::Options {
+    node::Options {
+        threads,
+        core: runtime::core::Config { steal: !args.no_steal, ..runtime::core::Config::default() },
+        seed: args.seed.unwrap_or(0),
+        ..node::Options::default()
+    }
+}
+
+fn available_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Rendering runs on rayon pools; tokio only moves bytes and timers, so two workers suffice.
+pub fn tokio_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    Ok(tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?)
+}
+
 /// Writes each finished frame and keeps its statistics.
 struct Sink<'a> {
-    args: &'a RenderArgs,
+    args: &'a FrameArgs,
     progress: Progress,
     stats: StatsFile,
     rays: u64,
@@ -147,7 +191,7 @@ impl Sink<'_> {
 }
 
 /// Loads the scene and applies the command line's overrides.
-pub fn load_scene(args: &RenderArgs) -> anyhow::Result<Scene> {
+pub fn load_scene(args: &FrameArgs) -> anyhow::Result<Scene> {
     let mut scene = tracer::scene::load(&args.scene)?;
     let s = &mut scene.settings;
     s.frames = args.frames.unwrap_or(s.frames);

@@ -6,10 +6,30 @@
 //! starts with which tiles) -> render, measuring a [`CostMap`] -> `observe(&map)` (new
 //! predictions, and for the PBT a re-cut tree) -> next frame.
 //!
-//! Both balancers predict with the same [`Predictor`](self): a tile's predicted cost is the
-//! previous frame's measured cost of its pixels, optionally smoothed over frames
-//! ([`Config::smoothing`]); before any measurement it is the tile's area in pixels (a uniform
-//! guess: one unit of cost per pixel, which only the ratios between tiles make meaningful).
+//! Both balancers predict the same way: a tile's predicted cost is the previous frame's
+//! measured cost of its pixels, optionally smoothed over frames ([`Config::smoothing`]); before
+//! any measurement it is the tile's area in pixels (a uniform guess: one unit of cost per pixel,
+//! which only the ratios between tiles make meaningful).
+//!
+//! ```
+//! use balancer::{Config, CostMap, Partitioner};
+//!
+//! let (width, height) = (640, 360);
+//! let mut partitioner = Partitioner::new(width, height, &Config::default())?;
+//! for _frame in 0..3 {
+//!     let tiles = partitioner.tiles();
+//!     let assignment = partitioner.assign(4, None)?;
+//!     assert_eq!(assignment.runs.iter().map(Vec::len).sum::<usize>(), tiles.len());
+//!     // Render; each tile reports counted work for its part of every 8x8 block it touches.
+//!     let mut measured = CostMap::builder(width, height, 8)?;
+//!     for tile in &tiles {
+//!         let work = if tile.rect.x < 100 { 50.0 } else { 1.0 } * tile.rect.area() as f64;
+//!         measured.add_rect(tile.rect, work)?;
+//!     }
+//!     partitioner.observe(&measured.build()?)?;
+//! }
+//! # Ok::<(), balancer::Error>(())
+//! ```
 
 use serde::{Deserialize, Serialize};
 

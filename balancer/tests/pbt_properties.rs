@@ -166,6 +166,32 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    #[test]
+    fn large_trees_follow_a_moving_spot(
+        (w, h) in (64u32..=400, 64u32..=300),
+        m in 200usize..=3000,
+        spots in proptest::collection::vec((0.0f64..1.0, 0.0f64..1.0, 0.05f64..0.3, 2.0f64..100.0), 2..4),
+    ) {
+        let mut pbt = Pbt::new(w, h, &config(m)).unwrap();
+        let expected = expected_leaves(w, h, m);
+        for (cx, cy, radius, peak) in spots {
+            let map = Layout::Spot { cx, cy, radius, peak, floor: 1.0 }.map(w, h, 8);
+            let before: Vec<f64> = rects(&pbt).iter().map(|&r| map.cost(r)).collect();
+            let update = pbt.observe(&map).unwrap();
+            prop_assert!(!update.capped);
+            let after = rects(&pbt);
+            prop_assert_eq!(check_partition(w, h, &after, Some(expected), Some(2.0)), Ok(()));
+            let predicted: Vec<f64> = pbt.tiles().iter().map(|t| t.predicted).collect();
+            let scale = predicted.iter().map(|p| p * p).sum::<f64>() / predicted.len() as f64;
+            prop_assert!(variance(&predicted) <= variance(&before) + 1e-9 * scale);
+            assert_no_improving_pair(Rect::image(w, h), &after, &map)?;
+        }
+    }
+}
+
 #[test]
 fn all_zero_and_all_huge_maps_leave_a_sane_tree() {
     for (w, h) in [(64, 48), (1, 40), (200, 5)] {

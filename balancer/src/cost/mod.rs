@@ -170,7 +170,10 @@ impl CostMap {
     pub fn block_rect(&self, column: u32, row: u32) -> Option<Rect> {
         (column < self.columns && row < self.rows).then(|| {
             let (x, y) = (column * self.block, row * self.block);
-            let (w, h) = (self.block.min(self.width - x), self.block.min(self.height - y));
+            let (w, h) = (
+                self.block.min(self.width - x),
+                self.block.min(self.height - y),
+            );
             Rect::new(x, y, w, h)
         })
     }
