@@ -105,6 +105,10 @@ pub struct FrameArgs {
     /// Rendering threads of this process, shared evenly by its peers (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Seconds a peer may stay silent before the owner gives its tiles to others (also the
+    /// transport's idle timeout).
+    #[arg(long, default_value_t = 10.0)]
+    pub peer_timeout: f64,
     /// Turn work stealing between peers off (each renders its initial set only).
     #[arg(long)]
     pub no_steal: bool,

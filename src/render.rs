@@ -52,6 +52,7 @@ fn execute(
     let started = Instant::now();
     let scene = load_scene(args)?;
     let files = node::bundle::scene_files(&args.scene, &scene)?;
+    let params = node::bundle::params(&scene, args.effects == EffectsChoice::All);
     let settings = scene.settings.clone();
     let world = Arc::new(prepare_world(scene, args.effects));
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
@@ -88,7 +89,7 @@ fn execute(
         },
         rays: 0,
     };
-    let job = Job { world, files, frames: settings.frames, partitioner };
+    let job = Job { world, files, params, frames: settings.frames, partitioner };
     let render_started = Instant::now();
     let run = drive(job, &mut sink)?;
     let render_seconds = render_started.elapsed().as_secs_f64();
@@ -118,11 +119,19 @@ fn execute(
 }
 
 fn options(args: &FrameArgs, threads: usize) -> node::Options {
+    let timeout = std::time::Duration::from_secs_f64(args.peer_timeout.max(0.1));
+    let defaults = node::Options::default();
     node::Options {
         threads,
-        core: runtime::core::Config { steal: !args.no_steal, ..runtime::core::Config::default() },
+        core: runtime::core::Config {
+            steal: !args.no_steal,
+            peer_timeout: timeout,
+            heartbeat_interval: timeout / 5,
+            ..runtime::core::Config::default()
+        },
+        net: runtime::net::Config { idle_timeout: timeout, keep_alive: timeout / 5, ..defaults.net.clone() },
         seed: args.seed.unwrap_or(0),
-        ..node::Options::default()
+        ..defaults
     }
 }
 

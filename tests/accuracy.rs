@@ -129,6 +129,8 @@ fn rmse_falls_as_one_over_the_square_root_of_spp_on_the_furnace() {
             "spp",
             "--seed",
             &seed.to_string(),
+            "--repeat-below",
+            "0",
         ]);
         assert!(stdout.contains("reference: analytic"), "{stdout}");
         let rows = csv_rows(&out.join("accuracy.csv"));
@@ -268,6 +270,8 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             "16",
             "--leak-rays",
             "2000",
+            "--repeat-below",
+            "0",
             "--width",
             size,
             "--height",

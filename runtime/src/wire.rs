@@ -32,8 +32,13 @@ pub const PROTOCOL_VERSION: u32 = 1;
 /// Pixels travel as linear RGB `f32` triples, little-endian: 12 bytes per pixel.
 pub const BYTES_PER_PIXEL: u64 = 12;
 
-/// A cost map holds at most one 8-byte value per pixel; anything longer is malformed.
+/// A cost map holds at most one 8-byte value per pixel, plus a small header
+/// ([`COST_HEADER_BYTES`]); anything longer is malformed.
 pub const MAX_COST_BYTES_PER_PIXEL: u64 = 8;
+
+/// Room for totals (rays, work) ahead of a cost map's per-block values: a 1x1 tile still
+/// carries them.
+pub const COST_HEADER_BYTES: u64 = 64;
 
 /// One message between two peers.
 ///
@@ -52,7 +57,7 @@ pub enum Message {
     /// Where the other peers listen, so that peers can steal from each other directly.
     Peers { peers: Vec<PeerAddress> },
     /// The scene's files; the receiver checks each file's hash before loading it.
-    Scene { files: Vec<SceneFile> },
+    Scene { files: Vec<SceneFile>, params: RenderParams },
     /// The receiver has loaded the scene and can take tiles.
     SceneReady,
     /// The owner gives tiles of `frame` to the receiver (its initial set, or re-issued tiles).
@@ -194,6 +199,20 @@ pub struct SceneFile {
     pub bytes: Vec<u8>,
 }
 
+/// The render settings the owner uses, which may differ from the scene file's (command-line
+/// overrides): every peer must render with exactly these, or its pixels would differ.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RenderParams {
+    pub width: u32,
+    pub height: u32,
+    pub samples_per_pixel: u32,
+    pub max_depth: Option<u32>,
+    pub russian_roulette_depth: Option<u32>,
+    pub seed: u64,
+    /// Every light-transport effect forced on (`--effects all`) rather than the scene's set.
+    pub all_effects: bool,
+}
+
 /// Where a peer listens, as a socket address string (`"10.0.0.7:4433"`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PeerAddress {
@@ -304,7 +323,7 @@ fn validate(message: &Message, limits: &Limits) -> Result<(), WireError> {
             }
             Ok(())
         }
-        Message::Scene { files } => {
+        Message::Scene { files, .. } => {
             bound("scene files", files.len(), limits.max_scene_files)?;
             for file in files {
                 bound("scene file size", file.bytes.len(), limits.max_file_bytes)?;
@@ -382,7 +401,7 @@ pub(crate) fn check_rect(rect: Rect, limits: &Limits) -> Result<(), WireError> {
 }
 
 /// A result's buffers must fit its rectangle: exactly [`BYTES_PER_PIXEL`] bytes per pixel, and
-/// at most [`MAX_COST_BYTES_PER_PIXEL`] bytes of cost map per pixel.
+/// at most [`MAX_COST_BYTES_PER_PIXEL`] bytes of cost map per pixel plus [`COST_HEADER_BYTES`].
 pub(crate) fn check_result(result: &TileResult, limits: &Limits) -> Result<(), WireError> {
     check_rect(result.rect, limits)?;
     check_buffers(result)
@@ -396,7 +415,7 @@ pub(crate) fn check_buffers(result: &TileResult) -> Result<(), WireError> {
             what: "pixel buffer length for the tile's rectangle",
         });
     }
-    let max_costs = area * MAX_COST_BYTES_PER_PIXEL;
+    let max_costs = area * MAX_COST_BYTES_PER_PIXEL + COST_HEADER_BYTES;
     if result.costs.len() as u64 > max_costs {
         return Err(WireError::Limit {
             what: "cost map bytes",

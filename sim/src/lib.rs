@@ -1,8 +1,86 @@
 //! The cluster simulator: a discrete-event cluster in virtual time that drives the runtime's
-//! sans-IO scheduling core for every peer. (The simulator itself is being written; this crate
-//! holds the charts it shares with real renders.)
+//! sans-IO scheduling core for every peer, so that a 2-core machine can say how balancing
+//! scales to a thousand machines, with the very code the real peers run.
+//!
+//! Nothing here schedules a tile: the pump is `runtime::core::testing::Cluster` (the same one
+//! the core's own tests use), every peer is a `runtime::core::Core`, and the frame owner's
+//! partition and assignment come from `balancer`. The simulator supplies what surrounds them:
+//! tile costs from a trace, a network, peers of different speeds that may crash, and the
+//! accounting behind every number it reports.
 //!
 //! Module map:
-//! - [`plot`]: SVG charts (Gantt) shared by real and simulated runs.
+//! - [`trace`]: cost traces (every frame's counted work per block of pixels), their JSON Lines
+//!   format, reader and writer; what `tessera render --trace` records.
+//! - [`synthetic`]: traces made up for tests and experiments: a hot spot orbiting the image.
+//! - [`network`]: the network model: per-link latency with jitter, bandwidth, loss.
+//! - [`scenario`]: one run: the scenario's knobs, and the frame owner's loop (partition,
+//!   assign, start the frame, feed the measured costs back) in virtual time.
+//! - `world`: the simulator's side of the pump: renderers costed from the trace, the
+//!   network, and the per-frame tally behind a [`RunReport`].
+//! - [`report`]: what a run yields ([`RunReport`], [`FrameReport`]), CSV and JSON output.
+//! - [`sweep`]: many runs (peers x policies x tile counts), in parallel, and everything they
+//!   write: tables, charts, summary.
+//! - [`summary`]: the summary of a sweep in Markdown, organised by the seed's three claims.
+//! - [`plot`]: SVG charts: efficiency against peers and against tiles, and Gantt charts
+//!   shared with real renders (`tessera render --gantt`).
 
+pub mod network;
 pub mod plot;
+pub mod report;
+pub mod scenario;
+pub mod summary;
+pub mod sweep;
+pub mod synthetic;
+pub mod trace;
+mod world;
+
+pub use network::Network;
+pub use report::{FrameReport, RunReport};
+pub use scenario::{Crash, Scenario};
+pub use sweep::{GanttChoice, Policy, Sweep};
+pub use trace::{FrameCosts, Trace, TraceWriter};
+
+use std::path::PathBuf;
+
+/// What can go wrong reading a trace, running a scenario or writing its results.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}, line {line}: {message}")]
+    Trace {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+    #[error("invalid trace: {0}")]
+    BadTrace(String),
+    #[error("invalid scenario: {0}")]
+    Scenario(String),
+    #[error(transparent)]
+    Balancer(#[from] balancer::Error),
+    #[error("starting a frame: {0}")]
+    Frame(#[from] runtime::core::FrameError),
+    #[error("frame {frame} stalled at {at:?}: nothing left to happen, {missing} tiles missing")]
+    Stalled {
+        frame: u64,
+        at: std::time::Duration,
+        missing: usize,
+    },
+    #[error(transparent)]
+    Plot(#[from] plot::PlotError),
+    #[error("writing {path}: {message}")]
+    Write { path: PathBuf, message: String },
+}
+
+impl Error {
+    pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}

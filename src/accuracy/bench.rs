@@ -1,8 +1,8 @@
 //! Timed renders and the one-knob-at-a-time ladders.
 //!
 //! A rung's time is the wall time of rendering the whole frame on the thread pool, tiles of
-//! [`TILE`] pixels handed out by rayon as `tessera render` would. Renders shorter than
-//! [`MIN_TIMED_SECONDS`] are repeated and the fastest run kept: a 1-spp render of a small image
+//! [`TILE`] pixels handed out by rayon as `tessera render` would. Renders shorter than a second
+//! (`--repeat-below`) are repeated and the fastest run kept: a 1-spp render of a small image
 //! lasts milliseconds, and a single measurement of it is mostly scheduler noise and whatever else
 //! the machine is doing, which only ever adds time. The image is deterministic, so repeating
 //! changes only the time.
@@ -19,8 +19,6 @@ use tracer::{Film, Rect, World};
 
 /// The side of the square tiles a frame is cut into.
 pub const TILE: u32 = 32;
-/// Renders (and BVH builds) faster than this are repeated for a steadier time.
-pub const MIN_TIMED_SECONDS: f64 = 1.0;
 /// At most this many repetitions of a short render.
 const MAX_REPEATS: usize = 31;
 /// The depth cap of the roulette ladder: "off" needs one, or paths in a closed scene never end,
@@ -72,7 +70,7 @@ pub struct Timed {
 }
 
 /// Renders frame 0 of `world` on `pool`, timed (the fastest of repeats when short).
-pub fn render(world: &World, pool: &rayon::ThreadPool) -> Timed {
+pub fn render(world: &World, pool: &rayon::ThreadPool, repeat_below: f64) -> Timed {
     let (width, height) = (world.scene.settings.width, world.scene.settings.height);
     let tiles: Vec<Rect> = (0..height.div_ceil(TILE))
         .flat_map(|ty| (0..width.div_ceil(TILE)).map(move |tx| (tx, ty)))
@@ -102,7 +100,7 @@ pub fn render(world: &World, pool: &rayon::ThreadPool) -> Timed {
         (film, started.elapsed().as_secs_f64())
     };
     let (film, first) = once();
-    let seconds = fastest_time(first, || once().1);
+    let seconds = fastest_time(first, repeat_below, || once().1);
     Timed {
         rays: film.stats.rays + film.stats.shadow_rays,
         invalid_samples: film.stats.invalid_samples,
@@ -115,13 +113,13 @@ pub fn render(world: &World, pool: &rayon::ThreadPool) -> Timed {
     }
 }
 
-/// `first`, or when it is shorter than [`MIN_TIMED_SECONDS`] the fastest of it and enough
+/// `first`, or when it is shorter than `repeat_below` seconds the fastest of it and enough
 /// further runs of `again` to fill that time.
-pub fn fastest_time(first: f64, mut again: impl FnMut() -> f64) -> f64 {
-    if first >= MIN_TIMED_SECONDS {
+pub fn fastest_time(first: f64, repeat_below: f64, mut again: impl FnMut() -> f64) -> f64 {
+    if first >= repeat_below {
         return first;
     }
-    let repeats = ((MIN_TIMED_SECONDS / first.max(1e-6)).ceil() as usize).clamp(2, MAX_REPEATS);
+    let repeats = ((repeat_below / first.max(1e-6)).ceil() as usize).clamp(2, MAX_REPEATS);
     (1..repeats).map(|_| again()).fold(first, f64::min)
 }
 
@@ -132,16 +130,24 @@ pub struct Bench<'a> {
     reference: &'a Reference,
     /// The settings every rung starts from (`world.scene.settings` on entry).
     baseline: RenderSettings,
+    /// Renders and builds shorter than this many seconds are repeated, the fastest kept.
+    repeat_below: f64,
 }
 
 impl<'a> Bench<'a> {
-    pub fn new(world: World, pool: &'a rayon::ThreadPool, reference: &'a Reference) -> Self {
+    pub fn new(
+        world: World,
+        pool: &'a rayon::ThreadPool,
+        reference: &'a Reference,
+        repeat_below: f64,
+    ) -> Self {
         let baseline = world.scene.settings.clone();
         Bench {
             world,
             pool,
             reference,
             baseline,
+            repeat_below,
         }
     }
 
@@ -206,18 +212,19 @@ impl<'a> Bench<'a> {
             ..self.baseline.clone()
         };
         self.world.scene.settings = settings.clone();
-        let default_image = render(&self.world, self.pool).image;
+        let default_image = render(&self.world, self.pool, 0.0).image;
         let rows = BuildQuality::ALL
             .into_iter()
             .map(|quality| {
                 let triangles = &self.world.scene.triangles;
                 let started = Instant::now();
                 let accel = Accel::build(triangles, quality);
-                let build_seconds = fastest_time(started.elapsed().as_secs_f64(), || {
-                    let again = Instant::now();
-                    drop(std::hint::black_box(Accel::build(triangles, quality)));
-                    again.elapsed().as_secs_f64()
-                });
+                let build_seconds =
+                    fastest_time(started.elapsed().as_secs_f64(), self.repeat_below, || {
+                        let again = Instant::now();
+                        drop(std::hint::black_box(Accel::build(triangles, quality)));
+                        again.elapsed().as_secs_f64()
+                    });
                 self.world.accel = accel;
                 let (mut row, image) =
                     self.measure(Knob::Bvh, format!("{quality:?}"), settings.clone());
@@ -268,7 +275,7 @@ impl<'a> Bench<'a> {
         settings: RenderSettings,
     ) -> (Row, RgbImage) {
         self.world.scene.settings = settings.clone();
-        let timed = render(&self.world, self.pool);
+        let timed = render(&self.world, self.pool, self.repeat_below);
         let reference = self.reference.image();
         let metrics = Metrics::between(&timed.image, reference)
             .expect("every rung renders at the reference's size: both come from the same settings");
@@ -335,11 +342,11 @@ mod tests {
     fn short_runs_are_repeated_and_the_fastest_kept() {
         let mut runs = 0;
         assert_eq!(
-            fastest_time(2.0, || unreachable!("a long run is timed once")),
+            fastest_time(2.0, 1.0, || unreachable!("a long run is timed once")),
             2.0
         );
         let times = [0.3, 0.1, 0.2, 0.4];
-        let fastest = fastest_time(0.25, || {
+        let fastest = fastest_time(0.25, 1.0, || {
             runs += 1;
             times[runs - 1]
         });

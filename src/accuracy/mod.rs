@@ -72,6 +72,10 @@ pub struct AccuracyArgs {
     /// Rays shot per traversal by the closed-sphere leak check.
     #[arg(long, default_value_t = 1 << 19)]
     pub leak_rays: u32,
+    /// Renders (and BVH builds) faster than this many seconds are repeated and the fastest run
+    /// kept, for times that scheduler noise and other processes disturb less; 0 times each once.
+    #[arg(long, default_value_t = 1.0)]
+    pub repeat_below: f64,
     /// Rendering threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -125,6 +129,10 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
     ensure!(
         args.reference_spp.is_none_or(|n| n >= 2),
         "the reference needs at least 2 samples per pixel"
+    );
+    ensure!(
+        args.repeat_below.is_finite() && args.repeat_below >= 0.0,
+        "--repeat-below must be a number of seconds, 0 or more"
     );
     let mut scene = tracer::scene::load(&args.scene)?;
     let (width, height) = image_size(
@@ -184,7 +192,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
     };
     println!("reference: {}", reference.describe());
 
-    let mut bench = bench::Bench::new(world, &pool, &reference);
+    let mut bench = bench::Bench::new(world, &pool, &reference, args.repeat_below);
     let mut rows = Vec::new();
     let mut leak_checks = Vec::new();
     for &knob in &args.knobs {
@@ -212,6 +220,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
         scene_settings,
         baseline: bench.world().scene.settings.clone(),
         knob_spp: args.knob_spp,
+        repeat_below: args.repeat_below,
         reference: &reference,
         rows: &rows,
         leak_checks: &leak_checks,

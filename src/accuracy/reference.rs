@@ -122,7 +122,8 @@ impl Reference {
                 seed,
                 ..baseline.clone()
             };
-            bench::render(world, pool)
+            // Timed once: a reference takes long enough, and its time is only informative.
+            bench::render(world, pool, 0.0)
         };
         let a = half(key.seeds[0], spp / 2, world);
         let b = half(key.seeds[1], spp - spp / 2, world);

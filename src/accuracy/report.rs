@@ -31,6 +31,7 @@ pub struct Run<'a> {
     pub scene_settings: RenderSettings,
     pub baseline: RenderSettings,
     pub knob_spp: u32,
+    pub repeat_below: f64,
     pub reference: &'a Reference,
     pub rows: &'a [Row],
     pub leak_checks: &'a [LeakCheck],
@@ -131,11 +132,7 @@ pub fn markdown(run: &Run) -> String {
          frame (renders under {} s are repeated and the fastest run kept). Errors are against the reference, over \
          all pixels and channels: RMSE, relMSE = mean (a-b)^2/(b+0.01)^2, mean FLIP (8-bit sRGB at exposure 1), \
          and the mean bias (how much brighter or darker the whole image is).\n",
-        run.width,
-        run.height,
-        run.triangles,
-        run.threads,
-        super::bench::MIN_TIMED_SECONDS,
+        run.width, run.height, run.triangles, run.threads, run.repeat_below,
     );
     let _ = writeln!(
         md,

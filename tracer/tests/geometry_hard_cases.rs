@@ -293,7 +293,7 @@ fn every_ray_from_inside_a_closed_perturbed_sphere_hits_it() {
     // Random directions, and directions aimed at a vertex or a point on an edge of a random
     // triangle: the rays a non-watertight test lets through (obvhs's Moller-Trumbore test lets
     // about half of the vertex-aimed ones escape).
-    let mut direction = |origin: Vec3, k: usize, rng: &mut Rng| {
+    let direction = |origin: Vec3, k: usize, rng: &mut Rng| {
         let p = triangles[rng.index(triangles.len())].p;
         match k % 4 {
             0 | 1 => rng.direction(),

@@ -71,6 +71,10 @@ use crate::{Assignment, Config, CostMap, Error, Rect, Tile, Update};
 use crate::{Order, Partitioner};
 use tree::Tree;
 
+/// The most leaves a tree may have (and need for its forced cuts): node indices are u32, and a
+/// tree this size already takes tens of gigabytes.
+pub const MAX_LEAVES: usize = 1 << 30;
+
 /// The Prediction Binary Tree over one image (see the module docs).
 #[derive(Clone, Debug)]
 pub struct Pbt {
@@ -97,6 +101,12 @@ impl Pbt {
             ..config.clone()
         };
         config.validate()?;
+        // Forced leaves keep the short side and are longer than it, so there are fewer of them
+        // than long side / short side.
+        let elongation = (width.max(height) / width.min(height)) as usize;
+        if config.leaves > MAX_LEAVES || elongation > MAX_LEAVES {
+            return Err(Error::Config("a PBT can have at most 2^30 leaves"));
+        }
         let image = Rect::image(width, height);
         let mut pbt = Pbt {
             width,
@@ -154,8 +164,8 @@ impl Pbt {
 
     /// Changes the leaf count `m` (grow by splitting, shrink by merging; see the module docs).
     pub fn set_leaves(&mut self, leaves: usize) -> Result<Update, Error> {
-        if leaves == 0 {
-            return Err(Error::Config("a PBT needs at least one leaf"));
+        if leaves == 0 || leaves > MAX_LEAVES {
+            return Err(Error::Config("a PBT has between 1 and 2^30 leaves"));
         }
         self.target = leaves;
         Ok(self.restructure())

@@ -219,3 +219,22 @@ fn the_same_inputs_give_the_same_tiles() {
     };
     assert_eq!(run(), run());
 }
+
+#[test]
+fn absurd_sizes_are_refused() {
+    // A 1 x 2^32-1 strip would need over 2^30 forced leaves of at most 3 pixels.
+    assert!(matches!(
+        Pbt::new(1, u32::MAX, &config(1)),
+        Err(Error::Config(_))
+    ));
+    assert!(matches!(
+        Pbt::new(8, 8, &config(MAX_LEAVES + 1)),
+        Err(Error::Config(_))
+    ));
+    let mut pbt = Pbt::new(8, 8, &config(4)).unwrap();
+    assert!(matches!(
+        pbt.set_leaves(MAX_LEAVES + 1),
+        Err(Error::Config(_))
+    ));
+    assert_eq!(pbt.leaf_count(), 4);
+}

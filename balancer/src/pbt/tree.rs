@@ -117,7 +117,9 @@ impl Tree {
                 first
             }
             None => {
-                let first = u32::try_from(self.nodes.len()).expect("fewer than 2^32 nodes");
+                // Invariant: `Pbt` keeps at most `MAX_LEAVES` (2^30) leaves, so fewer than 2^31
+                // nodes, and indices fit a u32 that stays clear of `NONE`.
+                let first = u32::try_from(self.nodes.len()).expect("fewer than 2^31 nodes");
                 self.nodes
                     .extend([Tree::fresh(a, node, 0), Tree::fresh(b, node, 0)]);
                 first

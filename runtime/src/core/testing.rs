@@ -1,16 +1,27 @@
-//! A minimal cluster of cores in virtual time: no sockets, no threads, no clock.
+//! A cluster of scheduling cores in virtual time: no sockets, no threads, no clock.
 //!
-//! Tests use it to script races (a peer dying the instant a grant reaches it, a peer frozen past
-//! its timeout); the simulator can start from the same pattern. It is a discrete-event loop: an
-//! agenda of deliveries ordered by (time, sequence number), plus each core's own timeout, one at
-//! a time, so a run is a pure function of its inputs and seed. Every message can go through
-//! [`wire::encode`] and [`wire::decode`] on the way, as it would on a real connection.
+//! One pump serves two users, so that the simulator measures exactly the code the tests check.
+//! The core's own tests script races with it (a peer dying the instant a grant reaches it, a
+//! peer frozen past its timeout) through [`Cluster::new`], which keeps a full [`Record`] of the
+//! run. The simulator (`sim`) runs thousands of peers over many frames through
+//! [`Cluster::with_world`] and its own [`World`]: renderers that cost tiles from a trace, a
+//! network with bandwidth and loss, and running statistics instead of a record.
+//!
+//! It is a discrete-event loop. Deliveries and finished renders wait in an agenda ordered by
+//! (time, sequence number), first in first out on ties. Each core's own deadline
+//! ([`Core::poll_timeout`]) waits beside them in a set ordered by (time, peer); a deadline due
+//! at the same instant as an agenda entry goes first, as an event loop fires expired timers
+//! before it reads its sockets. Each step jumps to the earliest of the two. A core's deadline
+//! is re-read only after that core handled an input, so a step costs O(log n) whatever the
+//! number of peers. A run is a pure function of its inputs and seed. Every message can go
+//! through [`wire::encode`] and [`wire::decode`] on the way, as it would on a real connection.
 
-use std::collections::BTreeMap;
+use std::cmp::Ordering;
+use std::collections::{BTreeMap, BTreeSet, BinaryHeap};
 use std::time::Duration;
 
 use super::steal::Rng;
-use super::{Config, Core, Event, FrameError, WorkItem};
+use super::{Config, Core, Event, FrameError, ProtocolError, WorkItem};
 use crate::wire::{self, BYTES_PER_PIXEL, FrameId, Message, PeerId, TileResult, TileSpec};
 
 /// What the simulated renderer of a peer makes of a tile, and how long it takes.
@@ -22,6 +33,63 @@ pub struct Rendered {
 /// Renders a tile for a peer. Called once per tile a core hands out.
 pub type Renderer = Box<dyn FnMut(PeerId, &WorkItem) -> Rendered>;
 
+/// What surrounds the cores: their renderers, what the network does beyond the cluster's own
+/// latency and jitter, and whoever watches the run.
+pub trait World {
+    /// `peer`'s renderer starts `item` at `now`: how long it takes and what it produces.
+    fn render(&mut self, now: Duration, peer: PeerId, item: &WorkItem) -> Rendered;
+
+    /// `message` leaves `from` for `to` at `now`; `delay` is what the cluster's own link model
+    /// (`latency` plus jitter) gives it. Returns when it arrives and how many bytes it moves,
+    /// which both cores count in their statistics. By default: the cluster's delay, no bytes.
+    fn transit(
+        &mut self,
+        now: Duration,
+        from: PeerId,
+        to: PeerId,
+        message: &Message,
+        delay: Duration,
+    ) -> Transit {
+        let _ = (now, from, to, message);
+        Transit { delay, bytes: 0 }
+    }
+
+    /// Sees what the cores do, in order, as it happens.
+    fn observe(&mut self, at: Duration, seen: Seen<'_>);
+}
+
+/// How one message crosses the network.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Transit {
+    pub delay: Duration,
+    pub bytes: u64,
+}
+
+/// One output of a core, as a [`World`] sees it.
+#[derive(Debug)]
+pub enum Seen<'a> {
+    Sent {
+        from: PeerId,
+        to: PeerId,
+        message: &'a Message,
+    },
+    /// The core handed `item` to its renderer (just before [`World::render`] is asked).
+    Started {
+        peer: PeerId,
+        item: &'a WorkItem,
+    },
+    Event {
+        peer: PeerId,
+        event: Event,
+    },
+    /// A core refused a message; a real driver would close the connection.
+    Refused {
+        peer: PeerId,
+        from: PeerId,
+        error: ProtocolError,
+    },
+}
+
 /// One thing that happens to one peer at one instant.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Happening {
@@ -29,6 +97,8 @@ pub enum Happening {
         from: PeerId,
         to: PeerId,
         message: Message,
+        /// Its size, as [`World::transit`] counted it.
+        bytes: u64,
     },
     Rendered {
         peer: PeerId,
@@ -71,15 +141,51 @@ pub enum Record {
     },
 }
 
-/// Several cores, their renderers and the network between them.
-pub struct Cluster {
-    now: Duration,
-    nodes: BTreeMap<PeerId, Node>,
-    agenda: BTreeMap<(Duration, u64), Happening>,
-    next_seq: u64,
+/// The tests' world: renders with a [`Renderer`] and keeps every [`Record`].
+pub struct Scripted {
     renderer: Renderer,
     trace: Vec<Record>,
+}
+
+impl World for Scripted {
+    fn render(&mut self, _now: Duration, peer: PeerId, item: &WorkItem) -> Rendered {
+        (self.renderer)(peer, item)
+    }
+
+    fn observe(&mut self, at: Duration, seen: Seen<'_>) {
+        self.trace.push(match seen {
+            Seen::Sent { from, to, message } => Record::Sent {
+                at,
+                from,
+                to,
+                message: message.clone(),
+            },
+            Seen::Started { peer, item } => Record::Started {
+                at,
+                peer,
+                item: *item,
+            },
+            Seen::Event { peer, event } => Record::Event { at, peer, event },
+            Seen::Refused { peer, from, error } => Record::Refused {
+                at,
+                peer,
+                from,
+                error: error.to_string(),
+            },
+        });
+    }
+}
+
+/// Several cores, their world and the network between them.
+pub struct Cluster<W: World = Scripted> {
+    now: Duration,
+    nodes: BTreeMap<PeerId, Node>,
+    agenda: BinaryHeap<Entry>,
+    /// Every live, unfrozen core's next deadline.
+    deadlines: BTreeSet<(Duration, PeerId)>,
+    next_seq: u64,
     rng: Rng,
+    world: W,
     /// One-way delay of every message.
     pub latency: Duration,
     /// Each message is delayed by up to this much more, uniformly at random (from the
@@ -94,6 +200,8 @@ pub struct Cluster {
 struct Node {
     core: Core,
     state: NodeState,
+    /// The deadline this core has in `Cluster::deadlines`, if any.
+    deadline: Option<Duration>,
 }
 
 enum NodeState {
@@ -103,36 +211,73 @@ enum NodeState {
     Dead,
 }
 
-impl Cluster {
-    /// Peers `(id, renderer slots)`, all connected to each other at time zero.
+/// An agenda entry; the heap's top is the earliest (time, sequence number).
+struct Entry {
+    at: Duration,
+    seq: u64,
+    happening: Happening,
+}
+
+impl Cluster<Scripted> {
+    /// Peers `(id, renderer slots)`, all connected to each other at time zero, rendering with
+    /// `renderer` and keeping a full record.
     pub fn new(config: &Config, peers: &[(PeerId, usize)], seed: u64, renderer: Renderer) -> Self {
+        let world = Scripted {
+            renderer,
+            trace: Vec::new(),
+        };
+        Self::with_world(config, peers, seed, world)
+    }
+
+    pub fn trace(&self) -> &[Record] {
+        &self.world.trace
+    }
+
+    /// Every event so far, with the peer that reported it.
+    pub fn events(&self) -> impl Iterator<Item = (PeerId, &Event)> {
+        self.world.trace.iter().filter_map(|record| match record {
+            Record::Event { peer, event, .. } => Some((*peer, event)),
+            _ => None,
+        })
+    }
+}
+
+impl<W: World> Cluster<W> {
+    /// Peers `(id, renderer slots)`, all connected to each other at time zero, in `world`.
+    /// Messages take 0.5 ms, with no jitter, through the wire encoding; change the public
+    /// fields to taste.
+    pub fn with_world(config: &Config, peers: &[(PeerId, usize)], seed: u64, world: W) -> Self {
         let mut nodes = BTreeMap::new();
         for &(peer, slots) in peers {
             let mut core = Core::new(peer, slots, config.clone(), seed);
             for &(other, _) in peers {
                 core.handle_peer_connected(Duration::ZERO, other);
             }
-            nodes.insert(
-                peer,
-                Node {
-                    core,
-                    state: NodeState::Up,
-                },
-            );
+            let node = Node {
+                core,
+                state: NodeState::Up,
+                deadline: None,
+            };
+            nodes.insert(peer, node);
         }
-        Self {
+        let mut cluster = Self {
             now: Duration::ZERO,
             nodes,
-            agenda: BTreeMap::new(),
+            agenda: BinaryHeap::new(),
+            deadlines: BTreeSet::new(),
             next_seq: 0,
-            renderer,
-            trace: Vec::new(),
             rng: Rng(seed),
+            world,
             latency: Duration::from_micros(500),
             jitter: Duration::ZERO,
             loss_detection: Duration::from_millis(20),
             encode: true,
+        };
+        let ids: Vec<PeerId> = cluster.nodes.keys().copied().collect();
+        for peer in ids {
+            cluster.rearm(peer);
         }
+        cluster
     }
 
     pub fn now(&self) -> Duration {
@@ -143,16 +288,17 @@ impl Cluster {
         &self.nodes[&peer].core
     }
 
-    pub fn trace(&self) -> &[Record] {
-        &self.trace
+    pub fn world(&self) -> &W {
+        &self.world
     }
 
-    /// Every event so far, with the peer that reported it.
-    pub fn events(&self) -> impl Iterator<Item = (PeerId, &Event)> {
-        self.trace.iter().filter_map(|record| match record {
-            Record::Event { peer, event, .. } => Some((*peer, event)),
-            _ => None,
-        })
+    pub fn world_mut(&mut self) -> &mut W {
+        &mut self.world
+    }
+
+    /// Gives up the cluster, keeping its world (and whatever it gathered).
+    pub fn into_world(self) -> W {
+        self.world
     }
 
     pub fn start_frame(
@@ -169,43 +315,34 @@ impl Cluster {
 
     /// Processes everything that happens up to `until`, then moves the clock there.
     pub fn run(&mut self, until: Duration) {
-        while self.next().is_some_and(|(at, _)| at <= until) {
-            self.step();
+        while self.next_due().is_some_and(|at| at <= until) {
+            self.advance();
         }
         self.now = self.now.max(until);
     }
 
-    /// Processes the next happening and returns it; `None` when nothing is left.
+    /// Processes the next happening and returns (a copy of) it; `None` when nothing is left.
     pub fn step(&mut self) -> Option<Happening> {
-        let (at, timeout) = self.next()?;
-        self.now = self.now.max(at);
-        let happening = match timeout {
-            Some(peer) => Happening::Timeout { peer },
-            None => {
-                self.agenda
-                    .pop_first()
-                    .expect("invariant: `next` saw an entry")
-                    .1
-            }
-        };
+        let happening = self.take_next()?;
         self.apply(happening.clone());
         Some(happening)
     }
 
-    /// When the next happening is due, and whose timeout it is if it is one.
-    fn next(&self) -> Option<(Duration, Option<PeerId>)> {
-        let timeout = self
-            .nodes
-            .iter()
-            .filter(|(_, node)| matches!(node.state, NodeState::Up))
-            .filter_map(|(peer, node)| Some((node.core.poll_timeout()?, *peer)))
-            .min();
-        let next = self.agenda.first_key_value().map(|(key, _)| key.0);
-        match (timeout, next) {
-            (Some((at, peer)), next) if next.is_none_or(|next| at <= next) => {
-                Some((at, Some(peer)))
-            }
-            (_, next) => Some((next?, None)),
+    /// Processes the next happening, as [`Cluster::step`] does without copying it, and
+    /// returns the time it happened; `None` when nothing is left.
+    pub fn advance(&mut self) -> Option<Duration> {
+        let happening = self.take_next()?;
+        self.apply(happening);
+        Some(self.now)
+    }
+
+    /// When the next happening is due, if anything is left to happen.
+    pub fn next_due(&self) -> Option<Duration> {
+        let deadline = self.deadlines.first().map(|(at, _)| *at);
+        let entry = self.agenda.peek().map(|entry| entry.at);
+        match (deadline, entry) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
         }
     }
 
@@ -213,7 +350,8 @@ impl Cluster {
     /// still on the way if `drop_outgoing`. The others learn of it after `loss_detection`.
     pub fn kill(&mut self, peer: PeerId, drop_outgoing: bool) {
         self.node(peer).state = NodeState::Dead;
-        self.agenda.retain(|_, happening| match happening {
+        self.rearm(peer);
+        self.agenda.retain(|entry| match &entry.happening {
             Happening::Deliver { from, to, .. } => *to != peer && !(drop_outgoing && *from == peer),
             Happening::Rendered { peer: at, .. }
             | Happening::Lost { peer: at, .. }
@@ -221,19 +359,18 @@ impl Cluster {
         });
         let others: Vec<PeerId> = self.live_peers().filter(|&other| other != peer).collect();
         for other in others {
-            self.schedule(
-                self.loss_detection,
-                Happening::Lost {
-                    peer: other,
-                    lost: peer,
-                },
-            );
+            let lost = Happening::Lost {
+                peer: other,
+                lost: peer,
+            };
+            self.schedule(self.loss_detection, lost);
         }
     }
 
     /// Stops `peer` without closing its connections, as a long pause or a partition would.
     pub fn freeze(&mut self, peer: PeerId) {
         self.node(peer).state = NodeState::Frozen(Vec::new());
+        self.rearm(peer);
     }
 
     /// Resumes a frozen peer; what reached it meanwhile arrives now, in order.
@@ -244,6 +381,26 @@ impl Cluster {
                 self.schedule(Duration::ZERO, happening);
             }
         }
+        self.rearm(peer);
+    }
+
+    /// Removes the next happening (a deadline first on a tie) and moves the clock to it.
+    fn take_next(&mut self) -> Option<Happening> {
+        let deadline = self.deadlines.first().copied();
+        let entry = self.agenda.peek().map(|entry| entry.at);
+        let happening = match (deadline, entry) {
+            (Some((at, peer)), entry) if entry.is_none_or(|entry| at <= entry) => {
+                self.now = self.now.max(at);
+                Happening::Timeout { peer }
+            }
+            (_, Some(_)) => {
+                let entry = self.agenda.pop().expect("invariant: peeked just above");
+                self.now = self.now.max(entry.at);
+                entry.happening
+            }
+            (_, None) => return None,
+        };
+        Some(happening)
     }
 
     fn apply(&mut self, happening: Happening) {
@@ -254,7 +411,10 @@ impl Cluster {
             | Happening::Timeout { peer } => *peer,
         };
         let (now, encode) = (self.now, self.encode);
-        let node = self.node(peer);
+        let node = self
+            .nodes
+            .get_mut(&peer)
+            .expect("invariant: only peers of the cluster are scheduled");
         match &mut node.state {
             NodeState::Dead => return,
             NodeState::Frozen(held) => {
@@ -266,21 +426,22 @@ impl Cluster {
             NodeState::Up => {}
         }
         match happening {
-            Happening::Deliver { from, message, .. } => {
+            Happening::Deliver {
+                from,
+                message,
+                bytes,
+                ..
+            } => {
                 let message = if encode {
                     wire::decode(&wire::encode(&message), &wire::Limits::default())
                         .expect("invariant: what the core sends decodes")
                 } else {
                     message
                 };
+                node.core.record_bytes(0, bytes);
                 if let Err(error) = node.core.handle_message(now, from, message) {
-                    let error = error.to_string();
-                    self.trace.push(Record::Refused {
-                        at: now,
-                        peer,
-                        from,
-                        error,
-                    });
+                    let seen = Seen::Refused { peer, from, error };
+                    self.world.observe(now, seen);
                 }
             }
             Happening::Rendered { result, .. } => node.core.handle_tile_rendered(now, result),
@@ -290,26 +451,21 @@ impl Cluster {
         self.flush(peer);
     }
 
-    /// Moves a core's outputs into the agenda and the trace.
+    /// Moves a core's outputs into the agenda and the world, and re-reads its deadline.
     fn flush(&mut self, peer: PeerId) {
         let now = self.now;
         while let Some(item) = self.node(peer).core.poll_work() {
-            self.trace.push(Record::Started {
-                at: now,
-                peer,
-                item,
-            });
-            let Rendered { duration, result } = (self.renderer)(peer, &item);
+            self.world.observe(now, Seen::Started { peer, item: &item });
+            let Rendered { duration, result } = self.world.render(now, peer, &item);
             self.schedule(duration, Happening::Rendered { peer, result });
         }
         while let Some((to, message)) = self.node(peer).core.poll_transmit() {
-            let record = Record::Sent {
-                at: now,
+            let seen = Seen::Sent {
                 from: peer,
                 to,
-                message: message.clone(),
+                message: &message,
             };
-            self.trace.push(record);
+            self.world.observe(now, seen);
             if self
                 .nodes
                 .get(&to)
@@ -317,40 +473,84 @@ impl Cluster {
             {
                 let jitter = self.rng.below(self.jitter.as_nanos() as usize + 1);
                 let delay = self.latency + Duration::from_nanos(jitter as u64);
-                self.schedule(
-                    delay,
-                    Happening::Deliver {
-                        from: peer,
-                        to,
-                        message,
-                    },
-                );
+                let transit = self.world.transit(now, peer, to, &message, delay);
+                self.node(peer).core.record_bytes(transit.bytes, 0);
+                let deliver = Happening::Deliver {
+                    from: peer,
+                    to,
+                    message,
+                    bytes: transit.bytes,
+                };
+                self.schedule(transit.delay, deliver);
             }
         }
         while let Some(event) = self.node(peer).core.poll_event() {
-            self.trace.push(Record::Event {
-                at: now,
-                peer,
-                event,
-            });
+            self.world.observe(now, Seen::Event { peer, event });
+        }
+        self.rearm(peer);
+    }
+
+    /// Brings `peer`'s entry in `deadlines` up to date: its core's deadline if it is up.
+    fn rearm(&mut self, peer: PeerId) {
+        let node = self
+            .nodes
+            .get_mut(&peer)
+            .expect("invariant: only peers of the cluster are rearmed");
+        let due = match node.state {
+            NodeState::Up => node.core.poll_timeout(),
+            NodeState::Frozen(_) | NodeState::Dead => None,
+        };
+        if due != node.deadline {
+            if let Some(old) = node.deadline {
+                self.deadlines.remove(&(old, peer));
+            }
+            if let Some(new) = due {
+                self.deadlines.insert((new, peer));
+            }
+            node.deadline = due;
         }
     }
 
     fn schedule(&mut self, after: Duration, happening: Happening) {
-        self.agenda
-            .insert((self.now + after, self.next_seq), happening);
+        let entry = Entry {
+            at: self.now + after,
+            seq: self.next_seq,
+            happening,
+        };
+        self.agenda.push(entry);
         self.next_seq += 1;
     }
 
     fn node(&mut self, peer: PeerId) -> &mut Node {
         self.nodes
             .get_mut(&peer)
-            .expect("invariant: tests name peers of the cluster")
+            .expect("invariant: callers name peers of the cluster")
     }
 
     fn live_peers(&self) -> impl Iterator<Item = PeerId> + '_ {
         let alive = |(_, node): &(&PeerId, &Node)| !matches!(node.state, NodeState::Dead);
         self.nodes.iter().filter(alive).map(|(peer, _)| *peer)
+    }
+}
+
+impl PartialEq for Entry {
+    fn eq(&self, other: &Self) -> bool {
+        (self.at, self.seq) == (other.at, other.seq)
+    }
+}
+
+impl Eq for Entry {}
+
+impl PartialOrd for Entry {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Entry {
+    /// Reversed, so that the max-heap's top is the earliest entry.
+    fn cmp(&self, other: &Self) -> Ordering {
+        (other.at, other.seq).cmp(&(self.at, self.seq))
     }
 }
 

@@ -5,9 +5,9 @@
 //! memory with the same loader the owner used. Pixels travel as little-endian `f32` triples and
 //! costs as little-endian `u64` block counts, so a tile's bits arrive unchanged.
 
-use crate::wire::{SceneFile, TileResult};
+use crate::wire::{RenderParams, SceneFile, TileResult};
 use std::path::Path;
-use tracer::scene::{MemoryFiles, SceneError};
+use tracer::scene::{normalize, MemoryFiles, SceneError};
 use tracer::{Scene, TileCost, TileOutput};
 
 /// Why a scene could not be shipped or received.
@@ -23,24 +23,42 @@ pub enum BundleError {
     Scene(#[from] SceneError),
 }
 
-/// Reads every file `scene` was loaded from (relative to the folder of `toml_path`), hashed.
-/// The TOML comes first, as in `Scene::files`.
+/// Reads every file `scene` was loaded from, hashed, the TOML first (as in `Scene::files`).
+///
+/// Names are relative to the TOML's folder and may climb out of it (`../meshes/a.obj`; the
+/// shipped `scenes/shared/*.toml` reach `../shared/scenes`), which the wire refuses. So they are
+/// re-rooted at the lowest folder that holds them all: the TOML's path gains that many of its
+/// own parent folders' names, and the loader's lexical normalisation resolves the references
+/// to the same names on the peer.
 pub fn scene_files(toml_path: &Path, scene: &Scene) -> Result<Vec<SceneFile>, BundleError> {
-    let root = toml_path.parent().unwrap_or(Path::new(""));
+    let folder = toml_path.parent().unwrap_or(Path::new(""));
+    let climb = scene
+        .files
+        .iter()
+        .map(|name| normalize(name).unwrap_or_default().split('/').take_while(|part| *part == "..").count())
+        .max()
+        .unwrap_or(0);
+    let absolute = std::fs::canonicalize(if folder.as_os_str().is_empty() { Path::new(".") } else { folder })
+        .map_err(|source| BundleError::Read { path: folder.display().to_string(), source })?;
+    let parts: Vec<String> = absolute.iter().skip(1).map(|p| p.to_string_lossy().into_owned()).collect();
+    let prefix = parts[parts.len().saturating_sub(climb)..].join("/");
     scene
         .files
         .iter()
         .map(|name| {
-            let path = root.join(name);
+            let path = folder.join(name);
             let bytes = std::fs::read(&path)
                 .map_err(|source| BundleError::Read { path: path.display().to_string(), source })?;
-            Ok(SceneFile { name: name.clone(), hash: *blake3::hash(&bytes).as_bytes(), bytes })
+            let rooted = if prefix.is_empty() { name.clone() } else { format!("{prefix}/{name}") };
+            let name = normalize(&rooted).unwrap_or(rooted);
+            Ok(SceneFile { name, hash: *blake3::hash(&bytes).as_bytes(), bytes })
         })
         .collect()
 }
 
-/// Checks every file's hash and loads the scene from them; the first file is the TOML.
-pub fn load_scene(files: Vec<SceneFile>) -> Result<Scene, BundleError> {
+/// Checks every file's hash and loads the scene from them (the first file is the TOML), then
+/// applies the owner's render parameters.
+pub fn load_scene(files: Vec<SceneFile>, params: &RenderParams) -> Result<Scene, BundleError> {
     let toml = files.first().ok_or(BundleError::Empty)?.name.clone();
     let mut memory = MemoryFiles::new();
     for file in files {
@@ -49,7 +67,33 @@ pub fn load_scene(files: Vec<SceneFile>) -> Result<Scene, BundleError> {
         }
         memory.insert(&file.name, file.bytes);
     }
-    Ok(tracer::scene::load_from(&memory, &toml)?)
+    let mut scene = tracer::scene::load_from(&memory, &toml)?;
+    apply(&mut scene, params);
+    Ok(scene)
+}
+
+/// The parameters of a scene as it will be rendered.
+pub fn params(scene: &Scene, all_effects: bool) -> RenderParams {
+    let s = &scene.settings;
+    RenderParams {
+        width: s.width,
+        height: s.height,
+        samples_per_pixel: s.samples_per_pixel,
+        max_depth: s.max_depth,
+        russian_roulette_depth: s.russian_roulette_depth,
+        seed: s.seed,
+        all_effects,
+    }
+}
+
+fn apply(scene: &mut Scene, params: &RenderParams) {
+    let s = &mut scene.settings;
+    s.width = params.width;
+    s.height = params.height;
+    s.samples_per_pixel = params.samples_per_pixel;
+    s.max_depth = params.max_depth;
+    s.russian_roulette_depth = params.russian_roulette_depth;
+    s.seed = params.seed;
 }
 
 /// A content hash of a whole scene, for logs: peers print it so a user can see they agree.
@@ -129,8 +173,10 @@ mod tests {
     fn a_tampered_scene_file_is_refused() {
         let toml = b"[camera]\nposition = [0, 0, -1]\nlook_at = [0, 0, 0]\n".to_vec();
         let mut file = SceneFile { name: "s.toml".into(), hash: *blake3::hash(&toml).as_bytes(), bytes: toml };
-        assert!(load_scene(vec![file.clone()]).is_ok());
+        let params = RenderParams { width: 8, height: 6, samples_per_pixel: 1, seed: 3, ..RenderParams::default() };
+        let scene = load_scene(vec![file.clone()], &params).unwrap();
+        assert_eq!((scene.settings.width, scene.settings.height, scene.settings.seed), (8, 6, 3));
         file.bytes.push(b'\n');
-        assert!(matches!(load_scene(vec![file]), Err(BundleError::HashMismatch { .. })));
+        assert!(matches!(load_scene(vec![file], &params), Err(BundleError::HashMismatch { .. })));
     }
 }

@@ -65,6 +65,8 @@ pub enum NodeError {
     Balancer(#[from] balancer::Error),
     #[error("{0} came back with malformed pixels or costs")]
     BadTile(TileId),
+    #[error("frame {frame}: {faults} tile results were refused as faulty; giving up")]
+    Faulty { frame: u32, faults: usize },
     #[error("the transport stopped")]
     Stopped,
     #[error("writing a frame: {0}")]

@@ -7,7 +7,7 @@ use super::session::{check_hello, Session, Step};
 use super::{CompletedFrame, FrameSink, NodeError, Options, TileRecord};
 use crate::core::{Core, Event as CoreEvent, PeerStats};
 use crate::net::{CloseCode, Link, PeerIdentity};
-use crate::wire::{FrameId, GoodbyeReason, Message, PeerAddress, PeerId, SceneFile, TileId, TileSpec, PROTOCOL_VERSION};
+use crate::wire::{FrameId, GoodbyeReason, Message, PeerAddress, PeerId, RenderParams, SceneFile, TileId, TileSpec, PROTOCOL_VERSION};
 use std::collections::{BTreeMap, BTreeSet};
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -19,6 +19,8 @@ pub struct Job {
     pub world: Arc<World>,
     /// The scene's files, hashed, shipped to every peer.
     pub files: Vec<SceneFile>,
+    /// The settings every peer renders with (the scene's, after command-line overrides).
+    pub params: RenderParams,
     pub frames: u32,
     pub partitioner: balancer::Partitioner,
 }
@@ -49,7 +51,7 @@ impl Owner {
     pub async fn run(mut self, job: Job, expect: usize, sink: &mut dyn FrameSink) -> Result<(PeerReport, Vec<super::LocalTile>), NodeError> {
         let (renderer, results) = super::session::Renderer::new(self.options.threads, job.world.clone())?;
         self.session.set_renderer(renderer, results);
-        let joined = self.admit(&job.files, expect).await?;
+        let joined = self.admit(&job.files, job.params, expect).await?;
         let mut partitioner = job.partitioner;
         let mut report = PeerReport::new();
         for frame in 0..job.frames {
@@ -79,7 +81,7 @@ impl Owner {
     }
 
     /// Admits peers until `expect` have loaded the scene; then tells each where the others are.
-    async fn admit(&mut self, files: &[SceneFile], expect: usize) -> Result<usize, NodeError> {
+    async fn admit(&mut self, files: &[SceneFile], params: RenderParams, expect: usize) -> Result<usize, NodeError> {
         let mut pending: BTreeMap<crate::net::ConnId, (crate::net::PeerCertificate, SocketAddr)> = BTreeMap::new();
         let mut ready: BTreeMap<PeerId, SocketAddr> = BTreeMap::new();
         let mut loading: BTreeMap<crate::net::ConnId, (PeerId, SocketAddr)> = BTreeMap::new();
@@ -98,7 +100,7 @@ impl Owner {
                             Ok((peer, slots)) => {
                                 tracing::info!(%peer, %remote, slots, "peer joined; sending scene {digest}");
                                 self.session.send_conn(conn, &Message::Welcome { version: PROTOCOL_VERSION, peer: self.session.core.id() });
-                                self.session.send_conn(conn, &Message::Scene { files: files.to_vec() });
+                                self.session.send_conn(conn, &Message::Scene { files: files.to_vec(), params });
                                 loading.insert(conn, (peer, remote));
                             }
                             Err(reason) => self.session.close(conn, CloseCode::Identity, &reason),
@@ -162,6 +164,10 @@ impl Owner {
         let started = Instant::now();
         self.session.core.start_frame(now, FrameId(u64::from(frame)), initial)?;
         self.session.flush();
+        // A renderer that keeps producing results the ledger refuses would have its tiles
+        // re-issued forever; past this many refusals the render stops with an error instead.
+        let mut faults = 0usize;
+        let max_faults = 2 * tiles.len() + 8;
         loop {
             match self.session.step().await {
                 Step::Core(CoreEvent::FrameComplete { frame: done, results, rendered_by, .. }) if done.0 == u64::from(frame) => {
@@ -177,6 +183,10 @@ impl Owner {
                 }
                 Step::Core(CoreEvent::FaultyPeer { peer, tile, fault, .. }) => {
                     tracing::error!(%peer, %tile, ?fault, "faulty result ignored");
+                    faults += 1;
+                    if faults > max_faults {
+                        return Err(NodeError::Faulty { frame, faults });
+                    }
                 }
                 Step::Core(event) => tracing::debug!(?event, "core event"),
                 Step::Connected { conn, .. } => {

@@ -79,9 +79,9 @@ pub async fn run_peer(
                             session.flush();
                         }
                     }
-                    Message::Scene { files } if conn == owner_conn => {
+                    Message::Scene { files, params } if conn == owner_conn => {
                         let digest = bundle::scene_digest(&files);
-                        let loaded = tokio::task::spawn_blocking(move || bundle::load_scene(files)).await;
+                        let loaded = tokio::task::spawn_blocking(move || bundle::load_scene(files, &params)).await;
                         let scene = match loaded {
                             Ok(Ok(scene)) => scene,
                             Ok(Err(error)) => {
@@ -90,7 +90,8 @@ pub async fn run_peer(
                             }
                             Err(join) => return Err(NodeError::Io(std::io::Error::other(join))),
                         };
-                        let world = tokio::task::spawn_blocking(move || Arc::new(super::prepare_world(scene, None)))
+                        let effects = params.all_effects.then_some(tracer::Effects::ALL);
+                        let world = tokio::task::spawn_blocking(move || Arc::new(super::prepare_world(scene, effects)))
                             .await
                             .map_err(|e| NodeError::Io(std::io::Error::other(e)))?;
                         let (renderer, results) = Renderer::new(options.threads, world)?;

@@ -55,6 +55,7 @@ fn samples() -> Vec<Message> {
                 hash: [5; 32],
                 bytes: b"v 0 0 0\n".to_vec(),
             }],
+            params: RenderParams { width: 64, height: 48, samples_per_pixel: 4, max_depth: Some(3), russian_roulette_depth: None, seed: 9, all_effects: true },
         },
         Message::SceneReady,
         Message::Assign {
@@ -137,7 +138,7 @@ fn pixel_buffers_must_fit_the_rectangle() {
     ));
 
     let mut costly = result(3, 2);
-    costly.costs = vec![0; 6 * 8 + 1];
+    costly.costs = vec![0; (6 * MAX_COST_BYTES_PER_PIXEL + COST_HEADER_BYTES) as usize + 1];
     let bytes = encode(&Message::TileDone(costly));
     assert!(matches!(
         decode(&bytes, &Limits::default()),
@@ -243,7 +244,7 @@ fn hostile_values_are_refused() {
             bytes: vec![],
         };
         assert!(
-            refused(Message::Scene { files: vec![file] }),
+            refused(Message::Scene { files: vec![file], params: RenderParams::default() }),
             "{name:?} accepted"
         );
     }

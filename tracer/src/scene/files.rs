@@ -182,8 +182,9 @@ pub(crate) fn join(base: &str, path: &str) -> String {
     }
 }
 
-/// Removes `.` segments and folds `x/..`; keeps leading `..`. `None` for an absolute path.
-fn normalize(path: &str) -> Option<String> {
+/// Lexically normalises a relative, `/`-separated path: removes `.` segments and folds `x/..`;
+/// keeps leading `..`. `None` for an absolute path.
+pub fn normalize(path: &str) -> Option<String> {
     if path.starts_with('/') {
         return None;
     }

@@ -18,7 +18,7 @@ mod texture;
 
 pub use camera::{Camera, CameraKey, CameraRays, CameraTrack};
 pub use error::{Location, SceneError};
-pub use files::{DiskFiles, MemoryFiles, SceneFiles};
+pub use files::{DiskFiles, MemoryFiles, SceneFiles, normalize};
 pub use load::{LoadReport, ObjectReport, load, load_from, load_str, load_with_report};
 pub use texture::Texture;
 

@@ -1,0 +1,232 @@
+//! What a run yields, frame by frame, and the CSV and JSON files experiments write.
+//!
+//! Definitions (times in virtual seconds; "work" is counted work converted to the time one slot
+//! of a speed-1 peer needs for it):
+//! - **makespan**: from the owner starting the frame to its core reporting every tile in.
+//! - **capacity**: the frame's participants' speed factors times their slots (`P` for equal
+//!   peers with one slot each).
+//! - **efficiency** = work / (capacity x makespan): 1 when every slot renders from the first
+//!   instant to the last and nothing is rendered twice.
+//! - **lower bound** on the makespan = max(work / capacity, largest tile / fastest speed): no
+//!   schedule of this partition can beat it. **bound efficiency** is the efficiency a run
+//!   achieving it would have, so efficiency <= bound efficiency <= 1 always.
+//! - **idle fraction** = 1 - busy slot time / (participant slots x makespan): slot time spent
+//!   not rendering (waiting for work, for the network, or for the frame's last tile).
+//!
+//! A run's totals add frames up: efficiency = total work / sum of (capacity x makespan).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::plot::GanttBar;
+use crate::{Error, Policy, Scenario};
+
+/// One frame of one run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameReport {
+    pub frame: u64,
+    pub tiles: usize,
+    /// Peers the owner dealt tiles to.
+    pub participants: usize,
+    /// Their speed factors times their slots.
+    pub capacity: f64,
+    pub makespan: f64,
+    pub work: f64,
+    pub largest_tile: f64,
+    pub lower_bound: f64,
+    pub efficiency: f64,
+    pub bound_efficiency: f64,
+    pub idle_fraction: f64,
+    /// Tiles handed to renderers: `tiles`, plus any rendered twice after a failure.
+    pub renders: usize,
+    /// The owner's completion held exactly one result per tile, in tile order.
+    pub results_ok: bool,
+    pub steal_requests: u64,
+    /// Steal requests answered with tiles, and the tiles they moved.
+    pub grants: u64,
+    pub stolen_tiles: u64,
+    /// Messages of this frame sent by all peers, and their bytes.
+    pub messages: u64,
+    pub bytes: u64,
+    /// Peers the owner declared failed during the frame.
+    pub failures: u64,
+    /// Results or messages a core refused; always 0 unless something is broken.
+    pub faults: u64,
+    /// What the balancer's update after this frame did (PBT leaves split and merged).
+    pub splits: usize,
+    pub merges: usize,
+}
+
+/// One run: its configuration, its frames and its totals.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunReport {
+    pub policy: Policy,
+    pub peers: usize,
+    pub slots: usize,
+    /// Tiles of the first frame (the PBT's leaf count, or the grid's cells).
+    pub tiles: usize,
+    pub seed: u64,
+    pub latency_ms: f64,
+    pub bandwidth_bytes_per_second: Option<f64>,
+    pub loss: f64,
+    pub work_per_second: f64,
+    /// Totals over all frames (see the module documentation).
+    pub makespan: f64,
+    pub work: f64,
+    pub efficiency: f64,
+    pub bound_efficiency: f64,
+    pub idle_fraction: f64,
+    pub steals: u64,
+    pub messages: u64,
+    pub bytes: u64,
+    /// A hash of every output of every core in order, with its time: equal for equal runs.
+    pub fingerprint: String,
+    /// Happenings the pump processed (messages delivered, tiles rendered, timeouts).
+    pub steps: u64,
+    /// Real seconds the simulation took (not part of the fingerprint).
+    pub wall_seconds: f64,
+    pub frames: Vec<FrameReport>,
+    /// The frame the scenario asked to draw, and every render of it.
+    pub gantt_frame: Option<u64>,
+    #[serde(skip)]
+    pub gantt: Vec<GanttBar>,
+    /// Each frame's tiles in partition order with the peer that started with each, if the
+    /// scenario asked to keep them.
+    #[serde(skip)]
+    pub assignments: Vec<Vec<(balancer::Rect, u32)>>,
+}
+
+impl RunReport {
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn new(
+        policy: Policy,
+        scenario: &Scenario,
+        tiles: usize,
+        frames: Vec<FrameReport>,
+        fingerprint: u64,
+        steps: u64,
+        gantt: Vec<GanttBar>,
+        wall_seconds: f64,
+    ) -> Self {
+        let sum = |f: &dyn Fn(&FrameReport) -> f64| frames.iter().map(f).sum::<f64>();
+        let slots = scenario.slots as f64;
+        let work = sum(&|f| f.work);
+        let capacity_time = sum(&|f| f.capacity * f.makespan);
+        let bound_time = sum(&|f| f.capacity * f.lower_bound);
+        let slot_time = sum(&|f| f.participants as f64 * slots * f.makespan);
+        let idle_time = sum(&|f| f.idle_fraction * f.participants as f64 * slots * f.makespan);
+        let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 1.0 };
+        Self {
+            policy,
+            peers: scenario.peers,
+            slots: scenario.slots,
+            tiles,
+            seed: scenario.seed,
+            latency_ms: scenario.network.latency.as_secs_f64() * 1e3,
+            bandwidth_bytes_per_second: scenario.network.bandwidth,
+            loss: scenario.network.loss,
+            work_per_second: scenario.work_per_second,
+            makespan: sum(&|f| f.makespan),
+            work,
+            efficiency: ratio(work, capacity_time),
+            bound_efficiency: ratio(work, bound_time),
+            idle_fraction: ratio(idle_time, slot_time),
+            steals: frames.iter().map(|f| f.grants).sum(),
+            messages: frames.iter().map(|f| f.messages).sum(),
+            bytes: frames.iter().map(|f| f.bytes).sum(),
+            fingerprint: format!("{fingerprint:016x}"),
+            steps,
+            wall_seconds,
+            frames,
+            gantt_frame: scenario.gantt_frame,
+            gantt,
+            assignments: Vec::new(),
+        }
+    }
+
+    /// Whether every frame completed with exactly one result per tile and nothing refused.
+    pub fn all_tiles_once(&self) -> bool {
+        self.frames.iter().all(|f| f.results_ok && f.faults == 0)
+    }
+}
+
+const RUN_COLUMNS: &str = "policy,peers,slots,tiles,frames,latency_ms,bandwidth_bytes_per_second,loss,makespan_s,work_s,efficiency,bound_efficiency,idle_fraction,steals,messages,bytes,steps,wall_s,fingerprint";
+
+const FRAME_COLUMNS: &str = "policy,peers,tiles,frame,frame_tiles,participants,capacity,makespan_s,work_s,largest_tile_s,lower_bound_s,efficiency,bound_efficiency,idle_fraction,renders,steal_requests,grants,stolen_tiles,messages,bytes,failures,splits,merges";
+
+/// Writes `runs.csv` (one row per run), `frames.csv` (one row per run and frame) and
+/// `runs.json` (everything) into `dir`.
+pub fn write_runs(dir: &Path, runs: &[RunReport]) -> Result<(), Error> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let mut csv = format!("{RUN_COLUMNS}\n");
+    for r in runs {
+        let bandwidth = r
+            .bandwidth_bytes_per_second
+            .map_or(String::new(), |b| b.to_string());
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{},{:.9},{:.9},{:.6},{:.6},{:.6},{},{},{},{},{:.3},{}",
+            r.policy,
+            r.peers,
+            r.slots,
+            r.tiles,
+            r.frames.len(),
+            r.latency_ms,
+            bandwidth,
+            r.loss,
+            r.makespan,
+            r.work,
+            r.efficiency,
+            r.bound_efficiency,
+            r.idle_fraction,
+            r.steals,
+            r.messages,
+            r.bytes,
+            r.steps,
+            r.wall_seconds,
+            r.fingerprint,
+        );
+    }
+    write(&dir.join("runs.csv"), &csv)?;
+    let mut csv = format!("{FRAME_COLUMNS}\n");
+    for r in runs {
+        for f in &r.frames {
+            let _ = writeln!(
+                csv,
+                "{},{},{},{},{},{},{},{:.9},{:.9},{:.9},{:.9},{:.6},{:.6},{:.6},{},{},{},{},{},{},{},{},{}",
+                r.policy,
+                r.peers,
+                r.tiles,
+                f.frame,
+                f.tiles,
+                f.participants,
+                f.capacity,
+                f.makespan,
+                f.work,
+                f.largest_tile,
+                f.lower_bound,
+                f.efficiency,
+                f.bound_efficiency,
+                f.idle_fraction,
+                f.renders,
+                f.steal_requests,
+                f.grants,
+                f.stolen_tiles,
+                f.messages,
+                f.bytes,
+                f.failures,
+                f.splits,
+                f.merges,
+            );
+        }
+    }
+    write(&dir.join("frames.csv"), &csv)?;
+    let json = serde_json::to_string_pretty(runs).expect("reports always serialise");
+    write(&dir.join("runs.json"), &json)
+}
+
+pub(crate) fn write(path: &Path, text: &str) -> Result<(), Error> {
+    std::fs::write(path, text).map_err(|e| Error::io(path, e))
+}

@@ -1,0 +1,342 @@
+//! One simulated run: a trace, a balancer, a cluster and a network, frame after frame.
+//!
+//! The frame owner's loop is the real owner's (`runtime::node::owner`), in virtual time: ask
+//! the balancer for its tiles and for one contiguous run per live participant, start the frame
+//! in the owner's core, let the cores run until the owner's core reports it complete, then
+//! feed the frame's measured cost map (the trace's) back to the balancer, which re-cuts the PBT
+//! for the next frame. The next frame starts the instant the last one completes: the owner's
+//! own work between frames (writing the image, re-cutting the tree) is not simulated.
+//!
+//! Time is counted work divided by a rate: a slot of a peer of speed 1 renders
+//! [`Scenario::work_per_second`] units of counted work per second. The default,
+//! [`DEFAULT_WORK_PER_SECOND`], was measured on the development machine (see its docs);
+//! ratios such as efficiency do not depend on it, but latency and bandwidth effects do, since
+//! they compare network time with render time.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::time::{Duration, Instant};
+
+use balancer::Partitioner;
+use runtime::core::Config;
+use runtime::core::testing::Cluster;
+use runtime::wire::{FrameId, PeerId, TileId, TileSpec};
+use serde::{Deserialize, Serialize};
+
+use crate::network::Links;
+use crate::report::{FrameReport, RunReport};
+use crate::sweep::Policy;
+use crate::world::SimWorld;
+use crate::{Error, Network, Trace};
+
+/// The peer that owns every frame (and renders too, like any other).
+pub const OWNER: PeerId = PeerId(0);
+
+/// Counted work one rendering thread renders per second on the development machine (2 cores,
+/// both rendering): measured by `cargo run -p sim --example record_trace` on the shipped
+/// glass-cluster-pan scene (2.21e9 units in 30.6 thread-seconds, each tile timed alone). Pass
+/// `--rate` for another machine or scene.
+pub const DEFAULT_WORK_PER_SECOND: f64 = 7.2e7;
+
+/// Everything a run needs besides the trace and the balancer. Every effect is off by default.
+#[derive(Clone, Debug)]
+pub struct Scenario {
+    /// Peers, the owner (peer 0) included.
+    pub peers: usize,
+    /// Tiles each peer renders at once (its rendering threads).
+    pub slots: usize,
+    /// The scheduling policy every core runs.
+    pub core: Config,
+    pub network: Network,
+    /// Speed factors, dealt to peers in turn: peer `p` renders at `speeds[p % len]` times the
+    /// rate. Empty means all 1.
+    pub speeds: Vec<f64>,
+    /// Peers that crash, and when.
+    pub crashes: Vec<Crash>,
+    /// Seeds the cores' victim choice, the jitter, the links and the loss.
+    pub seed: u64,
+    /// Counted work per second of one slot of a speed-1 peer.
+    pub work_per_second: f64,
+    /// Frames to simulate; `None`: as many as the trace has (more repeat it from the start).
+    pub frames: Option<usize>,
+    /// The frame whose renders are kept for a Gantt chart.
+    pub gantt_frame: Option<u64>,
+    /// Keep every frame's initial assignment (tile rectangles and their peers) in the report,
+    /// to compare with a real render's.
+    pub keep_assignments: bool,
+}
+
+/// A peer that stops dead at `at` (virtual time since the run began), after everything else
+/// due at that instant. Its connections time out `Network::loss_detection` later.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Crash {
+    pub peer: u32,
+    pub at: Duration,
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Self {
+            peers: 1,
+            slots: 1,
+            core: Config::default(),
+            network: Network::default(),
+            speeds: Vec::new(),
+            crashes: Vec::new(),
+            seed: 0,
+            work_per_second: DEFAULT_WORK_PER_SECOND,
+            frames: None,
+            gantt_frame: None,
+            keep_assignments: false,
+        }
+    }
+}
+
+impl Scenario {
+    fn validate(&self) -> Result<(), Error> {
+        let bad = |message: &str| Err(Error::Scenario(message.to_string()));
+        if self.peers == 0 || self.slots == 0 {
+            return bad("a cluster needs at least one peer with one slot");
+        }
+        if self.peers > u32::MAX as usize {
+            return bad("too many peers");
+        }
+        if self.speeds.iter().any(|s| !(*s > 0.0 && s.is_finite())) {
+            return bad("speed factors must be positive");
+        }
+        if !(self.work_per_second > 0.0 && self.work_per_second.is_finite()) {
+            return bad("the work rate must be positive");
+        }
+        if let Some(crash) = self.crashes.iter().find(|c| c.peer as usize >= self.peers) {
+            return Err(Error::Scenario(format!(
+                "peer {} cannot crash: the cluster has peers 0 to {}",
+                crash.peer,
+                self.peers - 1
+            )));
+        }
+        if self.crashes.iter().any(|c| PeerId(c.peer) == OWNER) {
+            return bad("the owner (peer 0) cannot crash: its frame would die with it");
+        }
+        self.network.validate().map_err(Error::Scenario)
+    }
+
+    /// Each peer's speed factor.
+    fn peer_speeds(&self) -> Vec<f64> {
+        (0..self.peers)
+            .map(|p| match self.speeds.len() {
+                0 => 1.0,
+                n => self.speeds[p % n],
+            })
+            .collect()
+    }
+}
+
+/// What the owner planned for one frame, to set against what happened.
+struct Plan {
+    capacity: f64,
+    fastest: f64,
+    participants: usize,
+    work: f64,
+    largest: f64,
+    splits: usize,
+    merges: usize,
+}
+
+/// Simulates `scenario` on `trace`, the owner cutting frames with `partitioner` (which must
+/// cover the trace's image).
+pub fn run(
+    trace: &Trace,
+    mut partitioner: Partitioner,
+    scenario: &Scenario,
+) -> Result<RunReport, Error> {
+    scenario.validate()?;
+    if (partitioner.width(), partitioner.height()) != (trace.width(), trace.height()) {
+        return Err(Error::Scenario(format!(
+            "the balancer cuts {}x{} images but the trace is {}x{}",
+            partitioner.width(),
+            partitioner.height(),
+            trace.width(),
+            trace.height()
+        )));
+    }
+    let wall = Instant::now();
+    let maps = trace.cost_maps()?;
+    let frames = scenario.frames.unwrap_or(maps.len()) as u64;
+    let speeds = scenario.peer_speeds();
+    let seconds_per_unit = 1.0 / scenario.work_per_second;
+    let network = &scenario.network;
+    let links = Links::new(
+        network.clone(),
+        scenario.peers,
+        scenario.seed,
+        trace.header.block_size,
+    );
+    let world = SimWorld::new(
+        maps,
+        seconds_per_unit,
+        speeds.clone(),
+        links,
+        scenario.gantt_frame,
+    );
+    let peers: Vec<(PeerId, usize)> = (0..scenario.peers)
+        .map(|p| (PeerId(p as u32), scenario.slots))
+        .collect();
+    let mut cluster = Cluster::with_world(&scenario.core, &peers, scenario.seed, world);
+    cluster.latency = network.latency;
+    cluster.jitter = network.jitter;
+    cluster.loss_detection = network.loss_detection;
+    cluster.encode = false;
+
+    let mut crashes: Vec<Crash> = scenario.crashes.clone();
+    crashes.sort_by_key(|c| (c.at, c.peer));
+    let mut crashes = VecDeque::from(crashes);
+    let mut crashed: BTreeMap<PeerId, Duration> = BTreeMap::new();
+    let mut plans = Vec::new();
+    let mut assignments = Vec::new();
+    let mut steps = 0u64;
+    let policy = Policy::of(&partitioner, &scenario.core);
+    let first_tiles = partitioner.tiles().len();
+    for frame in 0..frames {
+        let now = cluster.now();
+        // The owner deals to the peers it is connected to: a crashed peer until its
+        // connection times out.
+        let participants: Vec<PeerId> = peers
+            .iter()
+            .map(|(p, _)| *p)
+            .filter(|p| {
+                crashed
+                    .get(p)
+                    .is_none_or(|&at| now < at + network.loss_detection)
+            })
+            .collect();
+        let tiles = partitioner.tiles();
+        let assignment = partitioner.assign(participants.len(), None)?;
+        let map = cluster.world().map(frame);
+        let mut initial = vec![OWNER; tiles.len()];
+        let mut sets = BTreeMap::new();
+        for (&peer, run) in participants.iter().zip(&assignment.runs) {
+            let specs: Vec<TileSpec> = run
+                .iter()
+                .map(|&index| {
+                    initial[index] = peer;
+                    let tile = tiles[index];
+                    TileSpec {
+                        id: TileId(index as u32),
+                        rect: tile.rect,
+                        predicted: tile.predicted,
+                    }
+                })
+                .collect();
+            sets.insert(peer, specs);
+        }
+        let speed = |p: &PeerId| speeds[p.0 as usize];
+        let mut plan = Plan {
+            capacity: participants.iter().map(speed).sum::<f64>() * scenario.slots as f64,
+            fastest: participants.iter().map(speed).fold(0.0, f64::max),
+            participants: participants.len(),
+            work: map.total() * seconds_per_unit,
+            largest: tiles.iter().map(|t| map.cost(t.rect)).fold(0.0, f64::max) * seconds_per_unit,
+            splits: 0,
+            merges: 0,
+        };
+        if scenario.keep_assignments {
+            let dealt = tiles.iter().zip(&initial).map(|(t, p)| (t.rect, p.0));
+            assignments.push(dealt.collect());
+        }
+        cluster.world_mut().begin_frame(frame, now, initial);
+        cluster.start_frame(OWNER, FrameId(frame), sets)?;
+        while !cluster.world().is_complete(frame) {
+            let due = cluster.next_due();
+            if let Some(crash) = crashes.front().filter(|c| due.is_none_or(|d| c.at <= d)) {
+                let crash = *crash;
+                crashes.pop_front();
+                cluster.run(crash.at);
+                let peer = PeerId(crash.peer);
+                if !crashed.contains_key(&peer) {
+                    cluster.kill(peer, false);
+                    crashed.insert(peer, cluster.now());
+                }
+                continue;
+            }
+            if cluster.advance().is_none() {
+                let tally = &cluster.world().frames[&frame];
+                return Err(Error::Stalled {
+                    frame,
+                    at: cluster.now(),
+                    missing: tally.tiles.saturating_sub(tally.renders),
+                });
+            }
+            steps += 1;
+        }
+        let update = partitioner.observe(cluster.world().map(frame))?;
+        (plan.splits, plan.merges) = (update.splits, update.merges);
+        plans.push(plan);
+    }
+    // Let the last frame's `FrameDone`s and statistics travel, for its message counts.
+    while cluster.advance().is_some() {
+        steps += 1;
+    }
+    let world = cluster.into_world();
+    let frame_reports = plans
+        .iter()
+        .enumerate()
+        .map(|(frame, plan)| frame_report(frame as u64, plan, &world, scenario.slots))
+        .collect();
+    let mut report = RunReport::new(
+        policy,
+        scenario,
+        first_tiles,
+        frame_reports,
+        world.fingerprint.0,
+        steps,
+        world.gantt,
+        wall.elapsed().as_secs_f64(),
+    );
+    report.assignments = assignments;
+    Ok(report)
+}
+
+fn frame_report(frame: u64, plan: &Plan, world: &SimWorld, slots: usize) -> FrameReport {
+    let tally = &world.frames[&frame];
+    let (_, elapsed) = tally
+        .completed
+        .expect("invariant: the run loop waits for every frame to complete");
+    let makespan = elapsed.as_secs_f64();
+    let lower_bound = (plan.work / plan.capacity).max(plan.largest / plan.fastest);
+    let slot_time = (plan.participants * slots) as f64 * makespan;
+    FrameReport {
+        frame,
+        tiles: tally.tiles,
+        participants: plan.participants,
+        capacity: plan.capacity,
+        makespan,
+        work: plan.work,
+        largest_tile: plan.largest,
+        lower_bound,
+        efficiency: if makespan > 0.0 {
+            plan.work / (plan.capacity * makespan)
+        } else {
+            1.0
+        },
+        bound_efficiency: if lower_bound > 0.0 {
+            plan.work / (plan.capacity * lower_bound)
+        } else {
+            1.0
+        },
+        idle_fraction: if slot_time > 0.0 {
+            (1.0 - tally.busy / slot_time).max(0.0)
+        } else {
+            0.0
+        },
+        renders: tally.renders,
+        results_ok: tally.results_ok,
+        steal_requests: tally.steal_requests,
+        grants: tally.grants,
+        stolen_tiles: tally.stolen_tiles,
+        messages: tally.messages,
+        bytes: tally.bytes,
+        failures: tally.failures,
+        faults: tally.faults,
+        splits: plan.splits,
+        merges: plan.merges,
+    }
+}

@@ -1,0 +1,290 @@
+//! Many runs at once: every combination of peer count, policy and tile count on one trace, run
+//! in parallel (each run is single-threaded and independent, so the results do not depend on
+//! the thread count), and written out as tables, charts and a summary.
+//!
+//! A [`Policy`] names the two knobs the seed's claims are about: how frames are cut (the PBT or
+//! a regular grid) and whether peers steal. Everything else is the sweep's base [`Scenario`].
+
+use std::fmt;
+use std::path::Path;
+use std::str::FromStr;
+
+use balancer::{Kind, Partitioner};
+use rayon::prelude::*;
+use runtime::core::Config;
+use serde::{Deserialize, Serialize};
+
+use crate::plot::{self, Series};
+use crate::report::{self, RunReport};
+use crate::{Error, Scenario, Trace, scenario, summary};
+
+/// How frames are cut, and whether peers steal: `regular`, `regular+steal`, `pbt`,
+/// `pbt+steal`. Without stealing a peer renders what the owner dealt it (and what the owner
+/// re-issues after a failure); with it, the core's prefetch and stealing run as configured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(into = "String", try_from = "String")]
+pub struct Policy {
+    pub kind: Kind,
+    pub steal: bool,
+}
+
+impl Policy {
+    /// The four policies, baseline first.
+    pub const ALL: [Policy; 4] = [
+        Policy {
+            kind: Kind::Regular,
+            steal: false,
+        },
+        Policy {
+            kind: Kind::Regular,
+            steal: true,
+        },
+        Policy {
+            kind: Kind::Pbt,
+            steal: false,
+        },
+        Policy {
+            kind: Kind::Pbt,
+            steal: true,
+        },
+    ];
+
+    /// The policy a run with this balancer and core configuration follows.
+    pub fn of(partitioner: &Partitioner, core: &Config) -> Self {
+        let kind = match partitioner {
+            Partitioner::Pbt(_) => Kind::Pbt,
+            Partitioner::Regular(_) => Kind::Regular,
+        };
+        Self {
+            kind,
+            steal: core.steal,
+        }
+    }
+
+    /// Its position in [`Policy::ALL`]: a stable colour and order in charts and tables.
+    pub fn index(self) -> usize {
+        Self::ALL
+            .iter()
+            .position(|p| *p == self)
+            .expect("ALL lists every policy")
+    }
+}
+
+impl fmt::Display for Policy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let kind = match self.kind {
+            Kind::Pbt => "pbt",
+            Kind::Regular => "regular",
+        };
+        write!(f, "{kind}{}", if self.steal { "+steal" } else { "" })
+    }
+}
+
+impl FromStr for Policy {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|p| p.to_string() == text.trim())
+            .ok_or_else(|| {
+                format!("unknown policy {text:?}: use regular, regular+steal, pbt or pbt+steal")
+            })
+    }
+}
+
+impl From<Policy> for String {
+    fn from(policy: Policy) -> Self {
+        policy.to_string()
+    }
+}
+
+impl TryFrom<String> for Policy {
+    type Error = String;
+
+    fn try_from(text: String) -> Result<Self, String> {
+        text.parse()
+    }
+}
+
+/// The runs of an experiment: the cross product of `peers`, `policies` and `tiles`.
+#[derive(Clone, Debug)]
+pub struct Sweep {
+    pub peers: Vec<usize>,
+    pub policies: Vec<Policy>,
+    pub tiles: Vec<usize>,
+    /// Everything else; its `peers` and `core.steal` are set per run.
+    pub base: Scenario,
+}
+
+/// Which run to draw as a Gantt chart, and which of its frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GanttChoice {
+    pub peers: usize,
+    pub policy: Policy,
+    pub tiles: usize,
+    pub frame: u64,
+}
+
+impl Sweep {
+    /// Every (tiles, policy, peers) combination, in that nesting order.
+    pub fn combinations(&self) -> Vec<(usize, Policy, usize)> {
+        let mut all = Vec::new();
+        for &tiles in &self.tiles {
+            for &policy in &self.policies {
+                for &peers in &self.peers {
+                    all.push((tiles, policy, peers));
+                }
+            }
+        }
+        all
+    }
+
+    /// Runs every combination; `partitioner(policy kind, tiles)` makes each run's balancer.
+    /// The Gantt frame is recorded for the run `gantt` names.
+    pub fn run(
+        &self,
+        trace: &Trace,
+        partitioner: impl Fn(Kind, usize) -> Result<Partitioner, Error> + Sync,
+        gantt: Option<GanttChoice>,
+    ) -> Result<Vec<RunReport>, Error> {
+        let combinations = self.combinations();
+        // Big runs first, so that the last thread to finish is not left with the biggest.
+        let mut order: Vec<usize> = (0..combinations.len()).collect();
+        order.sort_by_key(|&i| std::cmp::Reverse(combinations[i].2 * combinations[i].0.max(1)));
+        let mut results: Vec<(usize, RunReport)> = order
+            .into_par_iter()
+            .map(|i| {
+                let (tiles, policy, peers) = combinations[i];
+                let mut scenario = self.base.clone();
+                scenario.peers = peers;
+                scenario.core.steal = policy.steal;
+                scenario.gantt_frame = gantt
+                    .filter(|g| (g.peers, g.policy, g.tiles) == (peers, policy, tiles))
+                    .map(|g| g.frame);
+                let run = scenario::run(trace, partitioner(policy.kind, tiles)?, &scenario)?;
+                Ok((i, run))
+            })
+            .collect::<Result<_, Error>>()?;
+        results.sort_by_key(|(i, _)| *i);
+        Ok(results.into_iter().map(|(_, run)| run).collect())
+    }
+}
+
+/// Writes everything an experiment yields into `dir`: `runs.csv`, `frames.csv`, `runs.json`,
+/// `summary.md`, `efficiency-vs-peers-M.svg` per tile count `M` (with more than one peer
+/// count), `efficiency-vs-tiles-P.svg` per peer count `P` (with more than one tile count),
+/// and `gantt.svg` if a run recorded its Gantt frame. Returns the files written.
+pub fn write_outputs(
+    dir: &Path,
+    title: &str,
+    sweep: &Sweep,
+    runs: &[RunReport],
+) -> Result<Vec<String>, Error> {
+    report::write_runs(dir, runs)?;
+    let mut written = vec![
+        "runs.csv".to_string(),
+        "frames.csv".into(),
+        "runs.json".into(),
+    ];
+    report::write(
+        &dir.join("summary.md"),
+        &summary::markdown(title, sweep, runs),
+    )?;
+    written.push("summary.md".into());
+    let combinations = sweep.combinations();
+    let find = |tiles: usize, policy: Policy, peers: usize| {
+        let i = combinations
+            .iter()
+            .position(|c| *c == (tiles, policy, peers))
+            .expect("the runs follow the sweep's combinations");
+        &runs[i]
+    };
+    if sweep.peers.len() > 1 {
+        for &tiles in &sweep.tiles {
+            let mut series = Vec::new();
+            for &policy in &sweep.policies {
+                let line = |bound: bool| Series {
+                    label: if bound {
+                        format!("{policy} bound")
+                    } else {
+                        policy.to_string()
+                    },
+                    points: sweep
+                        .peers
+                        .iter()
+                        .map(|&p| {
+                            let run = find(tiles, policy, p);
+                            let y = if bound {
+                                run.bound_efficiency
+                            } else {
+                                run.efficiency
+                            };
+                            (p as f64, y)
+                        })
+                        .collect(),
+                    color: policy.index(),
+                    dashed: bound,
+                };
+                series.push(line(false));
+                series.push(line(true));
+            }
+            let name = format!("efficiency-vs-peers-{tiles}.svg");
+            let caption = format!("{title}: efficiency vs peers, {tiles} tiles");
+            plot::lines_svg(
+                &dir.join(&name),
+                &caption,
+                ("peers", "efficiency"),
+                1.05,
+                &series,
+            )?;
+            written.push(name);
+        }
+    }
+    if sweep.tiles.len() > 1 {
+        for &peers in &sweep.peers {
+            let series: Vec<Series> = sweep
+                .policies
+                .iter()
+                .map(|&policy| Series {
+                    label: policy.to_string(),
+                    points: sweep
+                        .tiles
+                        .iter()
+                        .map(|&m| {
+                            (
+                                find(m, policy, peers).tiles as f64,
+                                find(m, policy, peers).efficiency,
+                            )
+                        })
+                        .collect(),
+                    color: policy.index(),
+                    dashed: false,
+                })
+                .collect();
+            let name = format!("efficiency-vs-tiles-{peers}.svg");
+            let caption = format!("{title}: efficiency vs tiles, {peers} peers");
+            plot::lines_svg(
+                &dir.join(&name),
+                &caption,
+                ("tiles", "efficiency"),
+                1.05,
+                &series,
+            )?;
+            written.push(name);
+        }
+    }
+    if let Some(run) = runs.iter().find(|r| !r.gantt.is_empty()) {
+        let caption = format!(
+            "{title}: frame {}, {} peers, {}, {} tiles (blue: own tiles, orange: taken over)",
+            run.gantt_frame.unwrap_or(0),
+            run.peers,
+            run.policy,
+            run.tiles
+        );
+        let rows = run.peers as u32;
+        plot::gantt_svg(&dir.join("gantt.svg"), &caption, rows, &run.gantt)?;
+        written.push("gantt.svg".into());
+    }
+    Ok(written)
+}

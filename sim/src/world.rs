@@ -1,0 +1,317 @@
+//! The simulator's side of the pump (`runtime::core::testing::World`): renderers that take a
+//! tile's time from the trace, the network model, and the running tally of each frame.
+//!
+//! The tally is kept as the run goes, never as a record of it: a run of a thousand peers over
+//! a hundred frames sends tens of millions of messages, and keeping them would cost more than
+//! simulating them. What the determinism tests need is a fingerprint: every output of every
+//! core (message sent, tile started, event) is folded into one 64-bit hash with its time.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use balancer::CostMap;
+use runtime::core::Event;
+use runtime::core::WorkItem;
+use runtime::core::testing::{Rendered, Seen, Transit, World};
+use runtime::wire::{self, Message, PeerId, TileId, TileResult};
+
+use crate::network::Links;
+use crate::plot::GanttBar;
+
+/// What the simulator knows and counts of one frame while it runs.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Tally {
+    pub(crate) started: Duration,
+    /// The peer each tile started the frame with, by tile id (for the Gantt chart's colours).
+    pub(crate) initial: Vec<PeerId>,
+    pub(crate) tiles: usize,
+    /// When the owner's core reported the frame complete, and in how long.
+    pub(crate) completed: Option<(Duration, Duration)>,
+    /// Whether the completion held exactly one result for each tile of the frame.
+    pub(crate) results_ok: bool,
+    /// Tiles handed to renderers (more than `tiles` when some were rendered twice).
+    pub(crate) renders: usize,
+    /// Slot-seconds spent rendering this frame's tiles.
+    pub(crate) busy: f64,
+    pub(crate) messages: u64,
+    pub(crate) bytes: u64,
+    pub(crate) steal_requests: u64,
+    pub(crate) grants: u64,
+    pub(crate) stolen_tiles: u64,
+    pub(crate) failures: u64,
+    /// Faulty results and refused messages: both mean a bug, in the core or here.
+    pub(crate) faults: u64,
+}
+
+pub(crate) struct SimWorld {
+    /// The trace's frames; frame `f` is costed by `maps[f % maps.len()]`.
+    maps: Vec<CostMap>,
+    /// Virtual seconds per unit of counted work, on a peer of speed 1.
+    seconds_per_unit: f64,
+    /// Speed factor of each peer, indexed by peer id.
+    speeds: Vec<f64>,
+    links: Links,
+    pub(crate) frames: BTreeMap<u64, Tally>,
+    /// The frame whose renders become Gantt bars.
+    gantt_frame: Option<u64>,
+    pub(crate) gantt: Vec<GanttBar>,
+    pub(crate) fingerprint: Fingerprint,
+}
+
+impl SimWorld {
+    pub(crate) fn new(
+        maps: Vec<CostMap>,
+        seconds_per_unit: f64,
+        speeds: Vec<f64>,
+        links: Links,
+        gantt_frame: Option<u64>,
+    ) -> Self {
+        Self {
+            maps,
+            seconds_per_unit,
+            speeds,
+            links,
+            frames: BTreeMap::new(),
+            gantt_frame,
+            gantt: Vec::new(),
+            fingerprint: Fingerprint::default(),
+        }
+    }
+
+    /// The cost map that measures frame `frame`.
+    pub(crate) fn map(&self, frame: u64) -> &CostMap {
+        &self.maps[(frame % self.maps.len() as u64) as usize]
+    }
+
+    pub(crate) fn begin_frame(&mut self, frame: u64, now: Duration, initial: Vec<PeerId>) {
+        let tally = Tally {
+            started: now,
+            tiles: initial.len(),
+            initial,
+            ..Tally::default()
+        };
+        self.frames.insert(frame, tally);
+    }
+
+    pub(crate) fn is_complete(&self, frame: u64) -> bool {
+        self.frames
+            .get(&frame)
+            .is_some_and(|tally| tally.completed.is_some())
+    }
+
+    fn tally(&mut self, frame: u64) -> Option<&mut Tally> {
+        self.frames.get_mut(&frame)
+    }
+}
+
+impl World for SimWorld {
+    fn render(&mut self, now: Duration, peer: PeerId, item: &WorkItem) -> Rendered {
+        let frame = item.frame.0;
+        let cost = self.map(frame).cost(item.tile.rect);
+        let speed = self.speeds[peer.0 as usize];
+        let seconds = cost * self.seconds_per_unit / speed;
+        let duration = Duration::from_secs_f64(seconds);
+        if let Some(tally) = self.frames.get_mut(&frame) {
+            tally.renders += 1;
+            tally.busy += duration.as_secs_f64();
+            if self.gantt_frame == Some(frame) {
+                let initial = tally.initial.get(item.tile.id.0 as usize).copied();
+                let start = (now - tally.started).as_secs_f64();
+                self.gantt.push(GanttBar {
+                    row: peer.0,
+                    start,
+                    end: start + duration.as_secs_f64(),
+                    stolen: initial != Some(peer),
+                });
+            }
+        }
+        // Pixels are opaque to the core, which only checks their length and compares
+        // duplicates; zeros are as deterministic as any. The cost map a real peer would add is
+        // counted in the message's size instead.
+        let pixels = vec![0; (item.tile.rect.area() * wire::BYTES_PER_PIXEL) as usize];
+        let result = TileResult {
+            frame: item.frame,
+            tile: item.tile.id,
+            rect: item.tile.rect,
+            pixels,
+            costs: Vec::new(),
+        };
+        Rendered { duration, result }
+    }
+
+    fn transit(
+        &mut self,
+        now: Duration,
+        from: PeerId,
+        to: PeerId,
+        message: &Message,
+        delay: Duration,
+    ) -> Transit {
+        let bytes = self.links.size(message);
+        if let Some(tally) = message_frame(message).and_then(|f| self.tally(f)) {
+            tally.bytes += bytes;
+        }
+        let delay = self.links.transit(now, from, to, bytes, delay);
+        Transit { delay, bytes }
+    }
+
+    fn observe(&mut self, at: Duration, seen: Seen<'_>) {
+        let print = &mut self.fingerprint;
+        print.word(at.as_nanos() as u64);
+        match seen {
+            Seen::Sent { from, to, message } => {
+                print.words(&[1, u64::from(from.0), u64::from(to.0)]);
+                print.message(message);
+                let Some(tally) = message_frame(message).and_then(|f| self.frames.get_mut(&f))
+                else {
+                    return;
+                };
+                tally.messages += 1;
+                match message {
+                    Message::StealRequest { .. } => tally.steal_requests += 1,
+                    Message::StealGrant { tiles, .. } => {
+                        tally.grants += 1;
+                        tally.stolen_tiles += tiles.len() as u64;
+                    }
+                    _ => {}
+                }
+            }
+            Seen::Started { peer, item } => {
+                print.words(&[
+                    2,
+                    u64::from(peer.0),
+                    item.frame.0,
+                    u64::from(item.tile.id.0),
+                ]);
+            }
+            Seen::Event { peer, event } => {
+                print.words(&[3, u64::from(peer.0)]);
+                self.event(event);
+            }
+            Seen::Refused { peer, from, error } => {
+                print.words(&[4, u64::from(peer.0), u64::from(from.0)]);
+                tracing::error!(%peer, %from, %error, "a simulated core refused a message");
+                if let Some(tally) = self.frames.values_mut().next_back() {
+                    tally.faults += 1;
+                }
+            }
+        }
+    }
+}
+
+impl SimWorld {
+    fn event(&mut self, event: Event) {
+        let print = &mut self.fingerprint;
+        match event {
+            Event::FrameComplete {
+                frame,
+                elapsed,
+                results,
+                rendered_by,
+            } => {
+                print.words(&[10, frame.0, elapsed.as_nanos() as u64]);
+                for peer in &rendered_by {
+                    print.word(u64::from(peer.0));
+                }
+                let Some(tally) = self.frames.get_mut(&frame.0) else {
+                    return;
+                };
+                let at = tally.started + elapsed;
+                let ids = results.iter().map(|r| r.tile);
+                tally.results_ok = results.len() == tally.tiles
+                    && ids.eq((0..tally.tiles as u32).map(TileId))
+                    && results.iter().all(|r| r.frame == frame);
+                tally.completed = Some((at, elapsed));
+            }
+            Event::PeerStats { frame, peer, stats } => {
+                print.words(&[11, frame.0, u64::from(peer.0), stats.busy.as_nanos() as u64]);
+            }
+            Event::PeerFailed {
+                frame,
+                peer,
+                reissued,
+                ..
+            } => {
+                print.words(&[12, frame.0, u64::from(peer.0), reissued as u64]);
+                if let Some(tally) = self.frames.get_mut(&frame.0) {
+                    tally.failures += 1;
+                }
+            }
+            Event::FaultyPeer {
+                frame, peer, tile, ..
+            } => {
+                print.words(&[13, frame.0, u64::from(peer.0), u64::from(tile.0)]);
+                tracing::error!(%frame, %peer, %tile, "a simulated peer's result was refused");
+                if let Some(tally) = self.frames.get_mut(&frame.0) {
+                    tally.faults += 1;
+                }
+            }
+            Event::OwnerLost { frame } => print.words(&[14, frame.0]),
+        }
+    }
+}
+
+/// The frame a message belongs to, if it names one.
+fn message_frame(message: &Message) -> Option<u64> {
+    match message {
+        Message::Assign { frame, .. }
+        | Message::StealRequest { frame, .. }
+        | Message::StealGrant { frame, .. }
+        | Message::StealRefuse { frame }
+        | Message::StealNotice { frame, .. }
+        | Message::Status { frame, .. }
+        | Message::FrameDone { frame }
+        | Message::FrameStats { frame, .. } => Some(frame.0),
+        Message::TileDone(result) => Some(result.frame.0),
+        Message::Hello { .. }
+        | Message::Welcome { .. }
+        | Message::Peers { .. }
+        | Message::Scene { .. }
+        | Message::SceneReady
+        | Message::Goodbye { .. } => None,
+    }
+}
+
+/// A 64-bit hash of a run's outputs, word by word (a multiply-rotate mix: fast, and any
+/// difference in any word changes the result with overwhelming probability).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Fingerprint(pub(crate) u64);
+
+impl Fingerprint {
+    fn word(&mut self, word: u64) {
+        self.0 = (self.0 ^ word)
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .rotate_left(29);
+    }
+
+    fn words(&mut self, words: &[u64]) {
+        for &word in words {
+            self.word(word);
+        }
+    }
+
+    /// A message's full encoding, except a tile result's pixels (all zeros here): its frame,
+    /// tile and rectangle.
+    fn message(&mut self, message: &Message) {
+        if let Message::TileDone(r) = message {
+            let rect = r.rect;
+            let words = [
+                20,
+                r.frame.0,
+                u64::from(r.tile.0),
+                u64::from(rect.x),
+                u64::from(rect.y),
+            ];
+            self.words(&words);
+            self.words(&[u64::from(rect.w), u64::from(rect.h)]);
+            return;
+        }
+        let bytes = wire::encode(message);
+        self.word(bytes.len() as u64);
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.word(u64::from_le_bytes(word));
+        }
+    }
+}

@@ -1,0 +1,282 @@
+//! The simulator end to end: determinism, no tile lost or doubled under any policy or fault,
+//! the reported efficiency within its bounds, and a case small enough to work out by hand.
+
+use std::time::Duration;
+
+use balancer::{Config, Grid, Kind, Partitioner};
+use sim::scenario::{self, Scenario};
+use sim::synthetic::HotSpot;
+use sim::{Crash, Network, Policy, RunReport, Trace};
+
+/// A 64 x 64 hot spot over `frames` frames, moving (or not).
+fn hot_spot(frames: u32, moving: bool) -> Trace {
+    let spot = HotSpot {
+        width: 64,
+        height: 64,
+        frames,
+        radius: 0.1,
+        period: if moving { 8.0 } else { f64::INFINITY },
+        ..HotSpot::default()
+    };
+    spot.trace().unwrap()
+}
+
+fn partitioner(trace: &Trace, kind: Kind, tiles: usize) -> Partitioner {
+    let side = (tiles as f64).sqrt().round() as u32;
+    let config = Config {
+        kind,
+        leaves: tiles,
+        grid: Grid::Count {
+            columns: side,
+            rows: side,
+        },
+        ..Config::default()
+    };
+    Partitioner::new(trace.width(), trace.height(), &config).unwrap()
+}
+
+/// A rate at which one frame of `trace` on `peers` equal peers takes about a second.
+fn rate(trace: &Trace, peers: usize) -> f64 {
+    let work: u64 = trace.frames[0].blocks.iter().sum();
+    work as f64 / peers as f64
+}
+
+fn run(trace: &Trace, policy: Policy, tiles: usize, scenario: &Scenario) -> RunReport {
+    let mut scenario = scenario.clone();
+    scenario.core.steal = policy.steal;
+    scenario::run(trace, partitioner(trace, policy.kind, tiles), &scenario).unwrap()
+}
+
+/// Eight peers with every source of randomness on: victim choice, jitter, per-link latency
+/// and loss.
+fn noisy(trace: &Trace, seed: u64) -> Scenario {
+    Scenario {
+        peers: 8,
+        slots: 2,
+        seed,
+        work_per_second: rate(trace, 8),
+        network: Network {
+            latency: Duration::from_millis(2),
+            link_spread: 0.5,
+            jitter: Duration::from_millis(1),
+            loss: 0.05,
+            bandwidth: Some(50e6),
+            ..Network::default()
+        },
+        ..Scenario::default()
+    }
+}
+
+#[test]
+fn the_same_seed_gives_the_same_run_and_another_seed_another() {
+    let trace = hot_spot(3, true);
+    let policy: Policy = "pbt+steal".parse().unwrap();
+    let first = run(&trace, policy, 64, &noisy(&trace, 11));
+    let second = run(&trace, policy, 64, &noisy(&trace, 11));
+    let other = run(&trace, policy, 64, &noisy(&trace, 12));
+    assert!(
+        first.steals > 0,
+        "the run must steal for victim choice to matter"
+    );
+    assert_eq!(first.fingerprint, second.fingerprint);
+    assert_eq!(first.frames, second.frames);
+    assert_ne!(first.fingerprint, other.fingerprint);
+}
+
+#[test]
+fn every_tile_completes_exactly_once_under_every_policy_and_fault() {
+    let trace = hot_spot(4, true);
+    let quiet = Scenario {
+        peers: 6,
+        work_per_second: rate(&trace, 6),
+        ..Scenario::default()
+    };
+    let crashing = Scenario {
+        crashes: vec![
+            Crash {
+                peer: 2,
+                at: Duration::from_millis(400),
+            },
+            Crash {
+                peer: 5,
+                at: Duration::from_millis(1700),
+            },
+        ],
+        ..noisy(&trace, 3)
+    };
+    for policy in Policy::ALL {
+        for (name, scenario) in [
+            ("quiet", &quiet),
+            ("lossy", &noisy(&trace, 5)),
+            ("crashing", &crashing),
+        ] {
+            let report = run(&trace, policy, 48, scenario);
+            assert_eq!(report.frames.len(), 4);
+            for frame in &report.frames {
+                assert!(frame.results_ok, "{policy}, {name}: {frame:?}");
+                assert_eq!(frame.faults, 0, "{policy}, {name}: {frame:?}");
+                assert!(frame.renders >= frame.tiles);
+                if name != "crashing" {
+                    assert_eq!(
+                        frame.renders, frame.tiles,
+                        "{policy}, {name}: a tile rendered twice"
+                    );
+                }
+            }
+            if name == "crashing" {
+                let failures: u64 = report.frames.iter().map(|f| f.failures).sum();
+                assert_eq!(failures, 2, "{policy}: both crashes must be noticed");
+                let last = report.frames.last().unwrap();
+                assert_eq!(last.participants, 6, "crashed peers get no more tiles");
+            }
+        }
+    }
+}
+
+#[test]
+fn efficiency_stays_within_its_bounds() {
+    let trace = hot_spot(3, true);
+    for policy in Policy::ALL {
+        for peers in [1, 3, 16] {
+            let scenario = Scenario {
+                peers,
+                work_per_second: rate(&trace, peers),
+                ..noisy(&trace, 1)
+            };
+            let report = run(&trace, policy, 32, &scenario);
+            for f in &report.frames {
+                assert!(
+                    f.makespan >= f.lower_bound * (1.0 - 1e-9),
+                    "{policy}, {peers}: {f:?}"
+                );
+                assert!(f.efficiency <= f.bound_efficiency * (1.0 + 1e-9));
+                assert!(f.bound_efficiency <= 1.0 + 1e-9);
+                assert!(f.efficiency > 0.0 && (0.0..=1.0).contains(&f.idle_fraction));
+            }
+            assert!(report.efficiency <= report.bound_efficiency * (1.0 + 1e-9));
+        }
+    }
+}
+
+/// With exact predictions (a static scene, after the first frame), no latency and no
+/// stealing, the contiguous assignment guarantees every peer's run is within the largest tile
+/// of the fair share, so the makespan is at most work / P + largest tile.
+#[test]
+fn without_latency_a_static_scene_is_within_a_tile_of_the_fair_share() {
+    let trace = hot_spot(3, false);
+    for kind in [Kind::Pbt, Kind::Regular] {
+        let policy = Policy { kind, steal: false };
+        let scenario = Scenario {
+            peers: 5,
+            work_per_second: rate(&trace, 5),
+            ..Scenario::default()
+        };
+        let report = run(&trace, policy, 40, &scenario);
+        for f in &report.frames[1..] {
+            let limit = f.work / 5.0 + f.largest_tile;
+            assert!(f.makespan <= limit * (1.0 + 1e-9), "{policy}: {f:?}");
+        }
+    }
+}
+
+/// Two peers, two tiles of 1000 units each, 1000 units per second, no latency: each peer
+/// renders one tile, so the frame takes one second and nothing idles. One peer takes two.
+#[test]
+fn two_equal_tiles_on_two_peers_take_one_tile_time() {
+    let mut trace = Trace::new(16, 8, 8, "two blocks").unwrap();
+    trace.push(vec![1000, 1000]).unwrap();
+    let config = Config {
+        kind: Kind::Regular,
+        grid: Grid::Count {
+            columns: 2,
+            rows: 1,
+        },
+        ..Config::default()
+    };
+    for steal in [false, true] {
+        for (peers, seconds) in [(2, 1.0), (1, 2.0)] {
+            let mut scenario = Scenario {
+                peers,
+                work_per_second: 1000.0,
+                ..Scenario::default()
+            };
+            scenario.core.steal = steal;
+            let partitioner = Partitioner::new(16, 8, &config).unwrap();
+            let report = scenario::run(&trace, partitioner, &scenario).unwrap();
+            let frame = &report.frames[0];
+            assert!(
+                (frame.makespan - seconds).abs() < 1e-9,
+                "{peers} peers: {frame:?}"
+            );
+            assert!((frame.work - 2.0).abs() < 1e-9 && (frame.largest_tile - 1.0).abs() < 1e-9);
+            assert!((frame.efficiency - 1.0).abs() < 1e-9);
+            assert!(frame.idle_fraction.abs() < 1e-9);
+            assert_eq!(frame.stolen_tiles, 0);
+        }
+    }
+}
+
+#[test]
+fn a_slow_peer_is_helped_by_stealing() {
+    let trace = hot_spot(3, false);
+    let scenario = Scenario {
+        peers: 4,
+        speeds: vec![1.0, 1.0, 1.0, 0.25],
+        work_per_second: rate(&trace, 4),
+        ..Scenario::default()
+    };
+    let alone = run(&trace, "pbt".parse().unwrap(), 64, &scenario);
+    let helped = run(&trace, "pbt+steal".parse().unwrap(), 64, &scenario);
+    assert!(helped.steals > 0);
+    assert!(
+        helped.makespan < 0.8 * alone.makespan,
+        "stealing: {} s, without: {} s",
+        helped.makespan,
+        alone.makespan
+    );
+}
+
+#[test]
+fn bad_scenarios_are_refused_with_a_reason() {
+    let trace = hot_spot(1, false);
+    let cases = [
+        (
+            Scenario {
+                peers: 0,
+                ..Scenario::default()
+            },
+            "at least one peer",
+        ),
+        (
+            Scenario {
+                peers: 2,
+                crashes: vec![Crash {
+                    peer: 0,
+                    at: Duration::ZERO,
+                }],
+                ..Scenario::default()
+            },
+            "owner",
+        ),
+        (
+            Scenario {
+                peers: 2,
+                crashes: vec![Crash {
+                    peer: 2,
+                    at: Duration::ZERO,
+                }],
+                ..Scenario::default()
+            },
+            "peers 0 to 1",
+        ),
+    ];
+    for (scenario, reason) in cases {
+        let error = scenario::run(&trace, partitioner(&trace, Kind::Pbt, 4), &scenario)
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains(reason), "{error}");
+    }
+    let wrong_size = Partitioner::new(32, 32, &Config::default()).unwrap();
+    let error = scenario::run(&trace, wrong_size, &Scenario::default()).unwrap_err();
+    assert!(error.to_string().contains("32x32"), "{error}");
+}
