@@ -25,6 +25,9 @@ pub enum Command {
     Compare(crate::compare::CompareArgs),
     /// Measure what accuracy costs in time: error against time for each accuracy knob.
     Accuracy(crate::accuracy::AccuracyArgs),
+    /// Simulate a cluster in virtual time on a cost trace: efficiency against peers, policies
+    /// and tile counts, as CSV, JSON and SVG charts.
+    Simulate(crate::simulate::SimulateArgs),
 }
 
 #[derive(Debug, clap::Args)]

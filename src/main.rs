@@ -7,6 +7,7 @@
 //! - `report`: progress on a terminal, log lines elsewhere, the stats JSON and the tile-map PNGs.
 //! - `compare`: `tessera compare`, the error metrics of one image against another.
 //! - `accuracy`: `tessera accuracy`, what accuracy costs in time, as a table and a plot.
+//! - `simulate`: `tessera simulate`, scaling experiments in virtual time on a cost trace.
 
 mod accuracy;
 mod cli;
@@ -14,6 +15,7 @@ mod cluster;
 mod compare;
 mod render;
 mod report;
+mod simulate;
 
 use clap::Parser;
 
@@ -34,5 +36,6 @@ fn main() -> anyhow::Result<()> {
         cli::Command::Keygen(args) => cluster::keygen(&args),
         cli::Command::Compare(args) => compare::run(&args),
         cli::Command::Accuracy(args) => accuracy::run(&args),
+        cli::Command::Simulate(args) => simulate::run(&args),
     }
 }

@@ -1,0 +1,423 @@
+//! `tessera simulate`: scaling experiments in virtual time on a cost trace (see the `sim` crate).
+//!
+//! Thin: it parses lists and units, loads (or makes) the trace, runs the sweep through `sim`,
+//! writes its files and prints one line per run. Each run's balancer comes from
+//! `render::partitioner`, so `--tiles M` means here exactly what it means to `tessera render`.
+//! With `--validate STATS` it instead simulates the render a `--stats` file describes and
+//! compares the two, frame by frame.
+
+use crate::cli::BalancerKind;
+use anyhow::{Context, bail};
+use serde::Deserialize;
+use sim::scenario::{self, DEFAULT_WORK_PER_SECOND, Scenario};
+use sim::synthetic::HotSpot;
+use sim::{Crash, GanttChoice, Network, Policy, Sweep, Trace};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+#[derive(Debug, clap::Args)]
+pub struct SimulateArgs {
+    /// A cost trace (`tessera render --trace FILE`), or `synthetic[:WIDTHxHEIGHT[:FRAMES]]`: a
+    /// hot spot orbiting the image (default 1024x1024, 100 frames).
+    pub trace: String,
+    /// Peer counts (the owner included), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16,32,64")]
+    pub peers: Vec<usize>,
+    /// Policies, comma-separated: regular, regular+steal, pbt, pbt+steal (default: all four).
+    #[arg(long, value_delimiter = ',')]
+    pub policy: Vec<Policy>,
+    /// Tile counts requested (PBT leaves; the grid is the nearest k x k), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "256")]
+    pub tiles: Vec<usize>,
+    /// Frames to simulate (default: the trace's; more repeat it).
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Rendering slots (threads) per peer (default 1; with --validate, the render's).
+    #[arg(long)]
+    pub slots: Option<usize>,
+    /// One-way latency of every link, in milliseconds.
+    #[arg(long, default_value_t = 0.0)]
+    pub latency: f64,
+    /// Extra delay of each message, uniform up to this many milliseconds.
+    #[arg(long, default_value_t = 0.0)]
+    pub jitter: f64,
+    /// Links' latencies differ from --latency by up to this fraction either way.
+    #[arg(long, default_value_t = 0.0)]
+    pub link_spread: f64,
+    /// Bandwidth of each peer's link, each way, in megabits per second (default: unlimited).
+    #[arg(long)]
+    pub bandwidth: Option<f64>,
+    /// Probability that a transmission is lost (QUIC resends it after a probe timeout).
+    #[arg(long, default_value_t = 0.0)]
+    pub loss: f64,
+    /// Milliseconds after a crash until the others notice.
+    #[arg(long, default_value_t = 100.0)]
+    pub loss_detection: f64,
+    /// Speed factors dealt to peers in turn, comma-separated (e.g. 1,1,1,0.5).
+    #[arg(long, value_delimiter = ',')]
+    pub speeds: Vec<f64>,
+    /// Crashes, comma-separated, as PEER@SECONDS (virtual time since the run began).
+    #[arg(long, value_delimiter = ',')]
+    pub crash: Vec<String>,
+    /// Counted work per second of one slot of a speed-1 peer (default: this project's
+    /// development machine; with --validate, measured from the render's statistics).
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Tiles a peer keeps committed to its renderer beyond its slots (the core's prefetch).
+    #[arg(long, default_value_t = 1)]
+    pub prefetch: usize,
+    /// Seed of victim choice, jitter, link latencies and loss.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// The run drawn as gantt.svg, as PEERS:POLICY:TILES[:FRAME] (default: at most 16 peers,
+    /// pbt+steal, the first tile count, the middle frame).
+    #[arg(long)]
+    pub gantt: Option<String>,
+    /// Output folder (created if missing).
+    #[arg(long, default_value = "sim-out")]
+    pub out: PathBuf,
+    /// Also write the trace to this file (for synthetic traces).
+    #[arg(long)]
+    pub save_trace: Option<PathBuf>,
+    /// Simulate the render a `tessera render --stats` file describes (its peers, threads,
+    /// balancer and tiles) and compare frame times and initial tile sets with it.
+    #[arg(long)]
+    pub validate: Option<PathBuf>,
+}
+
+pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
+    let trace = load_trace(&args.trace)?;
+    if let Some(path) = &args.save_trace {
+        trace.write(path)?;
+    }
+    if let Some(stats) = &args.validate {
+        return validate(args, &trace, stats);
+    }
+    let policies = if args.policy.is_empty() {
+        Policy::ALL.to_vec()
+    } else {
+        args.policy.clone()
+    };
+    anyhow::ensure!(
+        !args.peers.is_empty() && !args.tiles.is_empty(),
+        "--peers and --tiles need at least one value"
+    );
+    let base = base_scenario(
+        args,
+        args.slots.unwrap_or(1),
+        args.rate.unwrap_or(DEFAULT_WORK_PER_SECOND),
+    )?;
+    let frames = base.frames.unwrap_or(trace.frames.len());
+    let sweep = Sweep {
+        peers: args.peers.clone(),
+        policies,
+        tiles: args.tiles.clone(),
+        base,
+    };
+    let gantt = gantt_choice(args.gantt.as_deref(), &sweep, frames)?;
+    let (width, height) = (trace.width(), trace.height());
+    let started = Instant::now();
+    let runs = sweep.run(
+        &trace,
+        |kind, tiles| {
+            let kind = match kind {
+                balancer::Kind::Pbt => BalancerKind::Pbt,
+                balancer::Kind::Regular => BalancerKind::Regular,
+            };
+            crate::render::partitioner(kind, tiles, width, height)
+                .map_err(|e| sim::Error::Scenario(format!("{e:#}")))
+        },
+        gantt,
+    )?;
+    let elapsed = started.elapsed().as_secs_f64();
+    println!(
+        "{:>14} {:>6} {:>6} {:>10} {:>8} {:>8} {:>11} {:>8} {:>10} {:>8}",
+        "policy",
+        "peers",
+        "tiles",
+        "efficiency",
+        "bound",
+        "idle",
+        "makespan s",
+        "steals",
+        "messages",
+        "wall s"
+    );
+    for r in &runs {
+        println!(
+            "{:>14} {:>6} {:>6} {:>10.4} {:>8.4} {:>8.4} {:>11.4} {:>8} {:>10} {:>8.2}",
+            r.policy.to_string(),
+            r.peers,
+            r.tiles,
+            r.efficiency,
+            r.bound_efficiency,
+            r.idle_fraction,
+            r.makespan,
+            r.steals,
+            r.messages,
+            r.wall_seconds
+        );
+    }
+    let title = format!(
+        "{} ({}x{}, {frames} frames)",
+        trace.header.source, width, height
+    );
+    let written = sim::sweep::write_outputs(&args.out, &title, &sweep, &runs)?;
+    println!(
+        "{} runs in {elapsed:.1} s; wrote {} in {}",
+        runs.len(),
+        written.join(", "),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn load_trace(spec: &str) -> anyhow::Result<Trace> {
+    if spec.starts_with("synthetic") && !Path::new(spec).exists() {
+        return Ok(HotSpot::parse(spec)?.trace()?);
+    }
+    Trace::read(Path::new(spec)).with_context(|| format!("reading the trace {spec}"))
+}
+
+/// Everything but peers and policy, from the flags.
+fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result<Scenario> {
+    let millis = |ms: f64, what: &str| -> anyhow::Result<Duration> {
+        anyhow::ensure!(
+            ms >= 0.0 && ms.is_finite(),
+            "--{what} must be a non-negative number of milliseconds"
+        );
+        Ok(Duration::from_secs_f64(ms / 1e3))
+    };
+    let crashes = args
+        .crash
+        .iter()
+        .map(|spec| {
+            let parsed = spec
+                .split_once('@')
+                .and_then(|(peer, at)| Some((peer.parse().ok()?, at.parse::<f64>().ok()?)));
+            match parsed {
+                Some((peer, at)) if at >= 0.0 && at.is_finite() => Ok(Crash {
+                    peer,
+                    at: Duration::from_secs_f64(at),
+                }),
+                _ => bail!("--crash {spec:?}: expected PEER@SECONDS, e.g. 3@0.5"),
+            }
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let mut scenario = Scenario {
+        slots,
+        network: Network {
+            latency: millis(args.latency, "latency")?,
+            jitter: millis(args.jitter, "jitter")?,
+            link_spread: args.link_spread,
+            bandwidth: args.bandwidth.map(|mbit| mbit * 1e6 / 8.0),
+            loss: args.loss,
+            loss_detection: millis(args.loss_detection, "loss-detection")?,
+        },
+        speeds: args.speeds.clone(),
+        crashes,
+        seed: args.seed,
+        work_per_second: rate,
+        frames: args.frames,
+        ..Scenario::default()
+    };
+    scenario.core.prefetch_depth = args.prefetch;
+    Ok(scenario)
+}
+
+fn gantt_choice(
+    spec: Option<&str>,
+    sweep: &Sweep,
+    frames: usize,
+) -> anyhow::Result<Option<GanttChoice>> {
+    let middle = (frames / 2) as u64;
+    let Some(spec) = spec else {
+        let peers = sweep
+            .peers
+            .iter()
+            .copied()
+            .filter(|&p| p <= 16)
+            .max()
+            .or(sweep.peers.iter().copied().min());
+        let both: Policy = "pbt+steal".parse().expect("a valid policy name");
+        let policy = if sweep.policies.contains(&both) {
+            Some(both)
+        } else {
+            sweep.policies.last().copied()
+        };
+        return Ok(match (peers, policy) {
+            (Some(peers), Some(policy)) => Some(GanttChoice {
+                peers,
+                policy,
+                tiles: sweep.tiles[0],
+                frame: middle,
+            }),
+            _ => None,
+        });
+    };
+    let parts: Vec<&str> = spec.split(':').collect();
+    let bad = || {
+        anyhow::anyhow!(
+            "--gantt {spec:?}: expected PEERS:POLICY:TILES[:FRAME], e.g. 16:pbt+steal:256"
+        )
+    };
+    let (peers, policy, tiles) = match parts.as_slice() {
+        [peers, policy, tiles] | [peers, policy, tiles, _] => (
+            peers.parse().map_err(|_| bad())?,
+            policy.parse().map_err(|_| bad())?,
+            tiles.parse().map_err(|_| bad())?,
+        ),
+        _ => return Err(bad()),
+    };
+    let frame = match parts.get(3) {
+        Some(frame) => frame.parse().map_err(|_| bad())?,
+        None => middle,
+    };
+    anyhow::ensure!(
+        sweep.combinations().contains(&(tiles, policy, peers)),
+        "--gantt {spec:?} names a run the sweep does not make (check --peers, --policy and --tiles)"
+    );
+    Ok(Some(GanttChoice {
+        peers,
+        policy,
+        tiles,
+        frame,
+    }))
+}
+
+/// The parts of a `tessera render --stats` file the validation reads.
+#[derive(Deserialize)]
+struct Stats {
+    peers: usize,
+    balancer: String,
+    frames: Vec<StatsFrame>,
+}
+
+#[derive(Deserialize)]
+struct StatsFrame {
+    seconds: f64,
+    work: u64,
+    tiles: Vec<StatsTile>,
+    peers: Vec<StatsPeer>,
+}
+
+#[derive(Deserialize)]
+struct StatsTile {
+    tile: u32,
+    rect: [u32; 4],
+    initial_peer: u32,
+}
+
+#[derive(Deserialize)]
+struct StatsPeer {
+    threads: u32,
+    busy_seconds: f64,
+}
+
+/// Simulates the render `stats_path` describes and compares: frame times (simulated over
+/// measured) and the tiles each peer started each frame with.
+fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(stats_path)
+        .with_context(|| format!("reading {}", stats_path.display()))?;
+    let stats: Stats = serde_json::from_str(&text)
+        .with_context(|| format!("{} is not a tessera stats file", stats_path.display()))?;
+    anyhow::ensure!(
+        !stats.frames.is_empty(),
+        "{} has no frames",
+        stats_path.display()
+    );
+    let kind = match stats.balancer.as_str() {
+        "pbt" => BalancerKind::Pbt,
+        "regular" => BalancerKind::Regular,
+        other => bail!("unknown balancer {other:?} in {}", stats_path.display()),
+    };
+    let steal = match args.policy.as_slice() {
+        [] => true,
+        [policy] => policy.steal,
+        _ => bail!(
+            "--validate simulates one run: give at most one --policy (its balancer must be the render's)"
+        ),
+    };
+    // Rate: counted work over busy slot time, over the frames every peer reported.
+    let complete = || stats.frames.iter().filter(|f| f.peers.len() == stats.peers);
+    let busy: f64 = complete()
+        .flat_map(|f| f.peers.iter().map(|p| p.busy_seconds))
+        .sum();
+    let work: u64 = complete().map(|f| f.work).sum();
+    let rate = match args.rate {
+        Some(rate) => rate,
+        None if busy > 0.0 => work as f64 / busy,
+        None => bail!(
+            "{} has no frame with every peer's statistics: pass --rate",
+            stats_path.display()
+        ),
+    };
+    let threads = stats
+        .frames
+        .iter()
+        .flat_map(|f| f.peers.first())
+        .map(|p| p.threads as usize)
+        .next();
+    let slots = args.slots.or(threads).unwrap_or(1);
+    let frames = stats.frames.len().min(args.frames.unwrap_or(usize::MAX));
+    let mut scenario = base_scenario(args, slots, rate)?;
+    scenario.peers = stats.peers;
+    scenario.core.steal = steal;
+    scenario.frames = Some(frames);
+    scenario.keep_assignments = true;
+    let tiles = stats.frames[0].tiles.len();
+    let partitioner = crate::render::partitioner(kind, tiles, trace.width(), trace.height())?;
+    let run = scenario::run(trace, partitioner, &scenario)?;
+    let mut csv = String::from("frame,measured_s,simulated_s,ratio,tiles,same_initial_sets\n");
+    println!(
+        "simulating {} peers x {slots} slots, {} with{} stealing, {tiles} tiles, at {rate:.4e} work/s per slot",
+        stats.peers,
+        stats.balancer,
+        if steal { "" } else { "out" }
+    );
+    println!(
+        "{:>6} {:>11} {:>12} {:>8} {:>13}",
+        "frame", "measured s", "simulated s", "ratio", "same sets"
+    );
+    let (mut agree, mut measured_total, mut simulated_total) = (0, 0.0, 0.0);
+    for (index, (real, simulated)) in stats
+        .frames
+        .iter()
+        .zip(&run.frames)
+        .enumerate()
+        .take(frames)
+    {
+        let mut real_sets: Vec<&StatsTile> = real.tiles.iter().collect();
+        real_sets.sort_by_key(|t| t.tile);
+        let dealt = &run.assignments[index];
+        let same = real_sets.len() == dealt.len()
+            && real_sets.iter().zip(dealt).all(|(t, (rect, peer))| {
+                t.rect == [rect.x, rect.y, rect.w, rect.h] && t.initial_peer == *peer
+            });
+        agree += usize::from(same);
+        measured_total += real.seconds;
+        simulated_total += simulated.makespan;
+        let ratio = simulated.makespan / real.seconds;
+        println!(
+            "{index:>6} {:>11.4} {:>12.4} {ratio:>8.3} {same:>13}",
+            real.seconds, simulated.makespan
+        );
+        let _ = writeln!(
+            csv,
+            "{index},{},{},{ratio},{},{same}",
+            real.seconds,
+            simulated.makespan,
+            real.tiles.len()
+        );
+    }
+    std::fs::create_dir_all(&args.out)?;
+    let path = args.out.join("validation.csv");
+    std::fs::write(&path, csv).with_context(|| format!("writing {}", path.display()))?;
+    println!(
+        "total: measured {measured_total:.3} s, simulated {simulated_total:.3} s, ratio {:.3}; initial tile sets identical in {agree} of {frames} frames; wrote {}",
+        simulated_total / measured_total,
+        path.display()
+    );
+    Ok(())
+}
