@@ -48,8 +48,9 @@ pub struct RenderSettings {
     pub width: u32,
     pub height: u32,
     pub samples_per_pixel: u32,
-    /// Maximum number of path segments (1 = direct visibility of emitters only); `None` means
-    /// unlimited, ended by Russian roulette alone.
+    /// Maximum number of scattering events, as pbrt counts depth: 0 shows emitters only, 1 adds
+    /// direct lighting, and a path has at most `max_depth + 1` segments. `None` means unlimited,
+    /// ended by Russian roulette alone.
     pub max_depth: Option<u32>,
     /// The depth from which Russian roulette may end paths; `None` turns it off.
     pub russian_roulette_depth: Option<u32>,
