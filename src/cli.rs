@@ -25,6 +25,8 @@ pub enum Command {
     Compare(crate::compare::CompareArgs),
     /// Measure what accuracy costs in time: error against time for each accuracy knob.
     Accuracy(crate::accuracy::AccuracyArgs),
+    /// Measure the tracer: rays per second (camera rays, full paths), BVH build, CPU-seconds.
+    Bench(crate::bench::BenchArgs),
     /// Simulate a cluster in virtual time on a cost trace: efficiency against peers, policies
     /// and tile counts, as CSV, JSON and SVG charts.
     Simulate(crate::simulate::SimulateArgs),

@@ -7,9 +7,11 @@
 //! - `report`: progress on a terminal, log lines elsewhere, the stats JSON and the tile-map PNGs.
 //! - `compare`: `tessera compare`, the error metrics of one image against another.
 //! - `accuracy`: `tessera accuracy`, what accuracy costs in time, as a table and a plot.
+//! - `bench`: `tessera bench`, rays per second of the tracer alone, and the steal round trip.
 //! - `simulate`: `tessera simulate`, scaling experiments in virtual time on a cost trace.
 
 mod accuracy;
+mod bench;
 mod cli;
 mod cluster;
 mod compare;
@@ -36,6 +38,7 @@ fn main() -> anyhow::Result<()> {
         cli::Command::Keygen(args) => cluster::keygen(&args),
         cli::Command::Compare(args) => compare::run(&args),
         cli::Command::Accuracy(args) => accuracy::run(&args),
+        cli::Command::Bench(args) => bench::run(&args),
         cli::Command::Simulate(args) => simulate::run(&args),
     }
 }

@@ -18,7 +18,7 @@
 //! - `report`: accuracy.csv, accuracy.md and accuracy.svg.
 //! - `findings`: the equal-time and equal-error comparisons, in sentences.
 
-mod bench;
+pub(crate) mod bench;
 mod findings;
 mod leaks;
 mod reference;

@@ -171,7 +171,7 @@ mod tests {
 
     #[test]
     fn a_tampered_scene_file_is_refused() {
-        let toml = b"[camera]\nposition = [0, 0, -1]\nlook_at = [0, 0, 0]\n".to_vec();
+        let toml = b"[camera]\nposition = [0, 0, -1]\nlook_at = [0, 0, 0]\n[[object]]\nshape = \"sphere\"\ncenter = [0, 0, 0]\nradius = 1\nmaterial = \"m\"\n[materials.m]\ntype = \"diffuse\"\n".to_vec();
         let mut file = SceneFile { name: "s.toml".into(), hash: *blake3::hash(&toml).as_bytes(), bytes: toml };
         let params = RenderParams { width: 8, height: 6, samples_per_pixel: 1, seed: 3, ..RenderParams::default() };
         let scene = load_scene(vec![file.clone()], &params).unwrap();

@@ -1,0 +1,405 @@
+//! `tessera bench`: how fast the tracer is, in rays per second, on real scenes.
+//!
+//! The figures are meant to be set beside other renderers' (Mitsuba 3, Cycles) and beside our own
+//! earlier runs, so the command measures the tracer alone: frame 0 of each scene is rendered
+//! straight through [`tracer::render_tile`] by rayon over tiles, on every core, with no peers, no
+//! network and no file output in the timed part. That is the same timed render `tessera accuracy`
+//! uses, so the two commands cannot disagree about what "one render" costs.
+//!
+//! Each scene gets two passes. *Primary* sets the maximum depth to 0 (pbrt's convention: emitters
+//! seen directly), so it traces exactly one camera ray per sample and measures the BVH and camera
+//! alone. *Paths* uses the scene's depth (or `--max-depth`) and measures what a user waits for:
+//! closest-hit and shadow rays together, with shading. Every pass reports wall seconds and the
+//! CPU-seconds of the whole process over the same interval, because other renderers quote
+//! CPU-seconds and because on a shared machine the two differ.
+//!
+//! A scene whose files are absent (the `scenes/shared/` files point at `../shared/scenes`, which
+//! is not part of the repository) is skipped and listed as such; any other loading error stops the
+//! command, as it would stop a render.
+//!
+//! - `rtt`: the steal round trip between two peers on loopback (`--steal-rtt N`).
+
+mod rtt;
+
+use crate::accuracy::bench::render;
+use crate::cli::FrameArgs;
+use crate::render::{load_scene, prepare_world};
+use anyhow::Context;
+use clap::{Args, FromArgMatches};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Measure the tracer: rays per second for camera rays alone and for full paths, BVH build time,
+/// CPU-seconds and wall seconds, per scene.
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// Scene files (default: every `scenes/*/*.toml` under the current folder; the ones in
+    /// `scenes/shared/` are skipped, and listed as skipped, when `../shared/scenes` is absent).
+    pub scenes: Vec<PathBuf>,
+    /// Samples per pixel (default: each scene's).
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Image width in pixels (default: each scene's).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels (default: each scene's).
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Maximum depth of the full-path pass, in scattering events as pbrt counts them: a path has
+    /// at most `D + 1` segments, so Mitsuba's `max_depth = 8` is our 7 (default: each scene's).
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// Rendering threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Write each full-path image to DIR/SCENE.exr, to compare with another renderer's.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Also time this many steal exchanges (request, then a grant of tiles) between two peers
+    /// over QUIC on loopback; 0 skips it.
+    #[arg(long, default_value_t = 0)]
+    pub steal_rtt: usize,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Everything one `tessera bench` run measured.
+#[derive(Debug, Serialize)]
+pub struct Report {
+    pub threads: usize,
+    /// The machine's load average (1, 5, 15 minutes) before and after, so a reader can tell a
+    /// quiet machine from one shared with other work.
+    pub load_before: Option<[f64; 3]>,
+    pub load_after: Option<[f64; 3]>,
+    pub scenes: Vec<SceneBench>,
+    pub skipped: Vec<Skipped>,
+    pub steal_rtt: Option<rtt::StealRtt>,
+}
+
+/// One scene's figures.
+#[derive(Debug, Serialize)]
+pub struct SceneBench {
+    pub scene: String,
+    pub triangles: usize,
+    pub width: u32,
+    pub height: u32,
+    pub samples_per_pixel: u32,
+    /// Reading and validating the TOML and OBJ/MTL files.
+    pub load_seconds: f64,
+    /// Building the BVH (and the light tables, which take a small fraction of it).
+    pub build_seconds: f64,
+    pub build_cpu_seconds: Option<f64>,
+    pub primary: Pass,
+    pub paths: Pass,
+    /// Where the full-path image was written (`--out`).
+    pub image: Option<String>,
+}
+
+/// One timed render of frame 0.
+#[derive(Debug, Serialize)]
+pub struct Pass {
+    /// `None`: unlimited, ended by Russian roulette.
+    pub max_depth: Option<u32>,
+    /// Closest-hit plus shadow rays.
+    pub rays: u64,
+    pub seconds: f64,
+    /// User plus system CPU time of the whole process during the render (all threads).
+    pub cpu_seconds: Option<f64>,
+    pub rays_per_second: f64,
+    /// Samples dropped as non-finite (a bug if ever non-zero).
+    pub invalid_samples: u64,
+}
+
+/// A scene that was not measured, and why.
+#[derive(Debug, Serialize)]
+pub struct Skipped {
+    pub scene: String,
+    pub reason: String,
+}
+
+pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    let scenes = if args.scenes.is_empty() {
+        shipped_scenes(Path::new("scenes"))?
+    } else {
+        args.scenes.clone()
+    };
+    anyhow::ensure!(
+        !scenes.is_empty(),
+        "no scenes given and no scenes/*/*.toml here; run from the repository root"
+    );
+    let threads = args
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+    if let Some(out) = &args.out {
+        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    }
+    let mut report = Report {
+        threads,
+        load_before: load_average(),
+        load_after: None,
+        scenes: Vec::new(),
+        skipped: Vec::new(),
+        steal_rtt: None,
+    };
+    for path in &scenes {
+        match bench_scene(path, args, &pool)? {
+            Ok(scene) => {
+                if !args.json {
+                    print_scene(&scene);
+                }
+                report.scenes.push(scene);
+            }
+            Err(skipped) => {
+                if !args.json {
+                    println!("{}: skipped, {}", skipped.scene, skipped.reason);
+                }
+                report.skipped.push(skipped);
+            }
+        }
+    }
+    if args.steal_rtt > 0 {
+        let measured = rtt::measure(args.steal_rtt)?;
+        if !args.json {
+            println!("{measured}");
+        }
+        report.steal_rtt = Some(measured);
+    }
+    report.load_after = load_average();
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        let load = |l: Option<[f64; 3]>| {
+            l.map_or("unknown".to_owned(), |l| {
+                format!("{:.2} {:.2} {:.2}", l[0], l[1], l[2])
+            })
+        };
+        println!(
+            "{} threads; load average before {}, after {}; {} scenes measured, {} skipped",
+            threads,
+            load(report.load_before),
+            load(report.load_after),
+            report.scenes.len(),
+            report.skipped.len()
+        );
+    }
+    Ok(())
+}
+
+/// Loads, builds and renders one scene twice. The outer error stops the command (a malformed
+/// scene, an unwritable output); the inner one is a scene skipped because its files are absent.
+fn bench_scene(
+    path: &Path,
+    args: &BenchArgs,
+    pool: &rayon::ThreadPool,
+) -> anyhow::Result<Result<SceneBench, Skipped>> {
+    let frame_args = frame_args(path, args)?;
+    let started = Instant::now();
+    let scene = match load_scene(&frame_args) {
+        Ok(scene) => scene,
+        Err(error) => {
+            return match absent_file(&error) {
+                Some(file) => Ok(Err(Skipped {
+                    scene: path.display().to_string(),
+                    reason: format!("{file} is absent"),
+                })),
+                None => Err(error.context(format!("benchmarking {}", path.display()))),
+            };
+        }
+    };
+    let load_seconds = started.elapsed().as_secs_f64();
+    let build = timed(|| prepare_world(scene, frame_args.effects));
+    let (mut world, build_seconds, build_cpu_seconds) =
+        (build.value, build.seconds, build.cpu_seconds);
+    if let Some(depth) = args.max_depth {
+        world.scene.settings.max_depth = Some(depth);
+    }
+    let full_depth = world.scene.settings.max_depth;
+
+    world.scene.settings.max_depth = Some(0);
+    let (primary, _) = pass(&world, pool);
+    world.scene.settings.max_depth = full_depth;
+    let (paths, image) = pass(&world, pool);
+
+    let settings = &world.scene.settings;
+    let written = match &args.out {
+        Some(out) => {
+            let stem = path
+                .file_stem()
+                .map_or("scene".into(), |s| s.to_string_lossy());
+            let file = out.join(format!("{stem}.exr"));
+            tracer::output::write_exr(&file, image.width, image.height, &image.pixels)?;
+            Some(file.display().to_string())
+        }
+        None => None,
+    };
+    Ok(Ok(SceneBench {
+        scene: path.display().to_string(),
+        triangles: world.scene.triangles.len(),
+        width: settings.width,
+        height: settings.height,
+        samples_per_pixel: settings.samples_per_pixel,
+        load_seconds,
+        build_seconds,
+        build_cpu_seconds,
+        primary,
+        paths,
+        image: written,
+    }))
+}
+
+/// One render of frame 0 at the world's settings, timed once (no repeats: the CPU-seconds must
+/// belong to the same interval as the wall seconds).
+fn pass(world: &tracer::World, pool: &rayon::ThreadPool) -> (Pass, tracer::output::RgbImage) {
+    let measured = timed(|| render(world, pool, 0.0));
+    // The render's own timing covers the tiles alone, without the pool's start-up.
+    let rendered = measured.value;
+    let pass = Pass {
+        max_depth: world.scene.settings.max_depth,
+        rays: rendered.rays,
+        seconds: rendered.seconds,
+        cpu_seconds: measured.cpu_seconds,
+        rays_per_second: rendered.rays as f64 / rendered.seconds.max(1e-9),
+        invalid_samples: rendered.invalid_samples,
+    };
+    (pass, rendered.image)
+}
+
+/// A value with the wall seconds and the process's CPU-seconds it took to make.
+struct Timed<T> {
+    value: T,
+    seconds: f64,
+    cpu_seconds: Option<f64>,
+}
+
+fn timed<T>(f: impl FnOnce() -> T) -> Timed<T> {
+    let cpu = process_cpu_seconds();
+    let started = Instant::now();
+    let value = f();
+    let seconds = started.elapsed().as_secs_f64();
+    let cpu_seconds = cpu
+        .zip(process_cpu_seconds())
+        .map(|(before, after)| after - before);
+    Timed {
+        value,
+        seconds,
+        cpu_seconds,
+    }
+}
+
+/// The `render` command's arguments for one scene, so that [`load_scene`] applies the same
+/// overrides, with the same checks, as a render would. Built by clap itself, so every flag the
+/// bench does not set keeps the default a user would get.
+fn frame_args(scene: &Path, args: &BenchArgs) -> anyhow::Result<FrameArgs> {
+    let mut argv = vec!["bench".into(), scene.as_os_str().to_owned()];
+    for (flag, value) in [
+        ("--spp", args.spp),
+        ("--width", args.width),
+        ("--height", args.height),
+    ] {
+        if let Some(value) = value {
+            argv.extend([flag.into(), value.to_string().into()]);
+        }
+    }
+    let command = FrameArgs::augment_args(clap::Command::new("bench"));
+    Ok(FrameArgs::from_arg_matches(
+        &command.try_get_matches_from(argv)?,
+    )?)
+}
+
+/// The file a scene failed to load for because it does not exist, if that was the reason.
+fn absent_file(error: &anyhow::Error) -> Option<String> {
+    match error.downcast_ref::<tracer::SceneError>()? {
+        tracer::SceneError::Read { file, source, .. }
+            if source.kind() == std::io::ErrorKind::NotFound =>
+        {
+            Some(file.clone())
+        }
+        _ => None,
+    }
+}
+
+/// `DIR/*/*.toml`, sorted.
+fn shipped_scenes(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let mut scenes = Vec::new();
+    if !dir.is_dir() {
+        return Ok(scenes);
+    }
+    for entry in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
+        let folder = entry?.path();
+        if !folder.is_dir() {
+            continue;
+        }
+        for file in
+            std::fs::read_dir(&folder).with_context(|| format!("reading {}", folder.display()))?
+        {
+            let file = file?.path();
+            if file.extension().is_some_and(|e| e == "toml") {
+                scenes.push(file);
+            }
+        }
+    }
+    scenes.sort();
+    Ok(scenes)
+}
+
+fn print_scene(s: &SceneBench) {
+    println!(
+        "{}: {} triangles, {}x{}, {} spp; load {:.3} s, BVH build {:.3} s ({} CPU-s)",
+        s.scene,
+        s.triangles,
+        s.width,
+        s.height,
+        s.samples_per_pixel,
+        s.load_seconds,
+        s.build_seconds,
+        cpu(s.build_cpu_seconds)
+    );
+    for (name, pass) in [("primary", &s.primary), ("paths", &s.paths)] {
+        let depth = pass
+            .max_depth
+            .map_or("unlimited".to_owned(), |d| d.to_string());
+        println!(
+            "  {name:<7} depth {depth:<9} {:>12} rays in {:>7.3} s wall, {:>7} CPU-s: {:>7.2} Mrays/s{}",
+            pass.rays,
+            pass.seconds,
+            cpu(pass.cpu_seconds),
+            pass.rays_per_second / 1e6,
+            if pass.invalid_samples > 0 {
+                format!(" ({} invalid samples)", pass.invalid_samples)
+            } else {
+                String::new()
+            }
+        );
+    }
+    if let Some(image) = &s.image {
+        println!("  image: {image}");
+    }
+}
+
+fn cpu(seconds: Option<f64>) -> String {
+    seconds.map_or("?".to_owned(), |s| format!("{s:.2}"))
+}
+
+/// CPU time used so far by this process, all threads, user plus system, from `/proc/self/stat`
+/// (in ticks of Linux's fixed USER_HZ of 100, so to 10 ms). `None` where there is no procfs.
+fn process_cpu_seconds() -> Option<f64> {
+    const TICKS_PER_SECOND: f64 = 100.0;
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The command name (field 2) is in parentheses and may hold spaces; the rest is plain.
+    // After it, field 3 comes first, so utime (field 14) and stime (15) are at 11 and 12.
+    let fields: Vec<&str> = stat[stat.rfind(')')? + 1..].split_whitespace().collect();
+    let user: u64 = fields.get(11)?.parse().ok()?;
+    let system: u64 = fields.get(12)?.parse().ok()?;
+    Some((user + system) as f64 / TICKS_PER_SECOND)
+}
+
+fn load_average() -> Option<[f64; 3]> {
+    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
+    let mut values = text.split_whitespace().map(|v| v.parse::<f64>().ok());
+    Some([values.next()??, values.next()??, values.next()??])
+}
