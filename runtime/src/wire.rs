@@ -106,6 +106,20 @@ pub enum Message {
 }
 
 impl Message {
+    /// Whether the message belongs to the connection's driver (handshake, scene distribution,
+    /// orderly close) rather than to the scheduling core.
+    pub fn is_session(&self) -> bool {
+        matches!(
+            self,
+            Message::Hello { .. }
+                | Message::Welcome { .. }
+                | Message::Peers { .. }
+                | Message::Scene { .. }
+                | Message::SceneReady
+                | Message::Goodbye { .. }
+        )
+    }
+
     /// The variant's name, for errors and logs.
     pub fn kind(&self) -> &'static str {
         match self {

@@ -21,6 +21,23 @@ use tracer::{Film, Rect, World};
 pub const TILE: u32 = 32;
 /// At most this many repetitions of a short render.
 const MAX_REPEATS: usize = 31;
+
+/// How often a render (or BVH build) is run for its time; the fastest run counts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Timing {
+    /// Runs shorter than this many seconds are repeated until the runs fill it (at most 31).
+    pub repeat_below: f64,
+    /// Every measurement is run at least this many times.
+    pub repeats: u32,
+}
+
+impl Timing {
+    /// One run, whatever its length: for renders whose time is only informative.
+    pub const ONCE: Timing = Timing {
+        repeat_below: 0.0,
+        repeats: 1,
+    };
+}
 /// The depth cap of the roulette ladder: "off" needs one, or paths in a closed scene never end,
 /// and every roulette rung gets the same cap so that only the roulette differs. At a survival
 /// probability of at most 0.95 per bounce, paths this long are rare enough not to matter.
@@ -70,7 +87,7 @@ pub struct Timed {
 }
 
 /// Renders frame 0 of `world` on `pool`, timed (the fastest of repeats when short).
-pub fn render(world: &World, pool: &rayon::ThreadPool, repeat_below: f64) -> Timed {
+pub fn render(world: &World, pool: &rayon::ThreadPool, timing: Timing) -> Timed {
     let (width, height) = (world.scene.settings.width, world.scene.settings.height);
     let tiles: Vec<Rect> = (0..height.div_ceil(TILE))
         .flat_map(|ty| (0..width.div_ceil(TILE)).map(move |tx| (tx, ty)))
@@ -100,7 +117,7 @@ pub fn render(world: &World, pool: &rayon::ThreadPool, repeat_below: f64) -> Tim
         (film, started.elapsed().as_secs_f64())
     };
     let (film, first) = once();
-    let seconds = fastest_time(first, repeat_below, || once().1);
+    let seconds = fastest_time(first, timing, || once().1);
     Timed {
         rays: film.stats.rays + film.stats.shadow_rays,
         invalid_samples: film.stats.invalid_samples,
@@ -113,13 +130,14 @@ pub fn render(world: &World, pool: &rayon::ThreadPool, repeat_below: f64) -> Tim
     }
 }
 
-/// `first`, or when it is shorter than `repeat_below` seconds the fastest of it and enough
-/// further runs of `again` to fill that time.
-pub fn fastest_time(first: f64, repeat_below: f64, mut again: impl FnMut() -> f64) -> f64 {
-    if first >= repeat_below {
-        return first;
-    }
-    let repeats = ((repeat_below / first.max(1e-6)).ceil() as usize).clamp(2, MAX_REPEATS);
+/// The fastest of `first` and as many further runs of `again` as `timing` asks for.
+pub fn fastest_time(first: f64, timing: Timing, mut again: impl FnMut() -> f64) -> f64 {
+    let fill = if first >= timing.repeat_below {
+        1
+    } else {
+        ((timing.repeat_below / first.max(1e-6)).ceil() as usize).min(MAX_REPEATS)
+    };
+    let repeats = fill.max(timing.repeats as usize);
     (1..repeats).map(|_| again()).fold(first, f64::min)
 }
 
@@ -130,8 +148,7 @@ pub struct Bench<'a> {
     reference: &'a Reference,
     /// The settings every rung starts from (`world.scene.settings` on entry).
     baseline: RenderSettings,
-    /// Renders and builds shorter than this many seconds are repeated, the fastest kept.
-    repeat_below: f64,
+    timing: Timing,
 }
 
 impl<'a> Bench<'a> {
@@ -139,7 +156,7 @@ impl<'a> Bench<'a> {
         world: World,
         pool: &'a rayon::ThreadPool,
         reference: &'a Reference,
-        repeat_below: f64,
+        timing: Timing,
     ) -> Self {
         let baseline = world.scene.settings.clone();
         Bench {
@@ -147,7 +164,7 @@ impl<'a> Bench<'a> {
             pool,
             reference,
             baseline,
-            repeat_below,
+            timing,
         }
     }
 
@@ -212,7 +229,7 @@ impl<'a> Bench<'a> {
             ..self.baseline.clone()
         };
         self.world.scene.settings = settings.clone();
-        let default_image = render(&self.world, self.pool, 0.0).image;
+        let default_image = render(&self.world, self.pool, Timing::ONCE).image;
         let rows = BuildQuality::ALL
             .into_iter()
             .map(|quality| {
@@ -220,7 +237,7 @@ impl<'a> Bench<'a> {
                 let started = Instant::now();
                 let accel = Accel::build(triangles, quality);
                 let build_seconds =
-                    fastest_time(started.elapsed().as_secs_f64(), self.repeat_below, || {
+                    fastest_time(started.elapsed().as_secs_f64(), self.timing, || {
                         let again = Instant::now();
                         drop(std::hint::black_box(Accel::build(triangles, quality)));
                         again.elapsed().as_secs_f64()
@@ -275,7 +292,7 @@ impl<'a> Bench<'a> {
         settings: RenderSettings,
     ) -> (Row, RgbImage) {
         self.world.scene.settings = settings.clone();
-        let timed = render(&self.world, self.pool, self.repeat_below);
+        let timed = render(&self.world, self.pool, self.timing);
         let reference = self.reference.image();
         let metrics = Metrics::between(&timed.image, reference)
             .expect("every rung renders at the reference's size: both come from the same settings");
@@ -340,17 +357,30 @@ mod tests {
 
     #[test]
     fn short_runs_are_repeated_and_the_fastest_kept() {
-        let mut runs = 0;
+        let second = Timing {
+            repeat_below: 1.0,
+            repeats: 1,
+        };
         assert_eq!(
-            fastest_time(2.0, 1.0, || unreachable!("a long run is timed once")),
+            fastest_time(2.0, second, || unreachable!("a long run is timed once")),
             2.0
         );
-        let times = [0.3, 0.1, 0.2, 0.4];
-        let fastest = fastest_time(0.25, 1.0, || {
+        let times = [0.3, 0.1, 0.2, 0.4, 0.05];
+        let mut runs = 0;
+        let mut again = || {
             runs += 1;
             times[runs - 1]
-        });
+        };
         // 0.25 s fills a second in four runs: the first and three more.
-        assert_eq!((fastest, runs), (0.1, 3));
+        assert_eq!(fastest_time(0.25, second, &mut again), 0.1);
+        assert_eq!(runs, 3);
+        // Asked for three runs, a long one is run twice more.
+        runs = 3;
+        let thrice = Timing {
+            repeat_below: 1.0,
+            repeats: 3,
+        };
+        assert_eq!(fastest_time(2.0, thrice, &mut again), 0.05);
+        assert_eq!(runs, 5);
     }
 }

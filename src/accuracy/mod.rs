@@ -76,6 +76,10 @@ pub struct AccuracyArgs {
     /// kept, for times that scheduler noise and other processes disturb less; 0 times each once.
     #[arg(long, default_value_t = 1.0)]
     pub repeat_below: f64,
+    /// Time every render (and BVH build) at least this many times and keep the fastest: on a
+    /// machine busy with other work, more runs give steadier comparisons.
+    #[arg(long, default_value_t = 1)]
+    pub repeats: u32,
     /// Rendering threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -192,7 +196,11 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
     };
     println!("reference: {}", reference.describe());
 
-    let mut bench = bench::Bench::new(world, &pool, &reference, args.repeat_below);
+    let timing = bench::Timing {
+        repeat_below: args.repeat_below,
+        repeats: args.repeats.max(1),
+    };
+    let mut bench = bench::Bench::new(world, &pool, &reference, timing);
     let mut rows = Vec::new();
     let mut leak_checks = Vec::new();
     for &knob in &args.knobs {
@@ -220,7 +228,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
         scene_settings,
         baseline: bench.world().scene.settings.clone(),
         knob_spp: args.knob_spp,
-        repeat_below: args.repeat_below,
+        timing,
         reference: &reference,
         rows: &rows,
         leak_checks: &leak_checks,

@@ -31,7 +31,7 @@ pub struct Run<'a> {
     pub scene_settings: RenderSettings,
     pub baseline: RenderSettings,
     pub knob_spp: u32,
-    pub repeat_below: f64,
+    pub timing: super::bench::Timing,
     pub reference: &'a Reference,
     pub rows: &'a [Row],
     pub leak_checks: &'a [LeakCheck],
@@ -129,10 +129,16 @@ pub fn markdown(run: &Run) -> String {
     let _ = writeln!(
         md,
         "{}x{} pixels, {} triangles, {} rendering threads, frame 0. Times are wall-clock seconds of a whole \
-         frame (renders under {} s are repeated and the fastest run kept). Errors are against the reference, over \
-         all pixels and channels: RMSE, relMSE = mean (a-b)^2/(b+0.01)^2, mean FLIP (8-bit sRGB at exposure 1), \
-         and the mean bias (how much brighter or darker the whole image is).\n",
-        run.width, run.height, run.triangles, run.threads, run.repeat_below,
+         frame, the fastest of at least {} run{} (more for renders under {} s). Errors are against the reference, \
+         over all pixels and channels: RMSE, relMSE = mean (a-b)^2/(b+0.01)^2, mean FLIP (8-bit sRGB at \
+         exposure 1), and the mean bias (how much brighter or darker the whole image is).\n",
+        run.width,
+        run.height,
+        run.triangles,
+        run.threads,
+        run.timing.repeats,
+        if run.timing.repeats == 1 { "" } else { "s" },
+        run.timing.repeat_below,
     );
     let _ = writeln!(
         md,

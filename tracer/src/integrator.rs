@@ -6,6 +6,11 @@
 //! direct lighting, and a path has at most `max_depth + 1` segments. Every bounce draws its random
 //! numbers from a fixed block of dimensions ([`crate::sampler::DIMENSIONS_PER_BOUNCE`]), all of
 //! them drawn whether used or not, so skipping an absent effect never shifts a later number.
+//!
+//! Specialisation: every branch guarded by a flag of [`Effects`] is one whose work would add
+//! exactly zero when the scene lacks the effect (see [`crate::effects`] for the argument, flag by
+//! flag); the per-sample counters in [`PathStats`] let tests check that the skipped work is
+//! really skipped, and bit-identity with [`Effects::ALL`] that it really was zero.
 
 use crate::effects::Effects;
 use crate::geometry::{hit_point, spawn_ray, spawn_ray_to, Accel, Hit, Ray, Traversal, TraversalStats};
@@ -33,8 +38,11 @@ pub struct PathStats {
     /// Closest-hit rays (camera and bounce rays).
     pub rays: u64,
     pub shadow_rays: u64,
+    /// Lights sampled by next-event estimation (each may or may not need a shadow ray).
     pub light_samples: u64,
+    /// BSDF samples that crossed a surface (refraction through glass).
     pub refractions: u64,
+    /// Escaped rays that looked up the environment.
     pub environment_lookups: u64,
     /// Samples whose radiance came out non-finite and were dropped (a bug if ever non-zero).
     pub invalid_samples: u64,
@@ -82,7 +90,8 @@ impl World {
         loop {
             sampler.start_bounce(depth);
             stats.rays += 1;
-            let Some(hit) = self.accel.intersect_with(&ray, self.traversal, &mut stats.traversal) else {
+            let Some(hit) = self.accel.intersect_with(&ray, self.traversal, &mut stats.traversal)
+            else {
                 if effects.environment {
                     if let Some(env) = self.scene.environment {
                         stats.environment_lookups += 1;
@@ -226,7 +235,11 @@ impl World {
             }
             _ => geometric,
         };
-        let uv = triangle.uv.map(|uv| b0 * uv[0] + hit.b1 * uv[1] + hit.b2 * uv[2]);
+        // Texture coordinates are only ever read by a texture lookup.
+        let uv = triangle
+            .uv
+            .filter(|_| self.effects.textures)
+            .map(|uv| b0 * uv[0] + hit.b1 * uv[1] + hit.b2 * uv[2]);
         Surface {
             point,
             geometric,

@@ -7,6 +7,11 @@
 //! power against each other because an environment's power depends on the scene's extent (a wide
 //! floor would make it swamp a point light and turn the lamp's rare samples into fireflies). The
 //! choice uses one random number, and the position on the light two more, whatever the light.
+//!
+//! A light without positive, finite power is never listed, whatever the effect set: it would be
+//! chosen with probability zero anyway, and leaving it out in both a specialised render and one
+//! with every effect forced on keeps the two choice distributions identical to the bit (see
+//! [`crate::effects`]).
 
 use crate::effects::Effects;
 use crate::scene::Scene;
@@ -50,47 +55,63 @@ pub struct Lights {
     /// For each scene triangle, its light's index, or `u32::MAX` when it does not emit.
     triangle_light: Vec<u32>,
     environment_light: Option<u32>,
+    /// The density of an escaped direction under [`Lights::sample`], fixed for the scene.
+    environment_pdf: f32,
     scene_radius: f32,
 }
 
 impl Lights {
+    /// The lights of the kinds `effects` turns on that have positive, finite power.
     pub fn new(scene: &Scene, effects: &Effects) -> Self {
-        let (center, radius) = bounding_sphere(scene);
-        let _ = center;
+        let radius = bounding_radius(scene);
         let mut lights = Vec::new();
         let mut power = Vec::new();
-        let mut triangle_light = vec![u32::MAX; scene.triangles.len()];
+        let mut add = |light: Light, p: f32| {
+            if p.is_finite() && p > 0.0 {
+                lights.push(light);
+                power.push(p);
+            }
+        };
         if effects.area_lights {
             for (index, triangle) in scene.emissive_triangles() {
                 let emission = scene.materials[triangle.material as usize].emission;
-                triangle_light[index as usize] = lights.len() as u32;
-                lights.push(Light::Triangle(index));
-                power.push(triangle.area() * luminance(emission) * PI);
+                add(Light::Triangle(index), triangle.area() * luminance(emission) * PI);
             }
         }
         if effects.point_lights {
             for light in &scene.point_lights {
-                lights.push(Light::Point { position: light.position, intensity: light.intensity });
-                power.push(4.0 * PI * luminance(light.intensity));
+                let point = Light::Point { position: light.position, intensity: light.intensity };
+                add(point, 4.0 * PI * luminance(light.intensity));
             }
         }
-        let mut environment_light = None;
         if effects.environment {
             if let Some(radiance) = scene.environment {
-                environment_light = Some(lights.len() as u32);
-                lights.push(Light::Environment { radiance });
                 // The power the environment sends through the scene's bounding sphere.
-                power.push(luminance(radiance) * PI * 4.0 * PI * radius * radius);
+                let p = luminance(radiance) * PI * 4.0 * PI * radius * radius;
+                add(Light::Environment { radiance }, p);
             }
         }
         let cdf = choice_cdf(&lights, &power);
-        if cdf.is_empty() {
-            // Nothing emits anything measurable: no light is ever chosen.
-            lights.clear();
-            triangle_light.iter_mut().for_each(|l| *l = u32::MAX);
-            environment_light = None;
+        let mut triangle_light = vec![u32::MAX; scene.triangles.len()];
+        let mut environment_light = None;
+        for (index, light) in lights.iter().enumerate() {
+            match light {
+                Light::Triangle(t) => triangle_light[*t as usize] = index as u32,
+                Light::Environment { .. } => environment_light = Some(index as u32),
+                Light::Point { .. } => {}
+            }
         }
-        Self { lights, cdf, triangle_light, environment_light, scene_radius: radius }
+        let mut result = Self {
+            lights,
+            cdf,
+            triangle_light,
+            environment_light,
+            environment_pdf: 0.0,
+            scene_radius: radius,
+        };
+        result.environment_pdf = environment_light
+            .map_or(0.0, |i| result.choice_pdf(i as usize) / (4.0 * PI));
+        result
     }
 
     pub fn is_empty(&self) -> bool {
@@ -199,22 +220,21 @@ impl Lights {
 
     /// The density with which `sample` would have produced an escaped direction.
     pub fn environment_pdf(&self) -> f32 {
-        self.environment_light.map_or(0.0, |i| self.choice_pdf(i as usize) / (4.0 * PI))
+        self.environment_pdf
     }
 }
 
 /// The cumulative choice probabilities: each kind of light with positive total power equally
-/// likely, lights within a kind by power. Empty when no light has positive finite power.
+/// likely, lights within a kind by power. Empty when there is no light; every power is positive.
 fn choice_cdf(lights: &[Light], power: &[f32]) -> Vec<f32> {
     let kind = |light: &Light| match light {
         Light::Triangle(_) => 0,
         Light::Point { .. } => 1,
         Light::Environment { .. } => 2,
     };
-    let usable = |p: f32| if p.is_finite() && p > 0.0 { f64::from(p) } else { 0.0 };
     let mut kind_power = [0.0f64; 3];
     for (light, &p) in lights.iter().zip(power) {
-        kind_power[kind(light)] += usable(p);
+        kind_power[kind(light)] += f64::from(p);
     }
     let kinds = kind_power.iter().filter(|&&p| p > 0.0).count();
     if kinds == 0 {
@@ -227,7 +247,7 @@ fn choice_cdf(lights: &[Light], power: &[f32]) -> Vec<f32> {
         .map(|(light, &p)| {
             let total = kind_power[kind(light)];
             if total > 0.0 {
-                running += usable(p) / total / kinds as f64;
+                running += f64::from(p) / total / kinds as f64;
             }
             running as f32
         })
@@ -250,8 +270,8 @@ pub fn uniform_sphere(u: Vec2) -> Vec3 {
     Vec3::new(r * phi.cos(), r * phi.sin(), z)
 }
 
-/// A sphere around every triangle: the centre of the bounding box and half its diagonal.
-fn bounding_sphere(scene: &Scene) -> (Vec3, f32) {
+/// The radius of a sphere around every triangle: half the diagonal of their bounding box.
+fn bounding_radius(scene: &Scene) -> f32 {
     let mut lo = Vec3::splat(f32::INFINITY);
     let mut hi = Vec3::splat(f32::NEG_INFINITY);
     for t in &scene.triangles {
@@ -261,7 +281,7 @@ fn bounding_sphere(scene: &Scene) -> (Vec3, f32) {
         }
     }
     if lo.x > hi.x {
-        return (Vec3::ZERO, 1.0);
+        return 1.0;
     }
-    ((lo + hi) * 0.5, (0.5 * (hi - lo).length()).max(f32::MIN_POSITIVE))
+    (0.5 * (hi - lo).length()).max(f32::MIN_POSITIVE)
 }

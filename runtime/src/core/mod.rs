@@ -267,6 +267,9 @@ impl Core {
         message: Message,
     ) -> Result<(), ProtocolError> {
         let kind = message.kind();
+        if message.is_session() {
+            return Err(ProtocolError::NotForCore { kind });
+        }
         let (worker, mut cx) = self.split(now);
         match message {
             Message::Hello { .. }
@@ -274,7 +277,7 @@ impl Core {
             | Message::Peers { .. }
             | Message::Scene { .. }
             | Message::SceneReady
-            | Message::Goodbye { .. } => return Err(ProtocolError::NotForCore { kind }),
+            | Message::Goodbye { .. } => unreachable!("session messages were refused above"),
             Message::Assign {
                 frame,
                 peers,

@@ -211,11 +211,12 @@ enum NodeState {
     Dead,
 }
 
-/// An agenda entry; the heap's top is the earliest (time, sequence number).
+/// An agenda entry; the heap's top is the earliest (time, sequence number). The happening is
+/// boxed so that the heap moves 32-byte entries, not whole messages, as it sifts.
 struct Entry {
     at: Duration,
     seq: u64,
-    happening: Happening,
+    happening: Box<Happening>,
 }
 
 impl Cluster<Scripted> {
@@ -351,7 +352,7 @@ impl<W: World> Cluster<W> {
     pub fn kill(&mut self, peer: PeerId, drop_outgoing: bool) {
         self.node(peer).state = NodeState::Dead;
         self.rearm(peer);
-        self.agenda.retain(|entry| match &entry.happening {
+        self.agenda.retain(|entry| match &*entry.happening {
             Happening::Deliver { from, to, .. } => *to != peer && !(drop_outgoing && *from == peer),
             Happening::Rendered { peer: at, .. }
             | Happening::Lost { peer: at, .. }
@@ -396,7 +397,7 @@ impl<W: World> Cluster<W> {
             (_, Some(_)) => {
                 let entry = self.agenda.pop().expect("invariant: peeked just above");
                 self.now = self.now.max(entry.at);
-                entry.happening
+                *entry.happening
             }
             (_, None) => return None,
         };
@@ -515,7 +516,7 @@ impl<W: World> Cluster<W> {
         let entry = Entry {
             at: self.now + after,
             seq: self.next_seq,
-            happening,
+            happening: Box::new(happening),
         };
         self.agenda.push(entry);
         self.next_seq += 1;

@@ -257,21 +257,14 @@ impl Session {
                 let Some(peer) = self.peers.peer(conn) else {
                     return Some(Step::Control { conn, message });
                 };
-                match message {
-                    Message::Hello { .. }
-                    | Message::Welcome { .. }
-                    | Message::Peers { .. }
-                    | Message::Scene { .. }
-                    | Message::SceneReady
-                    | Message::Goodbye { .. } => Some(Step::Control { conn, message }),
-                    message => {
-                        let now = self.now();
-                        if let Err(error) = self.core.handle_message(now, peer, message) {
-                            self.close(conn, CloseCode::Protocol, &error.to_string());
-                        }
-                        None
-                    }
+                if message.is_session() {
+                    return Some(Step::Control { conn, message });
                 }
+                let now = self.now();
+                if let Err(error) = self.core.handle_message(now, peer, message) {
+                    self.close(conn, CloseCode::Protocol, &error.to_string());
+                }
+                None
             }
         }
     }

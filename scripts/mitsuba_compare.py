@@ -1,0 +1,361 @@
+#!/usr/bin/env python3
+"""Mitsuba 3 and tessera on the same OBJ scenes, at the same settings, side by side in one run.
+
+Why this script exists: the tracer issue sets a target of being faster than the renderer a user
+would otherwise pick, at equal settings and with the same mean image (within 1% per channel). A
+speed figure means nothing unless both renderers drew the same picture, so this script
+
+1. reads each scene's tessera TOML (camera, OBJ file) and the OBJ/MTL it names, and builds the
+   same scene for Mitsuba from them: one mesh per MTL material, Kd as a two-sided diffuse
+   reflectance, Ke as a one-sided area light (see MTL_MAPPING below);
+2. renders it with Mitsuba (each variant in a fresh process, so that its CPU-seconds are its
+   own) and writes an EXR;
+3. runs `tessera bench` on the same TOMLs at the same size, samples and depth, which writes our EXR
+   and our timings (CPU-seconds of the whole process, BVH build and render);
+4. runs `tessera compare OURS.exr MITSUBA.exr --json` and checks the per-channel means;
+5. prints one table and writes OUT/compare.json and OUT/compare.md.
+
+Depth: Mitsuba's `max_depth` counts path segments (1 shows emitters only), ours counts bounces as
+pbrt does (0 shows emitters only), so Mitsuba `max_depth = 8` is our `--max-depth 7`.
+
+Usage (from the repository root, after `cargo build --release`):
+    pip install mitsuba            # llvm_ad_rgb also needs Debian's libllvm19
+    python3 scripts/mitsuba_compare.py --out bench-out/mitsuba
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+# How the script maps MTL onto Mitsuba. Mitsuba's own OBJ loader ignores MTL files entirely, so
+# the mapping is ours; it is the one tessera applies to these files (scenes/README.md, "MTL"):
+# every material of the shared Cornell scenes is `illum 2` with `Ks 0`, which tessera reads as
+# diffuse with reflectance Kd. Mitsuba's `diffuse` is black from behind, tessera's reflection-only
+# BSDFs are two-sided, so the diffuse goes in a `twosided` wrapper. `Ke` > 0 adds an `area`
+# emitter, which, like tessera's, emits on the winding normal's side only. Ns, Ni, Ka and illum
+# play no part for these materials in either renderer.
+MTL_MAPPING = (
+    "Kd -> twosided(diffuse(reflectance = Kd)); Ke > 0 -> one-sided area emitter (radiance = Ke) on the "
+    "same mesh; Ns/Ni/Ka/illum unused (Ks = 0 everywhere); no vertex normals in these OBJs, so "
+    "both renderers shade with face normals"
+)
+
+DEFAULT_SCENES = [
+    "scenes/shared/cornell-box-original.toml",
+    "scenes/shared/cornell-bunny.toml",
+    "scenes/shared/cornell-dragon.toml",
+]
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("scenes", nargs="*", default=DEFAULT_SCENES, help="tessera scene TOMLs")
+    parser.add_argument("--out", default="bench-out/mitsuba", type=Path)
+    parser.add_argument("--tessera", default="target/release/tessera", help="the tessera binary")
+    parser.add_argument("--size", type=int, default=512, help="image width and height")
+    parser.add_argument("--spp", type=int, default=64)
+    parser.add_argument(
+        "--segments", type=int, default=8, help="path segments (Mitsuba max_depth; ours is one less)"
+    )
+    parser.add_argument("--variants", default="llvm_ad_rgb,scalar_rgb")
+    parser.add_argument("--tolerance", type=float, default=0.01, help="allowed relative difference of channel means")
+    parser.add_argument("--worker", nargs=3, metavar=("VARIANT", "TOML", "EXR"), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.worker:
+        variant, toml, exr = args.worker
+        print(json.dumps(render_mitsuba(variant, Path(toml), Path(exr), args.size, args.spp, args.segments)))
+        return
+
+    present = [Path(s) for s in args.scenes if scene_files_present(Path(s))]
+    for s in args.scenes:
+        if Path(s) not in present:
+            print(f"{s}: skipped, its OBJ (under ../shared/scenes) is absent", file=sys.stderr)
+    if not present:
+        sys.exit("no scene to compare")
+    args.out.mkdir(parents=True, exist_ok=True)
+    load_before = os.getloadavg()
+    mitsuba = {}
+    for variant in [v for v in args.variants.split(",") if v]:
+        for toml in present:
+            exr = args.out / f"mitsuba-{variant}" / f"{toml.stem}.exr"
+            exr.parent.mkdir(parents=True, exist_ok=True)
+            result = run_worker(variant, toml, exr, args)
+            mitsuba[(variant, toml.stem)] = result
+            print(f"mitsuba {variant} {toml.stem}: {describe(result)}", file=sys.stderr)
+    ours = run_tessera(present, args)
+    rows = []
+    for toml in present:
+        our = ours[str(toml)]
+        for variant in [v for v in args.variants.split(",") if v]:
+            theirs = mitsuba[(variant, toml.stem)]
+            row = {"scene": toml.stem, "variant": variant, "mitsuba": theirs, "tessera": our}
+            if "error" not in theirs:
+                row["comparison"] = compare(args.tessera, our["image"], theirs["exr"], args.tolerance)
+            rows.append(row)
+    report = {
+        "settings": {"size": args.size, "spp": args.spp, "segments": args.segments, "tessera_max_depth": args.segments - 1},
+        "mtl_mapping": MTL_MAPPING,
+        "cores": os.cpu_count(),
+        "load_before": load_before,
+        "load_after": os.getloadavg(),
+        "rows": rows,
+    }
+    (args.out / "compare.json").write_text(json.dumps(report, indent=2) + "\n")
+    table = markdown(report)
+    (args.out / "compare.md").write_text(table)
+    print(table)
+
+
+def scene_files_present(toml):
+    scene = tomllib.loads(toml.read_text())
+    return all((toml.parent / o["obj"]).exists() for o in scene.get("object", []))
+
+
+def run_worker(variant, toml, exr, args):
+    command = [sys.executable, __file__, "--worker", variant, str(toml), str(exr)]
+    command += ["--size", str(args.size), "--spp", str(args.spp), "--segments", str(args.segments)]
+    done = subprocess.run(command, capture_output=True, text=True)
+    if done.returncode != 0:
+        return {"error": done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"exit {done.returncode}"}
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def run_tessera(tomls, args):
+    """One `tessera bench` over every scene: its JSON has our timings and the EXR paths."""
+    out = args.out / "tessera"
+    command = [args.tessera, "bench", *map(str, tomls), "--spp", str(args.spp), "--width", str(args.size)]
+    command += ["--height", str(args.size), "--max-depth", str(args.segments - 1), "--out", str(out), "--json"]
+    print("running: " + " ".join(command), file=sys.stderr)
+    done = subprocess.run(command, capture_output=True, text=True, check=True)
+    report = json.loads(done.stdout)
+    results = {}
+    for s in report["scenes"]:
+        paths = s["paths"]
+        results[s["scene"]] = {
+            "triangles": s["triangles"],
+            "build_seconds": s["build_seconds"],
+            "build_cpu_seconds": s["build_cpu_seconds"],
+            "render_seconds": paths["seconds"],
+            "render_cpu_seconds": paths["cpu_seconds"],
+            "cpu_seconds": (s["build_cpu_seconds"] or 0) + (paths["cpu_seconds"] or 0),
+            "wall_seconds": s["build_seconds"] + paths["seconds"],
+            "rays": paths["rays"],
+            "mrays_per_second": paths["rays_per_second"] / 1e6,
+            "image": s["image"],
+        }
+        print(f"tessera {Path(s['scene']).stem}: {describe(results[s['scene']])}", file=sys.stderr)
+    return results
+
+
+def compare(tessera, ours, theirs, tolerance):
+    done = subprocess.run([tessera, "compare", ours, theirs, "--json"], capture_output=True, text=True, check=True)
+    metrics = json.loads(done.stdout)
+    test, reference = metrics["mean_test"], metrics["mean_reference"]
+    relative = [(t - r) / r if r else float("nan") for t, r in zip(test, reference)]
+    return {
+        "mean_tessera": test,
+        "mean_mitsuba": reference,
+        "relative_difference": relative,
+        "within_tolerance": all(abs(d) <= tolerance for d in relative),
+        "rmse": metrics["rmse"],
+        "rel_mse": metrics["rel_mse"],
+        "flip": metrics.get("flip", {}).get("mean") if isinstance(metrics.get("flip"), dict) else metrics.get("flip"),
+    }
+
+
+def describe(r):
+    if "error" in r:
+        return "error: " + r["error"]
+    return f"{r['cpu_seconds']:.2f} CPU-s, {r['wall_seconds']:.2f} s wall"
+
+
+def markdown(report):
+    s = report["settings"]
+    lines = [
+        f"{s['size']}x{s['size']}, {s['spp']} spp, at most {s['segments']} path segments "
+        f"(Mitsuba max_depth {s['segments']}, tessera --max-depth {s['tessera_max_depth']}); "
+        f"{report['cores']} cores, load average {fmt_load(report['load_before'])} before, "
+        f"{fmt_load(report['load_after'])} after.",
+        "",
+        "| scene | triangles | renderer | build + render CPU-s | wall s | mean R / G / B | tessera vs Mitsuba, per channel |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    seen = set()
+    for row in report["rows"]:
+        our = row["tessera"]
+        if row["scene"] not in seen:
+            seen.add(row["scene"])
+            means = next((r["comparison"]["mean_tessera"] for r in report["rows"] if r["scene"] == row["scene"] and "comparison" in r), None)
+            lines.append(
+                f"| {row['scene']} | {our['triangles']} | tessera | {our['cpu_seconds']:.2f} "
+                f"({our['build_cpu_seconds']:.2f} + {our['render_cpu_seconds']:.2f}) | {our['wall_seconds']:.2f} | "
+                f"{fmt_means(means)} | |"
+            )
+        m = row["mitsuba"]
+        if "error" in m:
+            lines.append(f"| {row['scene']} | | Mitsuba {row['variant']} | failed: {m['error']} | | | |")
+            continue
+        c = row["comparison"]
+        diff = " / ".join(f"{d * 100:+.2f}%" for d in c["relative_difference"])
+        verdict = "within" if c["within_tolerance"] else "OUTSIDE"
+        lines.append(
+            f"| {row['scene']} | | Mitsuba {row['variant']} | {m['cpu_seconds']:.2f} "
+            f"({m['load_cpu_seconds']:.2f} + {m['render_cpu_seconds']:.2f}) | {m['wall_seconds']:.2f} | "
+            f"{fmt_means(c['mean_mitsuba'])} | {diff} ({verdict} 1%; RMSE {c['rmse']:.4f}) |"
+        )
+    lines += ["", "MTL mapping: " + report["mtl_mapping"] + ".", ""]
+    return "\n".join(lines)
+
+
+def fmt_means(means):
+    return " / ".join(f"{v:.4f}" for v in means) if means else ""
+
+
+def fmt_load(load):
+    return " ".join(f"{v:.2f}" for v in load)
+
+
+# --- The Mitsuba side, run in a process of its own per (variant, scene). ---
+
+
+def render_mitsuba(variant, toml, exr, size, spp, segments):
+    import drjit as dr
+    import mitsuba as mi
+
+    mi.set_variant(variant)
+    scene_toml = tomllib.loads(toml.read_text())
+    camera = scene_toml["camera"]
+    unsupported = set(camera) - {"position", "look_at", "up", "vfov"}
+    if unsupported or scene_toml.get("materials") or scene_toml.get("lights") or scene_toml.get("environment"):
+        raise SystemExit(f"{toml}: only a fixed camera and plain OBJ objects are translated for Mitsuba")
+    shapes = {}
+    triangles = 0
+    for index, obj in enumerate(scene_toml.get("object", [])):
+        if set(obj) != {"obj"}:
+            raise SystemExit(f"{toml}: object {index} has keys other than obj, which this script does not translate")
+        for name, (positions, faces, kd, ke) in read_obj(toml.parent / obj["obj"]).items():
+            triangles += len(faces) // 3
+            props = mi.Properties()
+            props["bsdf"] = mi.load_dict({"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": kd}}})
+            if any(v > 0 for v in ke):
+                props["emitter"] = mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": ke}})
+            mesh = mi.Mesh(f"{index}-{name}", len(positions) // 3, len(faces) // 3, props=props,
+                           has_vertex_normals=False, has_vertex_texcoords=False)
+            params = mi.traverse(mesh)
+            params["vertex_positions"] = mi.Float(positions)
+            params["faces"] = mi.UInt32(faces)
+            params.update()
+            shapes[f"shape-{index}-{name}"] = mesh
+    description = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": segments},
+        "sensor": {
+            "type": "perspective",
+            "fov": camera.get("vfov", 40.0),
+            "fov_axis": "y",
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=camera["position"], target=camera["look_at"], up=camera.get("up", [0, 1, 0])
+            ),
+            "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
+                     "pixel_format": "rgb", "component_format": "float32"},
+            "sampler": {"type": "independent", "sample_count": spp},
+        },
+        **shapes,
+    }
+    cpu, wall = time.process_time(), time.perf_counter()
+    scene = mi.load_dict(description)
+    dr.eval(scene)
+    dr.sync_thread()
+    load_cpu, load_wall = time.process_time() - cpu, time.perf_counter() - wall
+    cpu, wall = time.process_time(), time.perf_counter()
+    image = mi.render(scene, spp=spp)
+    dr.eval(image)
+    dr.sync_thread()
+    render_cpu, render_wall = time.process_time() - cpu, time.perf_counter() - wall
+    mi.util.write_bitmap(str(exr), image)
+    return {
+        "variant": variant,
+        "mitsuba": mi.__version__,
+        "triangles": triangles,
+        "load_cpu_seconds": load_cpu,
+        "render_cpu_seconds": render_cpu,
+        "cpu_seconds": load_cpu + render_cpu,
+        "load_seconds": load_wall,
+        "render_seconds": render_wall,
+        "wall_seconds": load_wall + render_wall,
+        "exr": str(exr),
+    }
+
+
+def read_obj(path):
+    """Triangles per `usemtl` material: {name: (flat positions, flat indices, Kd, Ke)}.
+
+    Handles what the shared scenes use: CRLF endings, negative (relative) indices, `v/vt/vn`
+    references, and polygons, which are cut into fans as tessera's loader cuts them.
+    """
+    vertices = []
+    groups = {}
+    material = None
+    materials = {}
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for line in f:
+            words = line.split()
+            if not words:
+                continue
+            if words[0] == "v":
+                vertices.append((float(words[1]), float(words[2]), float(words[3])))
+            elif words[0] == "f":
+                count = len(vertices)
+                ids = [int(w.split("/")[0]) for w in words[1:]]
+                ids = [i - 1 if i > 0 else count + i for i in ids]
+                tris = groups.setdefault(material, [])
+                for k in range(1, len(ids) - 1):
+                    tris.extend((ids[0], ids[k], ids[k + 1]))
+            elif words[0] == "usemtl":
+                material = " ".join(words[1:])
+            elif words[0] == "mtllib":
+                materials.update(read_mtl(path.parent / " ".join(words[1:])))
+    meshes = {}
+    for name, tris in groups.items():
+        if name not in materials:
+            raise SystemExit(f"{path}: material {name!r} is not in its MTL files")
+        # Each material's mesh keeps only the vertices it uses.
+        remap = {}
+        positions = []
+        faces = []
+        for i in tris:
+            j = remap.get(i)
+            if j is None:
+                j = remap[i] = len(remap)
+                positions.extend(vertices[i])
+            faces.append(j)
+        kd, ke = materials[name]
+        meshes[name] = (positions, faces, kd, ke)
+    return meshes
+
+
+def read_mtl(path):
+    materials = {}
+    name = None
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for line in f:
+            words = line.split("#")[0].split()
+            if not words:
+                continue
+            if words[0] == "newmtl":
+                name = " ".join(words[1:])
+                materials[name] = [[0.8, 0.8, 0.8], [0.0, 0.0, 0.0]]
+            elif words[0] in ("Kd", "Ke") and name is not None:
+                values = [float(w) for w in words[1:4]]
+                values = values * 3 if len(values) == 1 else values
+                materials[name][0 if words[0] == "Kd" else 1] = values
+    return {k: (v[0], v[1]) for k, v in materials.items()}
+
+
+if __name__ == "__main__":
+    main()
