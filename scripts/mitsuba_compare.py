@@ -20,7 +20,7 @@ pbrt does (0 shows emitters only), so Mitsuba `max_depth = 8` is our `--max-dept
 
 Usage (from the repository root, after `cargo build --release`):
     pip install mitsuba            # llvm_ad_rgb also needs Debian's libllvm19
-    python3 scripts/mitsuba_compare.py --out bench-out/mitsuba
+    python3 scripts/mitsuba_compare.py --out out/bench/mitsuba
 """
 
 import argparse
@@ -55,7 +55,7 @@ DEFAULT_SCENES = [
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("scenes", nargs="*", default=DEFAULT_SCENES, help="tessera scene TOMLs")
-    parser.add_argument("--out", default="bench-out/mitsuba", type=Path)
+    parser.add_argument("--out", default="out/bench/mitsuba", type=Path)
     parser.add_argument("--tessera", default="target/release/tessera", help="the tessera binary")
     parser.add_argument("--size", type=int, default=512, help="image width and height")
     parser.add_argument("--spp", type=int, default=64)

@@ -34,9 +34,16 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
         let tokio = tokio_runtime()?;
         tokio.block_on(async {
             let owner = node::Owner::bind(args.listen, &identity, options)?;
-            tracing::info!("listening on {}; waiting for {} peers", owner.local_addr()?, args.expect);
+            tracing::info!(
+                "listening on {}; waiting for {} peers",
+                owner.local_addr()?,
+                args.expect
+            );
             let (peers, own) = owner.run(job, args.expect, sink).await?;
-            Ok(node::LocalRun { peers, timelines: vec![(runtime::wire::PeerId(0), own)] })
+            Ok(node::LocalRun {
+                peers,
+                timelines: vec![(runtime::wire::PeerId(0), own)],
+            })
         })
     })
 }
@@ -55,7 +62,8 @@ fn execute(
     let params = node::bundle::params(&scene, args.effects == EffectsChoice::All);
     let settings = scene.settings.clone();
     let world = Arc::new(prepare_world(scene, args.effects));
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
     let partitioner = partitioner(args.balancer, args.tiles, settings.width, settings.height)?;
     let tiles = partitioner.tiles().len();
     let progress = Progress::new(settings.frames);
@@ -89,7 +97,13 @@ fn execute(
         },
         rays: 0,
     };
-    let job = Job { world, files, params, frames: settings.frames, partitioner };
+    let job = Job {
+        world,
+        files,
+        params,
+        frames: settings.frames,
+        partitioner,
+    };
     let render_started = Instant::now();
     let run = drive(job, &mut sink)?;
     let render_seconds = render_started.elapsed().as_secs_f64();
@@ -100,9 +114,15 @@ fn execute(
             entry.peers.push(PeerFrameStats::new(peer.0, peer_stats));
         }
     }
-    let stats_path = args.stats.clone().unwrap_or_else(|| args.out.join("stats.json"));
+    let stats_path = args
+        .stats
+        .clone()
+        .unwrap_or_else(|| args.out.join("stats.json"));
     report::write_stats(&stats_path, &stats)?;
-    let gantt_path = args.gantt.clone().unwrap_or_else(|| args.out.join("gantt.svg"));
+    let gantt_path = args
+        .gantt
+        .clone()
+        .unwrap_or_else(|| args.out.join("gantt.svg"));
     report::write_gantt(&gantt_path, &stats, &run.timelines)?;
     println!(
         "rendered {} frames of {}x{} with {} peers in {:.2} s ({:.2} s in all): {:.2} Mrays/s; frames, stats.json and gantt.svg in {}",
@@ -129,7 +149,11 @@ fn options(args: &FrameArgs, threads: usize) -> node::Options {
             heartbeat_interval: timeout / 5,
             ..runtime::core::Config::default()
         },
-        net: runtime::net::Config { idle_timeout: timeout, keep_alive: timeout / 5, ..defaults.net.clone() },
+        net: runtime::net::Config {
+            idle_timeout: timeout,
+            keep_alive: timeout / 5,
+            ..defaults.net.clone()
+        },
         seed: args.seed.unwrap_or(0),
         ..defaults
     }
@@ -141,7 +165,10 @@ fn available_threads() -> usize {
 
 /// Rendering runs on rayon pools; tokio only moves bytes and timers, so two workers suffice.
 pub fn tokio_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
-    Ok(tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?)
+    Ok(tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?)
 }
 
 /// Writes each finished frame and keeps its statistics.
@@ -187,12 +214,21 @@ impl Sink<'_> {
         let (args, film) = (self.args, &done.film);
         let name = |ext: &str| args.out.join(format!("frame-{:04}.{ext}", done.frame));
         tracer::output::write_exr(&name("exr"), film.width, film.height, &film.pixels)?;
-        tracer::output::write_png(&name("png"), film.width, film.height, &film.pixels, args.exposure)?;
+        tracer::output::write_png(
+            &name("png"),
+            film.width,
+            film.height,
+            &film.pixels,
+            args.exposure,
+        )?;
         if args.tile_map {
             let preview = tracer::output::tone_map(&film.pixels, args.exposure);
             let path = args.out.join(format!("tiles-{:04}.png", done.frame));
-            let costs: Vec<([u32; 4], u64)> =
-                done.tiles.iter().map(|t| ([t.rect.x, t.rect.y, t.rect.w, t.rect.h], t.measured)).collect();
+            let costs: Vec<([u32; 4], u64)> = done
+                .tiles
+                .iter()
+                .map(|t| ([t.rect.x, t.rect.y, t.rect.w, t.rect.h], t.measured))
+                .collect();
             report::write_tile_map(&path, film.width, film.height, &preview, &costs)?;
         }
         Ok(())
@@ -208,8 +244,14 @@ pub fn load_scene(args: &FrameArgs) -> anyhow::Result<Scene> {
     s.width = args.width.unwrap_or(s.width);
     s.height = args.height.unwrap_or(s.height);
     s.seed = args.seed.unwrap_or(s.seed);
-    anyhow::ensure!(s.width > 0 && s.height > 0, "the image must be at least 1x1 pixels");
-    anyhow::ensure!(s.samples_per_pixel > 0, "samples per pixel must be at least 1");
+    anyhow::ensure!(
+        s.width > 0 && s.height > 0,
+        "the image must be at least 1x1 pixels"
+    );
+    anyhow::ensure!(
+        s.samples_per_pixel > 0,
+        "samples per pixel must be at least 1"
+    );
     Ok(scene)
 }
 
@@ -224,7 +266,12 @@ pub fn prepare_world(scene: Scene, effects: EffectsChoice) -> World {
 
 /// The balancer the flags ask for. `--tiles M` is the PBT's leaf count, or for the regular grid
 /// the nearest k x k grid (k = round(sqrt(M))), so equal flags mean comparable tile counts.
-pub fn partitioner(kind: BalancerKind, tiles: usize, width: u32, height: u32) -> anyhow::Result<balancer::Partitioner> {
+pub fn partitioner(
+    kind: BalancerKind,
+    tiles: usize,
+    width: u32,
+    height: u32,
+) -> anyhow::Result<balancer::Partitioner> {
     let side = ((tiles as f64).sqrt().round() as u32).max(1);
     let config = balancer::Config {
         kind: match kind {
@@ -232,7 +279,10 @@ pub fn partitioner(kind: BalancerKind, tiles: usize, width: u32, height: u32) ->
             BalancerKind::Regular => balancer::Kind::Regular,
         },
         leaves: tiles,
-        grid: balancer::Grid::Count { columns: side, rows: side },
+        grid: balancer::Grid::Count {
+            columns: side,
+            rows: side,
+        },
         ..balancer::Config::default()
     };
     Ok(balancer::Partitioner::new(width, height, &config)?)

@@ -18,9 +18,11 @@ impl Progress {
         let bar = std::io::stderr().is_terminal().then(|| {
             let bar = ProgressBar::new(u64::from(frames));
             bar.set_style(
-                ProgressStyle::with_template("[{bar:40}] frame {pos}/{len}, {elapsed} elapsed, ETA {eta} {msg}")
-                    .expect("the template is a valid indicatif template")
-                    .progress_chars("=> "),
+                ProgressStyle::with_template(
+                    "[{bar:40}] frame {pos}/{len}, {elapsed} elapsed, ETA {eta} {msg}",
+                )
+                .expect("the template is a valid indicatif template")
+                .progress_chars("=> "),
             );
             bar
         });
@@ -147,8 +149,12 @@ impl FrameStats {
             return;
         }
         let mean = self.tiles.iter().map(|t| t.measured as f64).sum::<f64>() / n;
-        self.leaf_cost_variance =
-            self.tiles.iter().map(|t| (t.measured as f64 - mean).powi(2)).sum::<f64>() / n;
+        self.leaf_cost_variance = self
+            .tiles
+            .iter()
+            .map(|t| (t.measured as f64 - mean).powi(2))
+            .sum::<f64>()
+            / n;
         let max = self.tiles.iter().map(|t| t.measured).max().unwrap_or(0) as f64;
         self.leaf_cost_max_over_mean = if mean > 0.0 { max / mean } else { 1.0 };
     }
@@ -206,10 +212,20 @@ pub fn write_gantt(
                 .get(t.frame as usize)
                 .and_then(|f| f.tiles.iter().find(|r| r.tile == t.tile))
                 .is_some_and(|r| r.initial_peer != peer.0);
-            bars.push(sim::plot::GanttBar { row: peer.0, start: t.start.as_secs_f64(), end: t.end.as_secs_f64(), stolen });
+            bars.push(sim::plot::GanttBar {
+                row: peer.0,
+                start: t.start.as_secs_f64(),
+                end: t.end.as_secs_f64(),
+                stolen,
+            });
         }
     }
     let rows = timelines.iter().map(|(p, _)| p.0 + 1).max().unwrap_or(1);
-    sim::plot::gantt_svg(path, &format!("{} ({} peers)", stats.scene, stats.peers), rows, &bars)?;
+    sim::plot::gantt_svg(
+        path,
+        &format!("{} ({} peers)", stats.scene, stats.peers),
+        rows,
+        &bars,
+    )?;
     Ok(())
 }

@@ -87,7 +87,19 @@ pub struct Timed {
 }
 
 /// Renders frame 0 of `world` on `pool`, timed (the fastest of repeats when short).
-pub fn render(world: &World, pool: &rayon::ThreadPool, timing: Timing) -> Timed {
+pub fn render(world: &World, pool: &rayon::ThreadPool, repeat_below: f64) -> Timed {
+    render_with(
+        world,
+        pool,
+        Timing {
+            repeat_below,
+            repeats: 1,
+        },
+    )
+}
+
+/// [`render`], timed as `timing` says.
+pub fn render_with(world: &World, pool: &rayon::ThreadPool, timing: Timing) -> Timed {
     let (width, height) = (world.scene.settings.width, world.scene.settings.height);
     let tiles: Vec<Rect> = (0..height.div_ceil(TILE))
         .flat_map(|ty| (0..width.div_ceil(TILE)).map(move |tx| (tx, ty)))
@@ -229,7 +241,7 @@ impl<'a> Bench<'a> {
             ..self.baseline.clone()
         };
         self.world.scene.settings = settings.clone();
-        let default_image = render(&self.world, self.pool, Timing::ONCE).image;
+        let default_image = render_with(&self.world, self.pool, Timing::ONCE).image;
         let rows = BuildQuality::ALL
             .into_iter()
             .map(|quality| {
@@ -292,7 +304,7 @@ impl<'a> Bench<'a> {
         settings: RenderSettings,
     ) -> (Row, RgbImage) {
         self.world.scene.settings = settings.clone();
-        let timed = render(&self.world, self.pool, self.timing);
+        let timed = render_with(&self.world, self.pool, self.timing);
         let reference = self.reference.image();
         let metrics = Metrics::between(&timed.image, reference)
             .expect("every rung renders at the reference's size: both come from the same settings");

@@ -123,7 +123,7 @@ impl Reference {
                 ..baseline.clone()
             };
             // Timed once: a reference takes long enough, and its time is only informative.
-            bench::render(world, pool, bench::Timing::ONCE)
+            bench::render_with(world, pool, bench::Timing::ONCE)
         };
         let a = half(key.seeds[0], spp / 2, world);
         let b = half(key.seeds[1], spp - spp / 2, world);

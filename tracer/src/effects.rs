@@ -88,10 +88,7 @@ impl Effects {
                 .any(|t| pred(&scene.materials[t.material as usize].bsdf))
         };
         let area_lights = scene.emissive_triangles().next().is_some();
-        let point_lights = scene
-            .point_lights
-            .iter()
-            .any(|l| l.intensity != Vec3::ZERO);
+        let point_lights = scene.point_lights.iter().any(|l| l.intensity != Vec3::ZERO);
         let environment = scene.environment.is_some_and(|e| e != Vec3::ZERO);
         let diffuse = used(|b| matches!(b, Bsdf::Diffuse { albedo, .. } if *albedo != Vec3::ZERO));
         let glossy_reflection = used(|b| matches!(b, Bsdf::Conductor { .. }));
@@ -105,9 +102,9 @@ impl Effects {
             specular_reflection: used(|b| matches!(b, Bsdf::Mirror { .. })),
             glossy_reflection,
             refraction: used(|b| matches!(b, Bsdf::Dielectric { .. })),
-            textures: used(|b| {
-                matches!(b, Bsdf::Diffuse { albedo, texture: Some(_) } if *albedo != Vec3::ZERO)
-            }),
+            textures: used(
+                |b| matches!(b, Bsdf::Diffuse { albedo, texture: Some(_) } if *albedo != Vec3::ZERO),
+            ),
             shading_normals: scene.triangles.iter().any(|t| t.n.is_some()),
         }
     }

@@ -13,7 +13,9 @@
 //! really skipped, and bit-identity with [`Effects::ALL`] that it really was zero.
 
 use crate::effects::Effects;
-use crate::geometry::{hit_point, spawn_ray, spawn_ray_to, Accel, Hit, Ray, Traversal, TraversalStats};
+use crate::geometry::{
+    Accel, Hit, Ray, Traversal, TraversalStats, hit_point, spawn_ray, spawn_ray_to,
+};
 use crate::lights::Lights;
 use crate::material::{Bsdf, Frame};
 use crate::sampler::PixelSampler;
@@ -71,7 +73,13 @@ impl PathStats {
 impl World {
     pub fn new(scene: Scene, accel: Accel, effects: Effects) -> Self {
         let lights = Lights::new(&scene, &effects);
-        Self { scene, accel, lights, effects, traversal: Traversal::Robust }
+        Self {
+            scene,
+            accel,
+            lights,
+            effects,
+            traversal: Traversal::Robust,
+        }
     }
 
     /// The radiance arriving along `ray` for one sample.
@@ -90,7 +98,9 @@ impl World {
         loop {
             sampler.start_bounce(depth);
             stats.rays += 1;
-            let Some(hit) = self.accel.intersect_with(&ray, self.traversal, &mut stats.traversal)
+            let Some(hit) = self
+                .accel
+                .intersect_with(&ray, self.traversal, &mut stats.traversal)
             else {
                 if effects.environment {
                     if let Some(env) = self.scene.environment {
@@ -112,8 +122,12 @@ impl World {
                 let weight = if last_delta {
                     1.0
                 } else {
-                    let light_pdf =
-                        self.lights.triangle_pdf(&self.scene, hit.triangle, last_point, surface.point);
+                    let light_pdf = self.lights.triangle_pdf(
+                        &self.scene,
+                        hit.triangle,
+                        last_point,
+                        surface.point,
+                    );
                     power_heuristic(last_pdf, light_pdf)
                 };
                 radiance += beta * material.emission * weight;
@@ -134,10 +148,20 @@ impl World {
 
             if effects.shadows && !bsdf.is_delta() {
                 radiance += beta
-                    * self.direct_light(&bsdf, &frame, wo, &surface, u_light_choice, u_light, stats);
+                    * self.direct_light(
+                        &bsdf,
+                        &frame,
+                        wo,
+                        &surface,
+                        u_light_choice,
+                        u_light,
+                        stats,
+                    );
             }
 
-            let Some(sample) = bsdf.sample(wo, u_bsdf_choice, u_bsdf) else { break };
+            let Some(sample) = bsdf.sample(wo, u_bsdf_choice, u_bsdf) else {
+                break;
+            };
             if sample.transmission {
                 stats.refractions += 1;
             }
@@ -193,19 +217,29 @@ impl World {
         } else {
             spawn_ray(surface.point, surface.geometric, light.wi)
         };
-        if self.accel.occluded_with(&shadow, self.traversal, &mut stats.traversal) {
+        if self
+            .accel
+            .occluded_with(&shadow, self.traversal, &mut stats.traversal)
+        {
             return Vec3::ZERO;
         }
-        let weight = if light.delta { 1.0 } else { power_heuristic(light.pdf, bsdf.pdf(wo, wi_local)) };
+        let weight = if light.delta {
+            1.0
+        } else {
+            power_heuristic(light.pdf, bsdf.pdf(wo, wi_local))
+        };
         f * light.radiance * (weight / light.pdf)
     }
 
     fn resolve(&self, bsdf: &Bsdf, surface: &Surface) -> Bsdf {
         match *bsdf {
-            Bsdf::Diffuse { texture: Some(texture), .. } if self.effects.textures => {
-                let texel = surface
-                    .uv
-                    .map_or(Vec3::ONE, |uv| self.scene.textures[texture as usize].lookup(uv));
+            Bsdf::Diffuse {
+                texture: Some(texture),
+                ..
+            } if self.effects.textures => {
+                let texel = surface.uv.map_or(Vec3::ONE, |uv| {
+                    self.scene.textures[texture as usize].lookup(uv)
+                });
                 bsdf.with_texture_value(texel)
             }
             other => other,
@@ -265,7 +299,13 @@ fn power_heuristic(f: f32, g: f32) -> f32 {
     let (f2, g2) = (f * f, g * g);
     if f2 + g2 == 0.0 || !(f2 + g2).is_finite() {
         // One density is infinite (a delta) or both vanish: the finite one takes all the weight.
-        return if f.is_finite() && f > g { 1.0 } else if g.is_finite() && g > f { 0.0 } else { 1.0 };
+        return if f.is_finite() && f > g {
+            1.0
+        } else if g.is_finite() && g > f {
+            0.0
+        } else {
+            1.0
+        };
     }
     f2 / (f2 + g2)
 }

@@ -23,8 +23,13 @@ use std::f32::consts::PI;
 pub enum Light {
     /// An emissive triangle: the index into `Scene::triangles`.
     Triangle(u32),
-    Point { position: Vec3, intensity: Vec3 },
-    Environment { radiance: Vec3 },
+    Point {
+        position: Vec3,
+        intensity: Vec3,
+    },
+    Environment {
+        radiance: Vec3,
+    },
 }
 
 /// A sampled direction towards a light, as seen from a shading point.
@@ -54,7 +59,6 @@ pub struct Lights {
     cdf: Vec<f32>,
     /// For each scene triangle, its light's index, or `u32::MAX` when it does not emit.
     triangle_light: Vec<u32>,
-    environment_light: Option<u32>,
     /// The density of an escaped direction under [`Lights::sample`], fixed for the scene.
     environment_pdf: f32,
     scene_radius: f32,
@@ -75,12 +79,18 @@ impl Lights {
         if effects.area_lights {
             for (index, triangle) in scene.emissive_triangles() {
                 let emission = scene.materials[triangle.material as usize].emission;
-                add(Light::Triangle(index), triangle.area() * luminance(emission) * PI);
+                add(
+                    Light::Triangle(index),
+                    triangle.area() * luminance(emission) * PI,
+                );
             }
         }
         if effects.point_lights {
             for light in &scene.point_lights {
-                let point = Light::Point { position: light.position, intensity: light.intensity };
+                let point = Light::Point {
+                    position: light.position,
+                    intensity: light.intensity,
+                };
                 add(point, 4.0 * PI * luminance(light.intensity));
             }
         }
@@ -105,12 +115,11 @@ impl Lights {
             lights,
             cdf,
             triangle_light,
-            environment_light,
             environment_pdf: 0.0,
             scene_radius: radius,
         };
-        result.environment_pdf = environment_light
-            .map_or(0.0, |i| result.choice_pdf(i as usize) / (4.0 * PI));
+        result.environment_pdf =
+            environment_light.map_or(0.0, |i| result.choice_pdf(i as usize) / (4.0 * PI));
         result
     }
 
@@ -137,7 +146,10 @@ impl Lights {
         if self.lights.is_empty() {
             return None;
         }
-        let index = self.cdf.partition_point(|&c| c <= u_choice).min(self.lights.len() - 1);
+        let index = self
+            .cdf
+            .partition_point(|&c| c <= u_choice)
+            .min(self.lights.len() - 1);
         let choice = self.choice_pdf(index);
         if choice <= 0.0 {
             return None;
@@ -165,9 +177,20 @@ impl Lights {
                 }
                 let pdf = choice * distance_squared / (cos_light * area);
                 let radiance = scene.materials[triangle.material as usize].emission;
-                Some(LightSample { wi, distance, point, normal, radiance, pdf, delta: false })
+                Some(LightSample {
+                    wi,
+                    distance,
+                    point,
+                    normal,
+                    radiance,
+                    pdf,
+                    delta: false,
+                })
             }
-            Light::Point { position, intensity } => {
+            Light::Point {
+                position,
+                intensity,
+            } => {
                 let to_light = position - p;
                 let distance_squared = to_light.length_squared();
                 if distance_squared == 0.0 {
@@ -202,7 +225,9 @@ impl Lights {
     /// The density with which `sample` would have produced the hit of emissive triangle `t` from
     /// `p`, for multiple importance sampling; zero if the triangle is not a sampled light.
     pub fn triangle_pdf(&self, scene: &Scene, t: u32, p: Vec3, hit_point: Vec3) -> f32 {
-        let Some(&index) = self.triangle_light.get(t as usize) else { return 0.0 };
+        let Some(&index) = self.triangle_light.get(t as usize) else {
+            return 0.0;
+        };
         if index == u32::MAX {
             return 0.0;
         }
@@ -211,7 +236,10 @@ impl Lights {
         let area = 0.5 * area_vector.length();
         let to_light = hit_point - p;
         let distance_squared = to_light.length_squared();
-        let cos_light = (to_light.normalize_or_zero().dot(area_vector.normalize_or_zero())).abs();
+        let cos_light = (to_light
+            .normalize_or_zero()
+            .dot(area_vector.normalize_or_zero()))
+        .abs();
         if cos_light == 0.0 || area == 0.0 {
             return 0.0;
         }

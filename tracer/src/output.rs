@@ -16,7 +16,10 @@ pub struct RgbImage {
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: {message}")]
     Exr { path: PathBuf, message: String },
     #[error("{path}: {message}")]
@@ -24,8 +27,17 @@ pub enum OutputError {
 }
 
 /// Writes `pixels` (`width` x `height`, linear RGB) as a 32-bit float RGB OpenEXR file.
-pub fn write_exr(path: &Path, width: u32, height: u32, pixels: &[[f32; 3]]) -> Result<(), OutputError> {
-    assert_eq!(pixels.len(), width as usize * height as usize, "pixel count must match the size");
+pub fn write_exr(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[[f32; 3]],
+) -> Result<(), OutputError> {
+    assert_eq!(
+        pixels.len(),
+        width as usize * height as usize,
+        "pixel count must match the size"
+    );
     use exr::prelude::*;
     let tmp = temporary(path);
     let channels = SpecificChannels::rgb(|position: Vec2<usize>| {
@@ -38,8 +50,14 @@ pub fn write_exr(path: &Path, width: u32, height: u32, pixels: &[[f32; 3]]) -> R
         .write()
         .non_parallel()
         .to_file(&tmp)
-        .map_err(|e| OutputError::Exr { path: path.to_owned(), message: e.to_string() })?;
-    std::fs::rename(&tmp, path).map_err(|source| OutputError::Io { path: path.to_owned(), source })
+        .map_err(|e| OutputError::Exr {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+    std::fs::rename(&tmp, path).map_err(|source| OutputError::Io {
+        path: path.to_owned(),
+        source,
+    })
 }
 
 /// Reads the first RGB(A) layer of an OpenEXR file as linear RGB (alpha ignored).
@@ -57,7 +75,10 @@ pub fn read_exr(path: &Path) -> Result<RgbImage, OutputError> {
             image.pixels[index] = [r, g, b];
         },
     )
-    .map_err(|e| OutputError::Exr { path: path.to_owned(), message: e.to_string() })?;
+    .map_err(|e| OutputError::Exr {
+        path: path.to_owned(),
+        message: e.to_string(),
+    })?;
     Ok(image.layer_data.channel_data.pixels)
 }
 
@@ -75,8 +96,14 @@ pub fn write_png(
     let tmp = temporary(path);
     image
         .save_with_format(&tmp, image::ImageFormat::Png)
-        .map_err(|e| OutputError::Png { path: path.to_owned(), message: e.to_string() })?;
-    std::fs::rename(&tmp, path).map_err(|source| OutputError::Io { path: path.to_owned(), source })
+        .map_err(|e| OutputError::Png {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+    std::fs::rename(&tmp, path).map_err(|source| OutputError::Io {
+        path: path.to_owned(),
+        source,
+    })
 }
 
 /// Linear RGB to 8-bit sRGB with a fixed exposure: the one tone mapping every preview and every
@@ -91,16 +118,27 @@ pub fn tone_map(pixels: &[[f32; 3]], exposure: f32) -> Vec<u8> {
 /// The sRGB transfer function; NaN and negatives map to 0, anything above 1 to 1.
 pub fn linear_to_srgb(c: f32) -> f32 {
     let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
-    if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
+    if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
 }
 
 /// The sRGB decoding function, for textures.
 pub fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.040_45 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+    if c <= 0.040_45 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
 }
 
 fn temporary(path: &Path) -> PathBuf {
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    let mut name = path
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
     name.push(".partial");
     path.with_file_name(name)
 }
@@ -112,8 +150,9 @@ mod tests {
     #[test]
     fn exr_round_trips_bits_and_png_is_written() {
         let dir = tempfile::tempdir().unwrap();
-        let pixels: Vec<[f32; 3]> =
-            (0..12).map(|i| [i as f32 * 0.1, 1.0 / (i as f32 + 1.0), 1e-30 * i as f32]).collect();
+        let pixels: Vec<[f32; 3]> = (0..12)
+            .map(|i| [i as f32 * 0.1, 1.0 / (i as f32 + 1.0), 1e-30 * i as f32])
+            .collect();
         let path = dir.path().join("a.exr");
         write_exr(&path, 4, 3, &pixels).unwrap();
         let back = read_exr(&path).unwrap();

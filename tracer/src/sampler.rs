@@ -64,10 +64,12 @@ mod tests {
 
     #[test]
     fn same_inputs_same_numbers_and_inputs_matter() {
-        let a: Vec<f32> = (0..8).map({
-            let mut s = PixelSampler::new(1, 2, 3, 4, 5);
-            move |_| s.next_1d()
-        }).collect();
+        let a: Vec<f32> = (0..8)
+            .map({
+                let mut s = PixelSampler::new(1, 2, 3, 4, 5);
+                move |_| s.next_1d()
+            })
+            .collect();
         let mut s = PixelSampler::new(1, 2, 3, 4, 5);
         let b: Vec<f32> = (0..8).map(|_| s.next_1d()).collect();
         assert_eq!(a, b);

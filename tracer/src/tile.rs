@@ -62,7 +62,11 @@ pub struct TileCost {
 /// Renders `rect` of `frame`: every pixel, every sample, in a fixed order.
 pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
     let settings = &world.scene.settings;
-    let camera = world.scene.camera.at(frame).rays(settings.width, settings.height);
+    let camera = world
+        .scene
+        .camera
+        .at(frame)
+        .rays(settings.width, settings.height);
     let (bx0, by0, bw, bh) = rect.blocks();
     let mut blocks = vec![0u64; (bw * bh) as usize];
     let mut pixels = Vec::with_capacity(rect.area() as usize);
@@ -94,7 +98,11 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
         frame,
         rect,
         pixels,
-        cost: TileCost { rays: stats.rays + stats.shadow_rays, work: stats.work(), blocks },
+        cost: TileCost {
+            rays: stats.rays + stats.shadow_rays,
+            work: stats.work(),
+            blocks,
+        },
         stats,
     }
 }
@@ -132,7 +140,8 @@ impl Film {
         for row in 0..rect.h {
             let src = (row * rect.w) as usize;
             let dst = ((rect.y + row) * self.width + rect.x) as usize;
-            self.pixels[dst..dst + rect.w as usize].copy_from_slice(&pixels[src..src + rect.w as usize]);
+            self.pixels[dst..dst + rect.w as usize]
+                .copy_from_slice(&pixels[src..src + rect.w as usize]);
         }
         let (bx0, by0, bw, bh) = rect.blocks();
         for by in 0..bh {

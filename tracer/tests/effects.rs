@@ -1,60 +1,564 @@
-use glam::{Vec2, Vec3};
-use tracer::geometry::{Accel, BuildQuality, TraversalStats, hit_point, spawn_ray, spawn_ray_to};
+//! Specialisation by effect set: absent effects cost nothing, and skipping them changes no bit.
+//!
+//! Three kinds of test. Counters: per-render [`PathStats`] show zero shadow rays, light samples,
+//! refractions or environment lookups exactly where the scene lacks the effect, and non-zero
+//! where it has it (or where `Effects::ALL` forces the work on), so a counter that never moved
+//! would fail. Bit-identity: every scene here, shipped or procedural, renders to the same bits
+//! with its own effect set and with every effect forced on. Closed forms: the furnace, white
+//! furnace and point-in-sphere answers hold for every material and every integrator setting
+//! (depth limit, Russian roulette), in both effect modes.
 
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 40) as f32 / (1u64 << 24) as f32
-    }
+use glam::Vec3;
+use std::path::Path;
+use tracer::geometry::{Accel, BuildQuality};
+use tracer::scene::{MemoryFiles, Scene};
+use tracer::{Effects, PathStats, Rect, TileOutput, World, render_tile};
+
+/// Renders frame `frame` of `scene` whole with `effects` (`None`: the scene's own).
+fn render(scene: &Scene, effects: Option<Effects>, frame: u32) -> TileOutput {
+    let effects = effects.unwrap_or_else(|| Effects::of(scene));
+    let accel = Accel::build(&scene.triangles, BuildQuality::default());
+    let (w, h) = (scene.settings.width, scene.settings.height);
+    let world = World::new(scene.clone(), accel, effects);
+    let out = render_tile(&world, frame, Rect { x: 0, y: 0, w, h });
+    assert_eq!(
+        out.stats.invalid_samples, 0,
+        "no sample may be NaN or infinite"
+    );
+    out
 }
 
-fn experiment(name: &str, toml: &str, light: Vec3, outside_env: bool) {
-    let scene = tracer::scene::load_str(toml).unwrap();
-    let accel = Accel::build(&scene.triangles, BuildQuality::default());
-    let mut rng = Rng(1);
-    let mut stats = TraversalStats::default();
-    let (mut traced, mut occluded) = (0u64, 0u64);
-    for t in &scene.triangles {
-        let ng = t.area_vector().normalize();
-        for k in 0..200 {
-            let (mut b1, mut b2) = (rng.next(), rng.next());
-            if b1 + b2 > 1.0 { b1 = 1.0 - b1; b2 = 1.0 - b2; }
-            match k % 8 { 0 => b1 = 0.0, 1 => b2 = 0.0, 2 => b1 = 1.0 - b2, 3 => {b1 = 0.0; b2 = 0.0}, 4 => {b1 = 1.0; b2 = 0.0}, _ => {} }
-            let p = hit_point(&t.p, b1, b2);
-            let ray = if outside_env {
-                let z = rng.next(); let phi = rng.next() * 6.2831853;
-                let r = (1.0 - z * z).sqrt();
-                let (a, b) = if ng.x.abs() > 0.5 { (Vec3::Y, ng.cross(Vec3::Y).normalize()) } else { (Vec3::X, ng.cross(Vec3::X).normalize()) };
-                let u = ng.cross(b);
-                let _ = a;
-                let d = (u * (r * phi.cos()) + b * (r * phi.sin()) + ng * z).normalize();
-                if d.dot(ng) <= 0.0 { continue; }
-                spawn_ray(p, ng, d)
-            } else {
-                spawn_ray_to(p, ng, light, None)
-            };
-            traced += 1;
-            if accel.occluded(&ray, &mut stats) { occluded += 1; }
-        }
+/// Renders `scene` specialised and with every effect on, asserts the pixels are the same bits,
+/// and returns both renders' counters (specialised first).
+fn assert_same_bits(what: &str, scene: &Scene, frame: u32) -> (PathStats, PathStats) {
+    let auto = render(scene, None, frame);
+    let all = render(scene, Some(Effects::ALL), frame);
+    let bits =
+        |o: &TileOutput| -> Vec<u32> { o.pixels.iter().flatten().map(|c| c.to_bits()).collect() };
+    let (a, b) = (bits(&auto), bits(&all));
+    let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+    assert_eq!(
+        differing,
+        0,
+        "{what}: {differing} channels differ between effects {} and all",
+        Effects::of(scene)
+    );
+    if Effects::of(scene).has_lights() {
+        assert!(
+            auto.pixels.iter().flatten().any(|&c| c > 0.0),
+            "{what}: a black image proves little"
+        );
     }
-    let _ = Vec2::ZERO;
-    println!("{name}: {occluded} of {traced} occluded");
+    (auto.stats, all.stats)
+}
+
+fn load(toml: &str) -> Scene {
+    tracer::scene::load_str(toml).expect("test scene loads")
+}
+
+/// A small open scene: a floor, a box and a sphere of `ball` under the given lights.
+fn open_scene(ball: &str, lights: &str) -> String {
+    format!(
+        r#"
+        [render]
+        width = 20
+        height = 16
+        spp = 4
+        max_depth = 6
+        russian_roulette_depth = 2
+        [camera]
+        position = [0, 1.5, -5]
+        look_at = [0, 0.5, 0]
+        [[object]]
+        shape = "quad"
+        corners = [[-4, 0, -4], [-4, 0, 4], [4, 0, 4], [4, 0, -4]]
+        material = "floor"
+        [[object]]
+        shape = "box"
+        min = [-1.8, 0, -0.5]
+        max = [-0.8, 1.2, 0.5]
+        material = "floor"
+        [[object]]
+        shape = "sphere"
+        center = [0.8, 0.7, 0]
+        radius = 0.7
+        subdivisions = 2
+        material = "ball"
+        [materials.floor]
+        type = "diffuse"
+        albedo = 0.7
+        [materials.ball]
+        {ball}
+        {lights}
+        "#
+    )
+}
+
+const POINT: &str = "[[light]]\ntype = \"point\"\nposition = [1, 4, -2]\nintensity = 20";
+const SKY: &str = "[environment]\nradiance = [0.4, 0.5, 0.7]";
+const DIFFUSE: &str = "type = \"diffuse\"\nalbedo = 0.5";
+const GLASS: &str = "type = \"glass\"\nior = 1.5";
+
+/// Which counters a scene must move. `None`: zero in the specialised render but non-zero with
+/// every effect forced on (work that `--effects all` pays for and the specialised render skips).
+struct Expect {
+    light_samples: Option<bool>,
+    shadow_rays: bool,
+    refractions: bool,
+    environment_lookups: Option<bool>,
 }
 
 #[test]
-fn exp() {
-    let sphere = |sub: u32, r: f32, c: &str| format!("[camera]\nposition=[0,0,0]\nlook_at=[0,0,1]\n[[object]]\nshape=\"sphere\"\nradius={r}\ncenter={c}\nsubdivisions={sub}\ninward=true\nmaterial=\"m\"\n[materials.m]\ntype=\"diffuse\"\n");
-    for (sub, r, c) in [(5, 1.0, "[0,0,0]"), (3, 1.0, "[0,0,0]"), (1, 1.0, "[0,0,0]"), (0, 1.0, "[0,0,0]"), (3, 1e-4, "[0,0,0]"), (3, 1e4, "[1e5,0,0]"), (3, 3.0, "[1e5,1e5,0]")] {
-        let cv: Vec<f32> = c.trim_matches(['[', ']']).split(',').map(|x| x.parse().unwrap()).collect();
-        experiment(&format!("sphere sub {sub} r {r} c {c} inside"), &sphere(sub, r, c), Vec3::new(cv[0], cv[1], cv[2]), false);
-        experiment(&format!("sphere sub {sub} r {r} c {c} outside env"), &sphere(sub, r, c).replace("inward=true", "inward=false"), Vec3::ZERO, true);
+fn counters_are_zero_exactly_where_an_effect_is_absent() {
+    let closed_black_emitter = r#"
+        [render]
+        width = 16
+        height = 16
+        spp = 2
+        [camera]
+        position = [0.1, 0.2, -0.3]
+        look_at = [1, 0, 0]
+        vfov = 90
+        [[object]]
+        shape = "sphere"
+        subdivisions = 2
+        inward = true
+        material = "lamp"
+        [materials.lamp]
+        type = "emissive"
+        emission = 2
+    "#;
+    let zero_sky = "[environment]\nradiance = 0";
+    let dark_lamp = "[[light]]\ntype = \"point\"\nposition = [1, 4, -2]\nintensity = 0";
+    let yes = |b: bool| Some(b);
+    let cases: Vec<(&str, String, Expect)> = vec![
+        (
+            "diffuse under a point light",
+            open_scene(DIFFUSE, POINT),
+            Expect {
+                light_samples: yes(true),
+                shadow_rays: true,
+                refractions: false,
+                environment_lookups: yes(false),
+            },
+        ),
+        (
+            "diffuse under sky",
+            open_scene(DIFFUSE, SKY),
+            Expect {
+                light_samples: yes(true),
+                shadow_rays: true,
+                refractions: false,
+                environment_lookups: yes(true),
+            },
+        ),
+        (
+            "glass under a point light",
+            open_scene(GLASS, POINT),
+            Expect {
+                light_samples: yes(true),
+                shadow_rays: true,
+                refractions: true,
+                environment_lookups: yes(false),
+            },
+        ),
+        (
+            "nothing emits",
+            open_scene(GLASS, ""),
+            Expect {
+                light_samples: None,
+                shadow_rays: false,
+                refractions: true,
+                environment_lookups: yes(false),
+            },
+        ),
+        (
+            "zero sky and a lamp",
+            open_scene(DIFFUSE, &format!("{POINT}\n{zero_sky}")),
+            Expect {
+                light_samples: yes(true),
+                shadow_rays: true,
+                refractions: false,
+                environment_lookups: None,
+            },
+        ),
+        (
+            "a lamp of zero intensity",
+            open_scene(DIFFUSE, &format!("{dark_lamp}\n{SKY}")),
+            Expect {
+                light_samples: yes(true),
+                shadow_rays: true,
+                refractions: false,
+                environment_lookups: yes(true),
+            },
+        ),
+        (
+            "inside a black emitter",
+            closed_black_emitter.to_owned(),
+            Expect {
+                light_samples: None,
+                shadow_rays: false,
+                refractions: false,
+                environment_lookups: yes(false),
+            },
+        ),
+    ];
+    for (what, toml, expect) in cases {
+        let scene = load(&toml);
+        let (auto, all) = assert_same_bits(what, &scene, 0);
+        let check = |name: &str, counter: fn(&PathStats) -> u64, expect: Option<bool>| {
+            let (a, b) = (counter(&auto), counter(&all));
+            match expect {
+                Some(present) => assert_eq!(a > 0, present, "{what}: {name} = {a} specialised"),
+                None => assert!(
+                    a == 0 && b > 0,
+                    "{what}: {name} = {a} specialised, {b} forced on"
+                ),
+            }
+        };
+        check("light samples", |s| s.light_samples, expect.light_samples);
+        check("shadow rays", |s| s.shadow_rays, Some(expect.shadow_rays));
+        check("refractions", |s| s.refractions, Some(expect.refractions));
+        check(
+            "environment lookups",
+            |s| s.environment_lookups,
+            expect.environment_lookups,
+        );
+        let effects = Effects::of(&scene);
+        assert_eq!(effects.shadows, expect.shadow_rays, "{what}: {effects}");
+        assert_eq!(effects.refraction, expect.refractions, "{what}: {effects}");
+        assert_eq!(
+            effects.environment,
+            expect.environment_lookups == Some(true),
+            "{what}: {effects}"
+        );
+        assert!(auto.work() <= all.work(), "{what}: specialising cost work");
     }
-    let bx = "[camera]\nposition=[0,0,0]\nlook_at=[0,0,1]\n[[object]]\nshape=\"box\"\nmin=[-1.3,-0.7,-2.1]\nmax=[1.1,0.9,0.3]\ninward=true\nmaterial=\"m\"\n[materials.m]\ntype=\"diffuse\"\n";
-    experiment("box inside", bx, Vec3::new(0.1, 0.2, -0.5), false);
-    experiment("box outside env", &bx.replace("inward=true", "inward=false"), Vec3::ZERO, true);
+}
+
+#[test]
+fn mirrors_and_glass_alone_take_no_light_samples_even_when_forced() {
+    // Delta BSDFs never sample lights, whatever the effect set: both counters stay at zero,
+    // while the light still arrives (the image is not black) by the BSDF's own sampling.
+    let scene =
+        load(&open_scene(GLASS, &format!("{POINT}\n{SKY}")).replace("albedo = 0.7", "albedo = 0"));
+    let effects = Effects::of(&scene);
+    assert!(
+        !effects.shadows && !effects.diffuse && effects.refraction,
+        "{effects}"
+    );
+    let (auto, all) = assert_same_bits("glass on black", &scene, 0);
+    assert_eq!((auto.light_samples, auto.shadow_rays), (0, 0));
+    assert!(
+        all.light_samples > 0,
+        "black diffuse surfaces still sample lights when forced"
+    );
+    assert_eq!(
+        all.shadow_rays, 0,
+        "a black surface never needs a shadow ray"
+    );
+}
+
+/// `scenes/NAME`, shrunk to `w` x `h` at `spp` samples.
+fn shipped(name: &str, w: u32, h: u32, spp: u32) -> Scene {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes")
+        .join(name);
+    let mut scene = tracer::scene::load(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+    scene.settings.width = w;
+    scene.settings.height = h;
+    scene.settings.samples_per_pixel = spp;
+    scene
+}
+
+#[test]
+fn shipped_scenes_render_the_same_bits_specialised_or_forced() {
+    for (name, frame) in [
+        ("cornell-box/cornell-box.toml", 0),
+        ("furnace/furnace.toml", 0),
+        ("point-in-sphere/point-in-sphere.toml", 0),
+        ("glass-cluster-pan/glass-cluster-pan.toml", 0),
+        ("glass-cluster-pan/glass-cluster-pan.toml", 13),
+    ] {
+        let scene = shipped(name, 24, 20, 4);
+        assert_ne!(
+            Effects::of(&scene),
+            Effects::ALL,
+            "{name} would not test specialisation"
+        );
+        assert_same_bits(name, &scene, frame);
+    }
+}
+
+#[test]
+fn shared_scenes_render_the_same_bits_specialised_or_forced() {
+    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/scenes");
+    if !shared.is_dir() {
+        eprintln!(
+            "SKIPPED: {} is absent; the shared scenes were not checked",
+            shared.display()
+        );
+        return;
+    }
+    // Small images: the point is the many materials (dark glass, water, textures, sky).
+    for name in [
+        "cornell-box-original",
+        "cornell-box-mirror",
+        "cornell-box-sphere",
+        "cornell-box-water",
+        "sponza-skylight",
+    ] {
+        let scene = shipped(&format!("shared/{name}.toml"), 12, 12, 2);
+        assert_same_bits(name, &scene, 0);
+    }
+}
+
+/// A 4 x 4 RGB checkerboard as PNG bytes.
+fn checker_png() -> Vec<u8> {
+    let image = image::RgbImage::from_fn(4, 4, |x, y| {
+        if (x + y) % 2 == 0 {
+            image::Rgb([230, 40, 40])
+        } else {
+            image::Rgb([20, 20, 200])
+        }
+    });
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    image
+        .write_to(&mut bytes, image::ImageFormat::Png)
+        .expect("PNG encodes");
+    bytes.into_inner()
+}
+
+#[test]
+fn textures_and_shading_normals_render_the_same_bits_specialised_or_forced() {
+    // A floor quad with texture coordinates and shading normals tilted away from its geometric
+    // normal, so both code paths change the image.
+    let obj = "v -3 0 -3\nv 3 0 -3\nv 3 0 3\nv -3 0 3\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+               vn 0.3 1 0\nvn -0.3 1 0.2\nvn 0 1 -0.4\nvn 0.1 1 0.1\nf 1/1/1 4/4/4 3/3/3 2/2/2\n";
+    let toml = r#"
+        [render]
+        width = 20
+        height = 16
+        spp = 4
+        [camera]
+        position = [0, 2, -5]
+        look_at = [0, 0, 0]
+        [[object]]
+        obj = "floor.obj"
+        material = "checker"
+        [[object]]
+        shape = "sphere"
+        center = [0, 1, 0]
+        radius = 0.8
+        subdivisions = 2
+        material = "metal"
+        [materials.checker]
+        type = "diffuse"
+        albedo = 1
+        texture = "checker.png"
+        [materials.metal]
+        type = "metal"
+        roughness = 0.3
+        [[light]]
+        type = "point"
+        position = [2, 5, -3]
+        intensity = 30
+        [environment]
+        radiance = 0.2
+    "#;
+    let mut files = MemoryFiles::new();
+    files.insert("scene.toml", toml);
+    files.insert("floor.obj", obj);
+    files.insert("checker.png", checker_png());
+    let scene = tracer::scene::load_from(&files, "scene.toml").expect("test scene loads");
+    let effects = Effects::of(&scene);
+    assert!(
+        effects.textures && effects.shading_normals && effects.glossy_reflection,
+        "{effects}"
+    );
+    assert_same_bits("textures and shading normals", &scene, 0);
+    // Guard: the texture and the normals do change the image, so equal bits are not vacuous.
+    let plain = render(
+        &scene,
+        Some(Effects {
+            textures: false,
+            shading_normals: false,
+            ..Effects::ALL
+        }),
+        0,
+    );
+    assert_ne!(plain.pixels, render(&scene, None, 0).pixels);
+}
+
+// The closed forms, for every material and integrator setting.
+
+/// Per-channel mean of an image and its standard error (pixels are independent).
+fn mean_and_error(out: &TileOutput) -> (Vec3, Vec3) {
+    let n = out.pixels.len() as f64;
+    let mut sum = [0.0f64; 3];
+    let mut sum_sq = [0.0f64; 3];
+    for p in &out.pixels {
+        for c in 0..3 {
+            sum[c] += f64::from(p[c]);
+            sum_sq[c] += f64::from(p[c]).powi(2);
+        }
+    }
+    let mean = sum.map(|s| s / n);
+    let se: [f64; 3] =
+        std::array::from_fn(|c| ((sum_sq[c] / n - mean[c].powi(2)).max(0.0) / n).sqrt());
+    (
+        Vec3::from_array(mean.map(|m| m as f32)),
+        Vec3::from_array(se.map(|s| s as f32)),
+    )
+}
+
+/// The integrator settings every material is run under: (`max_depth`, `russian_roulette_depth`).
+const SETTINGS: [(Option<u32>, Option<u32>); 6] = [
+    (Some(1), None),
+    (Some(3), None),
+    (Some(3), Some(1)),
+    (Some(6), Some(2)),
+    (None, Some(1)),
+    (None, Some(3)),
+];
+
+/// `max_depth` as TOML, and the sum of `r^k` for k in 0..=depth (infinite depth: 1 / (1 - r)).
+fn depth_toml(depth: Option<u32>) -> String {
+    depth.map_or("\"unlimited\"".to_owned(), |d| d.to_string())
+}
+fn series(r: f32, depth: Option<u32>) -> f32 {
+    depth.map_or(1.0 / (1.0 - r), |d| (0..=d).map(|k| r.powi(k as i32)).sum())
+}
+
+/// Camera inside a closed inward sphere of `material` (which emits 1.5 inward).
+fn furnace(material: &str, depth: Option<u32>, roulette: Option<u32>) -> String {
+    let roulette = roulette.map_or("\"off\"".to_owned(), |r| r.to_string());
+    format!(
+        "[render]\nwidth = 16\nheight = 16\nspp = 8\nmax_depth = {}\nrussian_roulette_depth = {roulette}\n\
+         [camera]\nposition = [0.1, -0.2, 0.05]\nlook_at = [1, 0.3, 0.2]\nvfov = 90\n\
+         [[object]]\nshape = \"sphere\"\nsubdivisions = 3\ninward = true\nmaterial = \"wall\"\n\
+         [materials.wall]\n{material}\nemission = 1.5\n",
+        depth_toml(depth)
+    )
+}
+
+/// A unit sphere of `material` seen from outside in a uniform environment of radiance 0.8.
+fn white_furnace(material: &str, depth: Option<u32>, roulette: Option<u32>) -> String {
+    furnace(material, depth, roulette)
+        .replace(
+            "position = [0.1, -0.2, 0.05]\nlook_at = [1, 0.3, 0.2]\nvfov = 90",
+            "position = [0, 0, -3]\nlook_at = [0, 0, 0]\nvfov = 40",
+        )
+        .replace("inward = true", "inward = false")
+        .replace("emission = 1.5\n", "[environment]\nradiance = 0.8\n")
+}
+
+/// Asserts `mean` lies in `[lo, hi]` up to four standard errors in every channel.
+fn assert_within(what: &str, (mean, se): (Vec3, Vec3), lo: f32, hi: f32) {
+    for c in 0..3 {
+        let slack = 4.0 * se[c] + 1e-5 * hi.abs();
+        assert!(
+            mean[c] >= lo - slack && mean[c] <= hi + slack,
+            "{what}: channel {c} mean {} not in [{lo}, {hi}] (se {})",
+            mean[c],
+            se[c]
+        );
+    }
+}
+
+#[test]
+fn furnaces_hold_for_every_material_and_integrator_setting_in_both_effect_modes() {
+    for (depth, roulette) in SETTINGS {
+        let setting = format!("max_depth {depth:?}, roulette {roulette:?}");
+        // Emitting walls inside a closed sphere: every hit adds 1.5, every bounce keeps r.
+        for (material, r) in [
+            ("type = \"diffuse\"\nalbedo = 0.5", 0.5f32),
+            ("type = \"mirror\"\nreflectance = 0.5", 0.5),
+        ] {
+            let scene = load(&furnace(material, depth, roulette));
+            let what = format!("furnace {material:?}, {setting}");
+            assert_same_bits(&what, &scene, 0);
+            let expected = 1.5 * series(r, depth);
+            assert_within(
+                &what,
+                mean_and_error(&render(&scene, None, 0)),
+                expected,
+                expected,
+            );
+        }
+        // A rough metal with f0 = 1 reflects at most everything and, single-scattering, loses a
+        // little at each bounce: between the series for 0.8 and for 1 (unlimited depth would
+        // make the latter infinite, so only limited depths are run).
+        if let Some(d) = depth {
+            let scene = load(&furnace(
+                "type = \"metal\"\nreflectance = 1\nroughness = 0.5",
+                depth,
+                roulette,
+            ));
+            let what = format!("metal furnace, {setting}");
+            assert_same_bits(&what, &scene, 0);
+            let result = mean_and_error(&render(&scene, None, 0));
+            assert_within(
+                &what,
+                result,
+                1.5 * series(0.8, depth),
+                1.5 * (d + 1) as f32,
+            );
+        }
+        // Energy-conserving materials vanish in a uniform environment; glass needs the depth to
+        // follow its internal reflections, so it is run only where paths are not cut short.
+        let glass_ok = depth.is_none_or(|d| d >= 6);
+        for material in [
+            "type = \"diffuse\"\nalbedo = 1",
+            "type = \"mirror\"\nreflectance = 1",
+            "type = \"glass\"\nior = 1.5",
+        ] {
+            if material.contains("glass") && !glass_ok {
+                continue;
+            }
+            let scene = load(&white_furnace(material, depth, roulette));
+            let what = format!("white furnace {material:?}, {setting}");
+            assert_same_bits(&what, &scene, 0);
+            // Six bounces inside glass leave at most a few 1e-3 of the light behind.
+            let lo = if material.contains("glass") && depth.is_some() {
+                0.79
+            } else {
+                0.8
+            };
+            assert_within(&what, mean_and_error(&render(&scene, None, 0)), lo, 0.8);
+        }
+        let scene = load(&white_furnace(
+            "type = \"metal\"\nreflectance = 1\nroughness = 0.5",
+            depth,
+            roulette,
+        ));
+        let what = format!("white furnace metal, {setting}");
+        assert_same_bits(&what, &scene, 0);
+        assert_within(&what, mean_and_error(&render(&scene, None, 0)), 0.6, 0.8);
+    }
+}
+
+#[test]
+fn point_in_sphere_holds_for_every_integrator_setting_in_both_effect_modes() {
+    // Intensity pi at the centre of a unit sphere, diffuse 0.5 inside: the k-th scattering adds
+    // 0.5^k, so max_depth D gives 1 - 0.5^D and no limit gives 1. The tessellated sphere lies
+    // just inside the true one (1% slack).
+    for (depth, roulette) in SETTINGS {
+        let toml = furnace("type = \"diffuse\"\nalbedo = 0.5", depth, roulette)
+            .replace(
+                "emission = 1.5\n",
+                "[[light]]\ntype = \"point\"\nposition = [0, 0, 0]\nintensity = 3.14159265\n",
+            )
+            .replace("subdivisions = 3", "subdivisions = 4");
+        let scene = load(&toml);
+        let what = format!("point in sphere, max_depth {depth:?}, roulette {roulette:?}");
+        assert_same_bits(&what, &scene, 0);
+        let expected = depth.map_or(1.0, |d| 1.0 - 0.5f32.powi(d as i32));
+        assert_within(
+            &what,
+            mean_and_error(&render(&scene, None, 0)),
+            0.99 * expected,
+            1.01 * expected,
+        );
+    }
 }

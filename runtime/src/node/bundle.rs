@@ -7,14 +7,17 @@
 
 use crate::wire::{RenderParams, SceneFile, TileResult};
 use std::path::Path;
-use tracer::scene::{normalize, MemoryFiles, SceneError};
+use tracer::scene::{MemoryFiles, SceneError, normalize};
 use tracer::{Scene, TileCost, TileOutput};
 
 /// Why a scene could not be shipped or received.
 #[derive(Debug, thiserror::Error)]
 pub enum BundleError {
     #[error("{path}: {source}")]
-    Read { path: String, source: std::io::Error },
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
     #[error("scene file {name} does not match its hash")]
     HashMismatch { name: String },
     #[error("the scene has no files")]
@@ -35,23 +38,50 @@ pub fn scene_files(toml_path: &Path, scene: &Scene) -> Result<Vec<SceneFile>, Bu
     let climb = scene
         .files
         .iter()
-        .map(|name| normalize(name).unwrap_or_default().split('/').take_while(|part| *part == "..").count())
+        .map(|name| {
+            normalize(name)
+                .unwrap_or_default()
+                .split('/')
+                .take_while(|part| *part == "..")
+                .count()
+        })
         .max()
         .unwrap_or(0);
-    let absolute = std::fs::canonicalize(if folder.as_os_str().is_empty() { Path::new(".") } else { folder })
-        .map_err(|source| BundleError::Read { path: folder.display().to_string(), source })?;
-    let parts: Vec<String> = absolute.iter().skip(1).map(|p| p.to_string_lossy().into_owned()).collect();
+    let absolute = std::fs::canonicalize(if folder.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        folder
+    })
+    .map_err(|source| BundleError::Read {
+        path: folder.display().to_string(),
+        source,
+    })?;
+    let parts: Vec<String> = absolute
+        .iter()
+        .skip(1)
+        .map(|p| p.to_string_lossy().into_owned())
+        .collect();
     let prefix = parts[parts.len().saturating_sub(climb)..].join("/");
     scene
         .files
         .iter()
         .map(|name| {
             let path = folder.join(name);
-            let bytes = std::fs::read(&path)
-                .map_err(|source| BundleError::Read { path: path.display().to_string(), source })?;
-            let rooted = if prefix.is_empty() { name.clone() } else { format!("{prefix}/{name}") };
+            let bytes = std::fs::read(&path).map_err(|source| BundleError::Read {
+                path: path.display().to_string(),
+                source,
+            })?;
+            let rooted = if prefix.is_empty() {
+                name.clone()
+            } else {
+                format!("{prefix}/{name}")
+            };
             let name = normalize(&rooted).unwrap_or(rooted);
-            Ok(SceneFile { name, hash: *blake3::hash(&bytes).as_bytes(), bytes })
+            Ok(SceneFile {
+                name,
+                hash: *blake3::hash(&bytes).as_bytes(),
+                bytes,
+            })
         })
         .collect()
 }
@@ -108,7 +138,11 @@ pub fn scene_digest(files: &[SceneFile]) -> String {
 
 /// Pixels as little-endian `f32` triples.
 pub fn encode_pixels(pixels: &[[f32; 3]]) -> Vec<u8> {
-    pixels.iter().flatten().flat_map(|c| c.to_le_bytes()).collect()
+    pixels
+        .iter()
+        .flatten()
+        .flat_map(|c| c.to_le_bytes())
+        .collect()
 }
 
 /// The inverse of [`encode_pixels`]; `None` when the length is not a whole number of pixels.
@@ -119,14 +153,26 @@ pub fn decode_pixels(bytes: &[u8]) -> Option<Vec<[f32; 3]>> {
     Some(
         bytes
             .chunks_exact(12)
-            .map(|p| std::array::from_fn(|c| f32::from_le_bytes(p[4 * c..4 * c + 4].try_into().expect("chunks of 12 hold three 4-byte floats"))))
+            .map(|p| {
+                std::array::from_fn(|c| {
+                    f32::from_le_bytes(
+                        p[4 * c..4 * c + 4]
+                            .try_into()
+                            .expect("chunks of 12 hold three 4-byte floats"),
+                    )
+                })
+            })
             .collect(),
     )
 }
 
 /// A tile's cost: rays, then work, then the block counts, all little-endian `u64`.
 pub fn encode_cost(cost: &TileCost) -> Vec<u8> {
-    [cost.rays, cost.work].iter().chain(&cost.blocks).flat_map(|v| v.to_le_bytes()).collect()
+    [cost.rays, cost.work]
+        .iter()
+        .chain(&cost.blocks)
+        .flat_map(|v| v.to_le_bytes())
+        .collect()
 }
 
 /// The inverse of [`encode_cost`]; `None` when malformed.
@@ -139,11 +185,19 @@ pub fn decode_cost(bytes: &[u8]) -> Option<TileCost> {
         .map(|v| u64::from_le_bytes(v.try_into().expect("chunks of 8 are 8 bytes")));
     let rays = values.next()?;
     let work = values.next()?;
-    Some(TileCost { rays, work, blocks: values.collect() })
+    Some(TileCost {
+        rays,
+        work,
+        blocks: values.collect(),
+    })
 }
 
 /// A rendered tile as the wire carries it.
-pub fn tile_result(frame: crate::wire::FrameId, tile: crate::wire::TileId, output: &TileOutput) -> TileResult {
+pub fn tile_result(
+    frame: crate::wire::FrameId,
+    tile: crate::wire::TileId,
+    output: &TileOutput,
+) -> TileResult {
     TileResult {
         frame,
         tile,
@@ -163,7 +217,11 @@ mod tests {
         let back = decode_pixels(&encode_pixels(&pixels)).unwrap();
         let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&back), bits(&pixels));
-        let cost = TileCost { rays: 7, work: 99, blocks: vec![1, u64::MAX, 0] };
+        let cost = TileCost {
+            rays: 7,
+            work: 99,
+            blocks: vec![1, u64::MAX, 0],
+        };
         assert_eq!(decode_cost(&encode_cost(&cost)), Some(cost));
         assert_eq!(decode_pixels(&[0; 13]), None);
         assert_eq!(decode_cost(&[0; 12]), None);
@@ -172,11 +230,31 @@ mod tests {
     #[test]
     fn a_tampered_scene_file_is_refused() {
         let toml = b"[camera]\nposition = [0, 0, -1]\nlook_at = [0, 0, 0]\n[[object]]\nshape = \"sphere\"\ncenter = [0, 0, 0]\nradius = 1\nmaterial = \"m\"\n[materials.m]\ntype = \"diffuse\"\n".to_vec();
-        let mut file = SceneFile { name: "s.toml".into(), hash: *blake3::hash(&toml).as_bytes(), bytes: toml };
-        let params = RenderParams { width: 8, height: 6, samples_per_pixel: 1, seed: 3, ..RenderParams::default() };
+        let mut file = SceneFile {
+            name: "s.toml".into(),
+            hash: *blake3::hash(&toml).as_bytes(),
+            bytes: toml,
+        };
+        let params = RenderParams {
+            width: 8,
+            height: 6,
+            samples_per_pixel: 1,
+            seed: 3,
+            ..RenderParams::default()
+        };
         let scene = load_scene(vec![file.clone()], &params).unwrap();
-        assert_eq!((scene.settings.width, scene.settings.height, scene.settings.seed), (8, 6, 3));
+        assert_eq!(
+            (
+                scene.settings.width,
+                scene.settings.height,
+                scene.settings.seed
+            ),
+            (8, 6, 3)
+        );
         file.bytes.push(b'\n');
-        assert!(matches!(load_scene(vec![file], &params), Err(BundleError::HashMismatch { .. })));
+        assert!(matches!(
+            load_scene(vec![file], &params),
+            Err(BundleError::HashMismatch { .. })
+        ));
     }
 }

@@ -40,9 +40,21 @@ impl Default for Options {
     fn default() -> Self {
         // The scene travels in one message: allow scenes up to 64 MiB (the Stanford dragon's
         // OBJ is 32 MB). Chunked scene transfer would lift this; it is not written yet.
-        let net = crate::net::Config { max_message_bytes: 64 << 20, ..crate::net::Config::default() };
-        let limits = crate::wire::Limits { max_message_bytes: 64 << 20, ..crate::wire::Limits::default() };
-        Self { threads: 1, core: crate::core::Config::default(), net, limits, seed: 0 }
+        let net = crate::net::Config {
+            max_message_bytes: 64 << 20,
+            ..crate::net::Config::default()
+        };
+        let limits = crate::wire::Limits {
+            max_message_bytes: 64 << 20,
+            ..crate::wire::Limits::default()
+        };
+        Self {
+            threads: 1,
+            core: crate::core::Config::default(),
+            net,
+            limits,
+            seed: 0,
+        }
     }
 }
 
@@ -121,7 +133,12 @@ pub struct LocalRun {
 
 /// Renders `job` with `peers` peers in this process (peer 0 is the owner), each with
 /// `options.threads` rendering threads, over QUIC on 127.0.0.1 with certificates made in memory.
-pub async fn run_local(job: Job, peers: usize, options: Options, sink: &mut dyn FrameSink) -> Result<LocalRun, NodeError> {
+pub async fn run_local(
+    job: Job,
+    peers: usize,
+    options: Options,
+    sink: &mut dyn FrameSink,
+) -> Result<LocalRun, NodeError> {
     let peers = peers.max(1);
     let certs = ClusterCerts::generate(peers as u32)?;
     let loopback = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
@@ -132,7 +149,9 @@ pub async fn run_local(job: Job, peers: usize, options: Options, sink: &mut dyn 
         let options = options.clone();
         tasks.push(tokio::spawn(async move {
             let id = PeerId(identity.index());
-            run_peer(owner_addr, loopback, &identity, options).await.map(|tiles| (id, tiles))
+            run_peer(owner_addr, loopback, &identity, options)
+                .await
+                .map(|tiles| (id, tiles))
         }));
     }
     let (report, own_tiles) = owner.run(job, peers - 1, sink).await?;
@@ -142,8 +161,15 @@ pub async fn run_local(job: Job, peers: usize, options: Options, sink: &mut dyn 
             Ok(Ok(Ok(timeline))) => timelines.push(timeline),
             Ok(Ok(Err(error))) => return Err(NodeError::Peer(error.to_string())),
             Ok(Err(join)) => return Err(NodeError::Peer(join.to_string())),
-            Err(_) => return Err(NodeError::Peer("a peer did not stop after the render".into())),
+            Err(_) => {
+                return Err(NodeError::Peer(
+                    "a peer did not stop after the render".into(),
+                ));
+            }
         }
     }
-    Ok(LocalRun { peers: report, timelines })
+    Ok(LocalRun {
+        peers: report,
+        timelines,
+    })
 }

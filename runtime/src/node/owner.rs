@@ -3,11 +3,14 @@
 //! tiles itself too: its own core is one of the participants.
 
 use super::bundle;
-use super::session::{check_hello, Session, Step};
+use super::session::{Session, Step, check_hello};
 use super::{CompletedFrame, FrameSink, NodeError, Options, TileRecord};
 use crate::core::{Core, Event as CoreEvent, PeerStats};
 use crate::net::{CloseCode, Link, PeerIdentity};
-use crate::wire::{FrameId, GoodbyeReason, Message, PeerAddress, PeerId, RenderParams, SceneFile, TileId, TileSpec, PROTOCOL_VERSION};
+use crate::wire::{
+    FrameId, GoodbyeReason, Message, PROTOCOL_VERSION, PeerAddress, PeerId, RenderParams,
+    SceneFile, TileId, TileSpec,
+};
 use std::collections::{BTreeMap, BTreeSet};
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -36,10 +39,27 @@ pub type PeerReport = BTreeMap<(u64, PeerId), PeerStats>;
 
 impl Owner {
     /// Binds the owner's endpoint. Must be called within a tokio runtime.
-    pub fn bind(listen: SocketAddr, identity: &PeerIdentity, options: Options) -> Result<Self, NodeError> {
-        let (link, events) = Link::bind(listen, identity, options.net.clone(), super::session::decoder(options.limits.clone()))?;
-        let core = Core::new(PeerId(identity.index()), options.threads, options.core.clone(), options.seed);
-        Ok(Self { session: Session::new(core, link, events), options })
+    pub fn bind(
+        listen: SocketAddr,
+        identity: &PeerIdentity,
+        options: Options,
+    ) -> Result<Self, NodeError> {
+        let (link, events) = Link::bind(
+            listen,
+            identity,
+            options.net.clone(),
+            super::session::decoder(options.limits.clone()),
+        )?;
+        let core = Core::new(
+            PeerId(identity.index()),
+            options.threads,
+            options.core.clone(),
+            options.seed,
+        );
+        Ok(Self {
+            session: Session::new(core, link, events),
+            options,
+        })
     }
 
     pub fn local_addr(&self) -> std::io::Result<SocketAddr> {
@@ -48,19 +68,32 @@ impl Owner {
 
     /// Waits for `expect` peers to join, then renders every frame of `job`, handing each finished
     /// frame to `sink`. Returns what the peers reported, and the tiles rendered here.
-    pub async fn run(mut self, job: Job, expect: usize, sink: &mut dyn FrameSink) -> Result<(PeerReport, Vec<super::LocalTile>), NodeError> {
-        let (renderer, results) = super::session::Renderer::new(self.options.threads, job.world.clone())?;
+    pub async fn run(
+        mut self,
+        job: Job,
+        expect: usize,
+        sink: &mut dyn FrameSink,
+    ) -> Result<(PeerReport, Vec<super::LocalTile>), NodeError> {
+        let (renderer, results) =
+            super::session::Renderer::new(self.options.threads, job.world.clone())?;
         self.session.set_renderer(renderer, results);
         let joined = self.admit(&job.files, job.params, expect).await?;
         let mut partitioner = job.partitioner;
         let mut report = PeerReport::new();
         for frame in 0..job.frames {
-            let completed = self.render_frame(frame, &mut partitioner, &job.world, &mut report).await?;
+            let completed = self
+                .render_frame(frame, &mut partitioner, &job.world, &mut report)
+                .await?;
             sink.frame(completed).map_err(NodeError::Sink)?;
         }
         // Late statistics of the last frame arrive after its FrameDone: give them a moment.
         let deadline = Instant::now() + std::time::Duration::from_millis(200);
-        while report.keys().filter(|(f, _)| u64::from(job.frames.saturating_sub(1)) == *f).count() < joined + 1 {
+        while report
+            .keys()
+            .filter(|(f, _)| u64::from(job.frames.saturating_sub(1)) == *f)
+            .count()
+            < joined + 1
+        {
             let remaining = deadline.saturating_duration_since(Instant::now());
             match tokio::time::timeout(remaining, self.session.step()).await {
                 Ok(Step::Core(CoreEvent::PeerStats { frame, peer, stats })) => {
@@ -72,7 +105,12 @@ impl Owner {
         }
         let peers: Vec<PeerId> = self.session.peers.ids().collect();
         for peer in peers {
-            self.session.send(peer, &Message::Goodbye { reason: GoodbyeReason::Shutdown });
+            self.session.send(
+                peer,
+                &Message::Goodbye {
+                    reason: GoodbyeReason::Shutdown,
+                },
+            );
         }
         // Give the goodbyes a moment to leave before the endpoint closes.
         tokio::time::sleep(std::time::Duration::from_millis(50)).await;
@@ -81,31 +119,62 @@ impl Owner {
     }
 
     /// Admits peers until `expect` have loaded the scene; then tells each where the others are.
-    async fn admit(&mut self, files: &[SceneFile], params: RenderParams, expect: usize) -> Result<usize, NodeError> {
-        let mut pending: BTreeMap<crate::net::ConnId, (crate::net::PeerCertificate, SocketAddr)> = BTreeMap::new();
+    async fn admit(
+        &mut self,
+        files: &[SceneFile],
+        params: RenderParams,
+        expect: usize,
+    ) -> Result<usize, NodeError> {
+        let mut pending: BTreeMap<crate::net::ConnId, (crate::net::PeerCertificate, SocketAddr)> =
+            BTreeMap::new();
         let mut ready: BTreeMap<PeerId, SocketAddr> = BTreeMap::new();
         let mut loading: BTreeMap<crate::net::ConnId, (PeerId, SocketAddr)> = BTreeMap::new();
         let digest = bundle::scene_digest(files);
         while ready.len() < expect {
             match self.session.step().await {
-                Step::Connected { conn, certificate, remote, .. } => {
+                Step::Connected {
+                    conn,
+                    certificate,
+                    remote,
+                    ..
+                } => {
                     pending.insert(conn, (certificate, remote));
                 }
                 Step::Control { conn, message } => {
                     if let Some((certificate, remote)) = pending.remove(&conn) {
                         match check_hello(&message, &certificate) {
-                            Ok((peer, _)) if peer == self.session.core.id() || ready.contains_key(&peer) => {
-                                self.session.close(conn, CloseCode::Identity, &format!("{peer} is already here"));
+                            Ok((peer, _))
+                                if peer == self.session.core.id() || ready.contains_key(&peer) =>
+                            {
+                                self.session.close(
+                                    conn,
+                                    CloseCode::Identity,
+                                    &format!("{peer} is already here"),
+                                );
                             }
                             Ok((peer, slots)) => {
                                 tracing::info!(%peer, %remote, slots, "peer joined; sending scene {digest}");
-                                self.session.send_conn(conn, &Message::Welcome { version: PROTOCOL_VERSION, peer: self.session.core.id() });
-                                self.session.send_conn(conn, &Message::Scene { files: files.to_vec(), params });
+                                self.session.send_conn(
+                                    conn,
+                                    &Message::Welcome {
+                                        version: PROTOCOL_VERSION,
+                                        peer: self.session.core.id(),
+                                    },
+                                );
+                                self.session.send_conn(
+                                    conn,
+                                    &Message::Scene {
+                                        files: files.to_vec(),
+                                        params,
+                                    },
+                                );
                                 loading.insert(conn, (peer, remote));
                             }
                             Err(reason) => self.session.close(conn, CloseCode::Identity, &reason),
                         }
-                    } else if let (Some(&(peer, remote)), Message::SceneReady) = (loading.get(&conn), &message) {
+                    } else if let (Some(&(peer, remote)), Message::SceneReady) =
+                        (loading.get(&conn), &message)
+                    {
                         loading.remove(&conn);
                         self.session.peers.bind(conn, peer);
                         ready.insert(peer, remote);
@@ -113,7 +182,11 @@ impl Owner {
                     } else if let Message::Goodbye { reason } = message {
                         tracing::warn!(?conn, ?reason, "a joining peer gave up");
                     } else {
-                        self.session.close(conn, CloseCode::Protocol, &format!("unexpected {} while joining", message.kind()));
+                        self.session.close(
+                            conn,
+                            CloseCode::Protocol,
+                            &format!("unexpected {} while joining", message.kind()),
+                        );
                     }
                 }
                 Step::Closed { conn, peer } => {
@@ -127,11 +200,21 @@ impl Owner {
                 Step::Stopped => return Err(NodeError::Stopped),
             }
         }
-        let addresses: Vec<PeerAddress> =
-            ready.iter().map(|(&peer, addr)| PeerAddress { peer, addr: addr.to_string() }).collect();
+        let addresses: Vec<PeerAddress> = ready
+            .iter()
+            .map(|(&peer, addr)| PeerAddress {
+                peer,
+                addr: addr.to_string(),
+            })
+            .collect();
         let now = self.session.now();
         for &peer in ready.keys() {
-            self.session.send(peer, &Message::Peers { peers: addresses.clone() });
+            self.session.send(
+                peer,
+                &Message::Peers {
+                    peers: addresses.clone(),
+                },
+            );
             self.session.core.handle_peer_connected(now, peer);
         }
         self.session.flush();
@@ -154,15 +237,23 @@ impl Owner {
         for (peer, run) in participants.iter().zip(assignment.runs.iter()) {
             let specs = run
                 .iter()
-                .map(|&index| TileSpec { id: TileId(index as u32), rect: tiles[index].rect, predicted: tiles[index].predicted })
+                .map(|&index| TileSpec {
+                    id: TileId(index as u32),
+                    rect: tiles[index].rect,
+                    predicted: tiles[index].predicted,
+                })
                 .collect();
             initial.insert(*peer, specs);
         }
-        let owners: BTreeMap<TileId, PeerId> =
-            initial.iter().flat_map(|(&peer, specs)| specs.iter().map(move |spec| (spec.id, peer))).collect();
+        let owners: BTreeMap<TileId, PeerId> = initial
+            .iter()
+            .flat_map(|(&peer, specs)| specs.iter().map(move |spec| (spec.id, peer)))
+            .collect();
         let now = self.session.now();
         let started = Instant::now();
-        self.session.core.start_frame(now, FrameId(u64::from(frame)), initial)?;
+        self.session
+            .core
+            .start_frame(now, FrameId(u64::from(frame)), initial)?;
         self.session.flush();
         // A renderer that keeps producing results the ledger refuses would have its tiles
         // re-issued forever; past this many refusals the render stops with an error instead.
@@ -170,18 +261,38 @@ impl Owner {
         let max_faults = 2 * tiles.len() + 8;
         loop {
             match self.session.step().await {
-                Step::Core(CoreEvent::FrameComplete { frame: done, results, rendered_by, .. }) if done.0 == u64::from(frame) => {
+                Step::Core(CoreEvent::FrameComplete {
+                    frame: done,
+                    results,
+                    rendered_by,
+                    ..
+                }) if done.0 == u64::from(frame) => {
                     let seconds = started.elapsed().as_secs_f64();
                     let results = rendered_by.into_iter().zip(results).collect();
-                    return self.assemble(frame, &tiles, &owners, results, world, seconds, partitioner);
+                    return self.assemble(
+                        frame,
+                        &tiles,
+                        &owners,
+                        results,
+                        world,
+                        seconds,
+                        partitioner,
+                    );
                 }
                 Step::Core(CoreEvent::PeerStats { frame, peer, stats }) => {
                     report.insert((frame.0, peer), stats);
                 }
-                Step::Core(CoreEvent::PeerFailed { peer, reason, reissued, .. }) => {
+                Step::Core(CoreEvent::PeerFailed {
+                    peer,
+                    reason,
+                    reissued,
+                    ..
+                }) => {
                     tracing::warn!(%peer, ?reason, reissued, "peer failed; its tiles were re-issued");
                 }
-                Step::Core(CoreEvent::FaultyPeer { peer, tile, fault, .. }) => {
+                Step::Core(CoreEvent::FaultyPeer {
+                    peer, tile, fault, ..
+                }) => {
                     tracing::error!(%peer, %tile, ?fault, "faulty result ignored");
                     faults += 1;
                     if faults > max_faults {
@@ -190,11 +301,19 @@ impl Owner {
                 }
                 Step::Core(event) => tracing::debug!(?event, "core event"),
                 Step::Connected { conn, .. } => {
-                    self.session.close(conn, CloseCode::Protocol, "the render has started; no new peers");
+                    self.session.close(
+                        conn,
+                        CloseCode::Protocol,
+                        "the render has started; no new peers",
+                    );
                 }
                 Step::Control { conn, message } => {
                     if !matches!(message, Message::Goodbye { .. }) {
-                        self.session.close(conn, CloseCode::Protocol, &format!("unexpected {}", message.kind()));
+                        self.session.close(
+                            conn,
+                            CloseCode::Protocol,
+                            &format!("unexpected {}", message.kind()),
+                        );
                     }
                 }
                 Step::Closed { .. } => {}
@@ -218,8 +337,14 @@ impl Owner {
         let mut records = Vec::with_capacity(results.len());
         let mut rays = 0u64;
         for (peer, result) in results {
-            let rect = tracer::Rect { x: result.rect.x, y: result.rect.y, w: result.rect.w, h: result.rect.h };
-            let pixels = bundle::decode_pixels(&result.pixels).ok_or(NodeError::BadTile(result.tile))?;
+            let rect = tracer::Rect {
+                x: result.rect.x,
+                y: result.rect.y,
+                w: result.rect.w,
+                h: result.rect.h,
+            };
+            let pixels =
+                bundle::decode_pixels(&result.pixels).ok_or(NodeError::BadTile(result.tile))?;
             let cost = bundle::decode_cost(&result.costs).ok_or(NodeError::BadTile(result.tile))?;
             let (_, _, bw, bh) = rect.blocks();
             if pixels.len() as u64 != rect.area() || cost.blocks.len() != (bw * bh) as usize {
@@ -227,12 +352,32 @@ impl Owner {
             }
             film.insert(rect, &pixels, &cost);
             rays += cost.rays;
-            let predicted = tiles.get(result.tile.0 as usize).map_or(0.0, |t| t.predicted);
+            let predicted = tiles
+                .get(result.tile.0 as usize)
+                .map_or(0.0, |t| t.predicted);
             let initial = owners.get(&result.tile).copied().unwrap_or(peer);
-            records.push(TileRecord { tile: result.tile, rect: result.rect, predicted, measured: cost.work, peer, initial });
+            records.push(TileRecord {
+                tile: result.tile,
+                rect: result.rect,
+                predicted,
+                measured: cost.work,
+                peer,
+                initial,
+            });
         }
-        let map = balancer::CostMap::from_counts(film.width, film.height, tracer::BLOCK_SIZE, &film.block_work)?;
+        let map = balancer::CostMap::from_counts(
+            film.width,
+            film.height,
+            tracer::BLOCK_SIZE,
+            &film.block_work,
+        )?;
         partitioner.observe(&map)?;
-        Ok(CompletedFrame { frame, film, tiles: records, seconds, rays })
+        Ok(CompletedFrame {
+            frame,
+            film,
+            tiles: records,
+            seconds,
+            rays,
+        })
     }
 }

@@ -1,11 +1,11 @@
 //! A peer that is not the frame owner: joins the owner, loads the scene it is sent, connects to
 //! the other peers so that it can steal from them, and renders until the owner says goodbye.
 
-use super::session::{check_hello, Renderer, Session, Step};
-use super::{bundle, NodeError, Options};
+use super::session::{Renderer, Session, Step, check_hello};
+use super::{NodeError, Options, bundle};
 use crate::core::{Core, Event as CoreEvent};
 use crate::net::{CloseCode, ConnId, Expect, Link, PeerIdentity};
-use crate::wire::{GoodbyeReason, Message, PeerId, PROTOCOL_VERSION};
+use crate::wire::{GoodbyeReason, Message, PROTOCOL_VERSION, PeerId};
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -19,11 +19,23 @@ pub async fn run_peer(
     options: Options,
 ) -> Result<Vec<super::LocalTile>, NodeError> {
     let me = PeerId(identity.index());
-    let (link, events) = Link::bind(listen, identity, options.net.clone(), super::session::decoder(options.limits.clone()))?;
+    let (link, events) = Link::bind(
+        listen,
+        identity,
+        options.net.clone(),
+        super::session::decoder(options.limits.clone()),
+    )?;
     let core = Core::new(me, options.threads, options.core.clone(), options.seed);
     let mut session = Session::new(core, link, events);
     let owner_conn = session.link.connect(owner, Expect::Peer(0)).await?;
-    session.send_conn(owner_conn, &Message::Hello { version: PROTOCOL_VERSION, peer: me, slots: options.threads as u32 });
+    session.send_conn(
+        owner_conn,
+        &Message::Hello {
+            version: PROTOCOL_VERSION,
+            peer: me,
+            slots: options.threads as u32,
+        },
+    );
 
     // Connections whose handshake is under way: inbound ones wait for Hello, outbound for Welcome.
     let mut inbound: BTreeMap<ConnId, crate::net::PeerCertificate> = BTreeMap::new();
@@ -32,36 +44,64 @@ pub async fn run_peer(
     let mut dialing: BTreeMap<SocketAddr, PeerId> = BTreeMap::new();
     loop {
         match session.step().await {
-            Step::Connected { conn, remote, outbound: true, .. } => {
+            Step::Connected {
+                conn,
+                remote,
+                outbound: true,
+                ..
+            } => {
                 // TLS already checked the certificate we asked for (`Expect::Peer`), so the
                 // connection is bound to its peer at once: a message overtaking the Welcome
                 // (every message has its own stream) still finds its sender.
-                let peer = if conn == owner_conn { Some(PeerId(0)) } else { dialing.get(&remote).copied() };
+                let peer = if conn == owner_conn {
+                    Some(PeerId(0))
+                } else {
+                    dialing.get(&remote).copied()
+                };
                 match peer {
                     Some(peer) => {
                         session.peers.bind(conn, peer);
                         if conn != owner_conn {
-                            session.send_conn(conn, &Message::Hello { version: PROTOCOL_VERSION, peer: me, slots: options.threads as u32 });
+                            session.send_conn(
+                                conn,
+                                &Message::Hello {
+                                    version: PROTOCOL_VERSION,
+                                    peer: me,
+                                    slots: options.threads as u32,
+                                },
+                            );
                         }
                         outbound.insert(conn, peer);
                     }
                     None => session.close(conn, CloseCode::Protocol, "a connection nobody dialed"),
                 }
             }
-            Step::Connected { conn, certificate, .. } => {
+            Step::Connected {
+                conn, certificate, ..
+            } => {
                 inbound.insert(conn, certificate);
             }
             Step::Control { conn, message } => {
                 if let Some(certificate) = inbound.remove(&conn) {
                     match check_hello(&message, &certificate) {
                         Ok((peer, _)) if peer > me => {
-                            session.send_conn(conn, &Message::Welcome { version: PROTOCOL_VERSION, peer: me });
+                            session.send_conn(
+                                conn,
+                                &Message::Welcome {
+                                    version: PROTOCOL_VERSION,
+                                    peer: me,
+                                },
+                            );
                             session.peers.bind(conn, peer);
                             let now = session.now();
                             session.core.handle_peer_connected(now, peer);
                             session.flush();
                         }
-                        Ok((peer, _)) => session.close(conn, CloseCode::Protocol, &format!("{peer} should not dial {me}")),
+                        Ok((peer, _)) => session.close(
+                            conn,
+                            CloseCode::Protocol,
+                            &format!("{peer} should not dial {me}"),
+                        ),
                         Err(reason) => session.close(conn, CloseCode::Identity, &reason),
                     }
                     continue;
@@ -81,19 +121,28 @@ pub async fn run_peer(
                     }
                     Message::Scene { files, params } if conn == owner_conn => {
                         let digest = bundle::scene_digest(&files);
-                        let loaded = tokio::task::spawn_blocking(move || bundle::load_scene(files, &params)).await;
+                        let loaded =
+                            tokio::task::spawn_blocking(move || bundle::load_scene(files, &params))
+                                .await;
                         let scene = match loaded {
                             Ok(Ok(scene)) => scene,
                             Ok(Err(error)) => {
-                                session.send_conn(conn, &Message::Goodbye { reason: GoodbyeReason::BadScene });
+                                session.send_conn(
+                                    conn,
+                                    &Message::Goodbye {
+                                        reason: GoodbyeReason::BadScene,
+                                    },
+                                );
                                 return Err(error.into());
                             }
                             Err(join) => return Err(NodeError::Io(std::io::Error::other(join))),
                         };
                         let effects = params.all_effects.then_some(tracer::Effects::ALL);
-                        let world = tokio::task::spawn_blocking(move || Arc::new(super::prepare_world(scene, effects)))
-                            .await
-                            .map_err(|e| NodeError::Io(std::io::Error::other(e)))?;
+                        let world = tokio::task::spawn_blocking(move || {
+                            Arc::new(super::prepare_world(scene, effects))
+                        })
+                        .await
+                        .map_err(|e| NodeError::Io(std::io::Error::other(e)))?;
                         let (renderer, results) = Renderer::new(options.threads, world)?;
                         session.set_renderer(renderer, results);
                         tracing::info!(%me, "scene {digest} loaded");
@@ -103,7 +152,10 @@ pub async fn run_peer(
                         session.flush();
                     }
                     Message::Peers { peers } if conn == owner_conn => {
-                        for address in peers.into_iter().filter(|a| a.peer < me && a.peer != PeerId(0)) {
+                        for address in peers
+                            .into_iter()
+                            .filter(|a| a.peer < me && a.peer != PeerId(0))
+                        {
                             let Ok(addr) = address.addr.parse::<SocketAddr>() else {
                                 tracing::warn!(addr = address.addr, "unusable peer address");
                                 continue;
@@ -111,7 +163,9 @@ pub async fn run_peer(
                             dialing.insert(addr, address.peer);
                             let link = session.link.clone();
                             tokio::spawn(async move {
-                                if let Err(error) = link.connect(addr, Expect::Peer(address.peer.0)).await {
+                                if let Err(error) =
+                                    link.connect(addr, Expect::Peer(address.peer.0)).await
+                                {
                                     tracing::warn!(peer = %address.peer, %error, "cannot reach peer; stealing from the others");
                                 }
                             });
@@ -119,7 +173,11 @@ pub async fn run_peer(
                     }
                     Message::Goodbye { .. } if conn == owner_conn => break,
                     Message::Goodbye { .. } => {}
-                    other => session.close(conn, CloseCode::Protocol, &format!("unexpected {}", other.kind())),
+                    other => session.close(
+                        conn,
+                        CloseCode::Protocol,
+                        &format!("unexpected {}", other.kind()),
+                    ),
                 }
             }
             Step::Closed { conn, .. } if conn == owner_conn => break,
@@ -127,7 +185,9 @@ pub async fn run_peer(
                 inbound.remove(&conn);
                 outbound.remove(&conn);
             }
-            Step::Core(CoreEvent::OwnerLost { frame }) => tracing::warn!(%frame, "the owner is gone"),
+            Step::Core(CoreEvent::OwnerLost { frame }) => {
+                tracing::warn!(%frame, "the owner is gone")
+            }
             Step::Core(event) => tracing::debug!(?event, "core event"),
             Step::Stopped => break,
         }

@@ -5,7 +5,7 @@
 use super::bundle;
 use crate::core::{Core, Event as CoreEvent, WorkItem};
 use crate::net::{CloseCode, ConnId, Event as NetEvent, Link, PeerCertificate};
-use crate::wire::{self, Message, PeerId, PROTOCOL_VERSION};
+use crate::wire::{self, Message, PROTOCOL_VERSION, PeerId};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -16,7 +16,9 @@ use tracer::World;
 pub(crate) type Incoming = (Message, usize);
 
 /// The decoder handed to the transport: pure, bounded (see [`wire::decode`]).
-pub(crate) fn decoder(limits: wire::Limits) -> impl Fn(&[u8]) -> Result<Incoming, wire::WireError> + Send + Sync + 'static {
+pub(crate) fn decoder(
+    limits: wire::Limits,
+) -> impl Fn(&[u8]) -> Result<Incoming, wire::WireError> + Send + Sync + 'static {
     move |bytes| wire::decode(bytes, &limits).map(|message| (message, bytes.len()))
 }
 
@@ -32,7 +34,10 @@ impl Renderer {
     pub(crate) fn new(
         threads: usize,
         world: Arc<World>,
-    ) -> std::io::Result<(Self, mpsc::UnboundedReceiver<(WorkItem, tracer::TileOutput, Duration)>)> {
+    ) -> std::io::Result<(
+        Self,
+        mpsc::UnboundedReceiver<(WorkItem, tracer::TileOutput, Duration)>,
+    )> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads.max(1))
             .thread_name(|i| format!("render-{i}"))
@@ -47,7 +52,12 @@ impl Renderer {
         let done = self.done.clone();
         self.pool.spawn(move || {
             let started = Instant::now();
-            let rect = tracer::Rect { x: item.tile.rect.x, y: item.tile.rect.y, w: item.tile.rect.w, h: item.tile.rect.h };
+            let rect = tracer::Rect {
+                x: item.tile.rect.x,
+                y: item.tile.rect.y,
+                w: item.tile.rect.w,
+                h: item.tile.rect.h,
+            };
             let frame = u32::try_from(item.frame.0).unwrap_or(u32::MAX);
             let output = tracer::render_tile(&world, frame, rect);
             // The loop may be gone at shutdown; the tile is then simply not needed.
@@ -108,7 +118,12 @@ pub(crate) enum Step {
     /// A message the core does not take (handshake, scene, goodbye), from a connection.
     Control { conn: ConnId, message: Message },
     /// A connection completed its TLS handshake.
-    Connected { conn: ConnId, certificate: PeerCertificate, remote: std::net::SocketAddr, outbound: bool },
+    Connected {
+        conn: ConnId,
+        certificate: PeerCertificate,
+        remote: std::net::SocketAddr,
+        outbound: bool,
+    },
     /// A connection is gone; `peer` if it was a known peer.
     Closed { conn: ConnId, peer: Option<PeerId> },
     /// The transport stopped.
@@ -129,7 +144,11 @@ pub(crate) struct Session {
 }
 
 impl Session {
-    pub(crate) fn new(core: Core, link: Link<Incoming>, events: mpsc::Receiver<NetEvent<Incoming>>) -> Self {
+    pub(crate) fn new(
+        core: Core,
+        link: Link<Incoming>,
+        events: mpsc::Receiver<NetEvent<Incoming>>,
+    ) -> Self {
         Self {
             core,
             link,
@@ -148,7 +167,11 @@ impl Session {
         self.epoch.elapsed()
     }
 
-    pub(crate) fn set_renderer(&mut self, renderer: Renderer, results: mpsc::UnboundedReceiver<(WorkItem, tracer::TileOutput, Duration)>) {
+    pub(crate) fn set_renderer(
+        &mut self,
+        renderer: Renderer,
+        results: mpsc::UnboundedReceiver<(WorkItem, tracer::TileOutput, Duration)>,
+    ) {
         self.renderer = Some(renderer);
         self.results = Some(results);
     }
@@ -201,7 +224,10 @@ impl Session {
             if let Some(step) = self.pending.pop_front() {
                 return step;
             }
-            let deadline = self.core.poll_timeout().map(|t| tokio::time::Instant::from_std(self.epoch + t));
+            let deadline = self
+                .core
+                .poll_timeout()
+                .map(|t| tokio::time::Instant::from_std(self.epoch + t));
             let sleep = async {
                 match deadline {
                     Some(deadline) => tokio::time::sleep_until(deadline).await,
@@ -236,7 +262,12 @@ impl Session {
 
     fn on_net(&mut self, event: NetEvent<Incoming>) -> Option<Step> {
         match event {
-            NetEvent::Connected { conn, remote, direction, certificate } => Some(Step::Connected {
+            NetEvent::Connected {
+                conn,
+                remote,
+                direction,
+                certificate,
+            } => Some(Step::Connected {
                 conn,
                 certificate,
                 remote,
@@ -252,7 +283,10 @@ impl Session {
                 }
                 Some(Step::Closed { conn, peer })
             }
-            NetEvent::Message { conn, message: (message, len) } => {
+            NetEvent::Message {
+                conn,
+                message: (message, len),
+            } => {
                 self.core.record_bytes(0, len as u64);
                 let Some(peer) = self.peers.peer(conn) else {
                     return Some(Step::Control { conn, message });
@@ -272,14 +306,25 @@ impl Session {
 
 /// The reply to a `Hello` that carries the right version and an identity the certificate
 /// vouches for, or the reason to refuse it.
-pub(crate) fn check_hello(message: &Message, certificate: &PeerCertificate) -> Result<(PeerId, u32), String> {
+pub(crate) fn check_hello(
+    message: &Message,
+    certificate: &PeerCertificate,
+) -> Result<(PeerId, u32), String> {
     match *message {
-        Message::Hello { version, peer, slots } => {
+        Message::Hello {
+            version,
+            peer,
+            slots,
+        } => {
             if version != PROTOCOL_VERSION {
-                return Err(format!("protocol version {version}, we speak {PROTOCOL_VERSION}"));
+                return Err(format!(
+                    "protocol version {version}, we speak {PROTOCOL_VERSION}"
+                ));
             }
             if !certificate.certifies(peer.0) {
-                return Err(format!("claims to be {peer}, but its certificate does not say so"));
+                return Err(format!(
+                    "claims to be {peer}, but its certificate does not say so"
+                ));
             }
             Ok((peer, slots))
         }
