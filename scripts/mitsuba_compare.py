@@ -247,8 +247,9 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
             mesh = mi.Mesh(f"{index}-{name}", len(positions) // 3, len(faces) // 3, props=props,
                            has_vertex_normals=False, has_vertex_texcoords=False)
             params = mi.traverse(mesh)
-            params["vertex_positions"] = mi.Float(positions)
-            params["faces"] = mi.UInt32(faces)
+            # The buffers' own types: drjit arrays in the llvm variants, scalar arrays in scalar_rgb.
+            params["vertex_positions"] = type(params["vertex_positions"])(positions)
+            params["faces"] = type(params["faces"])(faces)
             params.update()
             shapes[f"shape-{index}-{name}"] = mesh
     description = {

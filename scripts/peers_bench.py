@@ -64,12 +64,16 @@ def main():
     for setup in SETUPS:
         summary[setup] = {
             key: statistics.median(r[key] for r in runs[setup])
-            for key in ("render_seconds", "frame_seconds", "wall_seconds", "cpu_seconds")
+            for key in ("render_seconds", "frame_seconds", "wall_seconds", "cpu_seconds", "idle_share")
         }
+        # How many of the machine's cores the set-up got: under other load, this is the scheduler's
+        # doing, and wall times of set-ups that got different shares are not comparable.
+        summary[setup]["cores_used"] = statistics.median(r["cpu_seconds"] / r["wall_seconds"] for r in runs[setup])
     base = summary["one"]
     for setup in SETUPS:
         summary[setup]["render_ratio"] = summary[setup]["render_seconds"] / base["render_seconds"]
         summary[setup]["frame_ratio"] = summary[setup]["frame_seconds"] / base["frame_seconds"]
+        summary[setup]["cpu_ratio"] = summary[setup]["cpu_seconds"] / base["cpu_seconds"]
     report = {
         "scene": args.scene,
         "cores": os.cpu_count(),
@@ -104,6 +108,8 @@ def run_setup(setup, out, certs, args):
     match = re.search(r"rendered (\d+) frames .* in ([0-9.]+) s \(", summary)
     if not match:
         raise SystemExit(f"{setup}: no summary line in: {summary!r}")
+    slots = [p for f in data["frames"] for p in f["peers"]]
+    busy, idle = sum(p["busy_seconds"] for p in slots), sum(p["idle_seconds"] for p in slots)
     return {
         "setup": setup,
         "frames": int(match.group(1)),
@@ -111,6 +117,8 @@ def run_setup(setup, out, certs, args):
         "frame_seconds": sum(f["seconds"] for f in data["frames"]),
         "wall_seconds": wall,
         "cpu_seconds": children_cpu() - cpu_before,
+        # Of the rendering threads' slot-time within frames, the share spent waiting for work.
+        "idle_share": idle / (busy + idle) if busy + idle > 0 else 0.0,
         "load_before": load_before,
         "load_after": os.getloadavg(),
         "summary": summary.strip(),
@@ -197,8 +205,9 @@ def markdown(report):
     lines = [
         f"Scene `{report['scene']}`, {report['cores']} cores, median of {report['repeats']} interleaved runs.",
         "",
-        "| set-up | render s (tessera's summary) | vs 1 process | sum of frame s | vs 1 process | command wall s | CPU-s | load avg (1 min) at start |",
-        "|---|---|---|---|---|---|---|---|",
+        "| set-up | render s (tessera's summary) | vs 1 process | sum of frame s | vs 1 process | command wall s "
+        "| CPU-s | vs 1 process | cores used | idle share | load avg (1 min) at start |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for setup in SETUPS:
         r = s[setup]
@@ -206,7 +215,8 @@ def markdown(report):
         lines.append(
             f"| {names[setup]} | {r['render_seconds']:.2f} | {100 * (r['render_ratio'] - 1):+.1f}% | "
             f"{r['frame_seconds']:.2f} | {100 * (r['frame_ratio'] - 1):+.1f}% | {r['wall_seconds']:.2f} | "
-            f"{r['cpu_seconds']:.2f} | {loads} |"
+            f"{r['cpu_seconds']:.2f} | {100 * (r['cpu_ratio'] - 1):+.1f}% | {r['cores_used']:.2f} | "
+            f"{100 * r['idle_share']:.1f}% | {loads} |"
         )
     lines += ["", "Per-peer totals over all frames of the last run of each set-up:", "",
               "| set-up | peer | threads | busy s | idle s | tiles rendered | stolen | given | steal requests | refused | MB sent | MB received |",

@@ -147,7 +147,9 @@ impl World for SimWorld {
         message: &Message,
         delay: Duration,
     ) -> Transit {
-        let bytes = self.links.size(message);
+        // The message's content enters the fingerprint here rather than in `observe`, so that
+        // it is encoded once for both its size and its hash.
+        let bytes = self.fingerprint.message(message, &self.links);
         if let Some(tally) = message_frame(message).and_then(|f| self.tally(f)) {
             tally.bytes += bytes;
         }
@@ -161,7 +163,7 @@ impl World for SimWorld {
         match seen {
             Seen::Sent { from, to, message } => {
                 print.words(&[1, u64::from(from.0), u64::from(to.0)]);
-                print.message(message);
+                print.bytes(message.kind().as_bytes());
                 let Some(tally) = message_frame(message).and_then(|f| self.frames.get_mut(&f))
                 else {
                     return;
@@ -290,9 +292,9 @@ impl Fingerprint {
         }
     }
 
-    /// A message's full encoding, except a tile result's pixels (all zeros here): its frame,
-    /// tile and rectangle.
-    fn message(&mut self, message: &Message) {
+    /// Folds in a message's full encoding (a tile result's: its frame, tile and rectangle, not
+    /// its pixels, which are all zeros here) and returns its size on the wire.
+    fn message(&mut self, message: &Message, links: &Links) -> u64 {
         if let Message::TileDone(r) = message {
             let rect = r.rect;
             let words = [
@@ -304,9 +306,14 @@ impl Fingerprint {
             ];
             self.words(&words);
             self.words(&[u64::from(rect.w), u64::from(rect.h)]);
-            return;
+            return links.size(message);
         }
         let bytes = wire::encode(message);
+        self.bytes(&bytes);
+        bytes.len() as u64
+    }
+
+    fn bytes(&mut self, bytes: &[u8]) {
         self.word(bytes.len() as u64);
         for chunk in bytes.chunks(8) {
             let mut word = [0u8; 8];

@@ -377,22 +377,21 @@ mod tests {
             fastest_time(2.0, second, || unreachable!("a long run is timed once")),
             2.0
         );
+        let runs = std::cell::Cell::new(0);
         let times = [0.3, 0.1, 0.2, 0.4, 0.05];
-        let mut runs = 0;
-        let mut again = || {
-            runs += 1;
-            times[runs - 1]
+        let again = || {
+            runs.set(runs.get() + 1);
+            times[runs.get() - 1]
         };
         // 0.25 s fills a second in four runs: the first and three more.
-        assert_eq!(fastest_time(0.25, second, &mut again), 0.1);
-        assert_eq!(runs, 3);
+        assert_eq!(fastest_time(0.25, second, again), 0.1);
+        assert_eq!(runs.get(), 3);
         // Asked for three runs, a long one is run twice more.
-        runs = 3;
         let thrice = Timing {
             repeat_below: 1.0,
             repeats: 3,
         };
-        assert_eq!(fastest_time(2.0, thrice, &mut again), 0.05);
-        assert_eq!(runs, 5);
+        assert_eq!(fastest_time(2.0, thrice, again), 0.05);
+        assert_eq!(runs.get(), 5);
     }
 }

@@ -10,7 +10,8 @@ use super::Knob;
 use super::bench::Row;
 use super::leaks::LeakCheck;
 use super::report::Run;
-use tracer::geometry::Traversal;
+use tracer::geometry::{BuildQuality, Traversal};
+use tracer::scene::RenderSettings;
 
 /// A value read off the spp ladder: measured between two rungs, or only bounded.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -143,12 +144,48 @@ pub fn loglog_slope(points: &[(f64, f64)]) -> f64 {
 /// The findings of a run, a few sentences per knob measured.
 pub fn sentences(run: &Run, curve: Option<&Curve>) -> Vec<String> {
     let mut out = Vec::new();
+    out.extend(timing_sentence(run));
     out.extend(spp_sentence(run));
     out.extend(depth_sentence(run, curve));
     out.extend(roulette_sentence(run, curve));
     out.extend(bvh_sentence(run));
     out.extend(traversal_sentence(run));
     out
+}
+
+/// How much the same render's time varied across the run: the baseline at the knob ladders'
+/// sample count appears in several ladders (the spp rung, unlimited depth, the default BVH, the
+/// robust traversal), so its spread is a measured bound on timing noise, which a reader needs
+/// before trusting a difference between rungs.
+fn timing_sentence(run: &Run) -> Option<String> {
+    let baseline = RenderSettings {
+        samples_per_pixel: run.knob_spp,
+        ..run.baseline.clone()
+    };
+    let same: Vec<&Row> = run
+        .rows
+        .iter()
+        .filter(|r| {
+            r.settings == baseline
+                && r.bvh == BuildQuality::default()
+                && r.traversal == Traversal::Robust
+        })
+        .collect();
+    if same.len() < 2 {
+        return None;
+    }
+    let seconds = |r: &&Row| r.render_seconds;
+    let fastest = same.iter().map(seconds).fold(f64::INFINITY, f64::min);
+    let slowest = same.iter().map(seconds).fold(0.0, f64::max);
+    Some(format!(
+        "Timing noise: the same render (the baseline at {} spp) took {:.3} to {:.3} s in the {} ladders that \
+         contain it, a spread of {:.0}%; differences between rungs smaller than that are not significant.",
+        run.knob_spp,
+        fastest,
+        slowest,
+        same.len(),
+        100.0 * (slowest / fastest - 1.0),
+    ))
 }
 
 fn spp_sentence(run: &Run) -> Option<String> {

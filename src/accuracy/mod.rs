@@ -200,6 +200,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
         repeat_below: args.repeat_below,
         repeats: args.repeats.max(1),
     };
+    let load_before = load_average();
     let mut bench = bench::Bench::new(world, &pool, &reference, timing);
     let mut rows = Vec::new();
     let mut leak_checks = Vec::new();
@@ -220,6 +221,8 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
     }
     let run = report::Run {
         command: command_line(),
+        load_average: [load_before, load_average()],
+        cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
         scene: args.scene.display().to_string(),
         width,
         height,
@@ -277,6 +280,13 @@ fn parse_rgb(text: &str) -> Result<Rgb, String> {
         [v] if v.is_finite() && v >= 0.0 => Ok(Rgb([v; 3])),
         _ => Err("expected R,G,B (or one value for grey): finite and not negative".to_owned()),
     }
+}
+
+/// The one-minute load average (`/proc/loadavg`, Linux only): how many threads wanted a core. Above
+/// the number of cores, other work was sharing them and wall times are inflated.
+fn load_average() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
+    text.split_whitespace().next()?.parse().ok()
 }
 
 /// The command as a reader would retype it: `tessera` and the arguments given.

@@ -32,12 +32,20 @@ pub fn frames(dir: &Path) -> Vec<(String, Vec<u8>)> {
         .filter(|n| n.starts_with("frame-") && n.ends_with(".exr"))
         .collect();
     names.sort();
-    names.into_iter().map(|n| { let bytes = std::fs::read(dir.join(&n)).unwrap(); (n, bytes) }).collect()
+    names
+        .into_iter()
+        .map(|n| {
+            let bytes = std::fs::read(dir.join(&n)).unwrap();
+            (n, bytes)
+        })
+        .collect()
 }
 
 /// Every pixel of an EXR file as linear RGB.
 pub fn pixels(path: &Path) -> Vec<[f32; 3]> {
-    tracer::output::read_exr(path).expect("our EXR files read back").pixels
+    tracer::output::read_exr(path)
+        .expect("our EXR files read back")
+        .pixels
 }
 
 /// `../shared/scenes` beside the repository, if present.

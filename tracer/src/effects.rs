@@ -18,8 +18,9 @@
 //!   with a non-zero albedo, or a rough conductor). Elsewhere the light sample is either never
 //!   taken (delta BSDFs) or its BSDF value is exactly zero (black diffuse), and the estimator
 //!   returns zero before tracing.
-//! - `textures`, `shading_normals`: without them the branches never match anyway; the flags let
-//!   the integrator skip the interpolation of texture coordinates.
+//! - `textures`, `shading_normals`: without them the branches never match anyway (a texture on a
+//!   zero albedo only multiplies zero by a finite texel); the flags also let the integrator skip
+//!   interpolating texture coordinates, which only a texture lookup reads.
 //! - `specular_reflection`, `glossy_reflection`, `refraction`, `diffuse`: reported, and counted
 //!   per sample (refractions); the BSDF is a closed enum, so no code of an absent material runs.
 //!

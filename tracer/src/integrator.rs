@@ -102,16 +102,16 @@ impl World {
                 .accel
                 .intersect_with(&ray, self.traversal, &mut stats.traversal)
             else {
-                if effects.environment {
-                    if let Some(env) = self.scene.environment {
-                        stats.environment_lookups += 1;
-                        let weight = if last_delta {
-                            1.0
-                        } else {
-                            power_heuristic(last_pdf, self.lights.environment_pdf())
-                        };
-                        radiance += beta * env * weight;
-                    }
+                if effects.environment
+                    && let Some(env) = self.scene.environment
+                {
+                    stats.environment_lookups += 1;
+                    let weight = if last_delta {
+                        1.0
+                    } else {
+                        power_heuristic(last_pdf, self.lights.environment_pdf())
+                    };
+                    radiance += beta * env * weight;
                 }
                 break;
             };
@@ -175,14 +175,14 @@ impl World {
             last_point = surface.point;
             depth += 1;
 
-            if let Some(start) = settings.russian_roulette_depth {
-                if depth >= start {
-                    let survive = beta.max_element().min(0.95);
-                    if u_roulette >= survive {
-                        break;
-                    }
-                    beta /= survive;
+            if let Some(start) = settings.russian_roulette_depth
+                && depth >= start
+            {
+                let survive = beta.max_element().min(0.95);
+                if u_roulette >= survive {
+                    break;
                 }
+                beta /= survive;
             }
             ray = spawn_ray(surface.point, surface.geometric, wi);
         }

@@ -94,12 +94,12 @@ impl Lights {
                 add(point, 4.0 * PI * luminance(light.intensity));
             }
         }
-        if effects.environment {
-            if let Some(radiance) = scene.environment {
-                // The power the environment sends through the scene's bounding sphere.
-                let p = luminance(radiance) * PI * 4.0 * PI * radius * radius;
-                add(Light::Environment { radiance }, p);
-            }
+        if effects.environment
+            && let Some(radiance) = scene.environment
+        {
+            // The power the environment sends through the scene's bounding sphere.
+            let p = luminance(radiance) * PI * 4.0 * PI * radius * radius;
+            add(Light::Environment { radiance }, p);
         }
         let cdf = choice_cdf(&lights, &power);
         let mut triangle_light = vec![u32::MAX; scene.triangles.len()];
