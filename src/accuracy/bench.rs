@@ -56,6 +56,9 @@ pub struct Row {
     pub render_seconds: f64,
     /// Closest-hit plus shadow rays traced.
     pub rays: u64,
+    /// The tracer's counted work ([`tracer::PathStats::work`]): a cost that, unlike the time, does
+    /// not depend on the machine or its load.
+    pub work: u64,
     pub metrics: Metrics,
     pub flip: f64,
     /// Whatever else the rung showed (an image that changed when it must not, dropped samples).
@@ -83,6 +86,7 @@ pub struct Timed {
     pub image: RgbImage,
     pub seconds: f64,
     pub rays: u64,
+    pub work: u64,
     pub invalid_samples: u64,
 }
 
@@ -132,6 +136,7 @@ pub fn render_with(world: &World, pool: &rayon::ThreadPool, timing: Timing) -> T
     let seconds = fastest_time(first, timing, || once().1);
     Timed {
         rays: film.stats.rays + film.stats.shadow_rays,
+        work: film.stats.work(),
         invalid_samples: film.stats.invalid_samples,
         image: RgbImage {
             width,
@@ -334,6 +339,7 @@ impl<'a> Bench<'a> {
             build_seconds: 0.0,
             render_seconds: timed.seconds,
             rays: timed.rays,
+            work: timed.work,
             metrics,
             flip,
             note,

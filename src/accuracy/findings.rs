@@ -179,7 +179,9 @@ fn timing_sentence(run: &Run) -> Option<String> {
     let slowest = same.iter().map(seconds).fold(0.0, f64::max);
     Some(format!(
         "Timing noise: the same render (the baseline at {} spp) took {:.3} to {:.3} s in the {} ladders that \
-         contain it, a spread of {:.0}%; differences between rungs smaller than that are not significant.",
+         contain it, a spread of {:.0}%; differences between rungs smaller than that are not significant. The tables also \
+         give each rung's counted work (the tracer's deterministic cost: nodes visited, triangles tested and \
+         a fixed charge per ray), which the machine's load does not change.",
         run.knob_spp,
         fastest,
         slowest,
@@ -411,7 +413,8 @@ fn traversal_sentence(run: &Run) -> Option<String> {
         .rows_of(Knob::Traversal)
         .find(|r| r.traversal == Traversal::Obvhs)?;
     let mut s = format!(
-        "Traversal: obvhs's own traversal renders at {:.2} Mrays/s against {:.2} for ours ({:.2}x), and its image {}.",
+        "Traversal: obvhs's own traversal renders at {:.2} Mrays/s against {:.2} for ours ({:.2}x), and its image {} \
+         (its counted work counts only the leaves obvhs reports, not its inner nodes, so it is not comparable).",
         obvhs.mrays_per_second(),
         robust.mrays_per_second(),
         obvhs.mrays_per_second() / robust.mrays_per_second(),

@@ -153,9 +153,13 @@ fn probe(accel: &Accel, triangles: &[[glam::Vec3; 3]], traversal: Traversal, i: 
         CENTER + ORIGIN_RADIUS * random.next_1d().cbrt() * uniform_sphere(random.next_2d());
     let p =
         triangles[((random.next_1d() * triangles.len() as f32) as usize).min(triangles.len() - 1)];
-    let target = if i % 2 == 0 {
+    let target = if i.is_multiple_of(2) {
         let edge = ((random.next_1d() * 3.0) as usize).min(2);
-        let along = if i % 8 == 0 { 0.0 } else { random.next_1d() };
+        let along = if i.is_multiple_of(8) {
+            0.0
+        } else {
+            random.next_1d()
+        };
         p[edge].lerp(p[(edge + 1) % 3], along)
     } else {
         let (r, s) = (random.next_1d().sqrt(), random.next_1d());
@@ -171,7 +175,7 @@ fn probe(accel: &Accel, triangles: &[[glam::Vec3; 3]], traversal: Traversal, i: 
         traversal,
         &mut stats,
     );
-    if i % 2 == 0 {
+    if i.is_multiple_of(2) {
         counts.edge_rays = 1;
         counts.edge_leaks = u64::from(primary.is_none());
         return counts;

@@ -61,7 +61,7 @@ pub fn write_all(out: &Path, run: &Run) -> anyhow::Result<()> {
 }
 
 const CSV_HEADER: &str = "knob,setting,spp,max_depth,russian_roulette_depth,bvh,traversal,build_seconds,\
-render_seconds,seconds,rays,mrays_per_second,rmse,rel_mse,mae,max_difference,flip,mean_bias,efficiency,\
+render_seconds,seconds,rays,work,mrays_per_second,rmse,rel_mse,mae,max_difference,flip,mean_bias,efficiency,\
 sphere_rays,sphere_edge_leaks,sphere_bounce_leaks,sphere_self_hits,note";
 
 /// One line per rung; the leak-check columns are filled on the traversal rungs only.
@@ -87,6 +87,7 @@ pub fn csv(run: &Run) -> String {
             format!("{:.6}", r.render_seconds),
             format!("{:.6}", r.seconds()),
             r.rays.to_string(),
+            r.work.to_string(),
             format!("{:.4}", r.mrays_per_second()),
             format!("{:.6e}", m.rmse),
             format!("{:.6e}", m.rel_mse),
@@ -192,15 +193,16 @@ pub fn markdown(run: &Run) -> String {
     };
     let common = |r: &Row| {
         format!(
-            "{:.4} | {:.3e} | {:.3e} | {:.4} | {:+.2}%",
+            "{:.4} | {:.1} | {:.3e} | {:.3e} | {:.4} | {:+.2}%",
             r.seconds(),
+            r.work as f64 / 1e6,
             r.metrics.rmse,
             r.metrics.rel_mse,
             r.flip,
             100.0 * r.metrics.mean_bias()
         )
     };
-    const COMMON: &str = "time (s) | RMSE | relMSE | FLIP | mean bias";
+    const COMMON: &str = "time (s) | counted work (M) | RMSE | relMSE | FLIP | mean bias";
     const VERSUS: &str = "baseline relMSE at equal time | baseline time (s) at equal relMSE";
     let mut table = |title: String, head: &str, rows: Vec<String>| {
         if rows.is_empty() {
@@ -333,6 +335,9 @@ pub fn markdown(run: &Run) -> String {
 
 const SIZE: (u32, u32) = (960, 640);
 
+/// A point of the plot: seconds, relMSE, and its label.
+type Point = (f64, f64, String);
+
 /// accuracy.svg: relative MSE against time, log-log, one curve per knob. Log-log because both
 /// axes span orders of magnitude and because Monte Carlo noise is a straight line there (slope -1
 /// against time when time grows with samples), so a knob that beats "just render longer" shows as
@@ -343,7 +348,7 @@ pub fn write_svg(path: &Path, run: &Run) -> anyhow::Result<()> {
 }
 
 fn draw(path: &Path, run: &Run) -> Result<(), Box<dyn std::error::Error>> {
-    let curves: Vec<(Knob, Vec<(f64, f64, String)>)> = Knob::ALL
+    let curves: Vec<(Knob, Vec<Point>)> = Knob::ALL
         .into_iter()
         .map(|knob| {
             let points = run

@@ -348,6 +348,7 @@ fn shipped_scenes(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
 }
 
 fn print_scene(s: &SceneBench) {
+    let cpu = |seconds: Option<f64>| seconds.map_or("?".to_owned(), |s| format!("{s:.2}"));
     println!(
         "{}: {} triangles, {}x{}, {} spp; load {:.3} s, BVH build {:.3} s ({} CPU-s)",
         s.scene,
@@ -379,10 +380,6 @@ fn print_scene(s: &SceneBench) {
     if let Some(image) = &s.image {
         println!("  image: {image}");
     }
-}
-
-fn cpu(seconds: Option<f64>) -> String {
-    seconds.map_or("?".to_owned(), |s| format!("{s:.2}"))
 }
 
 /// CPU time used so far by this process, all threads, user plus system, from `/proc/self/stat`
