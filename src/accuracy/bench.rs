@@ -7,8 +7,8 @@
 //! the machine is doing, which only ever adds time. The image is deterministic, so repeating
 //! changes only the time.
 
-use super::Knob;
 use super::reference::Reference;
+use super::{Cost, Knob};
 use crate::compare::{Metrics, mean_flip};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -71,9 +71,18 @@ impl Row {
         self.build_seconds + self.render_seconds
     }
 
-    /// 1 / (relative MSE x time): higher is better; equal for settings that trade one for the other.
-    pub fn efficiency(&self) -> f64 {
-        1.0 / (self.metrics.rel_mse * self.seconds())
+    /// What this rung cost: seconds, or millions of counted work units.
+    pub fn cost(&self, cost: Cost) -> f64 {
+        match cost {
+            Cost::Time => self.seconds(),
+            Cost::Work => self.work as f64 / 1e6,
+        }
+    }
+
+    /// 1 / (relative MSE x cost): higher is better; equal for settings that trade one for the
+    /// other.
+    pub fn efficiency(&self, cost: Cost) -> f64 {
+        1.0 / (self.metrics.rel_mse * self.cost(cost))
     }
 
     pub fn mrays_per_second(&self) -> f64 {

@@ -1,145 +1,16 @@
 //! The comparisons a reader wants, in sentences: how error and time scale with samples, and for
 //! every other knob whether it beats simply rendering longer at the baseline settings.
 //!
-//! The spp ladder is the yardstick: a [`Curve`] of relative MSE against time, interpolated linearly in
-//! log-log space between rungs. Outside the ladder nothing is extrapolated; the answer is a bound
-//! ([`Estimate::Below`] or [`Estimate::Above`]), because a power law fitted to noisy rungs would
-//! invent numbers the run did not measure.
+//! The spp ladder is the yardstick ([`Curve`]): at equal cost, what error would the baseline have
+//! reached; at equal error, what would it have cost.
 
-use super::Knob;
 use super::bench::Row;
+use super::curve::{Curve, loglog_slope};
 use super::leaks::LeakCheck;
 use super::report::Run;
+use super::{Cost, Knob};
 use tracer::geometry::{BuildQuality, Traversal};
 use tracer::scene::RenderSettings;
-
-/// A value read off the spp ladder: measured between two rungs, or only bounded.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Estimate {
-    Within(f64),
-    /// Lower than this (beyond the ladder's end).
-    Below(f64),
-    /// Higher than this (before the ladder's start).
-    Above(f64),
-}
-
-impl std::fmt::Display for Estimate {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match *self {
-            Estimate::Within(v) => write!(f, "{}", significant(v)),
-            Estimate::Below(v) => write!(f, "< {}", significant(v)),
-            Estimate::Above(v) => write!(f, "> {}", significant(v)),
-        }
-    }
-}
-
-/// Relative MSE against time along the spp ladder. Relative, because absolute errors are
-/// dominated by the brightest pixels (the edges of a visible light), which no knob but samples
-/// changes; the relative error weighs every pixel by its own brightness, as pbrt's tools do.
-pub struct Curve {
-    /// (seconds, relMSE), sorted by seconds.
-    by_time: Vec<(f64, f64)>,
-    /// The same points sorted by decreasing relMSE.
-    by_error: Vec<(f64, f64)>,
-}
-
-impl Curve {
-    /// The spp ladder's curve, if it has at least two rungs with a positive error.
-    pub fn of(run: &Run) -> Option<Curve> {
-        let points: Vec<(f64, f64)> = run
-            .rows_of(Knob::Spp)
-            .map(|r| (r.seconds(), r.metrics.rel_mse))
-            .filter(|&(t, e)| t > 0.0 && e > 0.0)
-            .collect();
-        if points.len() < 2 {
-            return None;
-        }
-        let mut by_time = points.clone();
-        by_time.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut by_error = points;
-        by_error.sort_by(|a, b| b.1.total_cmp(&a.1));
-        Some(Curve { by_time, by_error })
-    }
-
-    /// The baseline's relMSE after `seconds` of rendering.
-    pub fn error_at(&self, seconds: f64) -> Estimate {
-        let (first, last) = (self.by_time[0], self.by_time[self.by_time.len() - 1]);
-        if seconds < first.0 {
-            return Estimate::Above(first.1);
-        }
-        if seconds > last.0 {
-            return Estimate::Below(last.1);
-        }
-        Estimate::Within(log_interpolate(
-            self.by_time.iter().map(|&(t, e)| (t, e)),
-            seconds,
-        ))
-    }
-
-    /// The baseline's time to reach a relMSE of `error`.
-    pub fn time_for(&self, error: f64) -> Estimate {
-        let (worst, best) = (self.by_error[0], self.by_error[self.by_error.len() - 1]);
-        if error > worst.1 {
-            return Estimate::Below(worst.0);
-        }
-        if error < best.1 {
-            return Estimate::Above(best.0);
-        }
-        // Along decreasing error: interpolate in -ln(error), which increases.
-        let points = self.by_error.iter().map(|&(t, e)| (1.0 / e, t));
-        Estimate::Within(log_interpolate(points, 1.0 / error))
-    }
-
-    /// Whether `row` has a lower relMSE than the baseline reaches in the same time; `None` when
-    /// the ladder cannot tell.
-    pub fn beaten_by(&self, row: &Row) -> Option<bool> {
-        let error = row.metrics.rel_mse;
-        match self.error_at(row.seconds()) {
-            Estimate::Within(e) => Some(error < e),
-            Estimate::Above(e) => (error <= e).then_some(true),
-            Estimate::Below(e) => (error >= e).then_some(false),
-        }
-    }
-}
-
-/// Piecewise-linear interpolation of ln(y) against ln(x) over points sorted by increasing x;
-/// `x` must lie within them.
-fn log_interpolate(points: impl Iterator<Item = (f64, f64)>, x: f64) -> f64 {
-    let points: Vec<(f64, f64)> = points.collect();
-    for pair in points.windows(2) {
-        let ((x0, y0), (x1, y1)) = (pair[0], pair[1]);
-        if x0 <= x && x <= x1 {
-            if x1 == x0 {
-                return y0;
-            }
-            let s = (x.ln() - x0.ln()) / (x1.ln() - x0.ln());
-            return (y0.ln() + s * (y1.ln() - y0.ln())).exp();
-        }
-    }
-    points.last().map_or(f64::NAN, |p| p.1)
-}
-
-/// The least-squares slope of ln(y) against ln(x); points with a non-positive coordinate are
-/// left out. NaN with fewer than two points.
-pub fn loglog_slope(points: &[(f64, f64)]) -> f64 {
-    let logs: Vec<(f64, f64)> = points
-        .iter()
-        .filter(|(x, y)| *x > 0.0 && *y > 0.0)
-        .map(|(x, y)| (x.ln(), y.ln()))
-        .collect();
-    let n = logs.len() as f64;
-    let (mx, my) = (
-        logs.iter().map(|p| p.0).sum::<f64>() / n,
-        logs.iter().map(|p| p.1).sum::<f64>() / n,
-    );
-    let sxy: f64 = logs.iter().map(|(x, y)| (x - mx) * (y - my)).sum();
-    let sxx: f64 = logs.iter().map(|(x, _)| (x - mx) * (x - mx)).sum();
-    if logs.len() < 2 || sxx == 0.0 {
-        f64::NAN
-    } else {
-        sxy / sxx
-    }
-}
 
 /// The findings of a run, a few sentences per knob measured.
 pub fn sentences(run: &Run, curve: Option<&Curve>) -> Vec<String> {
@@ -177,17 +48,39 @@ fn timing_sentence(run: &Run) -> Option<String> {
     let seconds = |r: &&Row| r.render_seconds;
     let fastest = same.iter().map(seconds).fold(f64::INFINITY, f64::min);
     let slowest = same.iter().map(seconds).fold(0.0, f64::max);
-    Some(format!(
-        "Timing noise: the same render (the baseline at {} spp) took {:.3} to {:.3} s in the {} ladders that \
+    Some(
+        format!(
+            "Timing noise: the same render (the baseline at {} spp) took {:.3} to {:.3} s in the {} ladders that \
          contain it, a spread of {:.0}%; differences between rungs smaller than that are not significant. The tables also \
          give each rung's counted work (the tracer's deterministic cost: nodes visited, triangles tested and \
          a fixed charge per ray), which the machine's load does not change.",
-        run.knob_spp,
-        fastest,
-        slowest,
-        same.len(),
-        100.0 * (slowest / fastest - 1.0),
-    ))
+            run.knob_spp,
+            fastest,
+            slowest,
+            same.len(),
+            100.0 * (slowest / fastest - 1.0),
+        ) + &work_rate_sentence(run),
+    )
+}
+
+/// When the comparisons count work: how work converts to seconds, at the fastest rate any rung of
+/// our own traversal reached (the machine at its least disturbed).
+fn work_rate_sentence(run: &Run) -> String {
+    if run.cost != Cost::Work {
+        return String::new();
+    }
+    let rate = run
+        .rows
+        .iter()
+        .filter(|r| r.traversal == Traversal::Robust && r.render_seconds > 0.0)
+        .map(|r| r.work as f64 / 1e6 / r.render_seconds)
+        .fold(0.0, f64::max);
+    format!(
+        " The comparisons below count work, not seconds; the fastest rung ran at {} M units per second, so \
+         at that rate 1 M units is {} s.",
+        significant(rate),
+        significant(1.0 / rate),
+    )
 }
 
 fn spp_sentence(run: &Run) -> Option<String> {
@@ -245,9 +138,11 @@ fn depth_sentence(run: &Run, curve: Option<&Curve>) -> Option<String> {
     );
     s += &match capped.iter().find(|r| r.metrics.mean_bias().abs() < 0.01) {
         Some(close) => format!(
-            " The shallowest cap within 1% of the reference's mean brightness is {}, at {:.0}% of unlimited depth's time.",
+            " The shallowest cap within 1% of the reference's mean brightness is {}, at {:.0}% of unlimited \
+             depth's {}.",
             close.setting,
-            100.0 * close.seconds() / unlimited.seconds(),
+            100.0 * close.cost(run.cost) / unlimited.cost(run.cost),
+            run.cost.name(),
         ),
         None => " No cap measured comes within 1% of the reference's mean brightness.".to_owned(),
     };
@@ -262,18 +157,21 @@ fn roulette_sentence(run: &Run, curve: Option<&Curve>) -> Option<String> {
     let off = roulette
         .iter()
         .find(|r| r.settings.russian_roulette_depth.is_none())?;
+    let c = run.cost;
     let best = roulette
         .iter()
-        .max_by(|a, b| a.efficiency().total_cmp(&b.efficiency()))?;
+        .max_by(|a, b| a.efficiency(c).total_cmp(&b.efficiency(c)))?;
     let mut s = format!(
-        "Russian roulette: the most efficient setting is {} ({:.2}x the efficiency 1/(relMSE x time) of no \
-         roulette: {:.3} s against {:.3} s, relMSE {:.3e} against {:.3e}).",
+        "Russian roulette: the most efficient setting is {} ({:.2}x the efficiency 1/(relMSE x {}) of no \
+         roulette: {} {unit} against {} {unit}, relMSE {:.3e} against {:.3e}).",
         best.setting,
-        best.efficiency() / off.efficiency(),
-        best.seconds(),
-        off.seconds(),
+        best.efficiency(c) / off.efficiency(c),
+        c.name(),
+        significant(best.cost(c)),
+        significant(off.cost(c)),
         best.metrics.rel_mse,
         off.metrics.rel_mse,
+        unit = c.unit(),
     );
     if let Some(curve) = curve {
         s += &beats_more_samples(curve, &roulette, "the baseline");
@@ -281,7 +179,7 @@ fn roulette_sentence(run: &Run, curve: Option<&Curve>) -> Option<String> {
     Some(s)
 }
 
-/// " At equal time, A and B beat rendering more samples at WHAT, and C does not. For its relMSE
+/// " At equal cost, A and B beat rendering more samples at WHAT, and C does not. For its relMSE
 /// the baseline needs ...": the rungs set against the spp ladder, and the equal-error numbers of
 /// the most efficient rung.
 fn beats_more_samples(curve: &Curve, rows: &[&Row], what: &str) -> String {
@@ -300,14 +198,17 @@ fn beats_more_samples(curve: &Curve, rows: &[&Row], what: &str) -> String {
     let verb = |rungs: &[&str], one: &'static str, many: &'static str| {
         if rungs.len() == 1 { one } else { many }
     };
+    let (c, name) = (curve.cost, curve.cost.name());
     let mut s = match (won.is_empty(), lost.is_empty()) {
         (true, true) => return String::new(),
         (false, true) => {
-            format!(" At equal time, every rung beats rendering more samples at {what}.")
+            format!(" At equal {name}, every rung beats rendering more samples at {what}.")
         }
-        (true, false) => format!(" At equal time, no rung beats rendering more samples at {what}."),
+        (true, false) => {
+            format!(" At equal {name}, no rung beats rendering more samples at {what}.")
+        }
         (false, false) => format!(
-            " At equal time, {} {} rendering more samples at {what}, and {} {} not.",
+            " At equal {name}, {} {} rendering more samples at {what}, and {} {} not.",
             join_and(won.iter().copied()),
             verb(&won, "beats", "beat"),
             join_and(lost.iter().copied()),
@@ -316,14 +217,16 @@ fn beats_more_samples(curve: &Curve, rows: &[&Row], what: &str) -> String {
     };
     if let Some(best) = rows
         .iter()
-        .max_by(|a, b| a.efficiency().total_cmp(&b.efficiency()))
+        .max_by(|a, b| a.efficiency(c).total_cmp(&b.efficiency(c)))
     {
         s += &format!(
-            " At equal error, {} reaches relMSE {:.3e} in {:.3} s, where more samples at the baseline need {} s.",
+            " At equal error, {} reaches relMSE {:.3e} for {} {unit}, where more samples at the baseline need \
+             {} {unit}.",
             best.setting,
             best.metrics.rel_mse,
-            best.seconds(),
-            curve.time_for(best.metrics.rel_mse),
+            significant(best.cost(c)),
+            curve.cost_for(best.metrics.rel_mse),
+            unit = c.unit(),
         );
     }
     s
@@ -392,9 +295,11 @@ fn bvh_sentence(run: &Run) -> Option<String> {
         .iter()
         .map(|r| r.build_seconds / r.seconds())
         .fold(0.0, f64::max);
+    let least = rows.iter().min_by_key(|r| r.work)?;
+    let most = rows.iter().max_by_key(|r| r.work)?;
     Some(format!(
         "BVH: {images} Builds took {} to {} s, at most {:.2}% of a frame; build plus render ranged from {:.4} s \
-         ({}) to {:.4} s ({}).",
+         ({}) to {:.4} s ({}). The trees' counted work per frame ranged from {:.1} M ({}) to {:.1} M ({}).",
         significant(build(f64::min, f64::INFINITY)),
         significant(build(f64::max, 0.0)),
         100.0 * largest_share,
@@ -402,6 +307,10 @@ fn bvh_sentence(run: &Run) -> Option<String> {
         fastest.setting,
         slowest.seconds(),
         slowest.setting,
+        least.work as f64 / 1e6,
+        least.setting,
+        most.work as f64 / 1e6,
+        most.setting,
     ))
 }
 
@@ -460,15 +369,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_slope_of_a_power_law_is_its_exponent() {
-        let points: Vec<(f64, f64)> = (0..8)
-            .map(|k| (2f64.powi(k), 3.0 * 2f64.powi(k).powf(-0.5)))
-            .collect();
-        assert!((loglog_slope(&points) + 0.5).abs() < 1e-12);
-        assert!(loglog_slope(&points[..1]).is_nan());
-    }
-
-    #[test]
     fn numbers_keep_four_significant_digits() {
         assert_eq!(significant(0.39754), "0.3975");
         assert_eq!(significant(12.3456), "12.35");
@@ -482,23 +382,5 @@ mod tests {
         assert_eq!(join_and(["a"].into_iter()), "a");
         assert_eq!(join_and(["a", "b", "c"].into_iter()), "a, b and c");
         assert_eq!(join_and(std::iter::empty()), "");
-    }
-
-    #[test]
-    fn interpolation_is_linear_in_log_log() {
-        let curve = Curve {
-            by_time: vec![(1.0, 1.0), (4.0, 0.5)],
-            by_error: vec![(1.0, 1.0), (4.0, 0.5)],
-        };
-        assert!(
-            matches!(curve.error_at(2.0), Estimate::Within(e) if (e - 0.5f64.sqrt()).abs() < 1e-12)
-        );
-        assert!(
-            matches!(curve.time_for(0.5f64.sqrt()), Estimate::Within(t) if (t - 2.0).abs() < 1e-12)
-        );
-        assert_eq!(curve.error_at(0.5), Estimate::Above(1.0));
-        assert_eq!(curve.error_at(8.0), Estimate::Below(0.5));
-        assert_eq!(curve.time_for(2.0), Estimate::Below(1.0));
-        assert_eq!(curve.time_for(0.25), Estimate::Above(4.0));
     }
 }

@@ -16,9 +16,11 @@
 //! - `reference`: the reference image: analytic, cached, or rendered and cached.
 //! - `leaks`: robust against obvhs's traversal on a closed sphere: leaks and self-hits.
 //! - `report`: accuracy.csv, accuracy.md and accuracy.svg.
-//! - `findings`: the equal-time and equal-error comparisons, in sentences.
+//! - `findings`: the equal-time and equal-error comparisons, in sentences; `curve`: the spp
+//!   ladder as the yardstick they are read off.
 
 pub(crate) mod bench;
+mod curve;
 mod findings;
 mod leaks;
 mod reference;
@@ -80,9 +82,41 @@ pub struct AccuracyArgs {
     /// machine busy with other work, more runs give steadier comparisons.
     #[arg(long, default_value_t = 1)]
     pub repeats: u32,
+    /// What the comparisons (equal cost, efficiency, the plot) count as cost: wall time, or the
+    /// tracer's counted work, which the machine's load does not change (for a shared machine).
+    #[arg(long, value_enum, default_value_t = Cost::Time)]
+    pub cost: Cost,
     /// Rendering threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+}
+
+/// What a rung costs, for the comparisons between rungs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Cost {
+    /// Wall-clock seconds (BVH: build plus render).
+    Time,
+    /// The tracer's counted work in millions of units: nodes visited, triangles tested and a
+    /// fixed charge per ray. Deterministic, and close to proportional to time on one machine.
+    Work,
+}
+
+impl Cost {
+    /// The cost's name in a sentence.
+    pub fn name(self) -> &'static str {
+        match self {
+            Cost::Time => "time",
+            Cost::Work => "counted work",
+        }
+    }
+
+    /// The unit after a number.
+    pub fn unit(self) -> &'static str {
+        match self {
+            Cost::Time => "s",
+            Cost::Work => "M work units",
+        }
+    }
 }
 
 /// An RGB triple given on the command line.
@@ -232,6 +266,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
         baseline: bench.world().scene.settings.clone(),
         knob_spp: args.knob_spp,
         timing,
+        cost: args.cost,
         reference: &reference,
         rows: &rows,
         leak_checks: &leak_checks,

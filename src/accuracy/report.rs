@@ -9,7 +9,8 @@
 
 use super::Knob;
 use super::bench::{ROULETTE_DEPTH_CAP, Row};
-use super::findings::{self, Curve};
+use super::curve::Curve;
+use super::findings;
 use super::leaks::LeakCheck;
 use super::reference::{Reference, Source};
 use anyhow::Context;
@@ -35,6 +36,8 @@ pub struct Run<'a> {
     pub baseline: RenderSettings,
     pub knob_spp: u32,
     pub timing: super::bench::Timing,
+    /// What the comparisons count as cost.
+    pub cost: super::Cost,
     pub reference: &'a Reference,
     pub rows: &'a [Row],
     pub leak_checks: &'a [LeakCheck],
@@ -61,7 +64,7 @@ pub fn write_all(out: &Path, run: &Run) -> anyhow::Result<()> {
 }
 
 const CSV_HEADER: &str = "knob,setting,spp,max_depth,russian_roulette_depth,bvh,traversal,build_seconds,\
-render_seconds,seconds,rays,work,mrays_per_second,rmse,rel_mse,mae,max_difference,flip,mean_bias,efficiency,\
+render_seconds,seconds,rays,work,mrays_per_second,rmse,rel_mse,mae,max_difference,flip,mean_bias,efficiency,efficiency_work,\
 sphere_rays,sphere_edge_leaks,sphere_bounce_leaks,sphere_self_hits,note";
 
 /// One line per rung; the leak-check columns are filled on the traversal rungs only.
@@ -95,7 +98,8 @@ pub fn csv(run: &Run) -> String {
             format!("{:.6e}", m.max_difference.value),
             format!("{:.6}", r.flip),
             format!("{:.6}", m.mean_bias()),
-            format!("{:.6e}", r.efficiency()),
+            format!("{:.6e}", r.efficiency(super::Cost::Time)),
+            format!("{:.6e}", r.efficiency(super::Cost::Work)),
             check.map_or(String::new(), |c| c.rays.to_string()),
             check.map_or(String::new(), |c| {
                 (c.edge_leaks + c.aimed_leaks).to_string()
@@ -172,7 +176,8 @@ pub fn markdown(run: &Run) -> String {
     let _ = writeln!(md, "**Reference**: {}.\n", run.reference.describe());
     let _ = writeln!(
         md,
-        "![relMSE against time, log-log, one curve per knob](accuracy.svg)\n"
+        "![relMSE against {}, log-log, one curve per knob](accuracy.svg)\n",
+        run.cost.name()
     );
     let curve = Curve::of(run);
     let findings = findings::sentences(run, curve.as_ref());
@@ -186,8 +191,8 @@ pub fn markdown(run: &Run) -> String {
     let versus = |r: &Row| match &curve {
         Some(c) => format!(
             "{} | {}",
-            c.error_at(r.seconds()),
-            c.time_for(r.metrics.rel_mse)
+            c.error_at(r.cost(run.cost)),
+            c.cost_for(r.metrics.rel_mse)
         ),
         None => "- | -".to_owned(),
     };
@@ -203,7 +208,12 @@ pub fn markdown(run: &Run) -> String {
         )
     };
     const COMMON: &str = "time (s) | counted work (M) | RMSE | relMSE | FLIP | mean bias";
-    const VERSUS: &str = "baseline relMSE at equal time | baseline time (s) at equal relMSE";
+    let versus_head = format!(
+        "baseline relMSE at equal {name} | baseline {name} ({unit}) at equal relMSE",
+        name = run.cost.name(),
+        unit = run.cost.unit()
+    );
+    let versus_head = versus_head.as_str();
     let mut table = |title: String, head: &str, rows: Vec<String>| {
         if rows.is_empty() {
             return;
@@ -231,7 +241,7 @@ pub fn markdown(run: &Run) -> String {
     );
     table(
         format!("Maximum path depth, at {} spp", run.knob_spp),
-        &format!("max depth | {COMMON} | {VERSUS}"),
+        &format!("max depth | {COMMON} | {versus_head}"),
         run.rows_of(Knob::Depth)
             .map(|r| format!("{} | {} | {}", r.setting, common(r), versus(r)))
             .collect(),
@@ -239,18 +249,21 @@ pub fn markdown(run: &Run) -> String {
     let roulette: Vec<&Row> = run.rows_of(Knob::Roulette).collect();
     let best = roulette
         .iter()
-        .map(|r| r.efficiency())
+        .map(|r| r.efficiency(run.cost))
         .fold(0.0f64, f64::max);
     table(
         format!(
             "Russian roulette, at {} spp, depth capped at {ROULETTE_DEPTH_CAP}",
             run.knob_spp
         ),
-        &format!("roulette | {COMMON} | efficiency 1/(relMSE x s) | of the best | {VERSUS}"),
+        &format!(
+            "roulette | {COMMON} | efficiency 1/(relMSE x {}) | of the best | {versus_head}",
+            run.cost.unit()
+        ),
         roulette
             .iter()
             .map(|r| {
-                let e = r.efficiency();
+                let e = r.efficiency(run.cost);
                 format!(
                     "{} | {} | {:.4e} | {:.2} | {}",
                     r.setting,
@@ -353,11 +366,13 @@ fn draw(path: &Path, run: &Run) -> Result<(), Box<dyn std::error::Error>> {
         .map(|knob| {
             let points = run
                 .rows_of(knob)
-                .filter(|r| r.seconds() > 0.0 && r.metrics.rel_mse > 0.0)
-                .map(|r| (r.seconds(), r.metrics.rel_mse, label(r)))
+                .filter(|r| r.cost(run.cost) > 0.0 && r.metrics.rel_mse > 0.0)
+                .map(|r| (r.cost(run.cost), r.metrics.rel_mse, label(r)))
                 .collect::<Vec<_>>();
             (knob, points)
         })
+        // obvhs's counted work leaves out its inner nodes: not a cost to set beside ours.
+        .filter(|(knob, _)| !(run.cost == super::Cost::Work && *knob == Knob::Traversal))
         .filter(|(_, points)| !points.is_empty())
         .collect();
     let root = SVGBackend::new(path, SIZE).into_drawing_area();
@@ -379,8 +394,11 @@ fn draw(path: &Path, run: &Run) -> Result<(), Box<dyn std::error::Error>> {
     let mut chart = ChartBuilder::on(&root)
         .caption(
             format!(
-                "Error against time: {} ({}x{})",
-                run.scene, run.width, run.height
+                "Error against {}: {} ({}x{})",
+                run.cost.name(),
+                run.scene,
+                run.width,
+                run.height
             ),
             ("sans-serif", 20),
         )
@@ -390,7 +408,10 @@ fn draw(path: &Path, run: &Run) -> Result<(), Box<dyn std::error::Error>> {
         .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?;
     chart
         .configure_mesh()
-        .x_desc("seconds per frame (BVH: build + render)")
+        .x_desc(match run.cost {
+            super::Cost::Time => "seconds per frame (BVH: build + render)",
+            super::Cost::Work => "counted work per frame (millions of units)",
+        })
         .y_desc("relMSE against the reference")
         .x_labels(8)
         .y_labels(8)

@@ -185,3 +185,22 @@ fn one_sided_emitters_are_dark_from_behind() {
     let (mean, _) = render_mean(&toml);
     assert_eq!(mean, Vec3::ZERO);
 }
+
+#[test]
+fn the_shipped_furnace_scene_renders_its_known_mean() {
+    // scenes/furnace: albedo 0.5, emission 1, max depth 8: mean = sum_{k=0..8} 0.5^k.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/furnace/furnace.toml");
+    let mut scene = tracer::scene::load(&path).expect("the shipped furnace loads");
+    scene.settings.width = 24;
+    scene.settings.height = 24;
+    scene.settings.samples_per_pixel = 16;
+    let accel = Accel::build(&scene.triangles, BuildQuality::default());
+    let effects = Effects::of(&scene);
+    let world = World::new(scene, accel, effects);
+    let out = render_tile(&world, 0, Rect { x: 0, y: 0, w: 24, h: 24 });
+    let n = out.pixels.len() as f64;
+    let mean = out.pixels.iter().map(|p| f64::from(p[1])).sum::<f64>() / n;
+    let var = out.pixels.iter().map(|p| (f64::from(p[1]) - mean).powi(2)).sum::<f64>() / n;
+    let expected: f64 = (0..=8).map(|k| 0.5f64.powi(k)).sum();
+    assert!((mean - expected).abs() <= 4.0 * (var / n).sqrt() + 1e-6, "mean {mean}, expected {expected}");
+}
