@@ -160,7 +160,15 @@ fn bad_arguments_are_named() {
         (&["no-such-trace.jsonl"], "no-such-trace.jsonl"),
         (&["synthetic:8x8:1", "--crash", "3"], "PEER@SECONDS"),
         (
-            &["synthetic:8x8:1", "--peers", "2", "--crash", "0@1"],
+            &[
+                "synthetic:8x8:1",
+                "--tiles",
+                "4",
+                "--peers",
+                "2",
+                "--crash",
+                "0@1",
+            ],
             "owner",
         ),
     ];

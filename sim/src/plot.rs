@@ -103,8 +103,8 @@ const PALETTE: [RGBColor; 6] = [
     RGBColor(140, 86, 75),
 ];
 
-/// Draws `series` as lines over a logarithmic x axis (peers or tiles grow by doubling) and a
-/// linear y axis from 0 to `y_max`, with a legend.
+/// Draws `series` as lines over a base-2 logarithmic x axis (peers and tiles grow by
+/// doubling; one grid line per doubling) and a linear y axis from 0 to `y_max`, with a legend.
 pub fn lines_svg(
     path: &Path,
     title: &str,
@@ -116,9 +116,17 @@ pub fn lines_svg(
         path: path.display().to_string(),
         message: e.to_string(),
     };
-    let xs = || series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
-    let x_min = xs().fold(f64::INFINITY, f64::min).max(1e-9);
-    let x_max = xs().fold(0.0f64, f64::max).max(x_min * 2.0);
+    let log = |x: f64| x.max(1e-9).log2();
+    let xs = || {
+        series
+            .iter()
+            .flat_map(|s| s.points.iter().map(|p| log(p.0)))
+    };
+    let x_min = xs().fold(f64::INFINITY, f64::min).floor();
+    let x_max = xs()
+        .fold(f64::NEG_INFINITY, f64::max)
+        .ceil()
+        .max(x_min + 1.0);
     let root = SVGBackend::new(path, (900, 600)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| error(&e))?;
     let mut chart = ChartBuilder::on(&root)
@@ -126,19 +134,21 @@ pub fn lines_svg(
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(60)
-        .build_cartesian_2d((x_min / 1.2..x_max * 1.2).log_scale(), 0.0..y_max)
+        .build_cartesian_2d(x_min - 0.25..x_max + 0.25, 0.0..y_max)
         .map_err(|e| error(&e))?;
     chart
         .configure_mesh()
         .x_desc(x_desc)
         .y_desc(y_desc)
-        .x_label_formatter(&|x| format!("{}", x.round()))
+        .x_labels((x_max - x_min) as usize + 1)
+        .x_label_formatter(&|x| format!("{}", 2f64.powf(x.round())))
+        .disable_x_mesh()
         .draw()
         .map_err(|e| error(&e))?;
     for s in series {
         let color = PALETTE[s.color % PALETTE.len()];
         let style = color.stroke_width(2);
-        let points = s.points.iter().copied();
+        let points = s.points.iter().map(|&(x, y)| (log(x), y));
         let legend = if s.dashed {
             chart
                 .draw_series(DashedLineSeries::new(points, 6, 4, style))

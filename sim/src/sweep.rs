@@ -163,6 +163,11 @@ impl Sweep {
                     .filter(|g| (g.peers, g.policy, g.tiles) == (peers, policy, tiles))
                     .map(|g| g.frame);
                 let run = scenario::run(trace, partitioner(policy.kind, tiles)?, &scenario)?;
+                tracing::info!(
+                    "simulated {policy}, {peers} peers, {tiles} tiles: efficiency {:.3}, {:.1} s",
+                    run.efficiency,
+                    run.wall_seconds
+                );
                 Ok((i, run))
             })
             .collect::<Result<_, Error>>()?;
@@ -202,32 +207,49 @@ pub fn write_outputs(
     };
     if sweep.peers.len() > 1 {
         for &tiles in &sweep.tiles {
-            let mut series = Vec::new();
+            let line = |policy: Policy, bound: bool| Series {
+                label: match bound {
+                    true => format!(
+                        "{} bound",
+                        Policy {
+                            steal: false,
+                            ..policy
+                        }
+                    ),
+                    false => policy.to_string(),
+                },
+                points: sweep
+                    .peers
+                    .iter()
+                    .map(|&p| {
+                        let run = find(tiles, policy, p);
+                        let y = if bound {
+                            run.bound_efficiency
+                        } else {
+                            run.efficiency
+                        };
+                        (p as f64, y)
+                    })
+                    .collect(),
+                color: policy.index(),
+                dashed: bound,
+            };
+            let mut series: Vec<Series> = sweep.policies.iter().map(|&p| line(p, false)).collect();
+            // The bound depends on the partition alone, which stealing does not change: one
+            // dashed line per balancer, in the colour of its policy without stealing.
+            let mut kinds: Vec<Policy> = Vec::new();
             for &policy in &sweep.policies {
-                let line = |bound: bool| Series {
-                    label: if bound {
-                        format!("{policy} bound")
-                    } else {
-                        policy.to_string()
-                    },
-                    points: sweep
-                        .peers
-                        .iter()
-                        .map(|&p| {
-                            let run = find(tiles, policy, p);
-                            let y = if bound {
-                                run.bound_efficiency
-                            } else {
-                                run.efficiency
-                            };
-                            (p as f64, y)
-                        })
-                        .collect(),
-                    color: policy.index(),
-                    dashed: bound,
+                let plain = Policy {
+                    steal: false,
+                    ..policy
                 };
-                series.push(line(false));
-                series.push(line(true));
+                if !kinds.contains(&plain) {
+                    kinds.push(plain);
+                    series.push(Series {
+                        color: plain.index(),
+                        ..line(policy, true)
+                    });
+                }
             }
             let name = format!("efficiency-vs-peers-{tiles}.svg");
             let caption = format!("{title}: efficiency vs peers, {tiles} tiles");

@@ -4,7 +4,9 @@
 //! The tally is kept as the run goes, never as a record of it: a run of a thousand peers over
 //! a hundred frames sends tens of millions of messages, and keeping them would cost more than
 //! simulating them. What the determinism tests need is a fingerprint: every output of every
-//! core (message sent, tile started, event) is folded into one 64-bit hash with its time.
+//! core (message sent, tile started, event) is folded into one 64-bit hash with its time, and
+//! every message's encoding with its arrival time as it leaves (once, for its size and its
+//! hash alike).
 
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -154,6 +156,7 @@ impl World for SimWorld {
             tally.bytes += bytes;
         }
         let delay = self.links.transit(now, from, to, bytes, delay);
+        self.fingerprint.word(delay.as_nanos() as u64);
         Transit { delay, bytes }
     }
 
