@@ -74,6 +74,10 @@ pub struct SimulateArgs {
     /// pbt+steal, the first tile count, the middle frame).
     #[arg(long)]
     pub gantt: Option<String>,
+    /// Line charts to draw: efficiency against peers (one per tile count), against tiles (one
+    /// per peer count), or both.
+    #[arg(long, value_delimiter = ',', default_value = "peers,tiles")]
+    pub charts: Vec<ChartAxis>,
     /// Output folder (created if missing).
     #[arg(long, default_value = "sim-out")]
     pub out: PathBuf,
@@ -84,6 +88,13 @@ pub struct SimulateArgs {
     /// balancer and tiles) and compare frame times and initial tile sets with it.
     #[arg(long)]
     pub validate: Option<PathBuf>,
+}
+
+/// The x axis of a line chart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ChartAxis {
+    Peers,
+    Tiles,
 }
 
 pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
@@ -163,7 +174,11 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         "{} ({}x{}, {frames} frames)",
         trace.header.source, width, height
     );
-    let written = sim::sweep::write_outputs(&args.out, &title, &sweep, &runs)?;
+    let charts = sim::Charts {
+        peers: args.charts.contains(&ChartAxis::Peers),
+        tiles: args.charts.contains(&ChartAxis::Tiles),
+    };
+    let written = sim::sweep::write_outputs(&args.out, &title, &sweep, &runs, charts)?;
     println!(
         "{} runs in {elapsed:.1} s; wrote {} in {}",
         runs.len(),

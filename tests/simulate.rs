@@ -94,7 +94,7 @@ fn simulate_writes_tables_charts_and_a_summary() {
         let svg = read(&out.join(chart));
         assert!(svg.starts_with("<svg"), "{chart} is not an SVG");
     }
-    assert!(read(&out.join("efficiency-vs-peers-16.svg")).contains("pbt+steal bound"));
+    assert!(read(&out.join("efficiency-vs-peers-16.svg")).contains("pbt bound"));
 
     // The saved trace is the synthetic one: simulating it again gives the same runs.
     let again = dir.path().join("again");

@@ -25,16 +25,16 @@ GLASS=$R/glass-cluster-pan.jsonl
 
 # 1. The shipped scene on a LAN (0.1 ms one way).
 $T simulate $GLASS --peers $PEERS --tiles 1024,4096,16384 --latency 0.1 \
-    --gantt 16:pbt+steal:1024:12 --out $R/glass-peers
+    --charts peers --gantt 16:pbt+steal:1024:12 --out $R/glass-peers
 $T simulate $GLASS --peers 4,16,64 --tiles 16,64,256,1024,4096,16384 --latency 0.1 \
-    --gantt 16:pbt+steal:256:12 --out $R/glass-tiles
+    --charts tiles --gantt 16:pbt+steal:256:12 --out $R/glass-tiles
 
 # 2. The synthetic trace: a hot spot orbiting a 1024x1024 image (the first 20 of 100 frames).
 $T simulate synthetic --frames 20 --peers $PEERS --tiles 4096,16384 --latency 0.1 \
-    --gantt 64:pbt+steal:4096:10 --out $R/synthetic-peers
+    --charts peers --gantt 64:pbt+steal:4096:10 --out $R/synthetic-peers
 $T simulate synthetic --frames 20 --peers 16,64,256 --tiles 256,1024,4096,16384 \
-    --latency 0.1 --out $R/synthetic-tiles
+    --latency 0.1 --charts tiles --out $R/synthetic-tiles
 
 # 3. The shipped scene behind gigabit links: where the owner's link becomes the limit.
 $T simulate $GLASS --peers $PEERS --tiles 4096 --latency 0.1 --bandwidth 1000 \
-    --out $R/glass-gigabit
+    --charts peers --out $R/glass-gigabit

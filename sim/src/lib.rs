@@ -37,7 +37,7 @@ mod world;
 pub use network::Network;
 pub use report::{FrameReport, RunReport};
 pub use scenario::{Crash, Scenario};
-pub use sweep::{GanttChoice, Policy, Sweep};
+pub use sweep::{Charts, GanttChoice, Policy, Sweep};
 pub use trace::{FrameCosts, Trace, TraceWriter};
 
 use std::path::PathBuf;

@@ -176,15 +176,25 @@ impl Sweep {
     }
 }
 
+/// Which line charts [`write_outputs`] draws: a sweep over peers at a few tile counts wants
+/// the first, a sweep over tiles at a few peer counts the second.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Charts {
+    /// `efficiency-vs-peers-M.svg` for each tile count `M`.
+    pub peers: bool,
+    /// `efficiency-vs-tiles-P.svg` for each peer count `P`.
+    pub tiles: bool,
+}
+
 /// Writes everything an experiment yields into `dir`: `runs.csv`, `frames.csv`, `runs.json`,
-/// `summary.md`, `efficiency-vs-peers-M.svg` per tile count `M` (with more than one peer
-/// count), `efficiency-vs-tiles-P.svg` per peer count `P` (with more than one tile count),
-/// and `gantt.svg` if a run recorded its Gantt frame. Returns the files written.
+/// `summary.md`, the `charts` asked for (each where its axis has more than one value), and
+/// `gantt.svg` if a run recorded its Gantt frame. Returns the files written.
 pub fn write_outputs(
     dir: &Path,
     title: &str,
     sweep: &Sweep,
     runs: &[RunReport],
+    charts: Charts,
 ) -> Result<Vec<String>, Error> {
     report::write_runs(dir, runs)?;
     let mut written = vec![
@@ -205,7 +215,7 @@ pub fn write_outputs(
             .expect("the runs follow the sweep's combinations");
         &runs[i]
     };
-    if sweep.peers.len() > 1 {
+    if charts.peers && sweep.peers.len() > 1 {
         for &tiles in &sweep.tiles {
             let line = |policy: Policy, bound: bool| Series {
                 label: match bound {
@@ -263,7 +273,7 @@ pub fn write_outputs(
             written.push(name);
         }
     }
-    if sweep.tiles.len() > 1 {
+    if charts.tiles && sweep.tiles.len() > 1 {
         for &peers in &sweep.peers {
             let series: Vec<Series> = sweep
                 .policies
