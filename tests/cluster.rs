@@ -11,15 +11,25 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 const SCENE: &str = "scenes/glass-cluster-pan/glass-cluster-pan.toml";
-const SIZE: [&str; 8] = ["--width", "96", "--height", "80", "--spp", "8", "--frames", "6"];
+const SIZE: [&str; 8] = [
+    "--width", "96", "--height", "80", "--spp", "8", "--frames", "6",
+];
 
 /// A free UDP port on 127.0.0.1 (released before use; tests run few enough servers for this).
 fn free_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
 }
 
 fn keygen(dir: &Path, peers: u32) {
-    run_ok(tessera().args(["keygen", "--peers", &peers.to_string(), "--out"]).arg(dir));
+    run_ok(
+        tessera()
+            .args(["keygen", "--peers", &peers.to_string(), "--out"])
+            .arg(dir),
+    );
 }
 
 /// Starts `tessera serve`; its stderr lines arrive on the returned channel.
@@ -28,8 +38,21 @@ fn serve(certs: &Path, out: &Path, port: u16, expect: usize) -> (Child, mpsc::Re
         .arg("serve")
         .arg(repo(SCENE))
         .args(SIZE)
-        .args(["--listen", &format!("127.0.0.1:{port}"), "--expect", &expect.to_string()])
-        .args(["--threads", "1", "--peer-timeout", "2", "--tiles", "64", "--certs"])
+        .args([
+            "--listen",
+            &format!("127.0.0.1:{port}"),
+            "--expect",
+            &expect.to_string(),
+        ])
+        .args([
+            "--threads",
+            "1",
+            "--peer-timeout",
+            "2",
+            "--tiles",
+            "64",
+            "--certs",
+        ])
         .arg(certs)
         .arg("--out")
         .arg(out)
@@ -53,7 +76,13 @@ fn serve(certs: &Path, out: &Path, port: u16, expect: usize) -> (Child, mpsc::Re
 fn peer(certs: &Path, port: u16, index: u32) -> Command {
     let mut command = tessera();
     command
-        .args(["peer", "--join", &format!("127.0.0.1:{port}"), "--listen", "127.0.0.1:0"])
+        .args([
+            "peer",
+            "--join",
+            &format!("127.0.0.1:{port}"),
+            "--listen",
+            "127.0.0.1:0",
+        ])
         .args(["--threads", "1", "--index", &index.to_string(), "--certs"])
         .arg(certs)
         .stdout(Stdio::null())
@@ -92,7 +121,14 @@ fn wait_success(mut child: Child, timeout: Duration) {
 /// The same frames rendered by one process alone.
 fn reference(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let out = dir.join("reference");
-    run_ok(tessera().arg("render").arg(repo(SCENE)).args(SIZE).args(["--peers", "1", "--out"]).arg(&out));
+    run_ok(
+        tessera()
+            .arg("render")
+            .arg(repo(SCENE))
+            .args(SIZE)
+            .args(["--peers", "1", "--out"])
+            .arg(&out),
+    );
     frames(&out)
 }
 
@@ -106,7 +142,10 @@ fn a_peer_killed_mid_render_costs_time_not_tiles() {
     let (server, lines) = serve(&certs, &out, port, 2);
     let survivor = peer(&certs, port, 1).spawn().unwrap();
     let mut victim = peer(&certs, port, 2).spawn().unwrap();
-    assert!(wait_for(&lines, "frame 0 done", Duration::from_secs(60)), "the cluster never finished frame 0");
+    assert!(
+        wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
+        "the cluster never finished frame 0"
+    );
     victim.kill().unwrap(); // SIGKILL: no goodbye, no connection close.
     victim.wait().unwrap();
     wait_success(server, Duration::from_secs(120));
@@ -118,9 +157,13 @@ fn a_peer_killed_mid_render_costs_time_not_tiles() {
         assert!(a == b, "{name} differs from the single-process render");
     }
     // The victim did take part before it died.
-    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    let stats: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
     let frame0 = &stats["frames"][0]["tiles"];
-    assert!(frame0.as_array().unwrap().iter().any(|t| t["peer"] == 2), "peer 2 rendered nothing in frame 0");
+    assert!(
+        frame0.as_array().unwrap().iter().any(|t| t["peer"] == 2),
+        "peer 2 rendered nothing in frame 0"
+    );
 }
 
 #[test]
@@ -134,10 +177,16 @@ fn peers_of_another_cluster_are_refused_and_the_render_goes_on() {
     let (server, lines) = serve(&ours, &out, port, 1);
     assert!(wait_for(&lines, "listening on", Duration::from_secs(30)));
     // A peer whose certificate another CA issued: the TLS handshake fails on both sides.
-    let intruder = peer(&theirs, port, 1).stderr(Stdio::piped()).output().unwrap();
+    let intruder = peer(&theirs, port, 1)
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
     assert!(!intruder.status.success(), "a foreign peer was let in");
     let message = String::from_utf8_lossy(&intruder.stderr);
-    assert!(message.contains("handshake") || message.contains("certificate"), "unclear refusal: {message}");
+    assert!(
+        message.contains("handshake") || message.contains("certificate"),
+        "unclear refusal: {message}"
+    );
     // A member then joins, and the render completes with it.
     let member = peer(&ours, port, 1).spawn().unwrap();
     wait_success(server, Duration::from_secs(120));

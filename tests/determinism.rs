@@ -11,7 +11,9 @@ fn render(out: &Path, extra: &[&str]) {
     let scene = repo("scenes/glass-cluster-pan/glass-cluster-pan.toml");
     let mut command = tessera();
     command.args(["render"]).arg(&scene).arg("--out").arg(out);
-    command.args(["--width", "48", "--height", "40", "--spp", "2", "--frames", "3"]);
+    command.args([
+        "--width", "48", "--height", "40", "--spp", "2", "--frames", "3",
+    ]);
     command.args(extra);
     run_ok(&mut command);
 }
@@ -20,21 +22,60 @@ fn render(out: &Path, extra: &[&str]) {
 fn any_peer_count_partition_and_stealing_gives_the_same_bits() {
     let dir = tempfile::tempdir().unwrap();
     let reference_dir = dir.path().join("reference");
-    render(&reference_dir, &["--peers", "1", "--threads", "1", "--balancer", "regular", "--tiles", "1"]);
+    render(
+        &reference_dir,
+        &[
+            "--peers",
+            "1",
+            "--threads",
+            "1",
+            "--balancer",
+            "regular",
+            "--tiles",
+            "1",
+        ],
+    );
     let reference = frames(&reference_dir);
     assert_eq!(reference.len(), 3);
     for (name, _) in &reference {
         for p in pixels(&reference_dir.join(name)) {
-            assert!(p.iter().all(|c| c.is_finite() && *c >= 0.0), "{name} has a bad pixel {p:?}");
+            assert!(
+                p.iter().all(|c| c.is_finite() && *c >= 0.0),
+                "{name} has a bad pixel {p:?}"
+            );
         }
     }
     let variants: &[&[&str]] = &[
         &["--peers", "1", "--threads", "2", "--tiles", "64"],
         &["--peers", "2", "--balancer", "pbt", "--tiles", "32"],
-        &["--peers", "2", "--balancer", "regular", "--tiles", "25", "--no-steal"],
+        &[
+            "--peers",
+            "2",
+            "--balancer",
+            "regular",
+            "--tiles",
+            "25",
+            "--no-steal",
+        ],
         &["--peers", "5", "--balancer", "pbt", "--tiles", "40"],
-        &["--peers", "5", "--balancer", "regular", "--tiles", "16", "--no-steal"],
-        &["--peers", "5", "--balancer", "pbt", "--tiles", "7", "--no-steal"],
+        &[
+            "--peers",
+            "5",
+            "--balancer",
+            "regular",
+            "--tiles",
+            "16",
+            "--no-steal",
+        ],
+        &[
+            "--peers",
+            "5",
+            "--balancer",
+            "pbt",
+            "--tiles",
+            "7",
+            "--no-steal",
+        ],
     ];
     for (i, flags) in variants.iter().enumerate() {
         let out = dir.path().join(format!("v{i}"));
@@ -62,18 +103,35 @@ fn the_render_leaves_stats_tile_maps_and_a_gantt_chart() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
     render(&out, &["--peers", "3", "--tile-map", "--tiles", "16"]);
-    for name in ["stats.json", "gantt.svg", "tiles-0000.png", "frame-0002.png"] {
+    for name in [
+        "stats.json",
+        "gantt.svg",
+        "tiles-0000.png",
+        "frame-0002.png",
+    ] {
         assert!(out.join(name).is_file(), "{name} missing");
     }
-    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    let stats: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
     let frames = stats["frames"].as_array().unwrap();
     assert_eq!(frames.len(), 3);
     for frame in frames {
         let tiles = frame["tiles"].as_array().unwrap();
         assert_eq!(tiles.len(), 16);
-        let area: u64 = tiles.iter().map(|t| t["rect"][2].as_u64().unwrap() * t["rect"][3].as_u64().unwrap()).sum();
+        let area: u64 = tiles
+            .iter()
+            .map(|t| t["rect"][2].as_u64().unwrap() * t["rect"][3].as_u64().unwrap())
+            .sum();
         assert_eq!(area, 48 * 40, "tiles cover the image");
-        let rendered: u64 = frame["peers"].as_array().unwrap().iter().map(|p| p["tiles_rendered"].as_u64().unwrap()).sum();
-        assert!(rendered >= 16, "peers report at least every tile rendered once");
+        let rendered: u64 = frame["peers"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["tiles_rendered"].as_u64().unwrap())
+            .sum();
+        assert!(
+            rendered >= 16,
+            "peers report at least every tile rendered once"
+        );
     }
 }

@@ -9,6 +9,6 @@
 //! - [`node`]: the driver: the owner and peer roles, the in-process cluster, rendering on rayon.
 
 pub mod core;
-pub mod node;
 pub mod net;
+pub mod node;
 pub mod wire;

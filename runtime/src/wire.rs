@@ -57,7 +57,10 @@ pub enum Message {
     /// Where the other peers listen, so that peers can steal from each other directly.
     Peers { peers: Vec<PeerAddress> },
     /// The scene's files; the receiver checks each file's hash before loading it.
-    Scene { files: Vec<SceneFile>, params: RenderParams },
+    Scene {
+        files: Vec<SceneFile>,
+        params: RenderParams,
+    },
     /// The receiver has loaded the scene and can take tiles.
     SceneReady,
     /// The owner gives tiles of `frame` to the receiver (its initial set, or re-issued tiles).

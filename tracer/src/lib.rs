@@ -31,4 +31,4 @@ pub use scene::{Scene, SceneError};
 
 pub use effects::Effects;
 pub use integrator::{PathStats, World};
-pub use tile::{render_tile, Film, Rect, TileCost, TileOutput, BLOCK_SIZE};
+pub use tile::{BLOCK_SIZE, Film, Rect, TileCost, TileOutput, render_tile};

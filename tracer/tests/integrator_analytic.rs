@@ -5,7 +5,7 @@
 
 use glam::Vec3;
 use tracer::geometry::{Accel, BuildQuality};
-use tracer::{render_tile, Effects, Rect, World};
+use tracer::{Effects, Rect, World, render_tile};
 
 /// Renders the whole image of `toml` and returns the per-channel mean and its standard error.
 fn render_mean(toml: &str) -> (Vec3, Vec3) {
@@ -15,7 +15,10 @@ fn render_mean(toml: &str) -> (Vec3, Vec3) {
     let (w, h) = (scene.settings.width, scene.settings.height);
     let world = World::new(scene, accel, effects);
     let out = render_tile(&world, 0, Rect { x: 0, y: 0, w, h });
-    assert_eq!(out.stats.invalid_samples, 0, "no sample may be NaN or infinite");
+    assert_eq!(
+        out.stats.invalid_samples, 0,
+        "no sample may be NaN or infinite"
+    );
     let n = out.pixels.len() as f64;
     let mut sum = [0.0f64; 3];
     let mut sum_sq = [0.0f64; 3];
@@ -27,8 +30,12 @@ fn render_mean(toml: &str) -> (Vec3, Vec3) {
         }
     }
     let mean = sum.map(|s| s / n);
-    let se: [f64; 3] = std::array::from_fn(|c| ((sum_sq[c] / n - mean[c].powi(2)).max(0.0) / n).sqrt());
-    (Vec3::new(mean[0] as f32, mean[1] as f32, mean[2] as f32), Vec3::new(se[0] as f32, se[1] as f32, se[2] as f32))
+    let se: [f64; 3] =
+        std::array::from_fn(|c| ((sum_sq[c] / n - mean[c].powi(2)).max(0.0) / n).sqrt());
+    (
+        Vec3::new(mean[0] as f32, mean[1] as f32, mean[2] as f32),
+        Vec3::new(se[0] as f32, se[1] as f32, se[2] as f32),
+    )
 }
 
 /// Asserts `mean` is within four standard errors (plus a relative `slack` for tessellation) of
@@ -81,7 +88,12 @@ fn closed_emissive_diffuse_sphere_gives_the_geometric_series_at_each_depth() {
     for depth in [1u32, 2, 3, 5] {
         let expected: f32 = le * (0..=depth).map(|k| rho.powi(k as i32)).sum::<f32>();
         let result = render_mean(&furnace(rho, le, &depth.to_string(), "\"off\"", 1));
-        assert_close(&format!("furnace depth {depth}"), result, Vec3::splat(expected), 0.0);
+        assert_close(
+            &format!("furnace depth {depth}"),
+            result,
+            Vec3::splat(expected),
+            0.0,
+        );
     }
 }
 
@@ -90,7 +102,12 @@ fn russian_roulette_is_unbiased_with_unlimited_depth() {
     let (rho, le) = (0.7f32, 1.0f32);
     for seed in [3, 4] {
         let result = render_mean(&furnace(rho, le, "\"unlimited\"", "2", seed));
-        assert_close("furnace with roulette", result, Vec3::splat(le / (1.0 - rho)), 0.0);
+        assert_close(
+            "furnace with roulette",
+            result,
+            Vec3::splat(le / (1.0 - rho)),
+            0.0,
+        );
     }
 }
 
@@ -162,7 +179,12 @@ fn white_furnace_energy_conserving_materials_vanish_in_a_uniform_environment() {
         "type = \"mirror\"\nreflectance = [1, 1, 1]",
         "type = \"glass\"\nior = 1.5",
     ] {
-        assert_close(material, render_mean(&convex_in_environment(material)), Vec3::splat(0.8), 0.0);
+        assert_close(
+            material,
+            render_mean(&convex_in_environment(material)),
+            Vec3::splat(0.8),
+            0.0,
+        );
     }
 }
 
@@ -171,9 +193,14 @@ fn white_furnace_rough_metal_loses_energy_but_never_gains_it() {
     // Single-scattering microfacet models lose the energy of multiple scattering between
     // microfacets, more at higher roughness: the image may be darker than the environment, never
     // brighter.
-    let (mean, se) = render_mean(&convex_in_environment("type = \"metal\"\nreflectance = [1, 1, 1]\nroughness = 0.5"));
+    let (mean, se) = render_mean(&convex_in_environment(
+        "type = \"metal\"\nreflectance = [1, 1, 1]\nroughness = 0.5",
+    ));
     for c in 0..3 {
-        assert!(mean[c] <= 0.8 + 4.0 * se[c], "metal brighter than its environment: {mean}");
+        assert!(
+            mean[c] <= 0.8 + 4.0 * se[c],
+            "metal brighter than its environment: {mean}"
+        );
         assert!(mean[c] > 0.6, "metal lost implausibly much energy: {mean}");
     }
 }
@@ -181,7 +208,9 @@ fn white_furnace_rough_metal_loses_energy_but_never_gains_it() {
 #[test]
 fn one_sided_emitters_are_dark_from_behind() {
     // The furnace sphere emits inward only: seen from outside it is black (no environment).
-    let toml = furnace(0.5, 1.0, "3", "\"off\"", 0).replace("position = [0.1, -0.2, 0.05]", "position = [0, 0, -4]").replace("look_at = [1, 0.3, 0.2]", "look_at = [0, 0, 0]");
+    let toml = furnace(0.5, 1.0, "3", "\"off\"", 0)
+        .replace("position = [0.1, -0.2, 0.05]", "position = [0, 0, -4]")
+        .replace("look_at = [1, 0.3, 0.2]", "look_at = [0, 0, 0]");
     let (mean, _) = render_mean(&toml);
     assert_eq!(mean, Vec3::ZERO);
 }
@@ -189,7 +218,8 @@ fn one_sided_emitters_are_dark_from_behind() {
 #[test]
 fn the_shipped_furnace_scene_renders_its_known_mean() {
     // scenes/furnace: albedo 0.5, emission 1, max depth 8: mean = sum_{k=0..8} 0.5^k.
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/furnace/furnace.toml");
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/furnace/furnace.toml");
     let mut scene = tracer::scene::load(&path).expect("the shipped furnace loads");
     scene.settings.width = 24;
     scene.settings.height = 24;
@@ -197,10 +227,27 @@ fn the_shipped_furnace_scene_renders_its_known_mean() {
     let accel = Accel::build(&scene.triangles, BuildQuality::default());
     let effects = Effects::of(&scene);
     let world = World::new(scene, accel, effects);
-    let out = render_tile(&world, 0, Rect { x: 0, y: 0, w: 24, h: 24 });
+    let out = render_tile(
+        &world,
+        0,
+        Rect {
+            x: 0,
+            y: 0,
+            w: 24,
+            h: 24,
+        },
+    );
     let n = out.pixels.len() as f64;
     let mean = out.pixels.iter().map(|p| f64::from(p[1])).sum::<f64>() / n;
-    let var = out.pixels.iter().map(|p| (f64::from(p[1]) - mean).powi(2)).sum::<f64>() / n;
+    let var = out
+        .pixels
+        .iter()
+        .map(|p| (f64::from(p[1]) - mean).powi(2))
+        .sum::<f64>()
+        / n;
     let expected: f64 = (0..=8).map(|k| 0.5f64.powi(k)).sum();
-    assert!((mean - expected).abs() <= 4.0 * (var / n).sqrt() + 1e-6, "mean {mean}, expected {expected}");
+    assert!(
+        (mean - expected).abs() <= 4.0 * (var / n).sqrt() + 1e-6,
+        "mean {mean}, expected {expected}"
+    );
 }

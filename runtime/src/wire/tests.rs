@@ -55,7 +55,15 @@ fn samples() -> Vec<Message> {
                 hash: [5; 32],
                 bytes: b"v 0 0 0\n".to_vec(),
             }],
-            params: RenderParams { width: 64, height: 48, samples_per_pixel: 4, max_depth: Some(3), russian_roulette_depth: None, seed: 9, all_effects: true },
+            params: RenderParams {
+                width: 64,
+                height: 48,
+                samples_per_pixel: 4,
+                max_depth: Some(3),
+                russian_roulette_depth: None,
+                seed: 9,
+                all_effects: true,
+            },
         },
         Message::SceneReady,
         Message::Assign {
@@ -244,7 +252,10 @@ fn hostile_values_are_refused() {
             bytes: vec![],
         };
         assert!(
-            refused(Message::Scene { files: vec![file], params: RenderParams::default() }),
+            refused(Message::Scene {
+                files: vec![file],
+                params: RenderParams::default()
+            }),
             "{name:?} accepted"
         );
     }

@@ -38,7 +38,9 @@ impl CameraTrack {
     }
 
     pub fn fixed(camera: Camera) -> Self {
-        Self { keys: vec![CameraKey { frame: 0, camera }] }
+        Self {
+            keys: vec![CameraKey { frame: 0, camera }],
+        }
     }
 
     pub fn keys(&self) -> &[CameraKey] {
@@ -60,7 +62,8 @@ impl CameraTrack {
             position: a.camera.position.lerp(b.camera.position, s),
             look_at: a.camera.look_at.lerp(b.camera.look_at, s),
             up: a.camera.up.lerp(b.camera.up, s),
-            vfov_degrees: a.camera.vfov_degrees + s * (b.camera.vfov_degrees - a.camera.vfov_degrees),
+            vfov_degrees: a.camera.vfov_degrees
+                + s * (b.camera.vfov_degrees - a.camera.vfov_degrees),
         }
     }
 }
@@ -100,7 +103,11 @@ impl CameraRays {
         let sx = 2.0 * x / self.width - 1.0;
         let sy = 2.0 * y / self.height - 1.0;
         let dir = (self.forward + sx * self.right + sy * self.down).normalize();
-        Ray { origin: self.origin, dir, t_max: f32::INFINITY }
+        Ray {
+            origin: self.origin,
+            dir,
+            t_max: f32::INFINITY,
+        }
     }
 }
 
@@ -109,12 +116,27 @@ mod tests {
     use super::*;
 
     fn cam(x: f32) -> Camera {
-        Camera { position: Vec3::new(x, 0.0, 0.0), look_at: Vec3::new(x, 0.0, 1.0), up: Vec3::Y, vfov_degrees: 40.0 }
+        Camera {
+            position: Vec3::new(x, 0.0, 0.0),
+            look_at: Vec3::new(x, 0.0, 1.0),
+            up: Vec3::Y,
+            vfov_degrees: 40.0,
+        }
     }
 
     #[test]
     fn track_interpolates_and_holds() {
-        let track = CameraTrack::new(vec![CameraKey { frame: 10, camera: cam(1.0) }, CameraKey { frame: 0, camera: cam(0.0) }]).unwrap();
+        let track = CameraTrack::new(vec![
+            CameraKey {
+                frame: 10,
+                camera: cam(1.0),
+            },
+            CameraKey {
+                frame: 0,
+                camera: cam(0.0),
+            },
+        ])
+        .unwrap();
         assert_eq!(track.at(5).position.x, 0.5);
         assert_eq!(track.at(20).position.x, 1.0);
         assert!(CameraTrack::new(vec![]).is_none());
