@@ -140,6 +140,10 @@ pub struct FrameArgs {
     /// Write OUT/tiles-NNNN.png per frame: the image dimmed, tile borders, tiles tinted by cost.
     #[arg(long)]
     pub tile_map: bool,
+    /// Record every frame's per-block cost map (counted work) to this file, for
+    /// `tessera simulate`.
+    #[arg(long)]
+    pub trace: Option<PathBuf>,
     /// Exposure of the PNG previews (the EXR files are always linear and unscaled).
     #[arg(long, default_value_t = 1.0)]
     pub exposure: f32,

@@ -96,6 +96,15 @@ fn execute(
             frames: Vec::new(),
         },
         rays: 0,
+        trace: match &args.trace {
+            Some(_) => Some(sim::trace::Trace::new(
+                settings.width,
+                settings.height,
+                tracer::BLOCK_SIZE,
+                &args.scene.display().to_string(),
+            )?),
+            None => None,
+        },
     };
     let job = Job {
         world,
@@ -113,6 +122,9 @@ fn execute(
         if let Some(entry) = stats.frames.get_mut(*frame as usize) {
             entry.peers.push(PeerFrameStats::new(peer.0, peer_stats));
         }
+    }
+    if let (Some(path), Some(trace)) = (&args.trace, &sink.trace) {
+        trace.write(path)?;
     }
     let stats_path = args
         .stats
@@ -177,12 +189,19 @@ struct Sink<'a> {
     progress: Progress,
     stats: StatsFile,
     rays: u64,
+    /// Every frame's block costs, when `--trace` asks for them.
+    trace: Option<sim::trace::Trace>,
 }
 
 impl FrameSink for Sink<'_> {
     fn frame(&mut self, done: CompletedFrame) -> Result<(), String> {
         self.write(&done).map_err(|e| format!("{e:#}"))?;
         self.rays += done.rays;
+        if let Some(trace) = &mut self.trace {
+            trace
+                .push(done.film.block_work.clone())
+                .map_err(|e| e.to_string())?;
+        }
         self.progress.frame_done(done.frame, done.seconds);
         let mut frame = FrameStats {
             frame: done.frame,

@@ -135,3 +135,39 @@ fn the_render_leaves_stats_tile_maps_and_a_gantt_chart() {
         );
     }
 }
+
+#[test]
+fn a_recorded_trace_drives_the_simulator() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let trace = dir.path().join("trace.jsonl");
+    render(&out, &["--peers", "2", "--trace", trace.to_str().unwrap()]);
+    let text = std::fs::read_to_string(&trace).unwrap();
+    assert_eq!(
+        text.lines().count(),
+        1 + 3,
+        "a header and one line per frame"
+    );
+    let sim = dir.path().join("sim");
+    run_ok(
+        tessera()
+            .arg("simulate")
+            .arg(&trace)
+            .args([
+                "--peers",
+                "1,2",
+                "--policy",
+                "pbt,pbt+steal",
+                "--tiles",
+                "8",
+                "--out",
+            ])
+            .arg(&sim),
+    );
+    let runs = std::fs::read_to_string(sim.join("runs.csv")).unwrap();
+    assert_eq!(
+        runs.lines().count(),
+        1 + 4,
+        "a header and one row per (peers, policy)"
+    );
+}
