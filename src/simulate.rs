@@ -30,6 +30,10 @@ pub struct SimulateArgs {
     /// Tile counts requested (PBT leaves; the grid is the nearest k x k), comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "256")]
     pub tiles: Vec<usize>,
+    /// Simulate only this frame of the trace, over and over: a static scene, every frame of
+    /// which after the first is predicted exactly (isolates motion from unevenness).
+    #[arg(long)]
+    pub hold: Option<usize>,
     /// Frames to simulate (default: the trace's; more repeat it).
     #[arg(long)]
     pub frames: Option<usize>,
@@ -64,6 +68,10 @@ pub struct SimulateArgs {
     /// development machine; with --validate, measured from the render's statistics).
     #[arg(long)]
     pub rate: Option<f64>,
+    /// Milliseconds each tile costs a slot besides its counted work (ray setup, encoding and
+    /// sending the result). Default 0.
+    #[arg(long, default_value_t = 0.0)]
+    pub tile_overhead: f64,
     /// Tiles a peer keeps committed to its renderer beyond its slots (the core's prefetch).
     #[arg(long, default_value_t = 1)]
     pub prefetch: usize,
@@ -98,7 +106,19 @@ pub enum ChartAxis {
 }
 
 pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
-    let trace = load_trace(&args.trace)?;
+    let mut trace = load_trace(&args.trace)?;
+    if let Some(hold) = args.hold {
+        let Some(frame) = trace.frames.get(hold) else {
+            bail!(
+                "--hold {hold}: the trace has frames 0 to {}",
+                trace.frames.len() - 1
+            );
+        };
+        let blocks = frame.blocks.clone();
+        trace.header.source = format!("{}, frame {hold} held", trace.header.source);
+        trace.frames.clear();
+        trace.push(blocks)?;
+    }
     if let Some(path) = &args.save_trace {
         trace.write(path)?;
     }
@@ -234,6 +254,7 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
         crashes,
         seed: args.seed,
         work_per_second: rate,
+        tile_overhead: millis(args.tile_overhead, "tile-overhead")?,
         frames: args.frames,
         ..Scenario::default()
     };

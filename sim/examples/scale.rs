@@ -1,9 +1,9 @@
 //! How fast the simulator is at the issue's scale: 1024 peers, 100 frames of 16k tiles (a
-//! synthetic 1024x1024 hot spot, PBT with stealing). Prints the wall time and the pump's
+//! synthetic 1024x1024 hot spot, PBT with stealing, links of 0.1 ms). Prints the wall time and the pump's
 //! throughput. A measurement, not a test: speed targets live outside the test suite.
 //!
 //! ```text
-//! cargo run --release -p sim --example scale -- [PEERS [FRAMES [TILES [POLICY]]]]
+//! cargo run --release -p sim --example scale -- [PEERS [FRAMES [TILES [POLICY [LATENCY_MS]]]]]
 //! ```
 
 use std::time::Instant;
@@ -20,6 +20,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let frames: u32 = arg(1, "100").parse()?;
     let tiles: usize = arg(2, "16384").parse()?;
     let policy: Policy = arg(3, "pbt+steal").parse()?;
+    let latency: f64 = arg(4, "0.1").parse()?;
     let started = Instant::now();
     let trace = HotSpot {
         frames,
@@ -43,10 +44,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         peers,
         ..Scenario::default()
     };
+    scenario.network.latency = std::time::Duration::from_secs_f64(latency / 1e3);
     scenario.core.steal = policy.steal;
     let run = scenario::run(&trace, partitioner, &scenario)?;
     println!(
-        "{peers} peers, {frames} frames, {} tiles, {policy}: {:.2} s simulating ({:.2} s making the trace), {} happenings ({:.2} M/s), {} messages, efficiency {:.4} (bound {:.4})",
+        "{peers} peers, {frames} frames, {} tiles, {policy}, {latency} ms: {:.2} s simulating ({:.2} s making the trace), {} happenings ({:.2} M/s), {} messages, efficiency {:.4} (bound {:.4})",
         run.tiles,
         run.wall_seconds,
         made,

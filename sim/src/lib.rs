@@ -72,8 +72,6 @@ pub enum Error {
     },
     #[error(transparent)]
     Plot(#[from] plot::PlotError),
-    #[error("writing {path}: {message}")]
-    Write { path: PathBuf, message: String },
 }
 
 impl Error {

@@ -72,6 +72,7 @@ pub struct RunReport {
     pub bandwidth_bytes_per_second: Option<f64>,
     pub loss: f64,
     pub work_per_second: f64,
+    pub tile_overhead_ms: f64,
     /// Totals over all frames (see the module documentation).
     pub makespan: f64,
     pub work: f64,
@@ -128,6 +129,7 @@ impl RunReport {
             bandwidth_bytes_per_second: scenario.network.bandwidth,
             loss: scenario.network.loss,
             work_per_second: scenario.work_per_second,
+            tile_overhead_ms: scenario.tile_overhead.as_secs_f64() * 1e3,
             makespan: sum(&|f| f.makespan),
             work,
             efficiency: ratio(work, capacity_time),
@@ -152,7 +154,7 @@ impl RunReport {
     }
 }
 
-const RUN_COLUMNS: &str = "policy,peers,slots,tiles,frames,latency_ms,bandwidth_bytes_per_second,loss,makespan_s,work_s,efficiency,bound_efficiency,idle_fraction,steals,messages,bytes,steps,wall_s,fingerprint";
+const RUN_COLUMNS: &str = "policy,peers,slots,tiles,frames,latency_ms,bandwidth_bytes_per_second,loss,tile_overhead_ms,makespan_s,work_s,efficiency,bound_efficiency,idle_fraction,steals,messages,bytes,steps,wall_s,fingerprint";
 
 const FRAME_COLUMNS: &str = "policy,peers,tiles,frame,frame_tiles,participants,capacity,makespan_s,work_s,largest_tile_s,lower_bound_s,efficiency,bound_efficiency,idle_fraction,renders,steal_requests,grants,stolen_tiles,messages,bytes,failures,splits,merges";
 
@@ -167,7 +169,7 @@ pub fn write_runs(dir: &Path, runs: &[RunReport]) -> Result<(), Error> {
             .map_or(String::new(), |b| b.to_string());
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{:.9},{:.9},{:.6},{:.6},{:.6},{},{},{},{},{:.3},{}",
+            "{},{},{},{},{},{},{},{},{},{:.9},{:.9},{:.6},{:.6},{:.6},{},{},{},{},{:.3},{}",
             r.policy,
             r.peers,
             r.slots,
@@ -176,6 +178,7 @@ pub fn write_runs(dir: &Path, runs: &[RunReport]) -> Result<(), Error> {
             r.latency_ms,
             bandwidth,
             r.loss,
+            r.tile_overhead_ms,
             r.makespan,
             r.work,
             r.efficiency,

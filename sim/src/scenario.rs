@@ -13,6 +13,7 @@
 //! ratios such as efficiency do not depend on it, but latency and bandwidth effects do, since
 //! they compare network time with render time.
 
+use std::collections::btree_map::Entry;
 use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
 
@@ -31,11 +32,12 @@ use crate::{Error, Network, Trace};
 /// The peer that owns every frame (and renders too, like any other).
 pub const OWNER: PeerId = PeerId(0);
 
-/// Counted work one rendering thread renders per second on the development machine (2 cores,
-/// both rendering): measured by `cargo run -p sim --example record_trace` on the shipped
-/// glass-cluster-pan scene (2.21e9 units in 30.6 thread-seconds, each tile timed alone). Pass
-/// `--rate` for another machine or scene.
-pub const DEFAULT_WORK_PER_SECOND: f64 = 7.2e7;
+/// Counted work one rendering thread renders per second on the development machine (2 AMD
+/// EPYC cores, otherwise idle, both rendering): `cargo run --release -p sim --example
+/// record_trace` on the shipped glass-cluster-pan scene did 4.61e8 units in 3.19
+/// thread-seconds, each tile timed alone (1.50e8 with one thread). Under a concurrent build the
+/// same measurement gave half as much. Pass `--rate` for another machine or scene.
+pub const DEFAULT_WORK_PER_SECOND: f64 = 1.45e8;
 
 /// Everything a run needs besides the trace and the balancer. Every effect is off by default.
 #[derive(Clone, Debug)]
@@ -56,6 +58,10 @@ pub struct Scenario {
     pub seed: u64,
     /// Counted work per second of one slot of a speed-1 peer.
     pub work_per_second: f64,
+    /// Time a slot of a speed-1 peer spends on each tile besides its counted work (setting up
+    /// its camera rays, encoding and sending its result): what makes many small tiles cost
+    /// more than a few big ones. Not work: efficiency counts it as lost time.
+    pub tile_overhead: Duration,
     /// Frames to simulate; `None`: as many as the trace has (more repeat it from the start).
     pub frames: Option<usize>,
     /// The frame whose renders are kept for a Gantt chart.
@@ -84,6 +90,7 @@ impl Default for Scenario {
             crashes: Vec::new(),
             seed: 0,
             work_per_second: DEFAULT_WORK_PER_SECOND,
+            tile_overhead: Duration::ZERO,
             frames: None,
             gantt_frame: None,
             keep_assignments: false,
@@ -170,9 +177,10 @@ pub fn run(
         scenario.seed,
         trace.header.block_size,
     );
+    let overhead = scenario.tile_overhead.as_secs_f64();
     let world = SimWorld::new(
         maps,
-        seconds_per_unit,
+        (seconds_per_unit, overhead),
         speeds.clone(),
         links,
         scenario.gantt_frame,
@@ -250,10 +258,9 @@ pub fn run(
                 let crash = *crash;
                 crashes.pop_front();
                 cluster.run(crash.at);
-                let peer = PeerId(crash.peer);
-                if !crashed.contains_key(&peer) {
-                    cluster.kill(peer, false);
-                    crashed.insert(peer, cluster.now());
+                if let Entry::Vacant(entry) = crashed.entry(PeerId(crash.peer)) {
+                    cluster.kill(*entry.key(), false);
+                    entry.insert(cluster.now());
                 }
                 continue;
             }

@@ -50,6 +50,8 @@ pub(crate) struct SimWorld {
     maps: Vec<CostMap>,
     /// Virtual seconds per unit of counted work, on a peer of speed 1.
     seconds_per_unit: f64,
+    /// Virtual seconds each tile costs besides its work, on a peer of speed 1.
+    tile_overhead: f64,
     /// Speed factor of each peer, indexed by peer id.
     speeds: Vec<f64>,
     links: Links,
@@ -63,7 +65,7 @@ pub(crate) struct SimWorld {
 impl SimWorld {
     pub(crate) fn new(
         maps: Vec<CostMap>,
-        seconds_per_unit: f64,
+        (seconds_per_unit, tile_overhead): (f64, f64),
         speeds: Vec<f64>,
         links: Links,
         gantt_frame: Option<u64>,
@@ -71,6 +73,7 @@ impl SimWorld {
         Self {
             maps,
             seconds_per_unit,
+            tile_overhead,
             speeds,
             links,
             frames: BTreeMap::new(),
@@ -111,7 +114,7 @@ impl World for SimWorld {
         let frame = item.frame.0;
         let cost = self.map(frame).cost(item.tile.rect);
         let speed = self.speeds[peer.0 as usize];
-        let seconds = cost * self.seconds_per_unit / speed;
+        let seconds = (cost * self.seconds_per_unit + self.tile_overhead) / speed;
         let duration = Duration::from_secs_f64(seconds);
         if let Some(tally) = self.frames.get_mut(&frame) {
             tally.renders += 1;

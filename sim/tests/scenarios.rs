@@ -216,6 +216,37 @@ fn two_equal_tiles_on_two_peers_take_one_tile_time() {
     }
 }
 
+/// The same two tiles on one peer, with half a second of overhead per tile: three seconds,
+/// of which two are work.
+#[test]
+fn tile_overhead_costs_time_but_is_not_work() {
+    let mut trace = Trace::new(16, 8, 8, "two blocks").unwrap();
+    trace.push(vec![1000, 1000]).unwrap();
+    let config = Config {
+        kind: Kind::Regular,
+        grid: Grid::Count {
+            columns: 2,
+            rows: 1,
+        },
+        ..Config::default()
+    };
+    let scenario = Scenario {
+        work_per_second: 1000.0,
+        tile_overhead: Duration::from_millis(500),
+        ..Scenario::default()
+    };
+    let partitioner = Partitioner::new(16, 8, &config).unwrap();
+    let frame = &scenario::run(&trace, partitioner, &scenario)
+        .unwrap()
+        .frames[0];
+    assert!((frame.makespan - 3.0).abs() < 1e-9, "{frame:?}");
+    assert!((frame.efficiency - 2.0 / 3.0).abs() < 1e-9);
+    assert!(
+        frame.idle_fraction.abs() < 1e-9,
+        "overhead keeps the slot busy"
+    );
+}
+
 #[test]
 fn a_slow_peer_is_helped_by_stealing() {
     let trace = hot_spot(3, false);
