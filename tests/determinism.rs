@@ -171,3 +171,47 @@ fn a_recorded_trace_drives_the_simulator() {
         "a header and one row per (peers, policy)"
     );
 }
+
+/// The simulator deals the same initial tile sets as the runtime did, frame after frame (the
+/// PBT re-cut from the same measured costs), for both balancers; frame times are compared too,
+/// but only printed, since they depend on this machine.
+#[test]
+fn the_simulator_deals_the_tiles_the_runtime_dealt() {
+    for (balancer, peers) in [("pbt", "3"), ("regular", "4")] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let trace = dir.path().join("trace.jsonl");
+        let stats = dir.path().join("stats.json");
+        render(
+            &out,
+            &[
+                "--peers",
+                peers,
+                "--balancer",
+                balancer,
+                "--tiles",
+                "12",
+                "--trace",
+                trace.to_str().unwrap(),
+                "--stats",
+                stats.to_str().unwrap(),
+            ],
+        );
+        let output = run_ok(
+            tessera()
+                .arg("simulate")
+                .arg(&trace)
+                .arg("--validate")
+                .arg(&stats)
+                .arg("--out")
+                .arg(dir.path().join("validation")),
+        );
+        let stdout = String::from_utf8(output.stdout).unwrap();
+        assert!(
+            stdout.contains("initial tile sets identical in 3 of 3 frames"),
+            "{balancer} on {peers} peers:\n{stdout}"
+        );
+        let csv = std::fs::read_to_string(dir.path().join("validation/validation.csv")).unwrap();
+        assert_eq!(csv.lines().count(), 1 + 3, "{csv}");
+    }
+}
