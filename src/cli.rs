@@ -130,6 +130,9 @@ pub struct FrameArgs {
     /// Number of tiles per frame (PBT leaves, or grid cells rounded to a k x k grid).
     #[arg(long, default_value_t = 256)]
     pub tiles: usize,
+    /// How each frame's tiles are dealt to peers before stealing starts.
+    #[arg(long, value_enum, default_value_t = DealOrder::Contiguous)]
+    pub deal: DealOrder,
     /// Which light-transport effects to pay for: those the scene calls for, or all of them.
     #[arg(long, value_enum, default_value_t = EffectsChoice::Auto)]
     pub effects: EffectsChoice,
@@ -155,6 +158,23 @@ pub enum BalancerKind {
     Pbt,
     /// A regular grid of equal tiles.
     Regular,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum DealOrder {
+    /// One run of neighbouring tiles per peer, the runs of equal predicted cost.
+    Contiguous,
+    /// Tiles dealt to peers in turn, blind to predicted cost (the classic static baseline).
+    RoundRobin,
+}
+
+impl From<DealOrder> for balancer::Order {
+    fn from(deal: DealOrder) -> Self {
+        match deal {
+            DealOrder::Contiguous => balancer::Order::Contiguous,
+            DealOrder::RoundRobin => balancer::Order::RoundRobin,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]

@@ -3,7 +3,7 @@
 //! other over QUIC, and the owner writes each frame and feeds its measured costs back to the
 //! balancer.
 
-use crate::cli::{BalancerKind, EffectsChoice, FrameArgs, RenderArgs, ServeArgs};
+use crate::cli::{BalancerKind, DealOrder, EffectsChoice, FrameArgs, RenderArgs, ServeArgs};
 use crate::report::{self, FrameStats, PeerFrameStats, Progress, StatsFile, TileStats};
 use anyhow::Context;
 use runtime::net::PeerIdentity;
@@ -64,7 +64,13 @@ fn execute(
     let world = Arc::new(prepare_world(scene, args.effects));
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let partitioner = partitioner(args.balancer, args.tiles, settings.width, settings.height)?;
+    let partitioner = partitioner(
+        args.balancer,
+        args.tiles,
+        args.deal,
+        settings.width,
+        settings.height,
+    )?;
     let tiles = partitioner.tiles().len();
     let progress = Progress::new(settings.frames);
     progress.line(&format!(
@@ -91,6 +97,7 @@ fn execute(
             height: settings.height,
             samples_per_pixel: settings.samples_per_pixel,
             balancer: format!("{:?}", args.balancer).to_lowercase(),
+            deal: deal_name(args.deal).to_string(),
             effects: world.effects.to_string(),
             peers,
             frames: Vec::new(),
@@ -283,11 +290,20 @@ pub fn prepare_world(scene: Scene, effects: EffectsChoice) -> World {
     node::prepare_world(scene, effects)
 }
 
+/// `--deal`'s spelling of `deal`, as the stats file records it.
+pub fn deal_name(deal: DealOrder) -> &'static str {
+    match deal {
+        DealOrder::Contiguous => "contiguous",
+        DealOrder::RoundRobin => "round-robin",
+    }
+}
+
 /// The balancer the flags ask for. `--tiles M` is the PBT's leaf count, or for the regular grid
 /// the nearest k x k grid (k = round(sqrt(M))), so equal flags mean comparable tile counts.
 pub fn partitioner(
     kind: BalancerKind,
     tiles: usize,
+    deal: DealOrder,
     width: u32,
     height: u32,
 ) -> anyhow::Result<balancer::Partitioner> {
@@ -302,6 +318,7 @@ pub fn partitioner(
             columns: side,
             rows: side,
         },
+        order: deal.into(),
         ..balancer::Config::default()
     };
     Ok(balancer::Partitioner::new(width, height, &config)?)

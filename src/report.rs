@@ -63,6 +63,8 @@ pub struct StatsFile {
     pub samples_per_pixel: u32,
     /// `pbt` or `regular`.
     pub balancer: String,
+    /// How tiles were dealt to peers: `contiguous` or `round-robin`.
+    pub deal: String,
     /// The light-transport effects the render paid for (see `tracer::Effects`).
     pub effects: String,
     pub peers: usize,

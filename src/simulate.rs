@@ -6,7 +6,7 @@
 //! With `--validate STATS` it instead simulates the render a `--stats` file describes and
 //! compares the two, frame by frame.
 
-use crate::cli::BalancerKind;
+use crate::cli::{BalancerKind, DealOrder};
 use anyhow::{Context, bail};
 use serde::Deserialize;
 use sim::scenario::{self, DEFAULT_WORK_PER_SECOND, Scenario};
@@ -30,6 +30,9 @@ pub struct SimulateArgs {
     /// Tile counts requested (PBT leaves; the grid is the nearest k x k), comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "256")]
     pub tiles: Vec<usize>,
+    /// How tiles are dealt to peers at the start of each frame (both balancers).
+    #[arg(long, value_enum, default_value_t = DealOrder::Contiguous)]
+    pub deal: DealOrder,
     /// Simulate only this frame of the trace, over and over: a static scene, every frame of
     /// which after the first is predicted exactly (isolates motion from unevenness).
     #[arg(long)]
@@ -156,7 +159,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
                 balancer::Kind::Pbt => BalancerKind::Pbt,
                 balancer::Kind::Regular => BalancerKind::Regular,
             };
-            crate::render::partitioner(kind, tiles, width, height)
+            crate::render::partitioner(kind, tiles, args.deal, width, height)
                 .map_err(|e| sim::Error::Scenario(format!("{e:#}")))
         },
         gantt,
@@ -191,8 +194,11 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         );
     }
     let title = format!(
-        "{} ({}x{}, {frames} frames)",
-        trace.header.source, width, height
+        "{} ({}x{}, {frames} frames, tiles dealt {})",
+        trace.header.source,
+        width,
+        height,
+        crate::render::deal_name(args.deal)
     );
     let charts = sim::Charts {
         peers: args.charts.contains(&ChartAxis::Peers),
@@ -327,6 +333,9 @@ fn gantt_choice(
 struct Stats {
     peers: usize,
     balancer: String,
+    /// Absent from files written before `--deal` existed, which always dealt contiguously.
+    #[serde(default)]
+    deal: Option<String>,
     frames: Vec<StatsFrame>,
 }
 
@@ -368,6 +377,11 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
         "regular" => BalancerKind::Regular,
         other => bail!("unknown balancer {other:?} in {}", stats_path.display()),
     };
+    let deal = match stats.deal.as_deref() {
+        None | Some("contiguous") => DealOrder::Contiguous,
+        Some("round-robin") => DealOrder::RoundRobin,
+        Some(other) => bail!("unknown deal {other:?} in {}", stats_path.display()),
+    };
     let steal = match args.policy.as_slice() {
         [] => true,
         [policy] => policy.steal,
@@ -403,7 +417,7 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
     scenario.frames = Some(frames);
     scenario.keep_assignments = true;
     let tiles = stats.frames[0].tiles.len();
-    let partitioner = crate::render::partitioner(kind, tiles, trace.width(), trace.height())?;
+    let partitioner = crate::render::partitioner(kind, tiles, deal, trace.width(), trace.height())?;
     let run = scenario::run(trace, partitioner, &scenario)?;
     let mut csv = String::from("frame,measured_s,simulated_s,ratio,tiles,same_initial_sets\n");
     println!(

@@ -173,11 +173,11 @@ fn a_recorded_trace_drives_the_simulator() {
 }
 
 /// The simulator deals the same initial tile sets as the runtime did, frame after frame (the
-/// PBT re-cut from the same measured costs), for both balancers; frame times are compared too,
+/// PBT re-cut from the same measured costs), for both balancers and both ways of dealing; frame times are compared too,
 /// but only printed, since they depend on this machine.
 #[test]
 fn the_simulator_deals_the_tiles_the_runtime_dealt() {
-    for (balancer, peers) in [("pbt", "3"), ("regular", "4")] {
+    for (balancer, peers, deal) in [("pbt", "3", "contiguous"), ("regular", "4", "round-robin")] {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("out");
         let trace = dir.path().join("trace.jsonl");
@@ -191,6 +191,8 @@ fn the_simulator_deals_the_tiles_the_runtime_dealt() {
                 balancer,
                 "--tiles",
                 "12",
+                "--deal",
+                deal,
                 "--trace",
                 trace.to_str().unwrap(),
                 "--stats",
@@ -209,7 +211,7 @@ fn the_simulator_deals_the_tiles_the_runtime_dealt() {
         let stdout = String::from_utf8(output.stdout).unwrap();
         assert!(
             stdout.contains("initial tile sets identical in 3 of 3 frames"),
-            "{balancer} on {peers} peers:\n{stdout}"
+            "{balancer} dealt {deal} to {peers} peers:\n{stdout}"
         );
         let csv = std::fs::read_to_string(dir.path().join("validation/validation.csv")).unwrap();
         assert_eq!(csv.lines().count(), 1 + 3, "{csv}");

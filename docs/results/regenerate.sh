@@ -5,12 +5,17 @@
 #
 # Each `tessera simulate` below writes runs.csv, frames.csv, runs.json, summary.md and SVG
 # charts into its folder. The runs are deterministic (same inputs and seed, same numbers);
-# only the wall-time columns change from one run of this script to the next.
+# only the wall-time columns change from one run of this script to the next. About half an
+# hour on the 2-core development machine, nearly all of it in the runs of 512 and 1024
+# stealing peers (see "Speed" in docs/results.md).
 set -eu
 cargo build --release --bin tessera
 T=target/release/tessera
 R=docs/results
 PEERS=1,2,4,8,16,32,64,128,256,512,1024
+# Every run: links of 0.1 ms one way (a LAN), one rendering slot per peer, the renderer's
+# measured per-tile overhead (30 us), the default work rate (1.45e8 units/s per slot).
+NET="--latency 0.1 --tile-overhead 0.03"
 
 # The shipped uneven scene's cost trace is committed: counted work is deterministic, so
 # recording it again gives the same file. To re-record it (about a minute):
@@ -23,18 +28,31 @@ GLASS=$R/glass-cluster-pan.jsonl
 # at a few peer counts: with fewer tiles than peers the efficiency is at most tiles / peers,
 # and the idle peers' stealing only costs simulation time.
 
-# 1. The shipped scene on a LAN (0.1 ms one way).
-$T simulate $GLASS --peers $PEERS --tiles 1024,4096,16384 --latency 0.1 \
+# 1. The shipped scene.
+$T simulate $GLASS $NET --peers $PEERS --tiles 1024,4096,16384 \
     --charts peers --gantt 16:pbt+steal:1024:12 --out $R/glass-peers
-$T simulate $GLASS --peers 4,16,64 --tiles 16,64,256,1024,4096,16384 --latency 0.1 \
+$T simulate $GLASS $NET --peers 4,16,64 --tiles 16,64,256,1024,4096,16384 \
     --charts tiles --gantt 16:pbt+steal:256:12 --out $R/glass-tiles
 
 # 2. The synthetic trace: a hot spot orbiting a 1024x1024 image (the first 20 of 100 frames).
-$T simulate synthetic --frames 20 --peers $PEERS --tiles 4096,16384 --latency 0.1 \
+$T simulate synthetic --frames 20 $NET --peers $PEERS --tiles 4096,16384 \
     --charts peers --gantt 64:pbt+steal:4096:10 --out $R/synthetic-peers
-$T simulate synthetic --frames 20 --peers 16,64,256 --tiles 256,1024,4096,16384 \
-    --latency 0.1 --charts tiles --out $R/synthetic-tiles
+$T simulate synthetic --frames 20 $NET --peers 16,64,256 --tiles 256,1024,4096,16384 \
+    --charts tiles --out $R/synthetic-tiles
 
-# 3. The shipped scene behind gigabit links: where the owner's link becomes the limit.
-$T simulate $GLASS --peers $PEERS --tiles 4096 --latency 0.1 --bandwidth 1000 \
+# 3. Control: the shipped scene's frame 12 held still, so that every frame after the first
+#    is predicted exactly: what is left of the gaps is unevenness, not motion.
+$T simulate $GLASS --hold 12 --frames 8 $NET --peers $PEERS --tiles 4096 \
+    --charts peers --out $R/glass-still
+
+# 4. The shipped scene behind gigabit links: where the owner's link becomes the limit.
+$T simulate $GLASS $NET --bandwidth 1000 --peers $PEERS --tiles 4096 \
     --charts peers --out $R/glass-gigabit
+
+# 5. The classic static baseline: a regular grid dealt round-robin, blind to predicted cost
+#    (every other run deals contiguous runs of equal predicted cost, which is already a use
+#    of the PBT's predictor).
+$T simulate $GLASS $NET --deal round-robin --policy regular,regular+steal --peers $PEERS \
+    --tiles 1024,4096 --charts peers --out $R/glass-round-robin
+$T simulate synthetic --frames 20 $NET --deal round-robin --policy regular,regular+steal \
+    --peers $PEERS --tiles 4096 --charts peers --out $R/synthetic-round-robin
