@@ -433,3 +433,68 @@ fn bad_inputs_are_refused_with_errors() {
         Err(FrameError::Busy(_))
     ));
 }
+
+/// In a cluster larger than a round, an idle thief asks `victims_per_round` victims, then waits,
+/// twice as long after each fruitless round in a row, up to the cap.
+#[test]
+fn rounds_are_bounded_and_backoffs_double_up_to_the_cap() {
+    let config = Config {
+        victims_per_round: 3,
+        steal_backoff: Duration::from_millis(10),
+        steal_backoff_max: Duration::from_millis(40),
+        // No grant could be worth this much: every request is refused.
+        min_steal_cost: 1e9,
+        ..Config::default()
+    };
+    let mut cluster = cluster(&config, 12, 1, 5);
+    // Peer 1 holds 300 ms of work; the other eleven have nothing.
+    let assignments: BTreeMap<PeerId, Vec<TileSpec>> = (0..12)
+        .map(|p| {
+            let work = if p == 1 {
+                tiles(0, &[10.0; 30])
+            } else {
+                Vec::new()
+            };
+            (PeerId(p), work)
+        })
+        .collect();
+    cluster.start_frame(OWNER, FrameId(1), assignments).unwrap();
+    finish(&mut cluster);
+    let (_, results) = completion(&cluster, FrameId(1));
+    assert_all_results(&results, FrameId(1), 30);
+
+    let thief = PeerId(5);
+    let asked: Vec<Duration> = cluster
+        .trace()
+        .iter()
+        .filter_map(|record| match record {
+            Record::Sent {
+                at,
+                from,
+                message: Message::StealRequest { .. },
+                ..
+            } if *from == thief => Some(*at),
+            _ => None,
+        })
+        .collect();
+    // Requests less than the shortest backoff apart belong to one round.
+    let mut rounds: Vec<Vec<Duration>> = Vec::new();
+    for at in asked {
+        match rounds.last_mut() {
+            Some(round) if at - *round.last().unwrap() < config.steal_backoff => round.push(at),
+            _ => rounds.push(vec![at]),
+        }
+    }
+    assert!(rounds.len() >= 6, "300 ms of waiting: {rounds:?}");
+    let (last, full) = rounds.split_last().unwrap();
+    assert!(full.iter().all(|round| round.len() == 3), "{rounds:?}");
+    assert!(last.len() <= 3, "{rounds:?}");
+    for (i, pair) in rounds.windows(2).enumerate() {
+        let gap = pair[1][0] - *pair[0].last().unwrap();
+        let expected = (config.steal_backoff * (1 << i)).min(config.steal_backoff_max);
+        assert!(
+            gap >= expected && gap <= expected + Duration::from_millis(1),
+            "backoff {i} lasted {gap:?}, expected {expected:?}"
+        );
+    }
+}

@@ -115,7 +115,9 @@ impl World for SimWorld {
         let cost = self.map(frame).cost(item.tile.rect);
         let speed = self.speeds[peer.0 as usize];
         let seconds = (cost * self.seconds_per_unit + self.tile_overhead) / speed;
-        let duration = Duration::from_secs_f64(seconds);
+        // Rounded up to whole nanoseconds: truncating would make every tile a little cheaper
+        // than its work, and a run's efficiency could then exceed its bound.
+        let duration = Duration::from_nanos((seconds * 1e9).ceil() as u64);
         if let Some(tally) = self.frames.get_mut(&frame) {
             tally.renders += 1;
             tally.busy += duration.as_secs_f64();

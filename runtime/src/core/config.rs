@@ -29,13 +29,22 @@ pub struct Config {
     pub max_grant_tiles: usize,
     /// Which peers a thief asks, in which order.
     pub victims: VictimOrder,
+    /// Most victims one round asks before the thief backs off. A cluster of at most this many
+    /// other peers is asked in full, each once; a larger one by this many draws. Without a
+    /// bound, every idle peer of `P` asks all `P - 1` others at the end of each frame: `P²`
+    /// requests a round, most of them to peers as idle as the thief.
+    pub victims_per_round: usize,
     /// Round-trip time assumed until one is measured (from steal exchanges or the driver).
     pub initial_rtt: Duration,
     /// A steal request unanswered for this long counts as refused; a grant arriving later is
     /// still kept, never dropped.
     pub steal_timeout: Duration,
-    /// After every candidate victim refused, a thief waits this long before its next round.
+    /// After every victim of a round refused, a thief waits this long before its next round,
+    /// twice as long after two fruitless rounds in a row, and so on up to `steal_backoff_max`.
+    /// A grant, new work or a new frame start again from `steal_backoff`.
     pub steal_backoff: Duration,
+    /// The longest backoff (see `steal_backoff`).
+    pub steal_backoff_max: Duration,
     /// A peer holding work tells the owner it is alive when it has sent the owner nothing for
     /// this long.
     pub heartbeat_interval: Duration,
@@ -48,10 +57,12 @@ pub struct Config {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum VictimOrder {
     /// As rayon does: a random first victim (from the core's seeded generator), then the
-    /// others in turn. Spreads thieves over victims.
+    /// others in turn; beyond `victims_per_round` others, that many victims drawn at random.
+    /// Spreads thieves over victims.
     RandomStart,
-    /// The peer after this one in id order first, then the others in turn. No randomness; all
-    /// thieves of a ring lean on their neighbours.
+    /// The peer after this one in id order first, then the others in turn (the nearest
+    /// `victims_per_round` of them). No randomness; all thieves of a ring lean on their
+    /// neighbours.
     Ring,
 }
 
@@ -65,9 +76,11 @@ impl Default for Config {
             min_steal_cost: 0.0,
             max_grant_tiles: 64,
             victims: VictimOrder::RandomStart,
+            victims_per_round: 8,
             initial_rtt: Duration::from_millis(1),
             steal_timeout: Duration::from_millis(250),
             steal_backoff: Duration::from_millis(10),
+            steal_backoff_max: Duration::from_millis(80),
             heartbeat_interval: Duration::from_secs(1),
             peer_timeout: Duration::from_secs(10),
         }

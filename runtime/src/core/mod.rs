@@ -78,8 +78,7 @@ impl Core {
     /// A core for peer `me`, whose renderer works on `slots` tiles at once. `seed` drives victim
     /// choice; the core mixes `me` into it, so a cluster may give every peer the same seed.
     pub fn new(me: PeerId, slots: usize, config: Config, seed: u64) -> Self {
-        let seed = seed ^ u64::from(me.0).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        let estimates = Estimates::new(&config, seed);
+        let estimates = Estimates::new(&config, steal::Rng::stream(seed, me));
         Self {
             config,
             connected: BTreeSet::new(),

@@ -25,11 +25,78 @@ pub(super) enum Thief {
     Backoff { until: Duration },
 }
 
-/// A round of requests: victim `start` first, then the others in turn.
+/// A round of requests: over a few peers, victim `start` first, then the others in turn; over
+/// many, `victims_per_round` draws (see [`pick_victim`]).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Round {
     start: usize,
     tried: usize,
+}
+
+/// What the thief does next within its round.
+enum Pick {
+    Victim(PeerId),
+    /// The round has asked all it may: back off.
+    RoundOver,
+    /// No live participant to ask.
+    Nobody,
+}
+
+/// The next victim of the running round, starting a round if none runs. Costs `O(log P)` per
+/// request in a large cluster (no list of candidates is built), so that the simulator's
+/// thousands of peers stay cheap.
+fn pick_victim(state: &mut FrameState, me: PeerId, rng: &mut Rng, cx: &Ctx) -> Pick {
+    let eligible = |peer: &PeerId| *peer != me && cx.connected.contains(peer);
+    let limit = cx.config.victims_per_round.max(1);
+    let order = cx.config.victims;
+    if state.peers.len() <= limit + 1 {
+        // Few enough to ask every one, each once.
+        let victims: Vec<PeerId> = state.peers.iter().copied().filter(eligible).collect();
+        if victims.is_empty() {
+            return Pick::Nobody;
+        }
+        let round = *state.round.get_or_insert_with(|| Round {
+            start: match order {
+                VictimOrder::RandomStart => rng.below(victims.len()),
+                VictimOrder::Ring => victims.iter().position(|p| *p > me).unwrap_or(0),
+            },
+            tried: 0,
+        });
+        if round.tried >= victims.len() {
+            return Pick::RoundOver;
+        }
+        return Pick::Victim(victims[(round.start + round.tried) % victims.len()]);
+    }
+    let round = *state.round.get_or_insert(Round { start: 0, tried: 0 });
+    if round.tried >= limit {
+        return Pick::RoundOver;
+    }
+    match order {
+        VictimOrder::RandomStart => {
+            // Nearly every participant is a candidate, so a few draws find one; the scan
+            // behind them only runs when most have been lost.
+            for _ in 0..32 {
+                let peer = state.peers[rng.below(state.peers.len())];
+                if eligible(&peer) {
+                    return Pick::Victim(peer);
+                }
+            }
+            let victims: Vec<PeerId> = state.peers.iter().copied().filter(eligible).collect();
+            match victims.len() {
+                0 => Pick::Nobody,
+                n => Pick::Victim(victims[rng.below(n)]),
+            }
+        }
+        VictimOrder::Ring => {
+            let after = state.peers.partition_point(|p| *p <= me);
+            let ring = state.peers[after..].iter().chain(&state.peers[..after]);
+            match ring.filter(|p| eligible(p)).nth(round.tried) {
+                Some(&peer) => Pick::Victim(peer),
+                None if round.tried == 0 => Pick::Nobody,
+                None => Pick::RoundOver,
+            }
+        }
+    }
 }
 
 /// What a peer has measured about itself and the network.
@@ -42,12 +109,12 @@ pub(super) struct Estimates {
 }
 
 impl Estimates {
-    pub(super) fn new(config: &Config, seed: u64) -> Self {
+    pub(super) fn new(config: &Config, rng: Rng) -> Self {
         Self {
             slot_rate: None,
             rtt: config.initial_rtt,
             rtt_measured: false,
-            rng: Rng(seed),
+            rng,
         }
     }
 
@@ -124,30 +191,25 @@ impl Worker {
             ..
         } = self;
         let Some(state) = frame else { return };
-        let victims: Vec<PeerId> = state
-            .peers
-            .iter()
-            .copied()
-            .filter(|p| p != me && cx.connected.contains(p))
-            .collect();
-        if victims.is_empty() {
-            return;
-        }
-        let round = *state.round.get_or_insert_with(|| Round {
-            start: match cx.config.victims {
-                VictimOrder::RandomStart => estimates.rng.below(victims.len()),
-                VictimOrder::Ring => victims.iter().position(|p| p > me).unwrap_or(0),
-            },
-            tried: 0,
-        });
-        if round.tried >= victims.len() {
-            state.thief = Thief::Backoff {
-                until: cx.now + cx.config.steal_backoff,
-            };
-            state.round = None;
-            return;
-        }
-        let victim = victims[(round.start + round.tried) % victims.len()];
+        let victim = match pick_victim(state, *me, &mut estimates.rng, cx) {
+            Pick::Victim(victim) => victim,
+            Pick::Nobody => return,
+            Pick::RoundOver => {
+                // Each fruitless round in a row doubles the wait, up to the cap.
+                let doublings = state.fruitless_rounds.min(16);
+                let backoff = cx
+                    .config
+                    .steal_backoff
+                    .saturating_mul(1 << doublings)
+                    .min(cx.config.steal_backoff_max.max(cx.config.steal_backoff));
+                state.fruitless_rounds += 1;
+                state.thief = Thief::Backoff {
+                    until: cx.now + backoff,
+                };
+                state.round = None;
+                return;
+            }
+        };
         let remaining = self.remaining_work(cx.now);
         let state = self.frame.as_mut().expect("invariant: matched Some above");
         state.thief = Thief::Asking {
@@ -256,6 +318,7 @@ impl Worker {
         if tiles.is_empty() {
             return;
         }
+        state.fruitless_rounds = 0;
         state.stolen += 1;
         self.stats.tiles_stolen += tiles.len() as u32;
         state.queue_work += tiles.iter().map(|tile| tile.predicted).sum::<f64>();
@@ -323,6 +386,16 @@ impl FrameState {
 pub(super) struct Rng(pub(super) u64);
 
 impl Rng {
+    /// The generator of peer `me` in a cluster seeded with `seed`. SplitMix's state only moves
+    /// by a constant step, so states that differ by a small multiple of it give the same
+    /// stream shifted: seeding peer `k` with `seed + k * step` (as this once did) had every thief
+    /// draw the same victims one draw apart, and left some victims never asked. Starting from
+    /// hashed states keeps the streams unrelated.
+    pub(super) fn stream(seed: u64, me: PeerId) -> Self {
+        let peer = Rng(u64::from(me.0) ^ 0x5851_F42D_4C95_7F2D).next_u64();
+        Rng(Rng(seed ^ peer).next_u64())
+    }
+
     pub(super) fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
@@ -334,5 +407,43 @@ impl Rng {
     /// A uniform index below `n` (which must not be 0), by multiply-shift.
     pub(super) fn below(&mut self, n: usize) -> usize {
         ((u128::from(self.next_u64()) * n as u128) >> 64) as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Thieves of one cluster share a seed; their victim draws must not be one stream seen at
+    /// different offsets, or some victims are never asked.
+    #[test]
+    fn peers_of_one_seed_draw_unrelated_victims() {
+        let draws = |peer: u32| -> Vec<usize> {
+            let mut rng = Rng::stream(7, PeerId(peer));
+            (0..64).map(|_| rng.below(1000)).collect()
+        };
+        let streams: Vec<Vec<usize>> = (0..32).map(draws).collect();
+        for (a, first) in streams.iter().enumerate() {
+            for second in &streams[a + 1..] {
+                for shift in 0..8 {
+                    let agree = first[shift..]
+                        .iter()
+                        .zip(second)
+                        .filter(|(x, y)| x == y)
+                        .count();
+                    assert!(
+                        agree <= 3,
+                        "two peers' draws agree {agree} times at shift {shift}"
+                    );
+                }
+            }
+        }
+        // Together, 32 thieves drawing 64 times each ask nearly every one of 1000 victims.
+        let asked: std::collections::BTreeSet<usize> = streams.into_iter().flatten().collect();
+        assert!(
+            asked.len() > 850,
+            "only {} of 1000 victims asked",
+            asked.len()
+        );
     }
 }

@@ -48,6 +48,8 @@ pub(super) struct FrameState {
     done: u32,
     pub(super) thief: Thief,
     pub(super) round: Option<Round>,
+    /// Rounds in a row in which every victim refused: the next backoff doubles with each.
+    pub(super) fruitless_rounds: u32,
     /// The counts of the last idle report, so that it is sent once.
     idle_reported: Option<[u32; 3]>,
     last_to_owner: Duration,
@@ -132,6 +134,7 @@ impl Worker {
             state.thief = Thief::Ready;
             state.round = None;
         }
+        state.fruitless_rounds = 0;
         self.newest = Some(frame);
     }
 
@@ -319,6 +322,7 @@ impl FrameState {
             done: 0,
             thief: Thief::Ready,
             round: None,
+            fruitless_rounds: 0,
             idle_reported: None,
             last_to_owner: now,
         }
