@@ -64,7 +64,8 @@ pub struct SimulateArgs {
     /// Speed factors dealt to peers in turn, comma-separated (e.g. 1,1,1,0.5).
     #[arg(long, value_delimiter = ',')]
     pub speeds: Vec<f64>,
-    /// Crashes, comma-separated, as PEER@SECONDS (virtual time since the run began).
+    /// Crashes, comma-separated: PEER@SECONDS (virtual time since the run began) or
+    /// PEER@tile:N (as the peer starts its N-th tile of the run).
     #[arg(long, value_delimiter = ',')]
     pub crash: Vec<String>,
     /// Counted work per second of one slot of a speed-1 peer (default: this project's
@@ -234,15 +235,20 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
         .crash
         .iter()
         .map(|spec| {
-            let parsed = spec
-                .split_once('@')
-                .and_then(|(peer, at)| Some((peer.parse().ok()?, at.parse::<f64>().ok()?)));
-            match parsed {
-                Some((peer, at)) if at >= 0.0 && at.is_finite() => Ok(Crash {
-                    peer,
-                    at: Duration::from_secs_f64(at),
-                }),
-                _ => bail!("--crash {spec:?}: expected PEER@SECONDS, e.g. 3@0.5"),
+            let bad = || anyhow::anyhow!("--crash {spec:?}: expected PEER@SECONDS (e.g. 3@0.5) or PEER@tile:N (e.g. 3@tile:40)");
+            let (peer, when) = spec.split_once('@').ok_or_else(bad)?;
+            let peer = peer.parse().map_err(|_| bad())?;
+            if let Some(tile) = when.strip_prefix("tile:") {
+                return match tile.parse::<u64>() {
+                    Ok(tile) if tile > 0 => Ok(Crash::starting(peer, tile)),
+                    _ => Err(bad()),
+                };
+            }
+            match when.parse::<f64>() {
+                Ok(at) if at >= 0.0 && at.is_finite() => {
+                    Ok(Crash::at(peer, Duration::from_secs_f64(at)))
+                }
+                _ => Err(bad()),
             }
         })
         .collect::<anyhow::Result<Vec<_>>>()?;

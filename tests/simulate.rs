@@ -139,26 +139,29 @@ fn network_effects_and_crashes_reach_the_runs() {
     let slow = run(&["--bandwidth", "1", "--latency", "5"]);
     assert!(slow["makespan"].as_f64() > ideal["makespan"].as_f64());
     assert_eq!(slow["bandwidth_bytes_per_second"].as_f64(), Some(125_000.0));
-    let crashed = run(&["--crash", "2@0.01"]);
-    let failures: u64 = crashed["frames"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|f| f["failures"].as_u64().unwrap())
-        .sum();
-    assert_eq!(failures, 1);
+    for crash in ["2@0.01", "3@tile:5"] {
+        let crashed = run(&["--crash", crash]);
+        let failures: u64 = crashed["frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|f| f["failures"].as_u64().unwrap())
+            .sum();
+        assert_eq!(failures, 1, "--crash {crash}");
+    }
 }
 
 #[test]
 fn bad_arguments_are_named() {
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&[&str], &str); 4] = [
+    let cases: [(&[&str], &str); 5] = [
         (
             &["synthetic:8x8:1", "--policy", "fastest"],
             "unknown policy",
         ),
         (&["no-such-trace.jsonl"], "no-such-trace.jsonl"),
         (&["synthetic:8x8:1", "--crash", "3"], "PEER@SECONDS"),
+        (&["synthetic:8x8:1", "--crash", "3@tile:0"], "PEER@tile:N"),
         (
             &[
                 "synthetic:8x8:1",

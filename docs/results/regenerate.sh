@@ -5,9 +5,9 @@
 #
 # Each `tessera simulate` below writes runs.csv, frames.csv, runs.json, summary.md and SVG
 # charts into its folder. The runs are deterministic (same inputs and seed, same numbers);
-# only the wall-time columns change from one run of this script to the next. About half an
-# hour on the 2-core development machine, nearly all of it in the runs of 512 and 1024
-# stealing peers (see "Speed" in docs/results.md).
+# only the wall-time columns change from one run of this script to the next. A few minutes on
+# the 2-core development machine, most of it in the runs of 512 and 1024 stealing peers (see
+# "Speed" in docs/results.md).
 set -eu
 cargo build --release --bin tessera
 T=target/release/tessera
@@ -34,10 +34,10 @@ $T simulate $GLASS $NET --peers $PEERS --tiles 1024,4096,16384 \
 $T simulate $GLASS $NET --peers 4,16,64 --tiles 16,64,256,1024,4096,16384 \
     --charts tiles --gantt 16:pbt+steal:256:12 --out $R/glass-tiles
 
-# 2. The synthetic trace: a hot spot orbiting a 1024x1024 image (the first 20 of 100 frames).
-$T simulate synthetic --frames 20 $NET --peers $PEERS --tiles 4096,16384 \
+# 2. The synthetic trace: a hot spot orbiting a 1024x1024 image, 100 frames.
+$T simulate synthetic $NET --peers $PEERS --tiles 4096,16384 \
     --charts peers --gantt 64:pbt+steal:4096:10 --out $R/synthetic-peers
-$T simulate synthetic --frames 20 $NET --peers 16,64,256 --tiles 256,1024,4096,16384 \
+$T simulate synthetic $NET --peers 16,64,256 --tiles 256,1024,4096,16384 \
     --charts tiles --out $R/synthetic-tiles
 
 # 3. Control: the shipped scene's frame 12 held still, so that every frame after the first
@@ -54,5 +54,5 @@ $T simulate $GLASS $NET --bandwidth 1000 --peers $PEERS --tiles 4096 \
 #    of the PBT's predictor).
 $T simulate $GLASS $NET --deal round-robin --policy regular,regular+steal --peers $PEERS \
     --tiles 1024,4096 --charts peers --out $R/glass-round-robin
-$T simulate synthetic --frames 20 $NET --deal round-robin --policy regular,regular+steal \
+$T simulate synthetic $NET --deal round-robin --policy regular,regular+steal \
     --peers $PEERS --tiles 4096 --charts peers --out $R/synthetic-round-robin

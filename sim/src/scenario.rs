@@ -71,12 +71,38 @@ pub struct Scenario {
     pub keep_assignments: bool,
 }
 
-/// A peer that stops dead at `at` (virtual time since the run began), after everything else
-/// due at that instant. Its connections time out `Network::loss_detection` later.
+/// A peer that stops dead `when` it is told to. Its connections time out
+/// `Network::loss_detection` later.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Crash {
     pub peer: u32,
-    pub at: Duration,
+    pub when: CrashWhen,
+}
+
+/// The moment a peer crashes.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum CrashWhen {
+    /// At this virtual time since the run began, after everything else due at that instant.
+    At(Duration),
+    /// As it starts its `n`-th tile of the run (counting from 1), which it never finishes: a
+    /// moment when it holds work in flight, whatever the timing of the run.
+    Starting(u64),
+}
+
+impl Crash {
+    pub fn at(peer: u32, at: Duration) -> Self {
+        Self {
+            peer,
+            when: CrashWhen::At(at),
+        }
+    }
+
+    pub fn starting(peer: u32, tile: u64) -> Self {
+        Self {
+            peer,
+            when: CrashWhen::Starting(tile),
+        }
+    }
 }
 
 impl Default for Scenario {
@@ -122,6 +148,13 @@ impl Scenario {
         }
         if self.crashes.iter().any(|c| PeerId(c.peer) == OWNER) {
             return bad("the owner (peer 0) cannot crash: its frame would die with it");
+        }
+        if self
+            .crashes
+            .iter()
+            .any(|c| c.when == CrashWhen::Starting(0))
+        {
+            return bad("a crash on starting a tile counts tiles from 1");
         }
         self.network.validate().map_err(Error::Scenario)
     }
@@ -194,8 +227,15 @@ pub fn run(
     cluster.loss_detection = network.loss_detection;
     cluster.encode = false;
 
-    let mut crashes: Vec<Crash> = scenario.crashes.clone();
-    crashes.sort_by_key(|c| (c.at, c.peer));
+    let mut crashes: Vec<(Duration, u32)> = Vec::new();
+    let mut on_start: Vec<(u32, u64)> = Vec::new();
+    for crash in &scenario.crashes {
+        match crash.when {
+            CrashWhen::At(at) => crashes.push((at, crash.peer)),
+            CrashWhen::Starting(tile) => on_start.push((crash.peer, tile)),
+        }
+    }
+    crashes.sort();
     let mut crashes = VecDeque::from(crashes);
     let mut crashed: BTreeMap<PeerId, Duration> = BTreeMap::new();
     let mut plans = Vec::new();
@@ -254,11 +294,10 @@ pub fn run(
         cluster.start_frame(OWNER, FrameId(frame), sets)?;
         while !cluster.world().is_complete(frame) {
             let due = cluster.next_due();
-            if let Some(crash) = crashes.front().filter(|c| due.is_none_or(|d| c.at <= d)) {
-                let crash = *crash;
+            if let Some(&(at, peer)) = crashes.front().filter(|c| due.is_none_or(|d| c.0 <= d)) {
                 crashes.pop_front();
-                cluster.run(crash.at);
-                if let Entry::Vacant(entry) = crashed.entry(PeerId(crash.peer)) {
+                cluster.run(at);
+                if let Entry::Vacant(entry) = crashed.entry(PeerId(peer)) {
                     cluster.kill(*entry.key(), false);
                     entry.insert(cluster.now());
                 }
@@ -273,6 +312,19 @@ pub fn run(
                 });
             }
             steps += 1;
+            if !on_start.is_empty() {
+                let started = &cluster.world().starts;
+                let (due, waiting) = on_start
+                    .iter()
+                    .partition(|(peer, tile)| started[*peer as usize] >= *tile);
+                on_start = waiting;
+                for (peer, _) in due {
+                    if let Entry::Vacant(entry) = crashed.entry(PeerId(peer)) {
+                        cluster.kill(*entry.key(), false);
+                        entry.insert(cluster.now());
+                    }
+                }
+            }
         }
         let update = partitioner.observe(cluster.world().map(frame))?;
         (plan.splits, plan.merges) = (update.splits, update.merges);

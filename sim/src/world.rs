@@ -56,6 +56,8 @@ pub(crate) struct SimWorld {
     speeds: Vec<f64>,
     links: Links,
     pub(crate) frames: BTreeMap<u64, Tally>,
+    /// Tiles each peer has started over the run, indexed by peer id (for crashes on an event).
+    pub(crate) starts: Vec<u64>,
     /// The frame whose renders become Gantt bars.
     gantt_frame: Option<u64>,
     pub(crate) gantt: Vec<GanttBar>,
@@ -70,6 +72,7 @@ impl SimWorld {
         links: Links,
         gantt_frame: Option<u64>,
     ) -> Self {
+        let peers = speeds.len();
         Self {
             maps,
             seconds_per_unit,
@@ -77,6 +80,7 @@ impl SimWorld {
             speeds,
             links,
             frames: BTreeMap::new(),
+            starts: vec![0; peers],
             gantt_frame,
             gantt: Vec::new(),
             fingerprint: Fingerprint::default(),
@@ -114,6 +118,7 @@ impl World for SimWorld {
         let frame = item.frame.0;
         let cost = self.map(frame).cost(item.tile.rect);
         let speed = self.speeds[peer.0 as usize];
+        self.starts[peer.0 as usize] += 1;
         let seconds = (cost * self.seconds_per_unit + self.tile_overhead) / speed;
         // Rounded up to whole nanoseconds: truncating would make every tile a little cheaper
         // than its work, and a run's efficiency could then exceed its bound.

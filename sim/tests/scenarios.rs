@@ -93,14 +93,9 @@ fn every_tile_completes_exactly_once_under_every_policy_and_fault() {
     };
     let crashing = Scenario {
         crashes: vec![
-            Crash {
-                peer: 2,
-                at: Duration::from_millis(400),
-            },
-            Crash {
-                peer: 5,
-                at: Duration::from_millis(1700),
-            },
+            Crash::at(2, Duration::from_millis(400)),
+            Crash::at(5, Duration::from_millis(1700)),
+            Crash::starting(4, 7),
         ],
         ..noisy(&trace, 3)
     };
@@ -125,9 +120,9 @@ fn every_tile_completes_exactly_once_under_every_policy_and_fault() {
             }
             if name == "crashing" {
                 let failures: u64 = report.frames.iter().map(|f| f.failures).sum();
-                assert_eq!(failures, 2, "{policy}: both crashes must be noticed");
+                assert_eq!(failures, 3, "{policy}: every crash must be noticed");
                 let last = report.frames.last().unwrap();
-                assert_eq!(last.participants, 6, "crashed peers get no more tiles");
+                assert_eq!(last.participants, 5, "crashed peers get no more tiles");
             }
         }
     }
@@ -281,10 +276,7 @@ fn bad_scenarios_are_refused_with_a_reason() {
         (
             Scenario {
                 peers: 2,
-                crashes: vec![Crash {
-                    peer: 0,
-                    at: Duration::ZERO,
-                }],
+                crashes: vec![Crash::at(0, Duration::ZERO)],
                 ..Scenario::default()
             },
             "owner",
@@ -292,10 +284,7 @@ fn bad_scenarios_are_refused_with_a_reason() {
         (
             Scenario {
                 peers: 2,
-                crashes: vec![Crash {
-                    peer: 2,
-                    at: Duration::ZERO,
-                }],
+                crashes: vec![Crash::at(2, Duration::ZERO)],
                 ..Scenario::default()
             },
             "peers 0 to 1",
