@@ -200,6 +200,11 @@ impl<M: Send + 'static> Link<M> {
         Ok(())
     }
 
+    /// QUIC's smoothed estimate of one connection's round-trip time; `None` once it is gone.
+    pub fn rtt(&self, conn: ConnId) -> Option<std::time::Duration> {
+        self.shared.peer(conn).map(|peer| peer.connection.rtt())
+    }
+
     /// Closes one connection; its [`Event::Closed`] reports `code` as [`CloseReason::Local`].
     pub fn close(&self, conn: ConnId, code: CloseCode, reason: &str) {
         if let Some(peer) = self.shared.peer(conn) {

@@ -294,6 +294,11 @@ impl Session {
                 if message.is_session() {
                     return Some(Step::Control { conn, message });
                 }
+                // QUIC measures the path on every packet; the core's own samples come only from
+                // steal exchanges, so without this it would plan with `initial_rtt` for a while.
+                if let Some(rtt) = self.link.rtt(conn) {
+                    self.core.handle_rtt(rtt);
+                }
                 let now = self.now();
                 if let Err(error) = self.core.handle_message(now, peer, message) {
                     self.close(conn, CloseCode::Protocol, &error.to_string());
