@@ -45,6 +45,10 @@ $T simulate synthetic $NET --peers 16,64,256 --tiles 256,1024,4096,16384 \
 $T simulate $GLASS --hold 12 --frames 8 $NET --peers $PEERS --tiles 4096 \
     --charts peers --out $R/glass-still
 
+# The same control on the synthetic trace: its frame 50 held still.
+$T simulate synthetic --hold 50 --frames 10 $NET --peers $PEERS --tiles 4096 \
+    --charts peers --out $R/synthetic-still
+
 # 4. The shipped scene behind gigabit links: where the owner's link becomes the limit.
 $T simulate $GLASS $NET --bandwidth 1000 --peers $PEERS --tiles 4096 \
     --charts peers --out $R/glass-gigabit

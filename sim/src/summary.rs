@@ -13,6 +13,14 @@ use balancer::Kind;
 use crate::report::RunReport;
 use crate::{Policy, Sweep};
 
+/// Efficiency over the frames after the first: work over capacity-time, as for the whole run.
+fn after_first(run: &RunReport) -> f64 {
+    let later = run.frames.iter().skip(1);
+    let work: f64 = later.clone().map(|f| f.work).sum();
+    let time: f64 = later.map(|f| f.capacity * f.makespan).sum();
+    if time > 0.0 { work / time } else { 0.0 }
+}
+
 /// `summary.md` of a sweep whose runs follow [`Sweep::combinations`]; `title` says what was
 /// simulated (the trace and the scenario).
 pub fn markdown(title: &str, sweep: &Sweep, runs: &[RunReport]) -> String {
@@ -31,8 +39,16 @@ pub fn markdown(title: &str, sweep: &Sweep, runs: &[RunReport]) -> String {
          schedule reaching the lower bound max(work / capacity, largest tile) would have.\n"
     );
 
+    let predicted = runs.iter().all(|r| r.frames.len() > 1);
     for &tiles in &sweep.tiles {
         let _ = writeln!(out, "## Efficiency vs peers, {tiles} tiles requested\n");
+        if predicted {
+            let _ = writeln!(
+                out,
+                "In each cell: all frames (bound), then the frames after the first, which every \
+                 balancer deals from a measured prediction rather than from pixel area.\n"
+            );
+        }
         let _ = write!(out, "| peers |");
         for policy in &sweep.policies {
             let _ = write!(out, " {policy} |");
@@ -42,11 +58,11 @@ pub fn markdown(title: &str, sweep: &Sweep, runs: &[RunReport]) -> String {
             let _ = write!(out, "| {peers} |");
             for &policy in &sweep.policies {
                 if let Some(run) = find(tiles, policy, peers) {
-                    let _ = write!(
-                        out,
-                        " {:.3} ({:.3}) |",
-                        run.efficiency, run.bound_efficiency
-                    );
+                    let _ = write!(out, " {:.3} ({:.3})", run.efficiency, run.bound_efficiency);
+                    if predicted {
+                        let _ = write!(out, " · {:.3}", after_first(run));
+                    }
+                    let _ = write!(out, " |");
                 }
             }
             let _ = writeln!(out);
