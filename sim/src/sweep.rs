@@ -186,6 +186,14 @@ pub struct Charts {
     pub tiles: bool,
 }
 
+/// What a chart's caption calls the trace: the title up to its first detail, and of a path
+/// only the file name, so that the caption fits the chart.
+fn short_name(title: &str) -> &str {
+    let end = title.find([':', ',', '(']).unwrap_or(title.len());
+    let head = title[..end].trim_end();
+    head.rsplit('/').next().unwrap_or(head)
+}
+
 /// Writes everything an experiment yields into `dir`: `runs.csv`, `frames.csv`, `runs.json`,
 /// `summary.md`, the `charts` asked for (each where its axis has more than one value), and
 /// `gantt.svg` if a run recorded its Gantt frame. Returns the files written.
@@ -197,6 +205,7 @@ pub fn write_outputs(
     charts: Charts,
 ) -> Result<Vec<String>, Error> {
     report::write_runs(dir, runs)?;
+    let name_of = short_name(title);
     let mut written = vec![
         "runs.csv".to_string(),
         "frames.csv".into(),
@@ -262,7 +271,7 @@ pub fn write_outputs(
                 }
             }
             let name = format!("efficiency-vs-peers-{tiles}.svg");
-            let caption = format!("{title}: efficiency vs peers, {tiles} tiles");
+            let caption = format!("{name_of}: efficiency vs peers, {tiles} tiles");
             plot::lines_svg(
                 &dir.join(&name),
                 &caption,
@@ -295,7 +304,7 @@ pub fn write_outputs(
                 })
                 .collect();
             let name = format!("efficiency-vs-tiles-{peers}.svg");
-            let caption = format!("{title}: efficiency vs tiles, {peers} peers");
+            let caption = format!("{name_of}: efficiency vs tiles, {peers} peers");
             plot::lines_svg(
                 &dir.join(&name),
                 &caption,
@@ -308,7 +317,7 @@ pub fn write_outputs(
     }
     if let Some(run) = runs.iter().find(|r| !r.gantt.is_empty()) {
         let caption = format!(
-            "{title}: frame {}, {} peers, {}, {} tiles (blue: own tiles, orange: taken over)",
+            "{name_of}: frame {}, {} peers, {}, {} tiles (blue: own, orange: taken over)",
             run.gantt_frame.unwrap_or(0),
             run.peers,
             run.policy,
