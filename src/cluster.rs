@@ -63,12 +63,10 @@ fn only_peer_index(dir: &Path) -> anyhow::Result<u32> {
         if let Some(k) = name
             .strip_prefix("peer-")
             .and_then(|n| n.strip_suffix("-key.pem"))
+            && let Ok(k) = k.parse::<u32>()
+            && k >= 1
         {
-            if let Ok(k) = k.parse::<u32>() {
-                if k >= 1 {
-                    found.push(k);
-                }
-            }
+            found.push(k);
         }
     }
     found.sort_unstable();

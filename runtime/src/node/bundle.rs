@@ -147,7 +147,7 @@ pub fn encode_pixels(pixels: &[[f32; 3]]) -> Vec<u8> {
 
 /// The inverse of [`encode_pixels`]; `None` when the length is not a whole number of pixels.
 pub fn decode_pixels(bytes: &[u8]) -> Option<Vec<[f32; 3]>> {
-    if bytes.len() % 12 != 0 {
+    if !bytes.len().is_multiple_of(12) {
         return None;
     }
     Some(
@@ -177,7 +177,7 @@ pub fn encode_cost(cost: &TileCost) -> Vec<u8> {
 
 /// The inverse of [`encode_cost`]; `None` when malformed.
 pub fn decode_cost(bytes: &[u8]) -> Option<TileCost> {
-    if bytes.len() % 8 != 0 || bytes.len() < 16 {
+    if !bytes.len().is_multiple_of(8) || bytes.len() < 16 {
         return None;
     }
     let mut values = bytes

@@ -22,22 +22,22 @@ pub(crate) fn decoder(
     move |bytes| wire::decode(bytes, &limits).map(|message| (message, bytes.len()))
 }
 
+/// A rendered tile as the renderer posts it back: what was asked, what came out, how long it took.
+pub(crate) type Rendered = (WorkItem, tracer::TileOutput, Duration);
+
 /// Renders tiles on a rayon pool of its own and posts the results back to the async loop.
 /// Rendering never runs on a tokio worker: a tile can take seconds.
 pub(crate) struct Renderer {
     pool: rayon::ThreadPool,
     world: Arc<World>,
-    done: mpsc::UnboundedSender<(WorkItem, tracer::TileOutput, Duration)>,
+    done: mpsc::UnboundedSender<Rendered>,
 }
 
 impl Renderer {
     pub(crate) fn new(
         threads: usize,
         world: Arc<World>,
-    ) -> std::io::Result<(
-        Self,
-        mpsc::UnboundedReceiver<(WorkItem, tracer::TileOutput, Duration)>,
-    )> {
+    ) -> std::io::Result<(Self, mpsc::UnboundedReceiver<Rendered>)> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads.max(1))
             .thread_name(|i| format!("render-{i}"))
@@ -137,7 +137,7 @@ pub(crate) struct Session {
     events: mpsc::Receiver<NetEvent<Incoming>>,
     pub(crate) peers: Peers,
     renderer: Option<Renderer>,
-    results: Option<mpsc::UnboundedReceiver<(WorkItem, tracer::TileOutput, Duration)>>,
+    results: Option<mpsc::UnboundedReceiver<Rendered>>,
     epoch: Instant,
     pending: std::collections::VecDeque<Step>,
     pub(crate) local_tiles: Vec<LocalTile>,
@@ -170,7 +170,7 @@ impl Session {
     pub(crate) fn set_renderer(
         &mut self,
         renderer: Renderer,
-        results: mpsc::UnboundedReceiver<(WorkItem, tracer::TileOutput, Duration)>,
+        results: mpsc::UnboundedReceiver<Rendered>,
     ) {
         self.renderer = Some(renderer);
         self.results = Some(results);
