@@ -14,7 +14,7 @@ T=target/release/tessera
 R=docs/results
 PEERS=1,2,4,8,16,32,64,128,256,512,1024
 # Every run: links of 0.1 ms one way (a LAN), one rendering slot per peer, the renderer's
-# measured per-tile overhead (30 us), the default work rate (1.45e8 units/s per slot).
+# measured per-tile overhead (30 us), the default work rate (1.17e8 units/s per slot).
 NET="--latency 0.1 --tile-overhead 0.03"
 
 # The shipped uneven scene's cost trace is committed: counted work is deterministic, so

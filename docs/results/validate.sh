@@ -31,7 +31,7 @@ for P in 2 4; do
         # when there are more peers than cores, so that the frame times are predicted outright.
         $T simulate "$OUT/trace.jsonl" --validate "$OUT/stats.json" --policy $POLICY \
             --out $DIR | tee $DIR/validation.txt
-        RATE=$(awk -v p=$P -v c="$(nproc)" 'BEGIN { s = c / p; if (s > 1) s = 1; printf "%.4g", 1.45e8 * s }')
+        RATE=$(awk -v p=$P -v c="$(nproc)" 'BEGIN { s = c / p; if (s > 1) s = 1; printf "%.4g", 1.17e8 * s }')
         $T simulate "$OUT/trace.jsonl" --validate "$OUT/stats.json" --policy $POLICY --rate "$RATE" \
             --out $DIR/fixed-rate | tee $DIR/fixed-rate/validation.txt
         rm -r "$OUT"

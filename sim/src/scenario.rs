@@ -34,10 +34,10 @@ pub const OWNER: PeerId = PeerId(0);
 
 /// Counted work one rendering thread renders per second on the development machine (2 AMD
 /// EPYC cores, otherwise idle, both rendering): `cargo run --release -p sim --example
-/// record_trace` on the shipped glass-cluster-pan scene did 4.61e8 units in 3.19
-/// thread-seconds, each tile timed alone (1.50e8 with one thread). Under a concurrent build the
-/// same measurement gave half as much. Pass `--rate` for another machine or scene.
-pub const DEFAULT_WORK_PER_SECOND: f64 = 1.45e8;
+/// record_trace` on the shipped glass-cluster-pan scene did 1.77e9 units in 15.0 to 15.3
+/// thread-seconds, each tile timed alone (1.16e8 to 1.18e8 per thread-second). Pass `--rate`
+/// for another machine or scene.
+pub const DEFAULT_WORK_PER_SECOND: f64 = 1.17e8;
 
 /// Everything a run needs besides the trace and the balancer. Every effect is off by default.
 #[derive(Clone, Debug)]

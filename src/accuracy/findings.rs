@@ -53,7 +53,7 @@ fn timing_sentence(run: &Run) -> Option<String> {
             "Timing noise: the same render (the baseline at {} spp) took {:.3} to {:.3} s in the {} ladders that \
          contain it, a spread of {:.0}%; differences between rungs smaller than that are not significant. The tables also \
          give each rung's counted work (the tracer's deterministic cost: nodes visited, triangles tested and \
-         a fixed charge per ray), which the machine's load does not change.",
+         a charge per ray, larger for rays that are shaded than for rays that escape), which the machine's load does not change.",
             run.knob_spp,
             fastest,
             slowest,

@@ -97,7 +97,8 @@ pub enum Cost {
     /// Wall-clock seconds (BVH: build plus render).
     Time,
     /// The tracer's counted work in millions of units: nodes visited, triangles tested and a
-    /// fixed charge per ray. Deterministic, and close to proportional to time on one machine.
+    /// charge per ray (see `tracer::PathStats::work`). Deterministic, and close to proportional
+    /// to time on one machine.
     Work,
 }
 
