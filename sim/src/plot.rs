@@ -161,8 +161,15 @@ pub fn lines_svg(
                 .draw_series(LineSeries::new(points, style))
                 .map_err(|e| error(&e))?
         };
+        // The legend's sample line is dashed like its series: two short strokes instead of one.
+        let (first, second) = match s.dashed {
+            true => ((0, 7), (12, 20)),
+            false => ((0, 20), (0, 20)),
+        };
         legend.label(s.label.as_str()).legend(move |(x, y)| {
-            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            EmptyElement::at((x, y))
+                + PathElement::new(vec![(first.0, 0), (first.1, 0)], color.stroke_width(2))
+                + PathElement::new(vec![(second.0, 0), (second.1, 0)], color.stroke_width(2))
         });
     }
     chart
