@@ -131,7 +131,7 @@ pub struct FrameArgs {
     #[arg(long, default_value_t = 256)]
     pub tiles: usize,
     /// How each frame's tiles are dealt to peers before stealing starts.
-    #[arg(long, value_enum, default_value_t = DealOrder::Contiguous)]
+    #[arg(long, value_enum, default_value_t = DealOrder::Interleaved)]
     pub deal: DealOrder,
     /// Which light-transport effects to pay for: those the scene calls for, or all of them.
     #[arg(long, value_enum, default_value_t = EffectsChoice::Auto)]
@@ -166,6 +166,9 @@ pub enum DealOrder {
     Contiguous,
     /// Tiles dealt to peers in turn, blind to predicted cost (the classic static baseline).
     RoundRobin,
+    /// Tiles dealt in turn to the peer with the least predicted work: shares spread over the
+    /// image and balanced in cost.
+    Interleaved,
 }
 
 impl From<DealOrder> for balancer::Order {
@@ -173,6 +176,7 @@ impl From<DealOrder> for balancer::Order {
         match deal {
             DealOrder::Contiguous => balancer::Order::Contiguous,
             DealOrder::RoundRobin => balancer::Order::RoundRobin,
+            DealOrder::Interleaved => balancer::Order::Interleaved,
         }
     }
 }

@@ -295,6 +295,7 @@ pub fn deal_name(deal: DealOrder) -> &'static str {
     match deal {
         DealOrder::Contiguous => "contiguous",
         DealOrder::RoundRobin => "round-robin",
+        DealOrder::Interleaved => "interleaved",
     }
 }
 

@@ -31,7 +31,7 @@ pub struct SimulateArgs {
     #[arg(long, value_delimiter = ',', default_value = "256")]
     pub tiles: Vec<usize>,
     /// How tiles are dealt to peers at the start of each frame (both balancers).
-    #[arg(long, value_enum, default_value_t = DealOrder::Contiguous)]
+    #[arg(long, value_enum, default_value_t = DealOrder::Interleaved)]
     pub deal: DealOrder,
     /// Simulate only this frame of the trace, over and over: a static scene, every frame of
     /// which after the first is predicted exactly (isolates motion from unevenness).
@@ -386,6 +386,7 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
     let deal = match stats.deal.as_deref() {
         None | Some("contiguous") => DealOrder::Contiguous,
         Some("round-robin") => DealOrder::RoundRobin,
+        Some("interleaved") => DealOrder::Interleaved,
         Some(other) => bail!("unknown deal {other:?} in {}", stats_path.display()),
     };
     let steal = match args.policy.as_slice() {

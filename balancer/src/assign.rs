@@ -42,6 +42,10 @@
 //! count, so free tiles are still spread. If every tile is predicted to cost nothing, tiles are
 //! dealt by count.
 //!
+//! **Interleaved.** Tiles in order, each to the peer with the least predicted load over its
+//! share (list scheduling): every share is spread over the image and balanced in predicted
+//! cost, within the largest tile for equal weights. See [`interleaved`].
+//!
 //! **Round-robin.** Tile `i` goes to the peer with the most accumulated credit, each peer
 //! earning its weight per tile (smooth weighted round-robin); with equal weights, tile `i` goes
 //! to peer `i mod P`.
@@ -98,6 +102,7 @@ pub fn assign(
             .map(Iterator::collect)
             .collect(),
         Order::RoundRobin => round_robin(costs.len(), weights)?,
+        Order::Interleaved => interleaved(costs, weights)?,
     };
     Ok(Assignment { runs })
 }
@@ -146,6 +151,56 @@ pub fn round_robin(tiles: usize, weights: &[f64]) -> Result<Vec<Vec<usize>>, Err
             (0..credit.len()).fold(0, |best, p| if credit[p] > credit[best] { p } else { best });
         credit[best] -= 1.0;
         runs[best].push(tile);
+    }
+    Ok(runs)
+}
+
+/// Deals tiles with predicted `costs` one at a time, in order, each to the peer whose predicted
+/// load over its share is the lowest (ties: the lowest index), as list scheduling does: with
+/// equal weights, no two peers' predicted loads differ by more than the largest tile. If every
+/// tile is predicted to cost nothing, tiles are dealt by count.
+pub fn interleaved(costs: &[f64], weights: &[f64]) -> Result<Vec<Vec<usize>>, Error> {
+    use std::cmp::{Ordering, Reverse};
+    use std::collections::BinaryHeap;
+
+    /// A peer's load over its share, ordered by `total_cmp`, then by peer index.
+    #[derive(PartialEq)]
+    struct Load(f64, usize);
+    impl Eq for Load {}
+    impl PartialOrd for Load {
+        fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+            Some(self.cmp(other))
+        }
+    }
+    impl Ord for Load {
+        fn cmp(&self, other: &Self) -> Ordering {
+            self.0.total_cmp(&other.0).then(self.1.cmp(&other.1))
+        }
+    }
+
+    let shares = normalise(weights)?;
+    if let Some((index, &value)) = costs
+        .iter()
+        .enumerate()
+        .find(|(_, c)| !(c.is_finite() && **c >= 0.0))
+    {
+        return Err(Error::InvalidTileCost { index, value });
+    }
+    if costs.iter().all(|&cost| cost == 0.0) {
+        return round_robin(costs.len(), weights);
+    }
+    let mut runs = vec![Vec::new(); shares.len()];
+    let mut loads = vec![0.0; shares.len()];
+    // Peers with no share get nothing; the others wait in a min-heap of load over share.
+    let mut heap: BinaryHeap<Reverse<Load>> = (0..shares.len())
+        .filter(|&p| shares[p] > 0.0)
+        .map(|p| Reverse(Load(0.0, p)))
+        .collect();
+    for (tile, &cost) in costs.iter().enumerate() {
+        let Reverse(Load(_, peer)) = heap.pop().expect("normalise leaves a positive share");
+        runs[peer].push(tile);
+        loads[peer] += cost;
+        heap.push(Reverse(Load(loads[peer] / shares[peer], peer)));
     }
     Ok(runs)
 }
@@ -298,6 +353,56 @@ mod tests {
         runs.iter()
             .map(|run| costs[run.clone()].iter().sum())
             .collect()
+    }
+
+    #[test]
+    fn interleaving_deals_every_tile_once_within_the_largest_tile() {
+        // A hot run in the middle of a cheap image: the costs a moving spot gives.
+        let costs: Vec<f64> = (0..200)
+            .map(|i| {
+                if (80..100).contains(&i) {
+                    50.0 + f64::from(i % 7)
+                } else {
+                    1.0 + f64::from(i % 3)
+                }
+            })
+            .collect();
+        let largest = costs.iter().fold(0.0f64, |a, &b| a.max(b));
+        for peers in [1, 2, 3, 7, 16] {
+            let runs = interleaved(&costs, &vec![1.0; peers]).unwrap();
+            let mut dealt: Vec<usize> = runs.iter().flatten().copied().collect();
+            dealt.sort();
+            assert_eq!(dealt, (0..200).collect::<Vec<_>>(), "{peers} peers");
+            let loads: Vec<f64> = runs
+                .iter()
+                .map(|r| r.iter().map(|&t| costs[t]).sum())
+                .collect();
+            let (low, high) = loads
+                .iter()
+                .fold((f64::MAX, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
+            assert!(high - low <= largest, "{peers} peers: loads {loads:?}");
+            // The hot tiles are spread: no peer holds more than its share of them plus one.
+            let hot = |run: &Vec<usize>| run.iter().filter(|t| (80..100).contains(*t)).count();
+            assert!(
+                runs.iter().all(|r| hot(r) <= 20usize.div_ceil(peers) + 1),
+                "{peers} peers"
+            );
+        }
+    }
+
+    #[test]
+    fn interleaving_equal_costs_is_round_robin_and_weights_are_followed() {
+        let runs = interleaved(&[2.0; 9], &[1.0; 3]).unwrap();
+        assert_eq!(runs, vec![vec![0, 3, 6], vec![1, 4, 7], vec![2, 5, 8]]);
+        // A peer twice as fast gets about twice the predicted work.
+        let runs = interleaved(&[1.0; 30], &[2.0, 1.0]).unwrap();
+        assert_eq!((runs[0].len(), runs[1].len()), (20, 10));
+        // Nothing predicted: dealt by count.
+        assert_eq!(
+            interleaved(&[0.0; 4], &[1.0; 2]).unwrap(),
+            vec![vec![0, 2], vec![1, 3]]
+        );
+        assert!(interleaved(&[1.0, f64::NAN], &[1.0]).is_err());
     }
 
     #[test]

@@ -68,7 +68,8 @@ pub struct Config {
     pub leaves: usize,
     /// The regular baseline's grid. Default: 16 x 16 tiles.
     pub grid: Grid,
-    /// How tiles are dealt to peers. Default: [`Order::Contiguous`].
+    /// How tiles are dealt to peers. Default: [`Order::Interleaved`], which the simulator found
+    /// the most robust to motion for both balancers (`docs/results.md`).
     pub order: Order,
     /// Exponential smoothing of predictions: the weight the previous prediction keeps, in
     /// `[0, 1)`; a new prediction is `smoothing * old + (1 - smoothing) * measured`, block by
@@ -115,10 +116,16 @@ impl Default for Grid {
 pub enum Order {
     /// Each peer gets one contiguous run of tiles, runs of nearly equal predicted cost
     /// (weighted by peer speed); spatially coherent for the PBT's depth-first order.
-    #[default]
     Contiguous,
     /// Tiles dealt one at a time (smooth weighted round-robin), ignoring predicted cost.
     RoundRobin,
+    /// Tiles dealt one at a time, in order, each to the peer with the least predicted work
+    /// relative to its speed: every peer's share is spread over the image, so that a change of
+    /// cost between frames lands on many peers instead of the few whose run covers it, and the
+    /// shares stay balanced in predicted cost. On the PBT's equal-cost leaves it deals them
+    /// round-robin.
+    #[default]
+    Interleaved,
 }
 
 impl Default for Config {
@@ -127,7 +134,7 @@ impl Default for Config {
             kind: Kind::Pbt,
             leaves: 256,
             grid: Grid::default(),
-            order: Order::Contiguous,
+            order: Order::Interleaved,
             smoothing: 0.0,
         }
     }

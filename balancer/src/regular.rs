@@ -207,15 +207,27 @@ mod tests {
     }
 
     #[test]
-    fn round_robin_and_contiguous_deal_differently() {
-        let regular = Regular::grid(8, 8, 4, 1).unwrap();
-        let contiguous = regular.assign(2, None).unwrap();
-        assert_eq!(contiguous.runs, vec![vec![0, 1], vec![2, 3]]);
-        let interleaved = regular
-            .with_order(Order::RoundRobin)
-            .assign(2, None)
-            .unwrap();
-        assert_eq!(interleaved.runs, vec![vec![0, 2], vec![1, 3]]);
+    fn the_three_deals_differ() {
+        let mut regular = Regular::grid(8, 8, 4, 1).unwrap();
+        // Columns of cost 3, 1, 1, 1 (before any measurement every tile costs its area).
+        let map = CostMap::from_fn(8, 8, 2, |c, _| if c == 0 { 3.0 } else { 1.0 }).unwrap();
+        regular.observe(&map).unwrap();
+        let contiguous = regular.clone().with_order(Order::Contiguous);
+        assert_eq!(
+            contiguous.assign(2, None).unwrap().runs,
+            vec![vec![0], vec![1, 2, 3]]
+        );
+        let round_robin = regular.clone().with_order(Order::RoundRobin);
+        assert_eq!(
+            round_robin.assign(2, None).unwrap().runs,
+            vec![vec![0, 2], vec![1, 3]]
+        );
+        // Each tile to the less loaded peer: 0 to peer 0, then peer 1 until it catches up.
+        let interleaved = regular.with_order(Order::Interleaved);
+        assert_eq!(
+            interleaved.assign(2, None).unwrap().runs,
+            vec![vec![0], vec![1, 2, 3]]
+        );
     }
 
     #[test]

@@ -5,7 +5,7 @@ mod common;
 
 use std::collections::HashSet;
 
-use balancer::{Config, CostMap, Error, Pbt, Rect, check_partition};
+use balancer::{Config, CostMap, Error, Order, Pbt, Rect, check_partition};
 use common::{Layout, close, expected_leaves, frames, variance};
 use proptest::prelude::*;
 
@@ -136,11 +136,12 @@ proptest! {
     }
 
     #[test]
-    fn assignment_runs_are_contiguous_and_balanced(
+    fn contiguous_runs_and_interleaved_shares_are_balanced(
         (w, h, m, block, layouts) in frames(120),
         peers in 1usize..=24,
     ) {
-        let mut pbt = Pbt::new(w, h, &config(m)).unwrap();
+        let contiguous = Config { order: Order::Contiguous, ..config(m) };
+        let mut pbt = Pbt::new(w, h, &contiguous).unwrap();
         pbt.observe(&layouts[0].map(w, h, block)).unwrap();
         let costs: Vec<f64> = pbt.tiles().iter().map(|t| t.predicted).collect();
         let assignment = pbt.assign(peers, None).unwrap();
@@ -152,6 +153,18 @@ proptest! {
         let (lo, hi) = run_costs.iter().fold((f64::MAX, 0.0f64), |(lo, hi), &c| (lo.min(c), hi.max(c)));
         let total: f64 = costs.iter().sum();
         prop_assert!(hi - lo <= largest + 1e-9 * total, "runs {:?}, largest tile {}", run_costs, largest);
+
+        // Interleaved (the default): every leaf dealt once, shares within the largest leaf too.
+        let interleaved = Config { order: Order::Interleaved, ..config(m) };
+        let mut pbt = Pbt::new(w, h, &interleaved).unwrap();
+        pbt.observe(&layouts[0].map(w, h, block)).unwrap();
+        let assignment = pbt.assign(peers, None).unwrap();
+        let mut dealt: Vec<usize> = assignment.runs.iter().flatten().copied().collect();
+        dealt.sort_unstable();
+        prop_assert_eq!(dealt, (0..costs.len()).collect::<Vec<_>>());
+        let run_costs = assignment.run_costs(&costs);
+        let (lo, hi) = run_costs.iter().fold((f64::MAX, 0.0f64), |(lo, hi), &c| (lo.min(c), hi.max(c)));
+        prop_assert!(hi - lo <= largest + 1e-9 * total, "shares {:?}, largest tile {}", run_costs, largest);
     }
 
     #[test]

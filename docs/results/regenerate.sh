@@ -16,6 +16,9 @@ PEERS=1,2,4,8,16,32,64,128,256,512,1024
 # Every run: links of 0.1 ms one way (a LAN), one rendering slot per peer, the renderer's
 # measured per-tile overhead (30 us), the default work rate (1.17e8 units/s per slot).
 NET="--latency 0.1 --tile-overhead 0.03"
+# Sections 1 to 4 deal each peer one contiguous run of tiles, as the claims were first studied;
+# section 6 deals interleaved, the default since.
+RUNS="--deal contiguous"
 
 # The shipped uneven scene's cost trace is committed: counted work is deterministic, so
 # recording it again gives the same file. To re-record it (about a minute):
@@ -29,28 +32,28 @@ GLASS=$R/glass-cluster-pan.jsonl
 # and the idle peers' stealing only costs simulation time.
 
 # 1. The shipped scene.
-$T simulate $GLASS $NET --peers $PEERS --tiles 1024,4096,16384 \
+$T simulate $GLASS $NET $RUNS --peers $PEERS --tiles 1024,4096,16384 \
     --charts peers --gantt 16:pbt+steal:1024:12 --out $R/glass-peers
-$T simulate $GLASS $NET --peers 4,16,64 --tiles 16,64,256,1024,4096,16384 \
+$T simulate $GLASS $NET $RUNS --peers 4,16,64 --tiles 16,64,256,1024,4096,16384 \
     --charts tiles --gantt 16:pbt+steal:256:12 --out $R/glass-tiles
 
 # 2. The synthetic trace: a hot spot orbiting a 1024x1024 image, 100 frames.
-$T simulate synthetic $NET --peers $PEERS --tiles 4096,16384 \
+$T simulate synthetic $NET $RUNS --peers $PEERS --tiles 4096,16384 \
     --charts peers --gantt 64:pbt+steal:4096:10 --out $R/synthetic-peers
-$T simulate synthetic $NET --peers 16,64,256 --tiles 256,1024,4096,16384 \
+$T simulate synthetic $NET $RUNS --peers 16,64,256 --tiles 256,1024,4096,16384 \
     --charts tiles --out $R/synthetic-tiles
 
 # 3. Control: the shipped scene's frame 12 held still, so that every frame after the first
 #    is predicted exactly: what is left of the gaps is unevenness, not motion.
-$T simulate $GLASS --hold 12 --frames 8 $NET --peers $PEERS --tiles 4096 \
+$T simulate $GLASS --hold 12 --frames 8 $NET $RUNS --peers $PEERS --tiles 4096 \
     --charts peers --out $R/glass-still
 
 # The same control on the synthetic trace: its frame 50 held still.
-$T simulate synthetic --hold 50 --frames 10 $NET --peers $PEERS --tiles 4096 \
+$T simulate synthetic --hold 50 --frames 10 $NET $RUNS --peers $PEERS --tiles 4096 \
     --charts peers --out $R/synthetic-still
 
 # 4. The shipped scene behind gigabit links: where the owner's link becomes the limit.
-$T simulate $GLASS $NET --bandwidth 1000 --peers $PEERS --tiles 4096 \
+$T simulate $GLASS $NET $RUNS --bandwidth 1000 --peers $PEERS --tiles 4096 \
     --charts peers --out $R/glass-gigabit
 
 # 5. The classic static baseline: a regular grid dealt round-robin, blind to predicted cost
@@ -60,3 +63,10 @@ $T simulate $GLASS $NET --deal round-robin --policy regular,regular+steal --peer
     --tiles 1024,4096 --charts peers --out $R/glass-round-robin
 $T simulate synthetic $NET --deal round-robin --policy regular,regular+steal \
     --peers $PEERS --tiles 4096 --charts peers --out $R/synthetic-round-robin
+
+# 6. Dealing interleaved (the default): each tile to the peer with the least predicted work,
+#    so that every peer's share is spread over the image.
+$T simulate $GLASS $NET --deal interleaved --peers $PEERS --tiles 1024,4096,16384 \
+    --charts peers --gantt 16:pbt+steal:1024:12 --out $R/glass-interleaved
+$T simulate synthetic $NET --deal interleaved --peers $PEERS --tiles 4096,16384 \
+    --charts peers --gantt 64:pbt+steal:4096:10 --out $R/synthetic-interleaved

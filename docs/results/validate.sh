@@ -1,8 +1,9 @@
 #!/bin/sh
 # The simulator against the real runtime (docs/results.md, "Validation"): renders the shipped
 # scene with 2 and 4 in-process peers, recording its cost trace, then simulates each render
-# from its own trace and statistics and compares frame times and initial tile sets. Two
-# policies: the PBT with stealing (the default) and a regular grid without stealing.
+# from its own trace and statistics and compares frame times and initial tile sets. Three
+# configurations: the defaults (PBT, stealing, tiles dealt interleaved), a regular grid without
+# stealing dealt interleaved, and the same grid dealt in contiguous runs.
 # Wall-clock times differ from run to run and with whatever else the machine is doing; run
 # it on an idle machine. From the repository root:
 #
@@ -13,10 +14,12 @@ T=target/release/tessera
 R=docs/results
 SCENE=scenes/glass-cluster-pan/glass-cluster-pan.toml
 for P in 2 4; do
-    for POLICY in pbt+steal regular; do
-        case $POLICY in
-            pbt+steal) FLAGS=""; DIR=$R/validation-$P ;;
-            regular) FLAGS="--balancer regular --no-steal"; DIR=$R/validation-$P-regular ;;
+    for CASE in default regular regular-contiguous; do
+        case $CASE in
+            default) POLICY=pbt+steal; FLAGS=""; DIR=$R/validation-$P ;;
+            regular) POLICY=regular; FLAGS="--balancer regular --no-steal"; DIR=$R/validation-$P-regular ;;
+            regular-contiguous) POLICY=regular; FLAGS="--balancer regular --no-steal --deal contiguous"
+                DIR=$R/validation-$P-regular-contiguous ;;
         esac
         OUT=$(mktemp -d)
         mkdir -p $DIR/fixed-rate
