@@ -9,8 +9,8 @@
 //! - [`pbt`]: [`Pbt`], the Prediction Binary Tree: leaves are tiles, re-cut between frames by
 //!   greedy split+merge pairs to minimise the variance of the predicted leaf costs.
 //! - [`regular`]: [`Regular`], the baseline: a fixed grid of (nearly) equal tiles.
-//! - [`assign`]: cutting an ordered list of tiles into one [`Assignment`] run per peer, either
-//!   contiguous with balanced predicted cost, or round-robin.
+//! - [`assign`]: dealing an ordered list of tiles into one [`Assignment`] share per peer, either
+//!   interleaved or contiguous with balanced predicted cost, or round-robin.
 //! - [`partition`]: the common surface the runtime and the simulator use: [`Partitioner`],
 //!   [`Tile`], [`Config`], and the predictor shared by every partition.
 //! - [`check`]: [`check_partition`], the O(n log n) validator of a tiling (exact cover, no
