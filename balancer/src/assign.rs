@@ -111,13 +111,7 @@ pub fn assign(
 /// describe.
 pub fn contiguous(costs: &[f64], weights: &[f64]) -> Result<Vec<Range<usize>>, Error> {
     let shares = normalise(weights)?;
-    if let Some((index, &value)) = costs
-        .iter()
-        .enumerate()
-        .find(|(_, c)| !(c.is_finite() && **c >= 0.0))
-    {
-        return Err(Error::InvalidTileCost { index, value });
-    }
+    check_costs(costs)?;
     let by_count = costs.iter().all(|&cost| cost == 0.0);
     let mut prefix = Vec::with_capacity(costs.len() + 1);
     prefix.push(0.0);
@@ -179,13 +173,7 @@ pub fn interleaved(costs: &[f64], weights: &[f64]) -> Result<Vec<Vec<usize>>, Er
     }
 
     let shares = normalise(weights)?;
-    if let Some((index, &value)) = costs
-        .iter()
-        .enumerate()
-        .find(|(_, c)| !(c.is_finite() && **c >= 0.0))
-    {
-        return Err(Error::InvalidTileCost { index, value });
-    }
+    check_costs(costs)?;
     if costs.iter().all(|&cost| cost == 0.0) {
         return round_robin(costs.len(), weights);
     }
@@ -203,6 +191,18 @@ pub fn interleaved(costs: &[f64], weights: &[f64]) -> Result<Vec<Vec<usize>>, Er
         heap.push(Reverse(Load(loads[peer] / shares[peer], peer)));
     }
     Ok(runs)
+}
+
+/// Refuses the first predicted cost that is negative or not finite.
+fn check_costs(costs: &[f64]) -> Result<(), Error> {
+    match costs
+        .iter()
+        .enumerate()
+        .find(|(_, c)| !(c.is_finite() && **c >= 0.0))
+    {
+        Some((index, &value)) => Err(Error::InvalidTileCost { index, value }),
+        None => Ok(()),
+    }
 }
 
 /// Weights scaled to sum to one.

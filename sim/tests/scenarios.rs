@@ -174,10 +174,8 @@ fn without_latency_a_static_scene_is_within_a_tile_of_the_fair_share() {
     }
 }
 
-/// Two peers, two tiles of 1000 units each, 1000 units per second, no latency: each peer
-/// renders one tile, so the frame takes one second and nothing idles. One peer takes two.
-#[test]
-fn two_equal_tiles_on_two_peers_take_one_tile_time() {
+/// A 16x8 image of two 8x8 blocks of 1000 units each, and a grid with one tile per block.
+fn two_blocks() -> (Trace, Config) {
     let mut trace = Trace::new(16, 8, 8, "two blocks").unwrap();
     trace.push(vec![1000, 1000]).unwrap();
     let config = Config {
@@ -188,6 +186,14 @@ fn two_equal_tiles_on_two_peers_take_one_tile_time() {
         },
         ..Config::default()
     };
+    (trace, config)
+}
+
+/// Two peers, two tiles of 1000 units each, 1000 units per second, no latency: each peer
+/// renders one tile, so the frame takes one second and nothing idles. One peer takes two.
+#[test]
+fn two_equal_tiles_on_two_peers_take_one_tile_time() {
+    let (trace, config) = two_blocks();
     for steal in [false, true] {
         for (peers, seconds) in [(2, 1.0), (1, 2.0)] {
             let mut scenario = Scenario {
@@ -215,16 +221,7 @@ fn two_equal_tiles_on_two_peers_take_one_tile_time() {
 /// of which two are work.
 #[test]
 fn tile_overhead_costs_time_but_is_not_work() {
-    let mut trace = Trace::new(16, 8, 8, "two blocks").unwrap();
-    trace.push(vec![1000, 1000]).unwrap();
-    let config = Config {
-        kind: Kind::Regular,
-        grid: Grid::Count {
-            columns: 2,
-            rows: 1,
-        },
-        ..Config::default()
-    };
+    let (trace, config) = two_blocks();
     let scenario = Scenario {
         work_per_second: 1000.0,
         tile_overhead: Duration::from_millis(500),
