@@ -21,6 +21,15 @@ fn after_first(run: &RunReport) -> f64 {
     if time > 0.0 { work / time } else { 0.0 }
 }
 
+/// The head of a table with one row per peer count and one column per policy.
+fn policy_header(out: &mut String, policies: &[Policy]) {
+    let _ = write!(out, "| peers |");
+    for policy in policies {
+        let _ = write!(out, " {policy} |");
+    }
+    let _ = writeln!(out, "\n|---:|{}", "---:|".repeat(policies.len()));
+}
+
 /// `summary.md` of a sweep whose runs follow [`Sweep::combinations`]; `title` says what was
 /// simulated (the trace and the scenario).
 pub fn markdown(title: &str, sweep: &Sweep, runs: &[RunReport]) -> String {
@@ -49,11 +58,7 @@ pub fn markdown(title: &str, sweep: &Sweep, runs: &[RunReport]) -> String {
                  balancer deals from a measured prediction rather than from pixel area.\n"
             );
         }
-        let _ = write!(out, "| peers |");
-        for policy in &sweep.policies {
-            let _ = write!(out, " {policy} |");
-        }
-        let _ = writeln!(out, "\n|---:|{}", "---:|".repeat(sweep.policies.len()));
+        policy_header(&mut out, &sweep.policies);
         for &peers in &sweep.peers {
             let _ = write!(out, "| {peers} |");
             for &policy in &sweep.policies {
@@ -77,11 +82,7 @@ pub fn markdown(title: &str, sweep: &Sweep, runs: &[RunReport]) -> String {
             "For each policy, the requested tile count with the highest efficiency (ties: the \
              fewest tiles), and that efficiency.\n"
         );
-        let _ = write!(out, "| peers |");
-        for policy in &sweep.policies {
-            let _ = write!(out, " {policy} |");
-        }
-        let _ = writeln!(out, "\n|---:|{}", "---:|".repeat(sweep.policies.len()));
+        policy_header(&mut out, &sweep.policies);
         for &peers in &sweep.peers {
             let _ = write!(out, "| {peers} |");
             for &policy in &sweep.policies {
