@@ -87,6 +87,21 @@ pub struct KeygenArgs {
     pub peers: u32,
 }
 
+/// Overrides of a scene's image settings, shared by every command that renders a scene as it
+/// is (`render`, `serve`, `bench`); applied by `render::load_scene`.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ImageArgs {
+    /// Samples per pixel (default: the scene's).
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Image width in pixels (default: the scene's).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels (default: the scene's).
+    #[arg(long)]
+    pub height: Option<u32>,
+}
+
 /// What to render and how; shared by `render` and `serve`.
 #[derive(Debug, clap::Args)]
 pub struct FrameArgs {
@@ -98,15 +113,8 @@ pub struct FrameArgs {
     /// Number of frames to render (default: the scene's `frames`).
     #[arg(long)]
     pub frames: Option<u32>,
-    /// Samples per pixel (default: the scene's).
-    #[arg(long)]
-    pub spp: Option<u32>,
-    /// Image width in pixels (default: the scene's).
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Image height in pixels (default: the scene's).
-    #[arg(long)]
-    pub height: Option<u32>,
+    #[command(flatten)]
+    pub image: ImageArgs,
     /// Rendering threads of this process, shared evenly by its peers (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,

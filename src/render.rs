@@ -3,7 +3,9 @@
 //! other over QUIC, and the owner writes each frame and feeds its measured costs back to the
 //! balancer.
 
-use crate::cli::{BalancerKind, DealOrder, EffectsChoice, FrameArgs, RenderArgs, ServeArgs};
+use crate::cli::{
+    BalancerKind, DealOrder, EffectsChoice, FrameArgs, ImageArgs, RenderArgs, ServeArgs,
+};
 use crate::report::{self, FrameStats, PeerFrameStats, Progress, StatsFile, TileStats};
 use anyhow::Context;
 use runtime::net::PeerIdentity;
@@ -266,19 +268,27 @@ pub fn load_scene(args: &FrameArgs) -> anyhow::Result<Scene> {
     let mut scene = tracer::scene::load(&args.scene)?;
     let s = &mut scene.settings;
     s.frames = args.frames.unwrap_or(s.frames);
-    s.samples_per_pixel = args.spp.unwrap_or(s.samples_per_pixel);
-    s.width = args.width.unwrap_or(s.width);
-    s.height = args.height.unwrap_or(s.height);
     s.seed = args.seed.unwrap_or(s.seed);
-    anyhow::ensure!(
-        s.width > 0 && s.height > 0,
-        "the image must be at least 1x1 pixels"
-    );
-    anyhow::ensure!(
-        s.samples_per_pixel > 0,
-        "samples per pixel must be at least 1"
-    );
+    args.image.apply(s)?;
     Ok(scene)
+}
+
+impl ImageArgs {
+    /// Overrides `settings` with the flags given, then checks the image is not empty.
+    pub fn apply(&self, settings: &mut tracer::scene::RenderSettings) -> anyhow::Result<()> {
+        settings.samples_per_pixel = self.spp.unwrap_or(settings.samples_per_pixel);
+        settings.width = self.width.unwrap_or(settings.width);
+        settings.height = self.height.unwrap_or(settings.height);
+        anyhow::ensure!(
+            settings.width > 0 && settings.height > 0,
+            "the image must be at least 1x1 pixels"
+        );
+        anyhow::ensure!(
+            settings.samples_per_pixel > 0,
+            "samples per pixel must be at least 1"
+        );
+        Ok(())
+    }
 }
 
 /// Builds the BVH and the lights, with the effect set the flags ask for.

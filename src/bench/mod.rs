@@ -22,10 +22,9 @@
 mod rtt;
 
 use crate::accuracy::bench::render;
-use crate::cli::FrameArgs;
-use crate::render::{load_scene, prepare_world};
+use crate::cli::{EffectsChoice, ImageArgs};
+use crate::render::prepare_world;
 use anyhow::Context;
-use clap::{Args, FromArgMatches};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -37,15 +36,8 @@ pub struct BenchArgs {
     /// Scene files (default: every `scenes/*/*.toml` under the current folder; the ones in
     /// `scenes/shared/` are skipped, and listed as skipped, when `../shared/scenes` is absent).
     pub scenes: Vec<PathBuf>,
-    /// Samples per pixel (default: each scene's).
-    #[arg(long)]
-    pub spp: Option<u32>,
-    /// Image width in pixels (default: each scene's).
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Image height in pixels (default: each scene's).
-    #[arg(long)]
-    pub height: Option<u32>,
+    #[command(flatten)]
+    pub image: ImageArgs,
     /// Maximum depth of the full-path pass, in scattering events as pbrt counts them: a path has
     /// at most `D + 1` segments, so Mitsuba's `max_depth = 8` is our 7 (default: each scene's).
     #[arg(long)]
@@ -197,22 +189,27 @@ fn bench_scene(
     args: &BenchArgs,
     pool: &rayon::ThreadPool,
 ) -> anyhow::Result<Result<SceneBench, Skipped>> {
-    let frame_args = frame_args(path, args)?;
     let started = Instant::now();
-    let scene = match load_scene(&frame_args) {
-        Ok(scene) => scene,
-        Err(error) => {
-            return match absent_file(&error) {
-                Some(file) => Ok(Err(Skipped {
-                    scene: path.display().to_string(),
-                    reason: format!("{file} is absent"),
-                })),
-                None => Err(error.context(format!("benchmarking {}", path.display()))),
-            };
-        }
-    };
+    let mut scene =
+        match tracer::scene::load(path) {
+            Ok(scene) => scene,
+            Err(error) => {
+                return match absent_file(&error) {
+                    Some(file) => Ok(Err(Skipped {
+                        scene: path.display().to_string(),
+                        reason: format!("{file} is absent"),
+                    })),
+                    None => Err(anyhow::Error::from(error)
+                        .context(format!("benchmarking {}", path.display()))),
+                };
+            }
+        };
+    // The same overrides, with the same checks, as `tessera render` applies.
+    args.image
+        .apply(&mut scene.settings)
+        .with_context(|| format!("benchmarking {}", path.display()))?;
     let load_seconds = started.elapsed().as_secs_f64();
-    let build = timed(|| prepare_world(scene, frame_args.effects));
+    let build = timed(|| prepare_world(scene, EffectsChoice::Auto));
     let (mut world, build_seconds, build_cpu_seconds) =
         (build.value, build.seconds, build.cpu_seconds);
     if let Some(depth) = args.max_depth {
@@ -291,29 +288,9 @@ fn timed<T>(f: impl FnOnce() -> T) -> Timed<T> {
     }
 }
 
-/// The `render` command's arguments for one scene, so that [`load_scene`] applies the same
-/// overrides, with the same checks, as a render would. Built by clap itself, so every flag the
-/// bench does not set keeps the default a user would get.
-fn frame_args(scene: &Path, args: &BenchArgs) -> anyhow::Result<FrameArgs> {
-    let mut argv = vec!["bench".into(), scene.as_os_str().to_owned()];
-    for (flag, value) in [
-        ("--spp", args.spp),
-        ("--width", args.width),
-        ("--height", args.height),
-    ] {
-        if let Some(value) = value {
-            argv.extend([flag.into(), value.to_string().into()]);
-        }
-    }
-    let command = FrameArgs::augment_args(clap::Command::new("bench"));
-    Ok(FrameArgs::from_arg_matches(
-        &command.try_get_matches_from(argv)?,
-    )?)
-}
-
 /// The file a scene failed to load for because it does not exist, if that was the reason.
-fn absent_file(error: &anyhow::Error) -> Option<String> {
-    match error.downcast_ref::<tracer::SceneError>()? {
+fn absent_file(error: &tracer::SceneError) -> Option<String> {
+    match error {
         tracer::SceneError::Read { file, source, .. }
             if source.kind() == std::io::ErrorKind::NotFound =>
         {
@@ -408,9 +385,11 @@ mod tests {
     fn args() -> BenchArgs {
         BenchArgs {
             scenes: Vec::new(),
-            spp: Some(2),
-            width: Some(8),
-            height: Some(6),
+            image: ImageArgs {
+                spp: Some(2),
+                width: Some(8),
+                height: Some(6),
+            },
             max_depth: None,
             threads: Some(1),
             out: None,
