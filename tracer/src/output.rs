@@ -39,24 +39,21 @@ pub fn write_exr(
         "pixel count must match the size"
     );
     use exr::prelude::*;
-    let tmp = temporary(path);
     let channels = SpecificChannels::rgb(|position: Vec2<usize>| {
         let p = pixels[position.y() * width as usize + position.x()];
         (p[0], p[1], p[2])
     });
     // Written on one thread: parallel compression stores chunks in the order they finish, so
     // the same pixels would give different bytes from run to run.
-    Image::from_channels((width as usize, height as usize), channels)
-        .write()
-        .non_parallel()
-        .to_file(&tmp)
-        .map_err(|e| OutputError::Exr {
-            path: path.to_owned(),
-            message: e.to_string(),
-        })?;
-    std::fs::rename(&tmp, path).map_err(|source| OutputError::Io {
-        path: path.to_owned(),
-        source,
+    write_then_rename(path, |tmp| {
+        Image::from_channels((width as usize, height as usize), channels)
+            .write()
+            .non_parallel()
+            .to_file(tmp)
+            .map_err(|e| OutputError::Exr {
+                path: path.to_owned(),
+                message: e.to_string(),
+            })
     })
 }
 
@@ -93,16 +90,13 @@ pub fn write_png(
     let bytes = tone_map(pixels, exposure);
     let image = image::RgbImage::from_raw(width, height, bytes)
         .expect("tone_map returns three bytes per pixel of a width x height image");
-    let tmp = temporary(path);
-    image
-        .save_with_format(&tmp, image::ImageFormat::Png)
-        .map_err(|e| OutputError::Png {
-            path: path.to_owned(),
-            message: e.to_string(),
-        })?;
-    std::fs::rename(&tmp, path).map_err(|source| OutputError::Io {
-        path: path.to_owned(),
-        source,
+    write_then_rename(path, |tmp| {
+        image
+            .save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(|e| OutputError::Png {
+                path: path.to_owned(),
+                message: e.to_string(),
+            })
     })
 }
 
@@ -132,6 +126,20 @@ pub fn srgb_to_linear(c: f32) -> f32 {
     } else {
         ((c + 0.055) / 1.055).powf(2.4)
     }
+}
+
+/// Writes `path` by having `write` fill a temporary file beside it, then renaming that over
+/// `path`: a reader never sees half a file.
+fn write_then_rename(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), OutputError>,
+) -> Result<(), OutputError> {
+    let tmp = temporary(path);
+    write(&tmp)?;
+    std::fs::rename(&tmp, path).map_err(|source| OutputError::Io {
+        path: path.to_owned(),
+        source,
+    })
 }
 
 fn temporary(path: &Path) -> PathBuf {
