@@ -5,8 +5,8 @@
 use super::bundle;
 use super::session::{Session, Step, check_hello};
 use super::{CompletedFrame, FrameSink, NodeError, Options, TileRecord};
-use crate::core::{Core, Event as CoreEvent, PeerStats};
-use crate::net::{CloseCode, Link, PeerIdentity};
+use crate::core::{Event as CoreEvent, PeerStats};
+use crate::net::{CloseCode, PeerIdentity};
 use crate::wire::{
     FrameId, GoodbyeReason, Message, PROTOCOL_VERSION, PeerAddress, PeerId, RenderParams,
     SceneFile, TileId, TileSpec,
@@ -44,20 +44,8 @@ impl Owner {
         identity: &PeerIdentity,
         options: Options,
     ) -> Result<Self, NodeError> {
-        let (link, events) = Link::bind(
-            listen,
-            identity,
-            options.net.clone(),
-            super::session::decoder(options.limits.clone()),
-        )?;
-        let core = Core::new(
-            PeerId(identity.index()),
-            options.threads,
-            options.core.clone(),
-            options.seed,
-        );
         Ok(Self {
-            session: Session::new(core, link, events),
+            session: Session::bind(listen, identity, &options)?,
             options,
         })
     }

@@ -3,8 +3,8 @@
 
 use super::session::{Renderer, Session, Step, check_hello};
 use super::{NodeError, Options, bundle};
-use crate::core::{Core, Event as CoreEvent};
-use crate::net::{CloseCode, ConnId, Expect, Link, PeerIdentity};
+use crate::core::Event as CoreEvent;
+use crate::net::{CloseCode, ConnId, Expect, PeerIdentity};
 use crate::wire::{GoodbyeReason, Message, PROTOCOL_VERSION, PeerId};
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -19,14 +19,7 @@ pub async fn run_peer(
     options: Options,
 ) -> Result<Vec<super::LocalTile>, NodeError> {
     let me = PeerId(identity.index());
-    let (link, events) = Link::bind(
-        listen,
-        identity,
-        options.net.clone(),
-        super::session::decoder(options.limits.clone()),
-    )?;
-    let core = Core::new(me, options.threads, options.core.clone(), options.seed);
-    let mut session = Session::new(core, link, events);
+    let mut session = Session::bind(listen, identity, &options)?;
     let owner_conn = session.link.connect(owner, Expect::Peer(0)).await?;
     session.send_conn(
         owner_conn,

@@ -2,11 +2,12 @@
 //! QUIC [`Link`] and the scheduling [`Core`], hands tiles to the rayon renderer, and keeps the
 //! core's timer. The core decides everything; this only carries.
 
-use super::bundle;
+use super::{NodeError, Options, bundle};
 use crate::core::{Core, Event as CoreEvent, WorkItem};
-use crate::net::{CloseCode, ConnId, Event as NetEvent, Link, PeerCertificate};
+use crate::net::{CloseCode, ConnId, Event as NetEvent, Link, PeerCertificate, PeerIdentity};
 use crate::wire::{self, Message, PROTOCOL_VERSION, PeerId};
 use std::collections::BTreeMap;
+use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
@@ -16,7 +17,7 @@ use tracer::World;
 pub(crate) type Incoming = (Message, usize);
 
 /// The decoder handed to the transport: pure, bounded (see [`wire::decode`]).
-pub(crate) fn decoder(
+fn decoder(
     limits: wire::Limits,
 ) -> impl Fn(&[u8]) -> Result<Incoming, wire::WireError> + Send + Sync + 'static {
     move |bytes| wire::decode(bytes, &limits).map(|message| (message, bytes.len()))
@@ -144,12 +145,22 @@ pub(crate) struct Session {
 }
 
 impl Session {
-    pub(crate) fn new(
-        core: Core,
-        link: Link<Incoming>,
-        events: mpsc::Receiver<NetEvent<Incoming>>,
-    ) -> Self {
-        Self {
+    /// Binds this peer's endpoint on `listen` and makes its core, as `identity` and `options`
+    /// say. Must be called within a tokio runtime.
+    pub(crate) fn bind(
+        listen: SocketAddr,
+        identity: &PeerIdentity,
+        options: &Options,
+    ) -> Result<Self, NodeError> {
+        let (link, events) = Link::bind(
+            listen,
+            identity,
+            options.net.clone(),
+            decoder(options.limits.clone()),
+        )?;
+        let me = PeerId(identity.index());
+        let core = Core::new(me, options.threads, options.core.clone(), options.seed);
+        Ok(Self {
             core,
             link,
             events,
@@ -159,7 +170,7 @@ impl Session {
             epoch: Instant::now(),
             pending: Default::default(),
             local_tiles: Vec::new(),
-        }
+        })
     }
 
     /// Time since the session started: the core's clock, read only here.
