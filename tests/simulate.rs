@@ -1,22 +1,10 @@
 //! `tessera simulate` through the real binary: the files it writes, their contents, that a saved
 //! trace gives the same runs as the recipe it came from, and clear errors for bad input.
 
+mod common;
+
+use common::{run_ok, tessera};
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn tessera() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_tessera"))
-}
-
-fn run_ok(command: &mut Command) -> Output {
-    let output = command.output().expect("the tessera binary runs");
-    assert!(
-        output.status.success(),
-        "{command:?} failed:\n{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    output
-}
 
 fn read(path: &Path) -> String {
     std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
