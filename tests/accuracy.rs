@@ -6,9 +6,11 @@
 //! exactly 0.5 / (1 - 0.5) = 1 whatever the tessellation. Flat shading: interpolated normals are
 //! not energy-conserving, which would make the exact answer something else.
 
+mod common;
+
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 const FURNACE: &str = r#"
 [render]
@@ -38,7 +40,7 @@ smooth = false
 "#;
 
 fn tessera(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tessera"))
+    common::tessera()
         .args(args)
         .output()
         .expect("the tessera binary runs")
@@ -46,9 +48,7 @@ fn tessera(args: &[&str]) -> Output {
 
 /// Runs tessera, fails with its stderr unless it succeeds, and returns its stdout.
 fn tessera_ok(args: &[&str]) -> String {
-    let out = tessera(args);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "tessera {args:?} failed:\n{stderr}");
+    let out = common::run_ok(common::tessera().args(args));
     String::from_utf8(out.stdout).expect("stdout is UTF-8")
 }
 
