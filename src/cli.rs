@@ -160,6 +160,20 @@ pub struct FrameArgs {
     pub exposure: f32,
 }
 
+/// A value as the command line spells it (`round-robin`), which is also how files record it.
+pub fn flag_name<T: ValueEnum>(value: &T) -> String {
+    value
+        .to_possible_value()
+        .expect("invariant: no value of ours is skipped by clap")
+        .get_name()
+        .to_string()
+}
+
+/// The value the command line would read from `name`, if any.
+pub fn parse_flag<T: ValueEnum>(name: &str) -> Option<T> {
+    T::from_str(name, false).ok()
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum BalancerKind {
     /// The Prediction Binary Tree: tiles sized by last frame's measured cost.

@@ -4,7 +4,7 @@
 //! balancer.
 
 use crate::cli::{
-    BalancerKind, DealOrder, EffectsChoice, FrameArgs, ImageArgs, RenderArgs, ServeArgs,
+    BalancerKind, DealOrder, EffectsChoice, FrameArgs, ImageArgs, RenderArgs, ServeArgs, flag_name,
 };
 use crate::report::{self, FrameStats, PeerFrameStats, Progress, StatsFile, TileStats};
 use anyhow::Context;
@@ -98,8 +98,8 @@ fn execute(
             width: settings.width,
             height: settings.height,
             samples_per_pixel: settings.samples_per_pixel,
-            balancer: format!("{:?}", args.balancer).to_lowercase(),
-            deal: deal_name(args.deal).to_string(),
+            balancer: flag_name(&args.balancer),
+            deal: flag_name(&args.deal),
             effects: world.effects.to_string(),
             peers,
             frames: Vec::new(),
@@ -298,15 +298,6 @@ pub fn prepare_world(scene: Scene, effects: EffectsChoice) -> World {
         EffectsChoice::All => Some(Effects::ALL),
     };
     node::prepare_world(scene, effects)
-}
-
-/// `--deal`'s spelling of `deal`, as the stats file records it.
-pub fn deal_name(deal: DealOrder) -> &'static str {
-    match deal {
-        DealOrder::Contiguous => "contiguous",
-        DealOrder::RoundRobin => "round-robin",
-        DealOrder::Interleaved => "interleaved",
-    }
 }
 
 /// The balancer the flags ask for. `--tiles M` is the PBT's leaf count, or for the regular grid

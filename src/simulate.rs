@@ -6,7 +6,7 @@
 //! With `--validate STATS` it instead simulates the render a `--stats` file describes and
 //! compares the two, frame by frame.
 
-use crate::cli::{BalancerKind, DealOrder};
+use crate::cli::{BalancerKind, DealOrder, parse_flag};
 use anyhow::{Context, bail};
 use serde::Deserialize;
 use sim::scenario::{self, DEFAULT_WORK_PER_SECOND, Scenario};
@@ -199,7 +199,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         trace.header.source,
         width,
         height,
-        crate::render::deal_name(args.deal)
+        crate::cli::flag_name(&args.deal)
     );
     let charts = sim::Charts {
         peers: args.charts.contains(&ChartAxis::Peers),
@@ -378,16 +378,19 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
         "{} has no frames",
         stats_path.display()
     );
-    let kind = match stats.balancer.as_str() {
-        "pbt" => BalancerKind::Pbt,
-        "regular" => BalancerKind::Regular,
-        other => bail!("unknown balancer {other:?} in {}", stats_path.display()),
+    let Some(kind) = parse_flag::<BalancerKind>(&stats.balancer) else {
+        bail!(
+            "unknown balancer {:?} in {}",
+            stats.balancer,
+            stats_path.display()
+        );
     };
     let deal = match stats.deal.as_deref() {
-        None | Some("contiguous") => DealOrder::Contiguous,
-        Some("round-robin") => DealOrder::RoundRobin,
-        Some("interleaved") => DealOrder::Interleaved,
-        Some(other) => bail!("unknown deal {other:?} in {}", stats_path.display()),
+        None => DealOrder::Contiguous,
+        Some(name) => match parse_flag::<DealOrder>(name) {
+            Some(deal) => deal,
+            None => bail!("unknown deal {name:?} in {}", stats_path.display()),
+        },
     };
     let steal = match args.policy.as_slice() {
         [] => true,
