@@ -9,7 +9,9 @@ use proptest::prelude::*;
 use runtime::core::testing::{
     Cluster, Happening, Record, Rendered, cost_renderer, synthetic_result,
 };
-use runtime::core::{Config, Core, Event, Failure, Fault, FrameError, PeerStats, ProtocolError};
+use runtime::core::{
+    Config, Core, Event, Failure, Fault, FrameError, PeerStats, ProtocolError, VictimOrder,
+};
 use runtime::wire::{FrameId, Message, PeerId, TileId, TileResult, TileSpec};
 
 /// Peers dying, freezing and racing, and results that disagree.
@@ -434,21 +436,15 @@ fn bad_inputs_are_refused_with_errors() {
     ));
 }
 
-/// In a cluster larger than a round, an idle thief asks `victims_per_round` victims, then waits,
-/// twice as long after each fruitless round in a row, up to the cap.
-#[test]
-fn rounds_are_bounded_and_backoffs_double_up_to_the_cap() {
+/// `peers` peers of which peer 1 holds 300 ms of work and the others nothing, under `config`
+/// with every steal refused (no grant could be worth `min_steal_cost`), run to the end.
+fn refused_thieves(config: &Config, peers: u32) -> Cluster {
     let config = Config {
-        victims_per_round: 3,
-        steal_backoff: Duration::from_millis(10),
-        steal_backoff_max: Duration::from_millis(40),
-        // No grant could be worth this much: every request is refused.
         min_steal_cost: 1e9,
-        ..Config::default()
+        ..config.clone()
     };
-    let mut cluster = cluster(&config, 12, 1, 5);
-    // Peer 1 holds 300 ms of work; the other eleven have nothing.
-    let assignments: BTreeMap<PeerId, Vec<TileSpec>> = (0..12)
+    let mut cluster = cluster(&config, peers, 1, 5);
+    let assignments: BTreeMap<PeerId, Vec<TileSpec>> = (0..peers)
         .map(|p| {
             let work = if p == 1 {
                 tiles(0, &[10.0; 30])
@@ -462,39 +458,71 @@ fn rounds_are_bounded_and_backoffs_double_up_to_the_cap() {
     finish(&mut cluster);
     let (_, results) = completion(&cluster, FrameId(1));
     assert_all_results(&results, FrameId(1), 30);
+    cluster
+}
 
-    let thief = PeerId(5);
-    let asked: Vec<Duration> = cluster
-        .trace()
-        .iter()
-        .filter_map(|record| match record {
-            Record::Sent {
-                at,
-                from,
-                message: Message::StealRequest { .. },
-                ..
-            } if *from == thief => Some(*at),
-            _ => None,
-        })
-        .collect();
-    // Requests less than the shortest backoff apart belong to one round.
-    let mut rounds: Vec<Vec<Duration>> = Vec::new();
-    for at in asked {
+/// The steal requests `thief` sent, as (when, to whom), grouped into rounds: requests less than
+/// `gap` apart belong to one round.
+fn rounds(cluster: &Cluster, thief: PeerId, gap: Duration) -> Vec<Vec<(Duration, PeerId)>> {
+    let mut rounds: Vec<Vec<(Duration, PeerId)>> = Vec::new();
+    for (at, to) in cluster.trace().iter().filter_map(|record| match record {
+        Record::Sent {
+            at,
+            from,
+            to,
+            message: Message::StealRequest { .. },
+        } if *from == thief => Some((*at, *to)),
+        _ => None,
+    }) {
         match rounds.last_mut() {
-            Some(round) if at - *round.last().unwrap() < config.steal_backoff => round.push(at),
-            _ => rounds.push(vec![at]),
+            Some(round) if at - round.last().unwrap().0 < gap => round.push((at, to)),
+            _ => rounds.push(vec![(at, to)]),
         }
     }
+    rounds
+}
+
+/// In a cluster larger than a round, an idle thief asks `victims_per_round` victims, then waits,
+/// twice as long after each fruitless round in a row, up to the cap.
+#[test]
+fn rounds_are_bounded_and_backoffs_double_up_to_the_cap() {
+    let config = Config {
+        victims_per_round: 3,
+        steal_backoff: Duration::from_millis(10),
+        steal_backoff_max: Duration::from_millis(40),
+        ..Config::default()
+    };
+    let cluster = refused_thieves(&config, 12);
+    let rounds = rounds(&cluster, PeerId(5), config.steal_backoff);
     assert!(rounds.len() >= 6, "300 ms of waiting: {rounds:?}");
     let (last, full) = rounds.split_last().unwrap();
     assert!(full.iter().all(|round| round.len() == 3), "{rounds:?}");
     assert!(last.len() <= 3, "{rounds:?}");
     for (i, pair) in rounds.windows(2).enumerate() {
-        let gap = pair[1][0] - *pair[0].last().unwrap();
+        let gap = pair[1][0].0 - pair[0].last().unwrap().0;
         let expected = (config.steal_backoff * (1 << i)).min(config.steal_backoff_max);
         assert!(
             gap >= expected && gap <= expected + Duration::from_millis(1),
             "backoff {i} lasted {gap:?}, expected {expected:?}"
         );
     }
+}
+
+/// With `VictimOrder::Ring` a thief asks the peers after it by id, wrapping around: all of them
+/// in a small cluster, the nearest `victims_per_round` in a large one.
+#[test]
+fn a_ring_thief_asks_its_successors_by_id() {
+    let victims = |peers: u32, thief: u32| -> Vec<u32> {
+        let config = Config {
+            victims: VictimOrder::Ring,
+            victims_per_round: 3,
+            ..Config::default()
+        };
+        let cluster = refused_thieves(&config, peers);
+        let rounds = rounds(&cluster, PeerId(thief), config.steal_backoff);
+        rounds[0].iter().map(|(_, to)| to.0).collect()
+    };
+    assert_eq!(victims(12, 5), vec![6, 7, 8]);
+    assert_eq!(victims(12, 10), vec![11, 0, 1]);
+    assert_eq!(victims(4, 2), vec![3, 0, 1]);
 }

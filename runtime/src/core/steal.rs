@@ -48,33 +48,45 @@ enum Pick {
 fn pick_victim(state: &mut FrameState, me: PeerId, rng: &mut Rng, cx: &Ctx) -> Pick {
     let eligible = |peer: &PeerId| *peer != me && cx.connected.contains(peer);
     let limit = cx.config.victims_per_round.max(1);
-    let order = cx.config.victims;
-    if state.peers.len() <= limit + 1 {
-        // Few enough to ask every one, each once.
-        let victims: Vec<PeerId> = state.peers.iter().copied().filter(eligible).collect();
-        if victims.is_empty() {
-            return Pick::Nobody;
+    let few = state.peers.len() <= limit + 1;
+    match cx.config.victims {
+        // The live peers after this one by id, wrapping around: all of them when few, the
+        // nearest `limit` when many.
+        VictimOrder::Ring => {
+            let round = *state.round.get_or_insert(Round { start: 0, tried: 0 });
+            if round.tried >= limit {
+                return Pick::RoundOver;
+            }
+            let after = state.peers.partition_point(|p| *p <= me);
+            let ring = state.peers[after..].iter().chain(&state.peers[..after]);
+            match ring.filter(|p| eligible(p)).nth(round.tried) {
+                Some(&peer) => Pick::Victim(peer),
+                None if round.tried == 0 => Pick::Nobody,
+                None => Pick::RoundOver,
+            }
         }
-        let round = *state.round.get_or_insert_with(|| Round {
-            start: match order {
-                VictimOrder::RandomStart => rng.below(victims.len()),
-                VictimOrder::Ring => victims.iter().position(|p| *p > me).unwrap_or(0),
-            },
-            tried: 0,
-        });
-        if round.tried >= victims.len() {
-            return Pick::RoundOver;
+        // Few enough to ask every one, each once, from a random first.
+        VictimOrder::RandomStart if few => {
+            let victims: Vec<PeerId> = state.peers.iter().copied().filter(eligible).collect();
+            if victims.is_empty() {
+                return Pick::Nobody;
+            }
+            let round = *state.round.get_or_insert_with(|| Round {
+                start: rng.below(victims.len()),
+                tried: 0,
+            });
+            match round.tried < victims.len() {
+                true => Pick::Victim(victims[(round.start + round.tried) % victims.len()]),
+                false => Pick::RoundOver,
+            }
         }
-        return Pick::Victim(victims[(round.start + round.tried) % victims.len()]);
-    }
-    let round = *state.round.get_or_insert(Round { start: 0, tried: 0 });
-    if round.tried >= limit {
-        return Pick::RoundOver;
-    }
-    match order {
+        // Many: `limit` draws. Nearly every participant is a candidate, so a few draws find one;
+        // the scan behind them only runs when most have been lost.
         VictimOrder::RandomStart => {
-            // Nearly every participant is a candidate, so a few draws find one; the scan
-            // behind them only runs when most have been lost.
+            let round = *state.round.get_or_insert(Round { start: 0, tried: 0 });
+            if round.tried >= limit {
+                return Pick::RoundOver;
+            }
             for _ in 0..32 {
                 let peer = state.peers[rng.below(state.peers.len())];
                 if eligible(&peer) {
@@ -85,15 +97,6 @@ fn pick_victim(state: &mut FrameState, me: PeerId, rng: &mut Rng, cx: &Ctx) -> P
             match victims.len() {
                 0 => Pick::Nobody,
                 n => Pick::Victim(victims[rng.below(n)]),
-            }
-        }
-        VictimOrder::Ring => {
-            let after = state.peers.partition_point(|p| *p <= me);
-            let ring = state.peers[after..].iter().chain(&state.peers[..after]);
-            match ring.filter(|p| eligible(p)).nth(round.tried) {
-                Some(&peer) => Pick::Victim(peer),
-                None if round.tried == 0 => Pick::Nobody,
-                None => Pick::RoundOver,
             }
         }
     }
