@@ -44,7 +44,7 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
             let (peers, own) = owner.run(job, args.expect, sink).await?;
             Ok(node::LocalRun {
                 peers,
-                timelines: vec![(runtime::wire::PeerId(0), own)],
+                timelines: vec![(runtime_core::wire::PeerId(0), own)],
             })
         })
     })
@@ -164,11 +164,11 @@ fn options(args: &FrameArgs, threads: usize) -> node::Options {
     let defaults = node::Options::default();
     node::Options {
         threads,
-        core: runtime::core::Config {
+        core: runtime_core::peer::Config {
             steal: !args.no_steal,
             peer_timeout: timeout,
             heartbeat_interval: timeout / 5,
-            ..runtime::core::Config::default()
+            ..runtime_core::peer::Config::default()
         },
         net: runtime::net::Config {
             idle_timeout: timeout,
@@ -297,7 +297,7 @@ pub fn prepare_world(scene: Scene, effects: EffectsChoice) -> World {
         EffectsChoice::Auto => None,
         EffectsChoice::All => Some(Effects::ALL),
     };
-    node::prepare_world(scene, effects)
+    World::prepare(scene, effects)
 }
 
 /// The balancer the flags ask for. `--tiles M` is the PBT's leaf count, or for the regular grid

@@ -109,7 +109,7 @@ pub struct PeerFrameStats {
 }
 
 impl PeerFrameStats {
-    pub fn new(peer: u32, s: &runtime::core::PeerStats) -> Self {
+    pub fn new(peer: u32, s: &runtime_core::peer::PeerStats) -> Self {
         Self {
             peer,
             threads: s.slots,
@@ -204,7 +204,7 @@ pub fn write_tile_map(
 pub fn write_gantt(
     path: &Path,
     stats: &StatsFile,
-    timelines: &[(runtime::wire::PeerId, Vec<runtime::node::LocalTile>)],
+    timelines: &[(runtime_core::wire::PeerId, Vec<runtime::node::LocalTile>)],
 ) -> anyhow::Result<()> {
     let mut bars = Vec::new();
     for (peer, tiles) in timelines {

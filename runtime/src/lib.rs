@@ -1,14 +1,11 @@
-//! The peer. (Being written.)
+//! The QUIC side of a peer: what moves bytes and timers. Everything that decides lives in
+//! [`runtime_core`] (the scheduling core, the owner's director, membership, the wire format);
+//! this crate drives it with tokio and quinn and renders on rayon.
 //!
 //! Module map:
-//! - [`core`]: the sans-IO scheduling core: queues, prefetch, stealing, frame completion and
-//!   the owner's ledger, driven by `handle_*(now, ..)` and drained by `poll_*`; plus
-//!   `core::testing`, a virtual-time cluster of cores for tests and the simulator.
-//! - [`wire`]: the messages peers exchange and their pure, bounded postcard encoding.
-//! - [`net`]: the QUIC transport that moves encoded messages between peers.
+//! - [`net`]: the QUIC transport that moves encoded messages between peers (mutual TLS,
+//!   certificates).
 //! - [`node`]: the driver: the owner and peer roles, the in-process cluster, rendering on rayon.
 
-pub mod core;
 pub mod net;
 pub mod node;
-pub mod wire;

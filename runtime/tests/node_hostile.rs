@@ -4,7 +4,7 @@
 
 use runtime::net::{self, CloseReason, ClusterCerts, Event, Expect, Link};
 use runtime::node::{self, CompletedFrame, FrameSink, Job, Owner};
-use runtime::wire::{self, Message, PROTOCOL_VERSION, PeerId};
+use runtime_core::wire::{self, Message, PROTOCOL_VERSION, PeerId};
 use std::net::{Ipv4Addr, SocketAddr};
 use std::sync::Arc;
 use std::time::Duration;
@@ -57,7 +57,7 @@ fn job() -> Job {
     )
     .unwrap();
     Job {
-        world: Arc::new(node::prepare_world(scene, None)),
+        world: Arc::new(tracer::World::prepare(scene, None)),
         files,
         params,
         frames,

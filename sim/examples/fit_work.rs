@@ -38,7 +38,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         scene.settings.height = (f64::from(scene.settings.height) * scale).round() as u32;
         scene.settings.samples_per_pixel = scene.settings.samples_per_pixel.min(8);
         let settings = scene.settings.clone();
-        let world = runtime::node::prepare_world(scene, None);
+        let world = tracer::World::prepare(scene, None);
         let frames = [0, settings.frames / 2];
         let before = samples.len();
         for frame in frames {

@@ -27,7 +27,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(frames) => frames.parse()?,
         None => settings.frames,
     };
-    let world = runtime::node::prepare_world(scene, None);
+    let world = tracer::World::prepare(scene, None);
     let (w, h) = (settings.width, settings.height);
     let mut writer = TraceWriter::create(std::path::Path::new(out), w, h, BLOCK_SIZE, scene_path)?;
     // Tiles of 32x32 pixels, block-aligned, so that every block's cost comes from one tile.

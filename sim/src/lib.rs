@@ -2,9 +2,9 @@
 //! sans-IO scheduling core for every peer, so that a 2-core machine can say how balancing
 //! scales to a thousand machines, with the very code the real peers run.
 //!
-//! Nothing here schedules a tile: the pump is `runtime::core::testing::Cluster` (the same one
-//! the core's own tests use), every peer is a `runtime::core::Core`, and the frame owner's
-//! partition and assignment come from `balancer`. The simulator supplies what surrounds them:
+//! Nothing here schedules a tile: the pump is `runtime_core::peer::testing::Cluster` (the same one
+//! the core's own tests use), every peer is a `runtime_core::peer::Core`, and the frame owner is
+//! the QUIC node's own `runtime_core::director::Director`. The simulator supplies what surrounds them:
 //! tile costs from a trace, a network, peers of different speeds that may crash, and the
 //! accounting behind every number it reports.
 //!
@@ -63,7 +63,9 @@ pub enum Error {
     #[error(transparent)]
     Balancer(#[from] balancer::Error),
     #[error("starting a frame: {0}")]
-    Frame(#[from] runtime::core::FrameError),
+    Frame(#[from] runtime_core::peer::FrameError),
+    #[error(transparent)]
+    Director(#[from] runtime_core::director::DirectorError),
     #[error("frame {frame} stalled at {at:?}: nothing left to happen, {missing} tiles missing")]
     Stalled {
         frame: u64,

@@ -18,13 +18,14 @@
 //!   lost for good while a connection lives, which is what the protocol relies on; only a
 //!   crash loses messages (those addressed to the dead peer).
 //!
-//! Message sizes are the wire encoding's ([`runtime::wire::encode`]), except that tile results
+//! Message sizes are the wire encoding's ([`runtime_core::wire::encode`]), except that tile results
 //! are sized without encoding them: their postcard header, their pixels, and the cost map a
 //! real peer sends (16 bytes, then 8 per block the tile touches).
 
 use std::time::Duration;
 
-use runtime::wire::{self, Message, PeerId};
+use runtime_core::rng::SplitMix;
+use runtime_core::wire::{self, Message, PeerId};
 use serde::{Deserialize, Serialize};
 
 /// The network model's knobs. All effects default to off.
@@ -178,29 +179,11 @@ fn varint_len(value: u64) -> u64 {
     u64::from((64 - value.leading_zeros()).max(1).div_ceil(7))
 }
 
-/// A small, seeded generator (splitmix64): the network's randomness is part of the scenario.
-pub(crate) struct SplitMix(pub(crate) u64);
-
-impl SplitMix {
-    pub(crate) fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub(crate) fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use balancer::Rect;
-    use runtime::wire::{FrameId, TileId, TileResult};
+    use runtime_core::wire::{FrameId, TileId, TileResult};
 
     #[test]
     fn a_tile_result_is_sized_as_its_encoding_with_a_real_cost_map() {

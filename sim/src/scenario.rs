@@ -1,10 +1,9 @@
 //! One simulated run: a trace, a balancer, a cluster and a network, frame after frame.
 //!
-//! The frame owner's loop is the real owner's (`runtime::node::owner`), in virtual time: ask
-//! the balancer for its tiles and for one contiguous run per live participant, start the frame
-//! in the owner's core, let the cores run until the owner's core reports it complete, then
-//! feed the frame's measured cost map (the trace's) back to the balancer, which re-cuts the PBT
-//! for the next frame. The next frame starts the instant the last one completes: the owner's
+//! The frame owner's loop is the real owner's: the same [`Director`] the QUIC node drives deals
+//! each frame to the live participants, the owner's core runs it, and when the core reports it
+//! complete the director is given the frame's measured cost map (the trace's) and re-cuts the
+//! partition for the next frame. Only time is virtual. The next frame starts the instant the last one completes: the owner's
 //! own work between frames (writing the image, re-cutting the tree) is not simulated.
 //!
 //! Time is counted work divided by a rate: a slot of a peer of speed 1 renders
@@ -18,9 +17,10 @@ use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
 
 use balancer::Partitioner;
-use runtime::core::Config;
-use runtime::core::testing::Cluster;
-use runtime::wire::{FrameId, PeerId, TileId, TileSpec};
+use runtime_core::director::{self, Director};
+use runtime_core::peer::Config;
+use runtime_core::peer::testing::Cluster;
+use runtime_core::wire::PeerId;
 use serde::{Deserialize, Serialize};
 
 use crate::network::Links;
@@ -185,7 +185,7 @@ struct Plan {
 /// cover the trace's image).
 pub fn run(
     trace: &Trace,
-    mut partitioner: Partitioner,
+    partitioner: Partitioner,
     scenario: &Scenario,
 ) -> Result<RunReport, Error> {
     scenario.validate()?;
@@ -243,55 +243,54 @@ pub fn run(
     let mut steps = 0u64;
     let policy = Policy::of(&partitioner, &scenario.core);
     let first_tiles = partitioner.tiles().len();
+    let config = director::Config {
+        frames,
+        ..director::Config::default()
+    };
+    let mut director = Director::new(OWNER, partitioner, config);
+    for &(peer, _) in &peers {
+        director.handle_peer_joined(Duration::ZERO, peer);
+    }
     for frame in 0..frames {
         let now = cluster.now();
         // The owner deals to the peers it is connected to: a crashed peer until its
         // connection times out.
-        let participants: Vec<PeerId> = peers
-            .iter()
-            .map(|(p, _)| *p)
-            .filter(|p| {
-                crashed
-                    .get(p)
-                    .is_none_or(|&at| now < at + network.loss_detection)
-            })
-            .collect();
-        let tiles = partitioner.tiles();
-        let assignment = partitioner.assign(participants.len(), None)?;
-        let map = cluster.world().map(frame);
-        let mut initial = vec![OWNER; tiles.len()];
-        let mut sets = BTreeMap::new();
-        for (&peer, run) in participants.iter().zip(&assignment.runs) {
-            let specs: Vec<TileSpec> = run
-                .iter()
-                .map(|&index| {
-                    initial[index] = peer;
-                    let tile = tiles[index];
-                    TileSpec {
-                        id: TileId(index as u32),
-                        rect: tile.rect,
-                        predicted: tile.predicted,
-                    }
-                })
-                .collect();
-            sets.insert(peer, specs);
+        for (&peer, &at) in &crashed {
+            if now >= at + network.loss_detection {
+                director.handle_peer_left(now, peer);
+            }
         }
-        let speed = |p: &PeerId| speeds[p.0 as usize];
+        let deal = director
+            .poll_deal(now)?
+            .expect("invariant: the director deals each frame once the last is measured");
+        let map = cluster.world().map(frame);
+        let speed = |p: PeerId| speeds[p.0 as usize];
         let mut plan = Plan {
-            capacity: participants.iter().map(speed).sum::<f64>() * scenario.slots as f64,
-            fastest: participants.iter().map(speed).fold(0.0, f64::max),
-            participants: participants.len(),
+            capacity: deal.participants().map(speed).sum::<f64>() * scenario.slots as f64,
+            fastest: deal.participants().map(speed).fold(0.0, f64::max),
+            participants: deal.participants().count(),
             work: map.total() * seconds_per_unit,
-            largest: tiles.iter().map(|t| map.cost(t.rect)).fold(0.0, f64::max) * seconds_per_unit,
+            largest: deal
+                .tiles
+                .iter()
+                .map(|t| map.cost(t.rect))
+                .fold(0.0, f64::max)
+                * seconds_per_unit,
             splits: 0,
             merges: 0,
         };
         if scenario.keep_assignments {
-            let dealt = tiles.iter().zip(&initial).map(|(t, p)| (t.rect, p.0));
+            let dealt = deal
+                .tiles
+                .iter()
+                .zip(&deal.initial)
+                .map(|(t, p)| (t.rect, p.0));
             assignments.push(dealt.collect());
         }
-        cluster.world_mut().begin_frame(frame, now, initial);
-        cluster.start_frame(OWNER, FrameId(frame), sets)?;
+        cluster
+            .world_mut()
+            .begin_frame(frame, now, deal.initial.clone());
+        cluster.start_frame(OWNER, deal.frame, deal.assignments)?;
         while !cluster.world().is_complete(frame) {
             let due = cluster.next_due();
             if let Some(&(at, peer)) = crashes.front().filter(|c| due.is_none_or(|d| c.0 <= d)) {
@@ -325,15 +324,28 @@ pub fn run(
                     }
                 }
             }
+            feed(&mut director, &mut cluster)?;
         }
-        let update = partitioner.observe(cluster.world().map(frame))?;
-        (plan.splits, plan.merges) = (update.splits, update.merges);
+        feed(&mut director, &mut cluster)?;
+        let now = cluster.now();
+        while let Some(event) = director.poll_event() {
+            if let director::Event::FrameComplete { frame: done, .. } = event {
+                let update = director.handle_measured(now, done, cluster.world().map(done.0))?;
+                (plan.splits, plan.merges) = (update.splits, update.merges);
+            }
+        }
         plans.push(plan);
     }
-    // Let the last frame's `FrameDone`s and statistics travel, for its message counts.
+    // Let the last frame's `FrameDone`s and statistics travel, for its message counts; the
+    // director finishes when every statistic is in.
     while cluster.advance().is_some() {
         steps += 1;
+        feed(&mut director, &mut cluster)?;
     }
+    if let Some(deadline) = director.poll_timeout() {
+        director.handle_timeout(deadline.max(cluster.now()));
+    }
+    debug_assert!(director.is_finished(), "every frame was measured");
     let world = cluster.into_world();
     let frame_reports = plans
         .iter()
@@ -352,6 +364,15 @@ pub fn run(
     );
     report.assignments = assignments;
     Ok(report)
+}
+
+/// Hands the owner core's events since the last call to the director.
+fn feed(director: &mut Director, cluster: &mut Cluster<SimWorld>) -> Result<(), Error> {
+    let now = cluster.now();
+    for event in cluster.world_mut().take_owner_events() {
+        director.handle_core_event(now, &event)?;
+    }
+    Ok(())
 }
 
 fn frame_report(frame: u64, plan: &Plan, world: &SimWorld, slots: usize) -> FrameReport {

@@ -11,7 +11,7 @@ use std::str::FromStr;
 
 use balancer::{Kind, Partitioner};
 use rayon::prelude::*;
-use runtime::core::Config;
+use runtime_core::peer::Config;
 use serde::{Deserialize, Serialize};
 
 use crate::plot::{self, Series};

@@ -1,4 +1,4 @@
-//! The simulator's side of the pump (`runtime::core::testing::World`): renderers that take a
+//! The simulator's side of the pump (`runtime_core::peer::testing::World`): renderers that take a
 //! tile's time from the trace, the network model, and the running tally of each frame.
 //!
 //! The tally is kept as the run goes, never as a record of it: a run of a thousand peers over
@@ -12,10 +12,10 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use balancer::CostMap;
-use runtime::core::Event;
-use runtime::core::WorkItem;
-use runtime::core::testing::{Rendered, Seen, Transit, World};
-use runtime::wire::{self, Message, PeerId, TileId, TileResult};
+use runtime_core::peer::Event;
+use runtime_core::peer::WorkItem;
+use runtime_core::peer::testing::{Rendered, Seen, Transit, World};
+use runtime_core::wire::{self, Message, PeerId, TileId, TileResult};
 
 use crate::network::Links;
 use crate::plot::GanttBar;
@@ -62,6 +62,8 @@ pub(crate) struct SimWorld {
     gantt_frame: Option<u64>,
     pub(crate) gantt: Vec<GanttBar>,
     pub(crate) fingerprint: Fingerprint,
+    /// The owner core's events not yet handed to the director.
+    owner_events: Vec<Event>,
 }
 
 impl SimWorld {
@@ -84,6 +86,7 @@ impl SimWorld {
             gantt_frame,
             gantt: Vec::new(),
             fingerprint: Fingerprint::default(),
+            owner_events: Vec::new(),
         }
     }
 
@@ -106,6 +109,11 @@ impl SimWorld {
         self.frames
             .get(&frame)
             .is_some_and(|tally| tally.completed.is_some())
+    }
+
+    /// The owner core's events since the last call, in order, for the director.
+    pub(crate) fn take_owner_events(&mut self) -> Vec<Event> {
+        std::mem::take(&mut self.owner_events)
     }
 
     fn tally(&mut self, frame: u64) -> Option<&mut Tally> {
@@ -201,7 +209,10 @@ impl World for SimWorld {
             }
             Seen::Event { peer, event } => {
                 print.words(&[3, u64::from(peer.0)]);
-                self.event(event);
+                self.event(&event);
+                if peer == crate::scenario::OWNER {
+                    self.owner_events.push(event);
+                }
             }
             Seen::Refused { peer, from, error } => {
                 print.words(&[4, u64::from(peer.0), u64::from(from.0)]);
@@ -215,7 +226,7 @@ impl World for SimWorld {
 }
 
 impl SimWorld {
-    fn event(&mut self, event: Event) {
+    fn event(&mut self, event: &Event) {
         let print = &mut self.fingerprint;
         match event {
             Event::FrameComplete {
@@ -225,18 +236,18 @@ impl SimWorld {
                 rendered_by,
             } => {
                 print.words(&[10, frame.0, elapsed.as_nanos() as u64]);
-                for peer in &rendered_by {
+                for peer in rendered_by {
                     print.word(u64::from(peer.0));
                 }
                 let Some(tally) = self.frames.get_mut(&frame.0) else {
                     return;
                 };
-                let at = tally.started + elapsed;
+                let at = tally.started + *elapsed;
                 let ids = results.iter().map(|r| r.tile);
                 tally.results_ok = results.len() == tally.tiles
                     && ids.eq((0..tally.tiles as u32).map(TileId))
-                    && results.iter().all(|r| r.frame == frame);
-                tally.completed = Some((at, elapsed));
+                    && results.iter().all(|r| r.frame == *frame);
+                tally.completed = Some((at, *elapsed));
             }
             Event::PeerStats { frame, peer, stats } => {
                 print.words(&[11, frame.0, u64::from(peer.0), stats.busy.as_nanos() as u64]);
@@ -247,7 +258,7 @@ impl SimWorld {
                 reissued,
                 ..
             } => {
-                print.words(&[12, frame.0, u64::from(peer.0), reissued as u64]);
+                print.words(&[12, frame.0, u64::from(peer.0), *reissued as u64]);
                 if let Some(tally) = self.frames.get_mut(&frame.0) {
                     tally.failures += 1;
                 }

@@ -11,7 +11,7 @@
 
 use anyhow::Context;
 use runtime::net::{ClusterCerts, Event, Expect, Link};
-use runtime::wire::{self, FrameId, Message, TileId, TileSpec};
+use runtime_core::wire::{self, FrameId, Message, TileId, TileSpec};
 use serde::Serialize;
 use std::fmt;
 use std::net::{Ipv4Addr, SocketAddr};

@@ -97,6 +97,14 @@ impl World {
         }
     }
 
+    /// A world ready to render: the scene's BVH built (default quality) and its lights set
+    /// up; `effects` forces an effect set, `None` derives it from the scene.
+    pub fn prepare(scene: Scene, effects: Option<Effects>) -> Self {
+        let effects = effects.unwrap_or_else(|| Effects::of(&scene));
+        let accel = Accel::build(&scene.triangles, crate::geometry::BuildQuality::default());
+        Self::new(scene, accel, effects)
+    }
+
     /// The radiance arriving along `ray` for one sample.
     pub fn radiance(&self, ray: Ray, sampler: &mut PixelSampler, stats: &mut PathStats) -> Vec3 {
         let settings = &self.scene.settings;

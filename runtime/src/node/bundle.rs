@@ -5,7 +5,7 @@
 //! memory with the same loader the owner used. Pixels travel as little-endian `f32` triples and
 //! costs as little-endian `u64` block counts, so a tile's bits arrive unchanged.
 
-use crate::wire::{RenderParams, SceneFile, TileResult};
+use runtime_core::wire::{RenderParams, SceneFile, TileResult};
 use std::path::Path;
 use tracer::scene::{MemoryFiles, SceneError, normalize};
 use tracer::{Scene, TileCost, TileOutput};
@@ -194,8 +194,8 @@ pub fn decode_cost(bytes: &[u8]) -> Option<TileCost> {
 
 /// A rendered tile as the wire carries it.
 pub fn tile_result(
-    frame: crate::wire::FrameId,
-    tile: crate::wire::TileId,
+    frame: runtime_core::wire::FrameId,
+    tile: runtime_core::wire::TileId,
     output: &TileOutput,
 ) -> TileResult {
     TileResult {
@@ -256,5 +256,16 @@ mod tests {
             load_scene(vec![file], &params),
             Err(BundleError::HashMismatch { .. })
         ));
+    }
+}
+
+/// The tracer's rectangle for a balancer's (the two crates do not know each other; this is the
+/// one place that converts).
+pub fn tracer_rect(rect: balancer::Rect) -> tracer::Rect {
+    tracer::Rect {
+        x: rect.x,
+        y: rect.y,
+        w: rect.w,
+        h: rect.h,
     }
 }

@@ -1,4 +1,4 @@
-//! The driver: tokio + quinn around the sans-IO [`crate::core`]. It moves bytes and timers and
+//! The driver: tokio + quinn around the sans-IO [`runtime_core`]. It moves bytes and timers and
 //! renders on a rayon pool; every scheduling decision is the core's.
 //!
 //! - [`owner`]: the frame owner (`tessera serve`, and peer 0 of the in-process default).
@@ -18,20 +18,19 @@ pub use peer::run_peer;
 pub use session::LocalTile;
 
 use crate::net::{BindError, ClusterCerts, ConnectError};
-use crate::wire::{PeerId, TileId};
+use runtime_core::wire::{PeerId, TileId};
 use std::net::{Ipv4Addr, SocketAddr};
 use std::time::Duration;
-use tracer::geometry::{Accel, BuildQuality};
-use tracer::{Effects, Film, Scene, World};
+use tracer::Film;
 
 /// How a node runs: its renderer, its policy and its transport's bounds.
 #[derive(Clone, Debug)]
 pub struct Options {
     /// Rendering threads, and so the tiles the core keeps in flight.
     pub threads: usize,
-    pub core: crate::core::Config,
+    pub core: runtime_core::peer::Config,
     pub net: crate::net::Config,
-    pub limits: crate::wire::Limits,
+    pub limits: runtime_core::wire::Limits,
     /// Seeds victim choice (mixed with the peer id by the core).
     pub seed: u64,
 }
@@ -44,13 +43,13 @@ impl Default for Options {
             max_message_bytes: 64 << 20,
             ..crate::net::Config::default()
         };
-        let limits = crate::wire::Limits {
+        let limits = runtime_core::wire::Limits {
             max_message_bytes: 64 << 20,
-            ..crate::wire::Limits::default()
+            ..runtime_core::wire::Limits::default()
         };
         Self {
             threads: 1,
-            core: crate::core::Config::default(),
+            core: runtime_core::peer::Config::default(),
             net,
             limits,
             seed: 0,
@@ -72,13 +71,13 @@ pub enum NodeError {
     #[error(transparent)]
     Bundle(#[from] bundle::BundleError),
     #[error(transparent)]
-    Frame(#[from] crate::core::FrameError),
+    Frame(#[from] runtime_core::peer::FrameError),
     #[error(transparent)]
     Balancer(#[from] balancer::Error),
+    #[error(transparent)]
+    Director(#[from] runtime_core::director::DirectorError),
     #[error("{0} came back with malformed pixels or costs")]
     BadTile(TileId),
-    #[error("frame {frame}: {faults} tile results were refused as faulty; giving up")]
-    Faulty { frame: u32, faults: usize },
     #[error("the transport stopped")]
     Stopped,
     #[error("writing a frame: {0}")]
@@ -115,13 +114,6 @@ pub struct TileRecord {
 /// Where finished frames go (the CLI writes them to disk).
 pub trait FrameSink: Send {
     fn frame(&mut self, frame: CompletedFrame) -> Result<(), String>;
-}
-
-/// Builds the BVH and lights of a scene; `effects` forces an effect set (default: the scene's).
-pub fn prepare_world(scene: Scene, effects: Option<Effects>) -> World {
-    let effects = effects.unwrap_or_else(|| Effects::of(&scene));
-    let accel = Accel::build(&scene.triangles, BuildQuality::default());
-    World::new(scene, accel, effects)
 }
 
 /// What an in-process cluster run reports.

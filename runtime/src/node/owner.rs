@@ -1,20 +1,21 @@
-//! The frame owner: admits peers, ships them the scene, and for each frame asks the balancer for
-//! tiles and initial sets, starts the frame in its core, and assembles the results. It renders
-//! tiles itself too: its own core is one of the participants.
+//! The frame owner: the QUIC driver of [`Membership`] (who may join) and [`Director`] (what each
+//! frame deals and what it yields), beside its own scheduling core. It decides nothing itself:
+//! it carries messages, timers and core events between those state machines, assembles each
+//! completed frame's pixels into a film, and measures its cost map. It renders tiles itself
+//! too: its own core is one of the participants.
 
 use super::bundle;
-use super::session::{Session, Step, check_hello};
+use super::session::{Session, Step};
 use super::{CompletedFrame, FrameSink, NodeError, Options, TileRecord};
-use crate::core::{Event as CoreEvent, PeerStats};
 use crate::net::{CloseCode, PeerIdentity};
-use crate::wire::{
-    FrameId, GoodbyeReason, Message, PROTOCOL_VERSION, PeerAddress, PeerId, RenderParams,
-    SceneFile, TileId, TileSpec,
-};
-use std::collections::{BTreeMap, BTreeSet};
+use runtime_core::director::{self, Director, Piece};
+use runtime_core::membership::{Action, Membership, Refusal};
+use runtime_core::peer::{Event as CoreEvent, PeerStats};
+use runtime_core::wire::{FrameId, GoodbyeReason, Message, PeerId, RenderParams, SceneFile};
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::Duration;
 use tracer::{Film, World};
 
 /// What the owner renders.
@@ -32,6 +33,8 @@ pub struct Job {
 pub struct Owner {
     session: Session,
     options: Options,
+    /// The certificate of each connection that has not closed, for membership's identity check.
+    certificates: BTreeMap<crate::net::ConnId, crate::net::PeerCertificate>,
 }
 
 /// Every peer's statistics for every frame, as the peers reported them.
@@ -47,6 +50,7 @@ impl Owner {
         Ok(Self {
             session: Session::bind(listen, identity, &options)?,
             options,
+            certificates: BTreeMap::new(),
         })
     }
 
@@ -65,30 +69,57 @@ impl Owner {
         let (renderer, results) =
             super::session::Renderer::new(self.options.threads, job.world.clone())?;
         self.session.set_renderer(renderer, results);
-        let joined = self.admit(&job.files, job.params, expect).await?;
-        let mut partitioner = job.partitioner;
+        let me = self.session.core.id();
+        tracing::info!(
+            "scene {}; waiting for {expect} peers",
+            bundle::scene_digest(&job.files)
+        );
+        let mut membership = Membership::new(me, job.files, job.params);
+        let config = director::Config {
+            frames: u64::from(job.frames),
+            ..director::Config::default()
+        };
+        let mut director = Director::new(me, job.partitioner, config);
         let mut report = PeerReport::new();
-        for frame in 0..job.frames {
-            let completed = self
-                .render_frame(frame, &mut partitioner, &job.world, &mut report)
-                .await?;
-            sink.frame(completed).map_err(NodeError::Sink)?;
+        while membership.members() < expect {
+            let step = self.session.step().await;
+            self.on_step(step, &mut membership, &mut director, &mut report)?;
         }
-        // Late statistics of the last frame arrive after its FrameDone: give them a moment.
-        let deadline = Instant::now() + std::time::Duration::from_millis(200);
-        while report
-            .keys()
-            .filter(|(f, _)| u64::from(job.frames.saturating_sub(1)) == *f)
-            .count()
-            < joined + 1
-        {
-            let remaining = deadline.saturating_duration_since(Instant::now());
-            match tokio::time::timeout(remaining, self.session.step()).await {
-                Ok(Step::Core(CoreEvent::PeerStats { frame, peer, stats })) => {
-                    report.insert((frame.0, peer), stats);
+        membership.start(self.session.now());
+        self.apply(&mut membership, &mut director);
+        while !director.is_finished() {
+            let now = self.session.now();
+            while let Some(deal) = director.poll_deal(now)? {
+                self.session
+                    .core
+                    .start_frame(now, deal.frame, deal.assignments)?;
+                self.session.flush();
+            }
+            while let Some(event) = director.poll_event() {
+                if let director::Event::FrameComplete {
+                    frame,
+                    elapsed,
+                    pieces,
+                } = event
+                {
+                    let (completed, map) = assemble(frame, pieces, &job.world, elapsed)?;
+                    director.handle_measured(self.session.now(), frame, &map)?;
+                    sink.frame(completed).map_err(NodeError::Sink)?;
                 }
-                Ok(Step::Stopped) | Err(_) => break,
-                Ok(_) => {}
+            }
+            if director.is_finished() {
+                break;
+            }
+            let deadline = director
+                .poll_timeout()
+                .map(|t| tokio::time::Instant::from_std(self.session.epoch() + t));
+            let step = tokio::select! {
+                step = self.session.step() => Some(step),
+                () = sleep_until(deadline) => None,
+            };
+            match step {
+                Some(step) => self.on_step(step, &mut membership, &mut director, &mut report)?,
+                None => director.handle_timeout(self.session.now()),
             }
         }
         let peers: Vec<PeerId> = self.session.peers.ids().collect();
@@ -100,272 +131,150 @@ impl Owner {
                 },
             );
         }
-        // Give the goodbyes a moment to leave before the endpoint closes.
-        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        // The goodbyes must leave before the endpoint closes every connection.
+        self.session.drain_sends().await;
         self.session.link.shutdown().await;
         Ok((report, std::mem::take(&mut self.session.local_tiles)))
     }
 
-    /// Admits peers until `expect` have loaded the scene; then tells each where the others are.
-    async fn admit(
+    /// Hands one step of the loop to the state machine it is for.
+    fn on_step(
         &mut self,
-        files: &[SceneFile],
-        params: RenderParams,
-        expect: usize,
-    ) -> Result<usize, NodeError> {
-        let mut pending: BTreeMap<crate::net::ConnId, (crate::net::PeerCertificate, SocketAddr)> =
-            BTreeMap::new();
-        let mut ready: BTreeMap<PeerId, SocketAddr> = BTreeMap::new();
-        let mut loading: BTreeMap<crate::net::ConnId, (PeerId, SocketAddr)> = BTreeMap::new();
-        let digest = bundle::scene_digest(files);
-        while ready.len() < expect {
-            match self.session.step().await {
-                Step::Connected {
-                    conn,
-                    certificate,
-                    remote,
-                    ..
-                } => {
-                    pending.insert(conn, (certificate, remote));
-                }
-                Step::Control { conn, message } => {
-                    if let Some((certificate, remote)) = pending.remove(&conn) {
-                        match check_hello(&message, &certificate) {
-                            Ok((peer, _))
-                                if peer == self.session.core.id() || ready.contains_key(&peer) =>
-                            {
-                                self.session.close(
-                                    conn,
-                                    CloseCode::Identity,
-                                    &format!("{peer} is already here"),
-                                );
-                            }
-                            Ok((peer, slots)) => {
-                                tracing::info!(%peer, %remote, slots, "peer joined; sending scene {digest}");
-                                self.session.send_conn(
-                                    conn,
-                                    &Message::Welcome {
-                                        version: PROTOCOL_VERSION,
-                                        peer: self.session.core.id(),
-                                    },
-                                );
-                                self.session.send_conn(
-                                    conn,
-                                    &Message::Scene {
-                                        files: files.to_vec(),
-                                        params,
-                                    },
-                                );
-                                loading.insert(conn, (peer, remote));
-                            }
-                            Err(reason) => self.session.close(conn, CloseCode::Identity, &reason),
-                        }
-                    } else if let (Some(&(peer, remote)), Message::SceneReady) =
-                        (loading.get(&conn), &message)
-                    {
-                        loading.remove(&conn);
-                        self.session.peers.bind(conn, peer);
-                        ready.insert(peer, remote);
-                        tracing::info!(%peer, "peer ready ({}/{expect})", ready.len());
-                    } else if let Message::Goodbye { reason } = message {
-                        tracing::warn!(?conn, ?reason, "a joining peer gave up");
-                    } else {
-                        self.session.close(
-                            conn,
-                            CloseCode::Protocol,
-                            &format!("unexpected {} while joining", message.kind()),
-                        );
-                    }
-                }
-                Step::Closed { conn, peer } => {
-                    pending.remove(&conn);
-                    loading.remove(&conn);
-                    if let Some(peer) = peer {
-                        ready.remove(&peer);
-                    }
-                }
-                Step::Core(event) => tracing::debug!(?event, "core event while admitting"),
-                Step::Stopped => return Err(NodeError::Stopped),
-            }
-        }
-        let addresses: Vec<PeerAddress> = ready
-            .iter()
-            .map(|(&peer, addr)| PeerAddress {
-                peer,
-                addr: addr.to_string(),
-            })
-            .collect();
-        let now = self.session.now();
-        for &peer in ready.keys() {
-            self.session.send(
-                peer,
-                &Message::Peers {
-                    peers: addresses.clone(),
-                },
-            );
-            self.session.core.handle_peer_connected(now, peer);
-        }
-        self.session.flush();
-        Ok(ready.len())
-    }
-
-    async fn render_frame(
-        &mut self,
-        frame: u32,
-        partitioner: &mut balancer::Partitioner,
-        world: &World,
+        step: Step,
+        membership: &mut Membership<crate::net::ConnId>,
+        director: &mut Director,
         report: &mut PeerReport,
-    ) -> Result<CompletedFrame, NodeError> {
-        let tiles = partitioner.tiles();
-        let mut participants: BTreeSet<PeerId> = self.session.peers.ids().collect();
-        participants.insert(self.session.core.id());
-        let participants: Vec<PeerId> = participants.into_iter().collect();
-        let assignment = partitioner.assign(participants.len(), None)?;
-        let mut initial: BTreeMap<PeerId, Vec<TileSpec>> = BTreeMap::new();
-        for (peer, run) in participants.iter().zip(assignment.runs.iter()) {
-            let specs = run
-                .iter()
-                .map(|&index| TileSpec {
-                    id: TileId(index as u32),
-                    rect: tiles[index].rect,
-                    predicted: tiles[index].predicted,
-                })
-                .collect();
-            initial.insert(*peer, specs);
-        }
-        let owners: BTreeMap<TileId, PeerId> = initial
-            .iter()
-            .flat_map(|(&peer, specs)| specs.iter().map(move |spec| (spec.id, peer)))
-            .collect();
+    ) -> Result<(), NodeError> {
         let now = self.session.now();
-        let started = Instant::now();
-        self.session
-            .core
-            .start_frame(now, FrameId(u64::from(frame)), initial)?;
-        self.session.flush();
-        // A renderer that keeps producing results the ledger refuses would have its tiles
-        // re-issued forever; past this many refusals the render stops with an error instead.
-        let mut faults = 0usize;
-        let max_faults = 2 * tiles.len() + 8;
-        loop {
-            match self.session.step().await {
-                Step::Core(CoreEvent::FrameComplete {
-                    frame: done,
-                    results,
-                    rendered_by,
-                    ..
-                }) if done.0 == u64::from(frame) => {
-                    let seconds = started.elapsed().as_secs_f64();
-                    let results = rendered_by.into_iter().zip(results).collect();
-                    return self.assemble(
-                        frame,
-                        &tiles,
-                        &owners,
-                        results,
-                        world,
-                        seconds,
-                        partitioner,
-                    );
-                }
-                Step::Core(CoreEvent::PeerStats { frame, peer, stats }) => {
-                    report.insert((frame.0, peer), stats);
-                }
-                Step::Core(CoreEvent::PeerFailed {
-                    peer,
-                    reason,
-                    reissued,
-                    ..
-                }) => {
-                    tracing::warn!(%peer, ?reason, reissued, "peer failed; its tiles were re-issued");
-                }
-                Step::Core(CoreEvent::FaultyPeer {
-                    peer, tile, fault, ..
-                }) => {
-                    tracing::error!(%peer, %tile, ?fault, "faulty result ignored");
-                    faults += 1;
-                    if faults > max_faults {
-                        return Err(NodeError::Faulty { frame, faults });
+        match step {
+            Step::Core(event) => {
+                director.handle_core_event(now, &event)?;
+                match event {
+                    CoreEvent::PeerStats { frame, peer, stats } => {
+                        report.insert((frame.0, peer), stats);
                     }
-                }
-                Step::Core(event) => tracing::debug!(?event, "core event"),
-                Step::Connected { conn, .. } => {
-                    self.session.close(
-                        conn,
-                        CloseCode::Protocol,
-                        "the render has started; no new peers",
-                    );
-                }
-                Step::Control { conn, message } => {
-                    if !matches!(message, Message::Goodbye { .. }) {
-                        self.session.close(
-                            conn,
-                            CloseCode::Protocol,
-                            &format!("unexpected {}", message.kind()),
-                        );
+                    CoreEvent::PeerFailed {
+                        peer,
+                        reason,
+                        reissued,
+                        ..
+                    } => {
+                        tracing::warn!(%peer, ?reason, reissued, "peer failed; its tiles were re-issued");
                     }
+                    CoreEvent::FaultyPeer {
+                        peer, tile, fault, ..
+                    } => tracing::error!(%peer, %tile, ?fault, "faulty result ignored"),
+                    event => tracing::debug!(?event, "core event"),
                 }
-                Step::Closed { .. } => {}
-                Step::Stopped => return Err(NodeError::Stopped),
             }
+            Step::Connected {
+                conn,
+                remote,
+                certificate,
+                ..
+            } => {
+                self.certificates.insert(conn, certificate);
+                membership.handle_connected(now, conn, remote.to_string());
+            }
+            Step::Control { conn, message } => {
+                let certificate = self.certificates.get(&conn);
+                let certifies = |id: u32| certificate.is_some_and(|c| c.certifies(id));
+                membership.handle_message(now, conn, message, &certifies);
+            }
+            Step::Closed { conn, .. } => {
+                self.certificates.remove(&conn);
+                membership.handle_closed(now, conn);
+            }
+            Step::Stopped => return Err(NodeError::Stopped),
         }
+        self.apply(membership, director);
+        Ok(())
     }
 
-    fn assemble(
-        &mut self,
-        frame: u32,
-        tiles: &[balancer::Tile],
-        owners: &BTreeMap<TileId, PeerId>,
-        results: Vec<(PeerId, crate::wire::TileResult)>,
-        world: &World,
-        seconds: f64,
-        partitioner: &mut balancer::Partitioner,
-    ) -> Result<CompletedFrame, NodeError> {
-        let settings = &world.scene.settings;
-        let mut film = Film::new(settings.width, settings.height);
-        let mut records = Vec::with_capacity(results.len());
-        let mut rays = 0u64;
-        for (peer, result) in results {
-            let rect = tracer::Rect {
-                x: result.rect.x,
-                y: result.rect.y,
-                w: result.rect.w,
-                h: result.rect.h,
-            };
-            let pixels =
-                bundle::decode_pixels(&result.pixels).ok_or(NodeError::BadTile(result.tile))?;
-            let cost = bundle::decode_cost(&result.costs).ok_or(NodeError::BadTile(result.tile))?;
-            let (_, _, bw, bh) = rect.blocks();
-            if pixels.len() as u64 != rect.area() || cost.blocks.len() != (bw * bh) as usize {
-                return Err(NodeError::BadTile(result.tile));
+    /// Carries out what membership decided.
+    fn apply(&mut self, membership: &mut Membership<crate::net::ConnId>, director: &mut Director) {
+        let now = self.session.now();
+        while let Some(action) = membership.poll_action() {
+            match action {
+                Action::Send { conn, message } => self.session.send_conn(conn, &message),
+                Action::Close {
+                    conn,
+                    refusal,
+                    reason,
+                } => {
+                    let code = match refusal {
+                        Refusal::Identity => CloseCode::Identity,
+                        Refusal::Protocol => CloseCode::Protocol,
+                    };
+                    self.session.close(conn, code, &reason);
+                }
+                Action::Joined { peer, conn } => {
+                    tracing::info!(%peer, "peer joined the render");
+                    self.session.peers.bind(conn, peer);
+                    self.session.core.handle_peer_connected(now, peer);
+                    director.handle_peer_joined(now, peer);
+                }
+                Action::Left { peer } => director.handle_peer_left(now, peer),
             }
-            film.insert(rect, &pixels, &cost);
-            rays += cost.rays;
-            let predicted = tiles
-                .get(result.tile.0 as usize)
-                .map_or(0.0, |t| t.predicted);
-            let initial = owners.get(&result.tile).copied().unwrap_or(peer);
-            records.push(TileRecord {
-                tile: result.tile,
-                rect: result.rect,
-                predicted,
-                measured: cost.work,
-                peer,
-                initial,
-            });
         }
-        let map = balancer::CostMap::from_counts(
-            film.width,
-            film.height,
-            tracer::BLOCK_SIZE,
-            &film.block_work,
-        )?;
-        partitioner.observe(&map)?;
-        Ok(CompletedFrame {
-            frame,
-            film,
-            tiles: records,
-            seconds,
-            rays,
-        })
+        self.session.flush();
     }
+}
+
+/// Sleeps until `deadline`, or forever without one.
+async fn sleep_until(deadline: Option<tokio::time::Instant>) {
+    match deadline {
+        Some(deadline) => tokio::time::sleep_until(deadline).await,
+        None => std::future::pending().await,
+    }
+}
+
+/// Puts a completed frame's pieces together: pixels into a film, counted work into the cost map
+/// the director learns from, and a record per tile.
+fn assemble(
+    frame: FrameId,
+    pieces: Vec<Piece>,
+    world: &World,
+    elapsed: Duration,
+) -> Result<(CompletedFrame, balancer::CostMap), NodeError> {
+    let settings = &world.scene.settings;
+    let mut film = Film::new(settings.width, settings.height);
+    let mut records = Vec::with_capacity(pieces.len());
+    let mut rays = 0u64;
+    for piece in pieces {
+        let result = piece.result;
+        let rect = bundle::tracer_rect(result.rect);
+        let pixels =
+            bundle::decode_pixels(&result.pixels).ok_or(NodeError::BadTile(result.tile))?;
+        let cost = bundle::decode_cost(&result.costs).ok_or(NodeError::BadTile(result.tile))?;
+        let (_, _, bw, bh) = rect.blocks();
+        if pixels.len() as u64 != rect.area() || cost.blocks.len() != (bw * bh) as usize {
+            return Err(NodeError::BadTile(result.tile));
+        }
+        film.insert(rect, &pixels, &cost);
+        rays += cost.rays;
+        records.push(TileRecord {
+            tile: result.tile,
+            rect: result.rect,
+            predicted: piece.predicted,
+            measured: cost.work,
+            peer: piece.peer,
+            initial: piece.initial,
+        });
+    }
+    let map = balancer::CostMap::from_counts(
+        film.width,
+        film.height,
+        tracer::BLOCK_SIZE,
+        &film.block_work,
+    )?;
+    let frame = u32::try_from(frame.0).expect("invariant: the director deals frames of a u32 job");
+    let completed = CompletedFrame {
+        frame,
+        film,
+        tiles: records,
+        seconds: elapsed.as_secs_f64(),
+        rays,
+    };
+    Ok((completed, map))
 }

@@ -1,11 +1,12 @@
 //! A peer that is not the frame owner: joins the owner, loads the scene it is sent, connects to
 //! the other peers so that it can steal from them, and renders until the owner says goodbye.
 
-use super::session::{Renderer, Session, Step, check_hello};
+use super::session::{Renderer, Session, Step};
 use super::{NodeError, Options, bundle};
-use crate::core::Event as CoreEvent;
 use crate::net::{CloseCode, ConnId, Expect, PeerIdentity};
-use crate::wire::{GoodbyeReason, Message, PROTOCOL_VERSION, PeerId};
+use runtime_core::membership::check_hello;
+use runtime_core::peer::Event as CoreEvent;
+use runtime_core::wire::{GoodbyeReason, Message, PROTOCOL_VERSION, PeerId};
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -76,7 +77,7 @@ pub async fn run_peer(
             }
             Step::Control { conn, message } => {
                 if let Some(certificate) = inbound.remove(&conn) {
-                    match check_hello(&message, &certificate) {
+                    match check_hello(&message, &|id| certificate.certifies(id)) {
                         Ok((peer, _)) if peer > me => {
                             session.send_conn(
                                 conn,
@@ -132,7 +133,7 @@ pub async fn run_peer(
                         };
                         let effects = params.all_effects.then_some(tracer::Effects::ALL);
                         let world = tokio::task::spawn_blocking(move || {
-                            Arc::new(super::prepare_world(scene, effects))
+                            Arc::new(tracer::World::prepare(scene, effects))
                         })
                         .await
                         .map_err(|e| NodeError::Io(std::io::Error::other(e)))?;

@@ -3,9 +3,9 @@
 //! core's timer. The core decides everything; this only carries.
 
 use super::{NodeError, Options, bundle};
-use crate::core::{Core, Event as CoreEvent, WorkItem};
 use crate::net::{CloseCode, ConnId, Event as NetEvent, Link, PeerCertificate, PeerIdentity};
-use crate::wire::{self, Message, PROTOCOL_VERSION, PeerId};
+use runtime_core::peer::{Core, Event as CoreEvent, WorkItem};
+use runtime_core::wire::{self, Message, PeerId};
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -53,12 +53,7 @@ impl Renderer {
         let done = self.done.clone();
         self.pool.spawn(move || {
             let started = Instant::now();
-            let rect = tracer::Rect {
-                x: item.tile.rect.x,
-                y: item.tile.rect.y,
-                w: item.tile.rect.w,
-                h: item.tile.rect.h,
-            };
+            let rect = bundle::tracer_rect(item.tile.rect);
             let frame = u32::try_from(item.frame.0).unwrap_or(u32::MAX);
             let output = tracer::render_tile(&world, frame, rect);
             // The loop may be gone at shutdown; the tile is then simply not needed.
@@ -125,8 +120,8 @@ pub(crate) enum Step {
         remote: std::net::SocketAddr,
         outbound: bool,
     },
-    /// A connection is gone; `peer` if it was a known peer.
-    Closed { conn: ConnId, peer: Option<PeerId> },
+    /// A connection is gone (the core has already been told if it was a known peer's).
+    Closed { conn: ConnId },
     /// The transport stopped.
     Stopped,
 }
@@ -142,6 +137,8 @@ pub(crate) struct Session {
     epoch: Instant,
     pending: std::collections::VecDeque<Step>,
     pub(crate) local_tiles: Vec<LocalTile>,
+    /// Messages on their way out, each sent by a task of its own.
+    sends: tokio::task::JoinSet<()>,
 }
 
 impl Session {
@@ -170,12 +167,23 @@ impl Session {
             epoch: Instant::now(),
             pending: Default::default(),
             local_tiles: Vec::new(),
+            sends: tokio::task::JoinSet::new(),
         })
     }
 
     /// Time since the session started: the core's clock, read only here.
     pub(crate) fn now(&self) -> Duration {
         self.epoch.elapsed()
+    }
+
+    /// The instant [`Session::now`] counts from, to turn a state machine's deadline into a timer.
+    pub(crate) fn epoch(&self) -> Instant {
+        self.epoch
+    }
+
+    /// Waits until every message sent so far has left (or failed to).
+    pub(crate) async fn drain_sends(&mut self) {
+        while self.sends.join_next().await.is_some() {}
     }
 
     pub(crate) fn set_renderer(
@@ -194,7 +202,9 @@ impl Session {
         self.core.record_bytes(bytes.len() as u64, 0);
         let link = self.link.clone();
         let kind = message.kind();
-        tokio::spawn(async move {
+        // Reap the sends that are done, so the set holds only those in flight.
+        while self.sends.try_join_next().is_some() {}
+        self.sends.spawn(async move {
             if let Err(error) = link.send(conn, &bytes).await {
                 tracing::debug!(%error, kind, "a message was not sent");
             }
@@ -292,7 +302,7 @@ impl Session {
                     self.core.handle_peer_lost(now, peer);
                     self.flush();
                 }
-                Some(Step::Closed { conn, peer })
+                Some(Step::Closed { conn })
             }
             NetEvent::Message {
                 conn,
@@ -317,33 +327,5 @@ impl Session {
                 None
             }
         }
-    }
-}
-
-/// The reply to a `Hello` that carries the right version and an identity the certificate
-/// vouches for, or the reason to refuse it.
-pub(crate) fn check_hello(
-    message: &Message,
-    certificate: &PeerCertificate,
-) -> Result<(PeerId, u32), String> {
-    match *message {
-        Message::Hello {
-            version,
-            peer,
-            slots,
-        } => {
-            if version != PROTOCOL_VERSION {
-                return Err(format!(
-                    "protocol version {version}, we speak {PROTOCOL_VERSION}"
-                ));
-            }
-            if !certificate.certifies(peer.0) {
-                return Err(format!(
-                    "claims to be {peer}, but its certificate does not say so"
-                ));
-            }
-            Ok((peer, slots))
-        }
-        ref other => Err(format!("expected Hello, got {}", other.kind())),
     }
 }

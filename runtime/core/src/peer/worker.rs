@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use super::steal::{Estimates, Round, Thief};
 use super::{Ctx, WorkItem};
-use crate::core::event::{Event, PeerStats};
+use crate::peer::event::{Event, PeerStats};
 use crate::wire::{FrameId, Message, PeerId, TileId, TileResult, TileSpec};
 
 pub(super) struct Worker {

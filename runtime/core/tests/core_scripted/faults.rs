@@ -169,7 +169,7 @@ fn a_duplicate_result_is_accepted_only_if_bit_identical() {
     owner
         .start_frame(Duration::ZERO, FrameId(1), assignments)
         .unwrap();
-    let item = runtime::core::WorkItem {
+    let item = runtime_core::peer::WorkItem {
         frame: FrameId(1),
         tile: all[0],
     };
@@ -212,7 +212,7 @@ fn a_duplicate_result_is_accepted_only_if_bit_identical() {
 #[test]
 fn a_differing_duplicate_from_a_peer_that_comes_back_is_reported() {
     // Peer 2 renders differently: broken, or non-deterministic.
-    let renderer = Box::new(|peer: PeerId, item: &runtime::core::WorkItem| {
+    let renderer = Box::new(|peer: PeerId, item: &runtime_core::peer::WorkItem| {
         let mut result = synthetic_result(item);
         if peer == PeerId(2) {
             result.pixels[0] ^= 0xff;
@@ -290,7 +290,7 @@ fn reports_overtaken_by_other_messages_do_not_count() {
         done,
     };
     let result = |tile: &TileSpec| {
-        Message::TileDone(synthetic_result(&runtime::core::WorkItem {
+        Message::TileDone(synthetic_result(&runtime_core::peer::WorkItem {
             frame: FrameId(1),
             tile: *tile,
         }))

@@ -25,6 +25,7 @@ use std::time::Duration;
 pub use config::{Config, VictimOrder};
 pub use event::{Event, Failure, Fault, PeerStats};
 
+use crate::rng::SplitMix;
 use crate::wire::{self, FrameId, Message, PeerId, TileId, TileResult, TileSpec};
 use ledger::Ledger;
 use steal::Estimates;
@@ -78,7 +79,7 @@ impl Core {
     /// A core for peer `me`, whose renderer works on `slots` tiles at once. `seed` drives victim
     /// choice; the core mixes `me` into it, so a cluster may give every peer the same seed.
     pub fn new(me: PeerId, slots: usize, config: Config, seed: u64) -> Self {
-        let estimates = Estimates::new(&config, steal::Rng::stream(seed, me));
+        let estimates = Estimates::new(&config, SplitMix::stream(seed, u64::from(me.0)));
         Self {
             config,
             connected: BTreeSet::new(),

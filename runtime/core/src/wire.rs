@@ -21,7 +21,7 @@ use std::fmt;
 use balancer::Rect;
 use serde::{Deserialize, Serialize};
 
-use crate::core::PeerStats;
+use crate::peer::PeerStats;
 
 #[cfg(test)]
 mod tests;

@@ -1,18 +1,18 @@
 //! The scheduling core driven directly: an owner and a few peers in virtual time
-//! (`runtime::core::testing::Cluster`), every message through the wire encoding, no sockets.
+//! (`runtime_core::peer::testing::Cluster`), every message through the wire encoding, no sockets.
 
 use std::collections::BTreeMap;
 use std::time::Duration;
 
 use balancer::Rect;
 use proptest::prelude::*;
-use runtime::core::testing::{
+use runtime_core::peer::testing::{
     Cluster, Happening, Record, Rendered, cost_renderer, synthetic_result,
 };
-use runtime::core::{
+use runtime_core::peer::{
     Config, Core, Event, Failure, Fault, FrameError, PeerStats, ProtocolError, VictimOrder,
 };
-use runtime::wire::{FrameId, Message, PeerId, TileId, TileResult, TileSpec};
+use runtime_core::wire::{FrameId, Message, PeerId, TileId, TileResult, TileSpec};
 
 /// Peers dying, freezing and racing, and results that disagree.
 #[path = "core_scripted/faults.rs"]
@@ -395,7 +395,7 @@ fn bad_inputs_are_refused_with_errors() {
         core.handle_message(Duration::ZERO, PeerId(2), hello),
         Err(ProtocolError::NotForCore { .. })
     ));
-    let result = synthetic_result(&runtime::core::WorkItem {
+    let result = synthetic_result(&runtime_core::peer::WorkItem {
         frame: FrameId(4),
         tile: tiles(0, &[1.0])[0],
     });

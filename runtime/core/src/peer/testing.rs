@@ -20,8 +20,8 @@ use std::cmp::Ordering;
 use std::collections::{BTreeMap, BTreeSet, BinaryHeap};
 use std::time::Duration;
 
-use super::steal::Rng;
 use super::{Config, Core, Event, FrameError, ProtocolError, WorkItem};
+use crate::rng::SplitMix;
 use crate::wire::{self, BYTES_PER_PIXEL, FrameId, Message, PeerId, TileResult, TileSpec};
 
 /// What the simulated renderer of a peer makes of a tile, and how long it takes.
@@ -184,7 +184,7 @@ pub struct Cluster<W: World = Scripted> {
     /// Every live, unfrozen core's next deadline.
     deadlines: BTreeSet<(Duration, PeerId)>,
     next_seq: u64,
-    rng: Rng,
+    rng: SplitMix,
     world: W,
     /// One-way delay of every message.
     pub latency: Duration,
@@ -267,7 +267,7 @@ impl<W: World> Cluster<W> {
             agenda: BinaryHeap::new(),
             deadlines: BTreeSet::new(),
             next_seq: 0,
-            rng: Rng(seed),
+            rng: SplitMix(seed),
             world,
             latency: Duration::from_micros(500),
             jitter: Duration::ZERO,

@@ -12,6 +12,7 @@ use std::time::Duration;
 use super::Ctx;
 use super::config::{Config, VictimOrder};
 use super::worker::{FrameState, Worker, shrink};
+use crate::rng::SplitMix;
 use crate::wire::{FrameId, Message, PeerId, TileSpec};
 
 /// Where a peer's stealing stands within a frame.
@@ -45,7 +46,7 @@ enum Pick {
 /// The next victim of the running round, starting a round if none runs. Costs `O(log P)` per
 /// request in a large cluster (no list of candidates is built), so that the simulator's
 /// thousands of peers stay cheap.
-fn pick_victim(state: &mut FrameState, me: PeerId, rng: &mut Rng, cx: &Ctx) -> Pick {
+fn pick_victim(state: &mut FrameState, me: PeerId, rng: &mut SplitMix, cx: &Ctx) -> Pick {
     let eligible = |peer: &PeerId| *peer != me && cx.connected.contains(peer);
     let limit = cx.config.victims_per_round.max(1);
     let few = state.peers.len() <= limit + 1;
@@ -108,11 +109,11 @@ pub(super) struct Estimates {
     slot_rate: Option<f64>,
     rtt: Duration,
     rtt_measured: bool,
-    rng: Rng,
+    rng: SplitMix,
 }
 
 impl Estimates {
-    pub(super) fn new(config: &Config, rng: Rng) -> Self {
+    pub(super) fn new(config: &Config, rng: SplitMix) -> Self {
         Self {
             slot_rate: None,
             rtt: config.initial_rtt,
@@ -381,72 +382,5 @@ impl FrameState {
         if let Some(round) = &mut self.round {
             round.tried += 1;
         }
-    }
-}
-
-/// SplitMix64: tiny, fast, and good enough to pick victims; its whole state is one `u64`, so
-/// a core's choices are a pure function of its seed and inputs.
-pub(super) struct Rng(pub(super) u64);
-
-impl Rng {
-    /// The generator of peer `me` in a cluster seeded with `seed`. SplitMix's state only moves
-    /// by a constant step, so states that differ by a small multiple of it give the same
-    /// stream shifted: seeding peer `k` with `seed + k * step` (as this once did) had every thief
-    /// draw the same victims one draw apart, and left some victims never asked. Starting from
-    /// hashed states keeps the streams unrelated.
-    pub(super) fn stream(seed: u64, me: PeerId) -> Self {
-        let peer = Rng(u64::from(me.0) ^ 0x5851_F42D_4C95_7F2D).next_u64();
-        Rng(Rng(seed ^ peer).next_u64())
-    }
-
-    pub(super) fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// A uniform index below `n` (which must not be 0), by multiply-shift.
-    pub(super) fn below(&mut self, n: usize) -> usize {
-        ((u128::from(self.next_u64()) * n as u128) >> 64) as usize
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Thieves of one cluster share a seed; their victim draws must not be one stream seen at
-    /// different offsets, or some victims are never asked.
-    #[test]
-    fn peers_of_one_seed_draw_unrelated_victims() {
-        let draws = |peer: u32| -> Vec<usize> {
-            let mut rng = Rng::stream(7, PeerId(peer));
-            (0..64).map(|_| rng.below(1000)).collect()
-        };
-        let streams: Vec<Vec<usize>> = (0..32).map(draws).collect();
-        for (a, first) in streams.iter().enumerate() {
-            for second in &streams[a + 1..] {
-                for shift in 0..8 {
-                    let agree = first[shift..]
-                        .iter()
-                        .zip(second)
-                        .filter(|(x, y)| x == y)
-                        .count();
-                    assert!(
-                        agree <= 3,
-                        "two peers' draws agree {agree} times at shift {shift}"
-                    );
-                }
-            }
-        }
-        // Together, 32 thieves drawing 64 times each ask nearly every one of 1000 victims.
-        let asked: std::collections::BTreeSet<usize> = streams.into_iter().flatten().collect();
-        assert!(
-            asked.len() > 850,
-            "only {} of 1000 victims asked",
-            asked.len()
-        );
     }
 }

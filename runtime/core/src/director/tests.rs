@@ -1,0 +1,328 @@
+//! The director driven over a virtual-time cluster of real cores (`peer::testing`), and alone.
+
+use std::time::Duration;
+
+use balancer::{CostMap, Grid, Kind, Partitioner};
+
+use super::*;
+use crate::peer::PeerStats;
+use crate::peer::testing::{Cluster, Record, cost_renderer};
+
+const OWNER: PeerId = PeerId(0);
+const SIDE: u32 = 32;
+
+fn grid(columns: u32, rows: u32) -> Partitioner {
+    let config = balancer::Config {
+        kind: Kind::Regular,
+        grid: Grid::Count { columns, rows },
+        ..balancer::Config::default()
+    };
+    Partitioner::new(SIDE, SIDE, &config).expect("a valid grid")
+}
+
+fn pbt(leaves: usize) -> Partitioner {
+    let config = balancer::Config {
+        leaves,
+        ..balancer::Config::default()
+    };
+    Partitioner::new(SIDE, SIDE, &config).expect("a valid PBT")
+}
+
+/// A cost map whose left half costs `left` per block and right half 1.
+fn halves(left: u64) -> CostMap {
+    let blocks = SIDE / 8;
+    let counts: Vec<u64> = (0..blocks * blocks)
+        .map(|i| if i % blocks < blocks / 2 { left } else { 1 })
+        .collect();
+    CostMap::from_counts(SIDE, SIDE, 8, &counts).expect("a valid map")
+}
+
+/// Drives `director` over `cluster` until it finishes, measuring every frame with `measure`.
+/// Returns the deals, the director's events, and the owner core's events it was given.
+fn drive(
+    director: &mut Director,
+    cluster: &mut Cluster,
+    measure: &dyn Fn(FrameId) -> CostMap,
+) -> (Vec<Deal>, Vec<Event>) {
+    let mut deals = Vec::new();
+    let mut events = Vec::new();
+    let mut seen = 0;
+    for _ in 0..100_000 {
+        let now = cluster.now();
+        while let Some(deal) = director.poll_deal(now).expect("the balancer deals") {
+            cluster
+                .start_frame(OWNER, deal.frame, deal.assignments.clone())
+                .expect("the core starts the dealt frame");
+            deals.push(deal);
+        }
+        let fresh: Vec<crate::peer::Event> = cluster.trace()[seen..]
+            .iter()
+            .filter_map(|record| match record {
+                Record::Event { peer, event, .. } if *peer == OWNER => Some(event.clone()),
+                _ => None,
+            })
+            .collect();
+        seen = cluster.trace().len();
+        for event in &fresh {
+            director
+                .handle_core_event(now, event)
+                .expect("no faults here");
+        }
+        let mut measured = false;
+        while let Some(event) = director.poll_event() {
+            if let Event::FrameComplete { frame, .. } = &event {
+                director
+                    .handle_measured(now, *frame, &measure(*frame))
+                    .expect("the frame waits for its map");
+                measured = true;
+            }
+            events.push(event);
+        }
+        if director.is_finished() {
+            return (deals, events);
+        }
+        if measured {
+            continue;
+        }
+        let due = [cluster.next_due(), director.poll_timeout()]
+            .into_iter()
+            .flatten()
+            .min();
+        match due {
+            Some(at) if Some(at) == director.poll_timeout() && cluster.next_due() != Some(at) => {
+                cluster.run(at);
+                director.handle_timeout(at);
+            }
+            Some(_) => {
+                cluster.step();
+            }
+            None => panic!("nothing left to happen and the director is not finished"),
+        }
+    }
+    panic!("the director did not finish");
+}
+
+fn cluster(peers: u32) -> Cluster {
+    let ids: Vec<(PeerId, usize)> = (0..peers).map(|p| (PeerId(p), 1)).collect();
+    Cluster::new(
+        &crate::peer::Config::default(),
+        &ids,
+        1,
+        cost_renderer(1e-4),
+    )
+}
+
+fn director(partitioner: Partitioner, peers: u32, frames: u64) -> Director {
+    let config = Config {
+        frames,
+        ..Config::default()
+    };
+    let mut director = Director::new(OWNER, partitioner, config);
+    for p in 1..peers {
+        director.handle_peer_joined(Duration::ZERO, PeerId(p));
+    }
+    director
+}
+
+#[test]
+fn every_frame_deals_each_tile_once_and_completes_with_one_piece_per_tile() {
+    for peers in [1, 2, 5] {
+        let mut cluster = cluster(peers);
+        let mut director = director(grid(4, 4), peers, 3);
+        let (deals, events) = drive(&mut director, &mut cluster, &|_| halves(5));
+        assert_eq!(deals.len(), 3);
+        for deal in &deals {
+            assert_eq!(deal.participants().count(), peers as usize);
+            let mut dealt: Vec<u32> = deal
+                .assignments
+                .values()
+                .flatten()
+                .map(|spec| spec.id.0)
+                .collect();
+            dealt.sort_unstable();
+            assert_eq!(dealt, (0..16).collect::<Vec<_>>());
+            for (peer, specs) in &deal.assignments {
+                for spec in specs {
+                    assert_eq!(deal.initial[spec.id.0 as usize], *peer);
+                    assert_eq!(deal.tiles[spec.id.0 as usize].rect, spec.rect);
+                }
+            }
+        }
+        let completed: Vec<&Event> = events
+            .iter()
+            .filter(|e| matches!(e, Event::FrameComplete { .. }))
+            .collect();
+        assert_eq!(completed.len(), 3);
+        for (frame, event) in completed.iter().enumerate() {
+            let Event::FrameComplete {
+                frame: id, pieces, ..
+            } = event
+            else {
+                unreachable!("filtered above")
+            };
+            assert_eq!(id.0, frame as u64);
+            let ids: Vec<u32> = pieces.iter().map(|p| p.result.tile.0).collect();
+            assert_eq!(ids, (0..16).collect::<Vec<_>>());
+            for piece in pieces.iter() {
+                let deal = &deals[frame];
+                assert_eq!(piece.initial, deal.initial[piece.result.tile.0 as usize]);
+                assert_eq!(
+                    piece.predicted,
+                    deal.tiles[piece.result.tile.0 as usize].predicted
+                );
+            }
+        }
+        assert_eq!(events.last(), Some(&Event::Finished));
+    }
+}
+
+#[test]
+fn the_next_frame_is_cut_from_the_measured_map() {
+    let mut cluster = cluster(3);
+    let mut director = director(pbt(16), 3, 2);
+    let (deals, _) = drive(&mut director, &mut cluster, &|_| halves(15));
+    // Frame 0 knows nothing: equal leaves. Frame 1 is cut from a map whose left half costs 15
+    // times the right: its leaves are smaller on the left, and all predicted nearly equal.
+    let left = |deal: &Deal| {
+        deal.tiles
+            .iter()
+            .filter(|t| t.rect.right() <= u64::from(SIDE / 2))
+            .count()
+    };
+    assert_eq!(left(&deals[0]) * 2, deals[0].tiles.len());
+    assert!(
+        left(&deals[1]) > deals[1].tiles.len() * 3 / 4,
+        "{} of {} leaves on the costly half",
+        left(&deals[1]),
+        deals[1].tiles.len()
+    );
+}
+
+#[test]
+fn nothing_is_dealt_while_a_frame_runs_or_waits_for_its_measure() {
+    let mut director = director(grid(2, 2), 1, 2);
+    let deal = director
+        .poll_deal(Duration::ZERO)
+        .unwrap()
+        .expect("frame 0");
+    assert_eq!(deal.frame, FrameId(0));
+    assert!(director.poll_deal(Duration::ZERO).unwrap().is_none());
+    assert!(matches!(
+        director.handle_measured(Duration::ZERO, FrameId(0), &halves(1)),
+        Err(DirectorError::NotWaiting { .. })
+    ));
+    let complete = crate::peer::Event::FrameComplete {
+        frame: FrameId(0),
+        elapsed: Duration::ZERO,
+        results: Vec::new(),
+        rendered_by: Vec::new(),
+    };
+    director
+        .handle_core_event(Duration::ZERO, &complete)
+        .unwrap();
+    assert!(director.poll_deal(Duration::ZERO).unwrap().is_none());
+    assert!(matches!(
+        director.handle_measured(Duration::ZERO, FrameId(1), &halves(1)),
+        Err(DirectorError::NotWaiting { .. })
+    ));
+    director
+        .handle_measured(Duration::ZERO, FrameId(0), &halves(1))
+        .unwrap();
+    let next = director
+        .poll_deal(Duration::ZERO)
+        .unwrap()
+        .expect("frame 1");
+    assert_eq!(next.frame, FrameId(1));
+}
+
+/// The end of a render waits for every participant's statistics, for a participant that
+/// leaves, or for the grace period, whichever comes first; never longer.
+#[test]
+fn the_last_frame_waits_for_statistics_leavers_or_the_grace_period() {
+    let stats = |peer: u32| crate::peer::Event::PeerStats {
+        frame: FrameId(0),
+        peer: PeerId(peer),
+        stats: PeerStats::default(),
+    };
+    let complete = crate::peer::Event::FrameComplete {
+        frame: FrameId(0),
+        elapsed: Duration::ZERO,
+        results: Vec::new(),
+        rendered_by: Vec::new(),
+    };
+    let t0 = Duration::from_secs(5);
+    let ended = |leave: bool, report: &[u32], wait: Duration| {
+        let mut director = director(grid(2, 2), 3, 1);
+        director.poll_deal(Duration::ZERO).unwrap();
+        director.handle_core_event(t0, &complete).unwrap();
+        director
+            .handle_measured(t0, FrameId(0), &halves(1))
+            .unwrap();
+        for &peer in report {
+            director.handle_core_event(t0, &stats(peer)).unwrap();
+        }
+        if leave {
+            director.handle_peer_left(t0, PeerId(2));
+        }
+        director.handle_timeout(t0 + wait);
+        director.is_finished()
+    };
+    let grace = Config::default().stats_grace;
+    assert!(ended(false, &[0, 1, 2], Duration::ZERO), "all reported");
+    assert!(
+        !ended(false, &[0, 1], Duration::ZERO),
+        "peer 2 has not reported"
+    );
+    assert!(ended(true, &[0, 1], Duration::ZERO), "peer 2 left");
+    assert!(!ended(false, &[0], grace - Duration::from_millis(1)));
+    assert!(ended(false, &[0], grace), "the grace period ran out");
+}
+
+#[test]
+fn a_peer_that_keeps_sending_faulty_results_stops_the_render() {
+    let mut director = director(grid(2, 2), 2, 1);
+    director.poll_deal(Duration::ZERO).unwrap();
+    let faulty = crate::peer::Event::FaultyPeer {
+        frame: FrameId(0),
+        peer: PeerId(1),
+        tile: TileId(0),
+        fault: crate::peer::Fault::UnknownTile,
+    };
+    let allowed = 2 * 4 + Config::default().fault_allowance;
+    for _ in 0..allowed {
+        director.handle_core_event(Duration::ZERO, &faulty).unwrap();
+    }
+    assert!(matches!(
+        director.handle_core_event(Duration::ZERO, &faulty),
+        Err(DirectorError::Faulty { .. })
+    ));
+}
+
+#[test]
+fn peers_that_join_or_leave_are_dealt_from_the_next_frame() {
+    let mut director = director(grid(4, 4), 2, 3);
+    let first = director.poll_deal(Duration::ZERO).unwrap().unwrap();
+    assert_eq!(
+        first.participants().collect::<Vec<_>>(),
+        [PeerId(0), PeerId(1)]
+    );
+    director.handle_peer_joined(Duration::ZERO, PeerId(7));
+    director.handle_peer_left(Duration::ZERO, PeerId(1));
+    let complete = crate::peer::Event::FrameComplete {
+        frame: FrameId(0),
+        elapsed: Duration::ZERO,
+        results: Vec::new(),
+        rendered_by: Vec::new(),
+    };
+    director
+        .handle_core_event(Duration::ZERO, &complete)
+        .unwrap();
+    director
+        .handle_measured(Duration::ZERO, FrameId(0), &halves(1))
+        .unwrap();
+    let second = director.poll_deal(Duration::ZERO).unwrap().unwrap();
+    assert_eq!(
+        second.participants().collect::<Vec<_>>(),
+        [PeerId(0), PeerId(7)]
+    );
+}
