@@ -11,7 +11,9 @@
 
 use rayon::prelude::*;
 use std::time::Instant;
-use tracer::geometry::{Accel, BuildQuality, Ray, Traversal, TraversalStats, hit_point, spawn_ray};
+use tracer::geometry::{
+    Accel, BuildQuality, OffsetMethod, Ray, Traversal, TraversalStats, hit_point, spawn_ray,
+};
 use tracer::lights::uniform_sphere;
 use tracer::sampler::PixelSampler;
 
@@ -185,20 +187,19 @@ fn probe(accel: &Accel, triangles: &[[glam::Vec3; 3]], traversal: Traversal, i: 
         counts.aimed_leaks = 1;
         return counts;
     };
-    let q = &triangles[hit.triangle as usize];
-    let point = hit_point(q, hit.b1, hit.b2);
-    let normal = (q[1] - q[0]).cross(q[2] - q[0]).normalize();
-    let inward = if normal.dot(dir) > 0.0 {
-        -normal
+    let at = hit.surface_point(&triangles[hit.triangle as usize]);
+    let inward = if at.normal.dot(dir) > 0.0 {
+        -at.normal
     } else {
-        normal
+        at.normal
     };
     let mut bounce = uniform_sphere(random.next_2d());
     if bounce.dot(inward) < 0.0 {
         bounce = -bounce;
     }
     counts.bounce_rays = 1;
-    match accel.intersect_with(&spawn_ray(point, inward, bounce), traversal, &mut stats) {
+    let bounce_ray = spawn_ray(&at, bounce, OffsetMethod::ErrorBound);
+    match accel.intersect_with(&bounce_ray, traversal, &mut stats) {
         None => counts.bounce_leaks = 1,
         Some(second) if second.triangle == hit.triangle => counts.self_hits = 1,
         Some(_) => {}

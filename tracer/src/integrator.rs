@@ -14,7 +14,7 @@
 
 use crate::effects::Effects;
 use crate::geometry::{
-    Accel, Hit, Ray, Traversal, TraversalStats, hit_point, spawn_ray, spawn_ray_to,
+    Accel, Hit, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats, spawn_ray, spawn_ray_to,
 };
 use crate::lights::Lights;
 use crate::material::{Bsdf, Frame};
@@ -30,6 +30,9 @@ pub struct World {
     pub effects: Effects,
     /// How rays meet the BVH: our robust traversal (the default), or obvhs's own for comparison.
     pub traversal: Traversal,
+    /// Where secondary rays start: off the error bound of each hit point (the default), or the
+    /// fixed-ULP offset for comparison.
+    pub offset: OffsetMethod,
 }
 
 /// Per-sample counters: the counted work that becomes a tile's cost, and the effect counters the
@@ -94,6 +97,7 @@ impl World {
             lights,
             effects,
             traversal: Traversal::Robust,
+            offset: OffsetMethod::default(),
         }
     }
 
@@ -150,7 +154,7 @@ impl World {
                         &self.scene,
                         hit.triangle,
                         last_point,
-                        surface.point,
+                        surface.at.p,
                     );
                     power_heuristic(last_pdf, light_pdf)
                 };
@@ -196,7 +200,7 @@ impl World {
             }
             last_pdf = sample.pdf;
             last_delta = sample.delta;
-            last_point = surface.point;
+            last_point = surface.at.p;
             depth += 1;
 
             if let Some(start) = settings.russian_roulette_depth
@@ -208,7 +212,7 @@ impl World {
                 }
                 beta /= survive;
             }
-            ray = spawn_ray(surface.point, surface.geometric, wi);
+            ray = spawn_ray(&surface.at, wi, self.offset);
         }
         radiance
     }
@@ -226,7 +230,7 @@ impl World {
         stats: &mut PathStats,
     ) -> Vec3 {
         stats.light_samples += 1;
-        let Some(light) = self.lights.sample(&self.scene, surface.point, u_choice, u) else {
+        let Some(light) = self.lights.sample(&self.scene, surface.at.p, u_choice, u) else {
             return Vec3::ZERO;
         };
         let wi_local = frame.to_local(light.wi);
@@ -236,10 +240,9 @@ impl World {
         }
         stats.shadow_rays += 1;
         let shadow = if light.distance.is_finite() {
-            let light_normal = (light.normal != Vec3::ZERO).then_some(light.normal);
-            spawn_ray_to(surface.point, surface.geometric, light.point, light_normal)
+            spawn_ray_to(&surface.at, &light.at, self.offset)
         } else {
-            spawn_ray(surface.point, surface.geometric, light.wi)
+            spawn_ray(&surface.at, light.wi, self.offset)
         };
         if self
             .accel
@@ -273,7 +276,7 @@ impl World {
     /// The local geometry at a hit.
     fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
         let triangle = &self.scene.triangles[hit.triangle as usize];
-        let point = hit_point(&triangle.p, hit.b1, hit.b2);
+        let at = hit.surface_point(&triangle.p);
         // Normals keep the winding's orientation: the side a ray arrives from is what tells a
         // dielectric whether it is entering or leaving, and an emitter whether it is seen from
         // the front. Reflection-only BSDFs are two-sided by themselves.
@@ -299,8 +302,7 @@ impl World {
             .filter(|_| self.effects.textures)
             .map(|uv| b0 * uv[0] + hit.b1 * uv[1] + hit.b2 * uv[2]);
         Surface {
-            point,
-            geometric,
+            at,
             shading_normal,
             uv,
             material: triangle.material,
@@ -311,8 +313,8 @@ impl World {
 
 /// The geometry of a hit; both normals on the winding's side.
 struct Surface {
-    point: Vec3,
-    geometric: Vec3,
+    /// The hit point, with what spawning rays from it needs: its error bound and plane normal.
+    at: SurfacePoint,
     shading_normal: Vec3,
     uv: Option<Vec2>,
     material: u32,

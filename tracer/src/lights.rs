@@ -14,6 +14,7 @@
 //! [`crate::effects`]).
 
 use crate::effects::Effects;
+use crate::geometry::SurfacePoint;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -39,10 +40,9 @@ pub struct LightSample {
     pub wi: Vec3,
     /// Distance to the sampled point (infinite for the environment).
     pub distance: f32,
-    /// The point on the light (for spawning the shadow ray towards it); unused for the environment.
-    pub point: Vec3,
-    /// The light's geometric normal at `point` (zero for point lights and the environment).
-    pub normal: Vec3,
+    /// The point on the light with its error bound and normal, for spawning the shadow ray
+    /// towards it (on no surface for point lights; unused for the environment).
+    pub at: SurfacePoint,
     /// Radiance (or, for a point light, intensity / distance^2) arriving along `wi`.
     pub radiance: Vec3,
     /// Solid-angle density including the probability of choosing this light; for a point light,
@@ -159,11 +159,11 @@ impl Lights {
                 let triangle = &scene.triangles[t as usize];
                 let su = u.x.sqrt();
                 let (b1, b2) = (su * (1.0 - u.y), su * u.y);
-                let point = crate::geometry::hit_point(&triangle.p, b1, b2);
+                let at = SurfacePoint::on_triangle(&triangle.p, b1, b2);
                 let area_vector = triangle.area_vector();
                 let area = 0.5 * area_vector.length();
                 let normal = area_vector.normalize_or_zero();
-                let to_light = point - p;
+                let to_light = at.p - p;
                 let distance_squared = to_light.length_squared();
                 if distance_squared == 0.0 || area == 0.0 {
                     return None;
@@ -180,8 +180,7 @@ impl Lights {
                 Some(LightSample {
                     wi,
                     distance,
-                    point,
-                    normal,
+                    at,
                     radiance,
                     pdf,
                     delta: false,
@@ -200,8 +199,7 @@ impl Lights {
                 Some(LightSample {
                     wi: to_light / distance,
                     distance,
-                    point: position,
-                    normal: Vec3::ZERO,
+                    at: SurfacePoint::exact(position),
                     radiance: intensity / distance_squared,
                     pdf: choice,
                     delta: true,
@@ -212,8 +210,7 @@ impl Lights {
                 Some(LightSample {
                     wi,
                     distance: f32::INFINITY,
-                    point: Vec3::ZERO,
-                    normal: Vec3::ZERO,
+                    at: SurfacePoint::exact(Vec3::ZERO),
                     radiance,
                     pdf: choice / (4.0 * PI),
                     delta: false,

@@ -141,7 +141,10 @@ impl Accel {
         self.intersect_with(ray, Traversal::Robust, stats)
     }
 
-    /// Whether anything is hit in `(0, ray.t_max)`; stops at the first hit found.
+    /// Whether anything is certainly hit in `(0, ray.t_max)`: at a `t` whose error bound keeps
+    /// it below `t_max`. Stops at the first such hit. Why not every hit below `t_max`: a shadow
+    /// ray ends a few ULPs in front of the light it aims at, and the rounding of `t` could
+    /// otherwise report the light itself, or its neighbour, as blocking (see `offset.rs`).
     pub fn occluded(&self, ray: &Ray, stats: &mut TraversalStats) -> bool {
         self.occluded_with(ray, Traversal::Robust, stats)
     }
@@ -202,8 +205,18 @@ impl std::fmt::Debug for Accel {
 /// The closest hit of `ray` among all `triangles`, testing every one: the reference the BVH is
 /// tested against. Same triangle test and tie rule as [`Accel::intersect`].
 pub fn intersect_brute_force(triangles: &[Triangle], ray: &Ray) -> Option<Hit> {
+    brute_force::<false>(triangles, ray)
+}
+
+/// Whether any of `triangles` is certainly hit, as [`Accel::occluded`] decides, testing every
+/// one: the reference for occlusion queries.
+pub fn occluded_brute_force(triangles: &[Triangle], ray: &Ray) -> bool {
+    brute_force::<true>(triangles, ray).is_some()
+}
+
+fn brute_force<const ANY_HIT: bool>(triangles: &[Triangle], ray: &Ray) -> Option<Hit> {
     let sheared = ShearedRay::new(ray);
-    let mut closest = Closest::new(ray);
+    let mut closest = Closest::new(ray, ANY_HIT);
     for (i, triangle) in triangles.iter().enumerate() {
         if !is_degenerate(&triangle.p) {
             closest.offer(&sheared, &triangle.p, i as u32);
@@ -216,13 +229,17 @@ pub fn intersect_brute_force(triangles: &[Triangle], ray: &Ray) -> Option<Hit> {
 pub(super) struct Closest {
     pub(super) best: Option<Hit>,
     ray_t_max: f32,
+    /// For occlusion queries: a hit counts only if its `t` plus its error bound is below the
+    /// ray's `t_max` (see [`Accel::occluded`]).
+    certain: bool,
 }
 
 impl Closest {
-    pub(super) fn new(ray: &Ray) -> Self {
+    pub(super) fn new(ray: &Ray, certain: bool) -> Self {
         Closest {
             best: None,
             ray_t_max: ray.t_max,
+            certain,
         }
     }
 
@@ -242,6 +259,9 @@ impl Closest {
             return false;
         };
         let better = match self.best {
+            // The sum rounds monotonically and t_max is a float: it stays >= t_max if the
+            // exact sum is.
+            None if self.certain => h.t + h.t_error < self.ray_t_max,
             None => h.t < self.ray_t_max,
             Some(best) => h.t < best.t || (h.t == best.t && triangle < best.triangle),
         };

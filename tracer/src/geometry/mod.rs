@@ -2,10 +2,12 @@
 //!
 //! Contract (see ARCHITECTURE.md): the BVH is *built* by obvhs but *traversed* by our own robust
 //! slab test; triangles are intersected with the watertight Woop-Benthin-Wald test; secondary rays
-//! leave surfaces with the Wachter-Binder offset. No scene-scale epsilon appears anywhere.
+//! leave surfaces offset by a conservative bound of their hit point's rounding error (pbrt-v4).
+//! No scene-scale epsilon appears anywhere.
 //!
 //! - `triangle`: the watertight ray/triangle test ([`intersect_triangle`]).
-//! - `offset`: spawn offsets and hit points for secondary rays ([`offset_ray_origin`]).
+//! - `offset`: hit points with their error bounds ([`SurfacePoint`]) and where secondary rays
+//!   start ([`spawn_ray`], [`OffsetMethod`]).
 //! - `bvh`: the [`Accel`] API, and brute force for tests.
 //! - `build`: building the tree with obvhs, deterministically and without cracks.
 //! - `traverse`: our robust traversal, and obvhs's for comparison ([`Traversal`]).
@@ -16,8 +18,10 @@ mod offset;
 mod traverse;
 mod triangle;
 
-pub use bvh::{Accel, BuildQuality, Traversal, intersect_brute_force};
-pub use offset::{hit_point, offset_ray_origin, spawn_ray, spawn_ray_to};
+pub use bvh::{Accel, BuildQuality, Traversal, intersect_brute_force, occluded_brute_force};
+pub use offset::{
+    OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, spawn_ray, spawn_ray_to,
+};
 pub use triangle::{TriangleHit, intersect_triangle, is_degenerate};
 
 use glam::Vec3;

@@ -1,47 +1,227 @@
-//! Where secondary rays start: the spawn offset of Wachter and Binder ("A Fast and Robust Method
-//! for Avoiding Self-Intersection", Ray Tracing Gems, chapter 6).
+//! Where secondary rays start: offsets from a conservative bound of each hit point's rounding
+//! error, as pbrt-v4 does (Physically Based Rendering, 4th edition, section 6.8.6), and the fixed
+//! ULP offset of Wachter and Binder (Ray Tracing Gems, chapter 6) for comparison only.
 //!
 //! Why: a hit point is computed with rounding error, so it lies slightly in front of or behind
-//! the surface, and a ray leaving it may hit the same surface again at a tiny `t` (shadow acne,
-//! darkened glass). Moving the origin by a scene-scale epsilon fails on scenes of another scale;
-//! this method moves it along the geometric normal by a fixed number of units in the last place
-//! (ULPs) of each coordinate, which grows with the coordinate's magnitude exactly as its error
-//! does. Near zero, where ULPs become vanishingly small but the error of a computed point does
-//! not (it is relative to the triangle's vertices), a small fixed offset is used instead.
+//! its surface, and a ray leaving it may hit that surface again at a tiny `t` (shadow acne,
+//! darkened glass) or, worse, start on the far side and leak out of a closed mesh. The error of
+//! the computed point is bounded by about one ULP of the point itself plus a few of the
+//! triangle's edges ([`SurfacePoint::on_triangle`]), so moving the origin along the normal by the
+//! bound's projection, then one float further on every axis, puts it strictly on the side the
+//! ray leaves to. The distance moved is as small as the rounding requires and no smaller:
+//! nothing in it depends on the scene's scale.
 //!
-//! The hit point itself is computed from barycentrics as `b0 p0 + b1 p1 + b2 p2` ([`hit_point`]):
-//! its error is bounded by a few ULPs of the vertex coordinates, whereas `origin + t * dir`
-//! carries the error of `t`, which grows with the distance travelled.
+//! The fixed offset moved every coordinate by 256 ULPs of *itself*, which grows with the
+//! distance from the world's origin rather than with the geometry: at x = 1e5 an ULP is 0.0078,
+//! so rays left a radius-1 sphere two units off its surface, outside it. It is kept as
+//! [`OffsetMethod::FixedUlp`] so that `tessera accuracy` can show the difference; nothing renders
+//! with it by default.
 //!
-//! Limitation (inherent to the constants): within 1/32 of zero on an axis the offset is the
-//! fixed `1/65536 * n`, about 1.5e-5, so a scene much smaller than that, centred on the origin,
-//! sees rays start farther from the surface than its own size.
+//! The normal used for offsetting is the triangle's plane normal computed in f64 from its f32
+//! vertices. The f32 cross product of a small triangle far from the origin can carry a relative
+//! error large enough to flip the sign of a near-zero component, and the final one-float step
+//! on that axis would then move the origin toward the surface; in f64 the direction is good to
+//! about 1e-16 divided by the sine of the triangle's smallest angle.
+//!
+//! Scenes come into the tracer with their transforms already applied (the loader bakes them
+//! into world-space vertices), so there is no transform between a hit and its offset: the
+//! bound is on the world-space point, computed from the same vertices the ray was tested
+//! against.
 
+use super::triangle::gamma;
 use super::{Hit, Ray};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
-/// Coordinates closer to zero than this get the fixed offset `FLOAT_SCALE * n`.
+/// How secondary rays leave surfaces. A closed set: the error-bound offset is the renderer's;
+/// the fixed-ULP one exists for the accuracy comparison.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum OffsetMethod {
+    /// Along the normal by the projection of the hit point's error bound, then one float
+    /// further on each axis (pbrt-v4's `OffsetRayOrigin`).
+    #[default]
+    ErrorBound,
+    /// 256 ULPs of each coordinate along the normal, a fixed 1/65536 within 1/32 of zero
+    /// (Wachter and Binder). Loses light in small geometry far from the world's origin.
+    FixedUlp,
+}
+
+impl OffsetMethod {
+    pub const ALL: [OffsetMethod; 2] = [OffsetMethod::ErrorBound, OffsetMethod::FixedUlp];
+
+    /// The name on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            OffsetMethod::ErrorBound => "error-bound",
+            OffsetMethod::FixedUlp => "fixed-ulp",
+        }
+    }
+}
+
+/// A computed point and what is known about where it truly lies: within `error` of a point of
+/// its surface on each axis, and the surface's unit normal there (winding side), zero for a
+/// point on no surface (a point light).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    pub p: Vec3,
+    /// Per axis, a conservative bound of `|p - q|` for some point `q` exactly on the surface.
+    pub error: Vec3,
+    /// The unit plane normal `(v1 - v0) x (v2 - v0)` of the triangle, or zero.
+    pub normal: Vec3,
+}
+
+impl SurfacePoint {
+    /// A point given exactly and on no surface: spawning from or to it moves nothing.
+    pub fn exact(p: Vec3) -> Self {
+        SurfacePoint {
+            p,
+            error: Vec3::ZERO,
+            normal: Vec3::ZERO,
+        }
+    }
+
+    /// The point with barycentrics `(1 - b1 - b2, b1, b2)` on the triangle `v` ([`hit_point`]),
+    /// with its error bound and the triangle's normal.
+    ///
+    /// The bound, per axis: with the edges `E1 = fl(v1 - v0)`, `E2 = fl(v2 - v0)`, the computed
+    /// `p = fl(v0 + fl(fl(b1 E1) + fl(b2 E2)))` lies within `gamma(1) |p|` (the last addition)
+    /// plus `gamma(3) (|b1 E1| + |b2 E2|)` (the sum, the products and the edges' own rounding)
+    /// of `q = v0 + b1 (v1 - v0) + b2 (v2 - v0)`, which is exactly a point of the triangle's
+    /// plane whatever the values of `b1` and `b2`. `gamma(2)` and `gamma(4)` leave room for the
+    /// roundings in computing the bound itself. For a triangle small beside its distance from
+    /// the origin the bound is about one ULP of `p`, the least that any computed point can be
+    /// off by, and the offset is about two.
+    pub fn on_triangle(v: &[Vec3; 3], b1: f32, b2: f32) -> Self {
+        let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
+        let p = hit_point(v, b1, b2);
+        let along = (b1 * e1).abs() + (b2 * e2).abs();
+        SurfacePoint {
+            p,
+            error: gamma(2) * p.abs() + gamma(4) * along,
+            normal: plane_normal(v),
+        }
+    }
+}
+
+impl Hit {
+    /// The hit point on the triangle `p` that was hit, from the barycentrics ([`hit_point`]).
+    pub fn point(&self, p: &[Vec3; 3]) -> Vec3 {
+        hit_point(p, self.b1, self.b2)
+    }
+
+    /// The hit point with its error bound and normal, for spawning rays from it.
+    pub fn surface_point(&self, p: &[Vec3; 3]) -> SurfacePoint {
+        SurfacePoint::on_triangle(p, self.b1, self.b2)
+    }
+}
+
+/// The point with barycentrics `(1 - b1 - b2, b1, b2)` on the triangle `p`, computed as
+/// `p0 + (b1 (p1 - p0) + b2 (p2 - p0))`, whose error is about one ULP of the point plus a few
+/// of the edges (whereas `origin + t * dir` carries the error of `t`, which grows with the
+/// distance travelled). Why this form and not `b0 p0 + b1 p1 + b2 p2`: far from the origin
+/// each of the three products rounds by an ULP of the coordinates, and `b0 = 1 - b1 - b2`
+/// rounds too, so the bound on the error (and the offset) came to about 15 ULPs of the point.
+pub fn hit_point(p: &[Vec3; 3], b1: f32, b2: f32) -> Vec3 {
+    p[0] + (b1 * (p[1] - p[0]) + b2 * (p[2] - p[0]))
+}
+
+/// `point` moved off its surface to the side of its normal that `toward` points to. A point on
+/// no surface (zero normal) is returned unchanged.
+pub fn offset_ray_origin(point: &SurfacePoint, toward: Vec3, method: OffsetMethod) -> Vec3 {
+    let n = if point.normal.dot(toward) < 0.0 {
+        -point.normal
+    } else {
+        point.normal
+    };
+    match method {
+        OffsetMethod::ErrorBound => offset_by_error(point.p, point.error, n),
+        OffsetMethod::FixedUlp => offset_by_ulps(point.p, n),
+    }
+}
+
+/// A ray leaving `from` in direction `dir`, from the side of the surface `dir` points to.
+pub fn spawn_ray(from: &SurfacePoint, dir: Vec3, method: OffsetMethod) -> Ray {
+    Ray {
+        origin: offset_ray_origin(from, dir, method),
+        dir,
+        t_max: f32::INFINITY,
+    }
+}
+
+/// A shadow ray from `from` to `to`, covering the open segment between them (`t` in `(0, 1)`).
+/// Both ends are offset off their surfaces toward each other, so that neither surface lies
+/// within the segment; a `to` on no surface (a point light) stays where it is.
+///
+/// The ray's end `origin + 1 * dir` is not the offset target itself: `dir = target - origin`
+/// rounds by up to half an ULP of each component. So the target's error bound is widened by
+/// `gamma(2) |target - origin|` before offsetting, which keeps the exact end of the segment
+/// off the target's surface too; [`crate::geometry::Accel::occluded`] then counts only hits
+/// certainly before `t = 1`, so that the rounding of `t` cannot report the light as blocking.
+///
+/// Limitation: a segment that runs within rounding of the plane it leaves (both ends on an
+/// edge two triangles share) has no side that is certainly right, and may be reported blocked
+/// by the surface it runs along. Light arriving along a surface carries a cosine of zero.
+pub fn spawn_ray_to(from: &SurfacePoint, to: &SurfacePoint, method: OffsetMethod) -> Ray {
+    let origin = offset_ray_origin(from, to.p - from.p, method);
+    let widened = SurfacePoint {
+        error: to.error + gamma(2) * (to.p - origin).abs(),
+        ..*to
+    };
+    let target = offset_ray_origin(&widened, origin - to.p, method);
+    Ray {
+        origin,
+        dir: target - origin,
+        t_max: 1.0,
+    }
+}
+
+/// The unit normal of the plane of `v`, from the cross product of its edges in f64 (see the
+/// module's comment); zero for a triangle without area.
+fn plane_normal(v: &[Vec3; 3]) -> Vec3 {
+    let [a, b, c] = v.map(|v| v.as_dvec3());
+    let n: DVec3 = (b - a).cross(c - a);
+    n.normalize_or_zero().as_vec3()
+}
+
+/// pbrt-v4's `OffsetRayOrigin`: `p` moved along the unit normal `n` by `d = |n| . error`, the
+/// largest distance from the plane that the error box around `p` reaches, then one float
+/// further on every axis along which `n` moves it. The last step is what makes the result
+/// strictly off the plane: the addition rounds to nearest, possibly back toward the plane, and
+/// the step away is larger than that rounding; a point with no error (a vertex at zero) moves
+/// by the step alone.
+fn offset_by_error(p: Vec3, error: Vec3, n: Vec3) -> Vec3 {
+    let d = n.abs().dot(error);
+    let moved = p + d * n;
+    let step = |x: f32, n: f32| {
+        if n > 0.0 {
+            x.next_up()
+        } else if n < 0.0 {
+            x.next_down()
+        } else {
+            x
+        }
+    };
+    Vec3::new(step(moved.x, n.x), step(moved.y, n.y), step(moved.z, n.z))
+}
+
+/// Coordinates closer to zero than this get the fixed offset `FLOAT_SCALE * n` (Wachter-Binder).
 const ORIGIN: f32 = 1.0 / 32.0;
 /// The fixed offset near zero, as a fraction of the unit normal.
 const FLOAT_SCALE: f32 = 1.0 / 65536.0;
 /// The ULP offset elsewhere: a unit normal component moves a coordinate by up to 256 ULPs.
 const INT_SCALE: f32 = 256.0;
 
-/// Offsets the point `p` off its surface along `n`, which must point to the side the new ray
-/// leaves on (the geometric normal, flipped if needed; see [`spawn_ray`]). `n` need not be unit
-/// length; a zero `n` leaves `p` unchanged.
-pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
-    let n = n.normalize_or_zero();
+/// Wachter and Binder's offset along the unit normal `n`: 256 ULPs per unit of normal component.
+fn offset_by_ulps(p: Vec3, n: Vec3) -> Vec3 {
     Vec3::new(
-        offset_coordinate(p.x, n.x),
-        offset_coordinate(p.y, n.y),
-        offset_coordinate(p.z, n.z),
+        ulp_coordinate(p.x, n.x),
+        ulp_coordinate(p.y, n.y),
+        ulp_coordinate(p.z, n.z),
     )
 }
 
-/// One coordinate of [`offset_ray_origin`]. Adding to the bit pattern of a float moves it by
-/// that many ULPs away from zero, so negative coordinates subtract to move toward +n.
-fn offset_coordinate(p: f32, n: f32) -> f32 {
+/// One coordinate of [`offset_by_ulps`]. Adding to the bit pattern of a float moves it by that
+/// many ULPs away from zero, so negative coordinates subtract to move toward +n.
+fn ulp_coordinate(p: f32, n: f32) -> f32 {
     if p.abs() < ORIGIN {
         return p + FLOAT_SCALE * n;
     }
@@ -52,105 +232,89 @@ fn offset_coordinate(p: f32, n: f32) -> f32 {
     f32::from_bits((p.to_bits() as i32).wrapping_add(ulps) as u32)
 }
 
-/// The point with barycentrics `(1 - b1 - b2, b1, b2)` on the triangle `p`, computed as
-/// `b0 p0 + b1 p1 + b2 p2`, whose error is a few ULPs of the vertex coordinates.
-pub fn hit_point(p: &[Vec3; 3], b1: f32, b2: f32) -> Vec3 {
-    let b0 = 1.0 - b1 - b2;
-    b0 * p[0] + b1 * p[1] + b2 * p[2]
-}
-
-impl Hit {
-    /// The hit point on the triangle `p` that was hit, from the barycentrics ([`hit_point`]).
-    pub fn point(&self, p: &[Vec3; 3]) -> Vec3 {
-        hit_point(p, self.b1, self.b2)
-    }
-}
-
-/// A ray leaving the surface point `p` (with geometric normal `ng`, either orientation) in
-/// direction `dir`. The origin is offset to the side `dir` points to.
-pub fn spawn_ray(p: Vec3, ng: Vec3, dir: Vec3) -> Ray {
-    Ray {
-        origin: offset_ray_origin(p, toward(ng, dir)),
-        dir,
-        t_max: f32::INFINITY,
-    }
-}
-
-/// A shadow ray from the surface point `p` (geometric normal `ng`) to `target`, covering the
-/// open segment between them (`t` in `(0, 1)`). When `target` lies on a surface, pass its
-/// geometric normal: the target is then offset toward `p` too, so that its own surface lies
-/// beyond `t = 1` rather than within rounding of it.
-pub fn spawn_ray_to(p: Vec3, ng: Vec3, target: Vec3, target_ng: Option<Vec3>) -> Ray {
-    let origin = offset_ray_origin(p, toward(ng, target - p));
-    let target = match target_ng {
-        Some(n) => offset_ray_origin(target, toward(n, p - target)),
-        None => target,
-    };
-    Ray {
-        origin,
-        dir: target - origin,
-        t_max: 1.0,
-    }
-}
-
-/// `n` flipped, if needed, to the side of its plane that `dir` points to.
-fn toward(n: Vec3, dir: Vec3) -> Vec3 {
-    if n.dot(dir) < 0.0 { -n } else { n }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    /// The triangle z = `z` spanned by `(x, 0)`, `(x + 1, 0)`, `(x, 1)`, normal +z.
+    fn flat(x: f32, z: f32) -> [Vec3; 3] {
+        [
+            Vec3::new(x, 0.0, z),
+            Vec3::new(x + 1.0, 0.0, z),
+            Vec3::new(x, 1.0, z),
+        ]
+    }
+
     #[test]
-    fn far_from_zero_the_offset_is_256_ulps_per_unit_normal_component() {
+    fn the_error_bound_offset_grows_with_the_vertices_not_beyond() {
+        // At 1e5 an ULP of x is 0.0078, but the plane z = 1 is where the error along z is:
+        // the offset is a few ULPs of 1, not of 1e5.
+        let point = SurfacePoint::on_triangle(&flat(1e5, 1.0), 0.25, 0.25);
+        let up = offset_ray_origin(&point, Vec3::Z, OffsetMethod::ErrorBound);
+        assert!(up.z > 1.0 && up.z < 1.0 + 1e-5, "{up}");
+        assert_eq!((up.x, up.y), (point.p.x, point.p.y), "n has no x or y");
+        let down = offset_ray_origin(&point, -Vec3::Z, OffsetMethod::ErrorBound);
+        assert!(down.z < 1.0 && down.z > 1.0 - 1e-5, "{down}");
+    }
+
+    #[test]
+    fn a_point_without_error_still_moves_one_float_off_the_plane() {
+        let point = SurfacePoint::on_triangle(&flat(0.0, 0.0), 0.0, 0.0);
+        assert_eq!((point.p, point.error), (Vec3::ZERO, Vec3::ZERO));
+        let up = offset_ray_origin(&point, Vec3::Z, OffsetMethod::ErrorBound);
+        assert_eq!(up, Vec3::new(0.0, 0.0, f32::from_bits(1)));
+    }
+
+    #[test]
+    fn the_fixed_ulp_offset_is_256_ulps_per_unit_normal_component() {
         for x in [1.0f32, -1.0, 1e5, -3.5e-2, 7e20] {
-            let moved = offset_ray_origin(Vec3::new(x, 5.0, -5.0), Vec3::X).x;
+            let moved = offset_by_ulps(Vec3::new(x, 5.0, -5.0), Vec3::X).x;
             let ulps = moved.to_bits() as i64 - x.to_bits() as i64;
             assert_eq!(ulps.abs(), 256, "{x}");
             assert!(moved > x, "{x} moved to {moved}: must move toward +x");
-            let back = offset_ray_origin(Vec3::new(x, 5.0, -5.0), -Vec3::X).x;
-            assert!(back < x);
+            assert!(offset_by_ulps(Vec3::new(x, 5.0, -5.0), -Vec3::X).x < x);
+        }
+        for x in [0.0f32, -0.0, 1e-30, -0.03] {
+            let moved = offset_by_ulps(Vec3::new(x, 1.0, 1.0), Vec3::X).x;
+            assert_eq!(moved, x + FLOAT_SCALE, "{x}: the fixed offset near zero");
         }
     }
 
     #[test]
-    fn near_zero_the_offset_is_fixed_and_crosses_zero_cleanly() {
-        for x in [0.0f32, -0.0, 1e-30, -1e-30, 0.03, -0.03] {
-            let moved = offset_ray_origin(Vec3::new(x, 1.0, 1.0), Vec3::X).x;
-            assert_eq!(moved, x + FLOAT_SCALE, "{x}");
+    fn a_point_on_no_surface_stays_where_it_is() {
+        let p = SurfacePoint::exact(Vec3::new(2.0, 3.0, 4.0));
+        for method in OffsetMethod::ALL {
+            assert_eq!(offset_ray_origin(&p, Vec3::Z, method), p.p);
         }
-    }
-
-    #[test]
-    fn the_normal_is_normalised_and_a_zero_normal_does_nothing() {
-        let p = Vec3::new(2.0, 3.0, 4.0);
-        assert_eq!(
-            offset_ray_origin(p, Vec3::Z * 1e-20),
-            offset_ray_origin(p, Vec3::Z)
-        );
-        assert_eq!(offset_ray_origin(p, Vec3::ZERO), p);
     }
 
     #[test]
     fn spawned_rays_start_on_the_side_they_leave_on() {
-        let p = Vec3::new(0.5, 0.25, 3.0);
-        let up = spawn_ray(p, -Vec3::Z, Vec3::new(0.1, 0.2, 1.0));
-        assert!(up.origin.z > p.z);
-        let down = spawn_ray(p, Vec3::Z, Vec3::new(0.1, 0.2, -1.0));
-        assert!(down.origin.z < p.z);
+        let point = SurfacePoint::on_triangle(&flat(0.0, 3.0), 0.5, 0.25);
+        for method in OffsetMethod::ALL {
+            let up = spawn_ray(&point, Vec3::new(0.1, 0.2, 1.0), method);
+            assert!(up.origin.z > 3.0, "{method:?}");
+            let down = spawn_ray(&point, Vec3::new(0.1, 0.2, -1.0), method);
+            assert!(down.origin.z < 3.0, "{method:?}");
+        }
     }
 
     #[test]
     fn a_shadow_ray_to_a_surface_stops_short_of_it() {
-        let p = Vec3::new(0.0, 0.0, 1.0);
-        let light = Vec3::new(0.0, 0.0, 5.0);
-        let r = spawn_ray_to(p, Vec3::Z, light, Some(-Vec3::Z));
-        assert!(r.origin.z > 1.0);
-        let end = r.origin + r.dir * r.t_max;
-        assert!(end.z < 5.0, "the offset target is on p's side of the light");
-        let r = spawn_ray_to(p, Vec3::Z, light, None);
-        assert_eq!(r.origin + r.dir, light);
+        let from = SurfacePoint::on_triangle(&flat(0.0, 1.0), 0.25, 0.25);
+        let light = SurfacePoint::on_triangle(&flat(0.0, 5.0), 0.25, 0.25);
+        for method in OffsetMethod::ALL {
+            let r = spawn_ray_to(&from, &light, method);
+            assert!(r.origin.z > 1.0);
+            let end = r.origin + r.dir * r.t_max;
+            assert!(
+                end.z < 5.0,
+                "{method:?}: the end is on the near side of the light"
+            );
+        }
+        let point_light = SurfacePoint::exact(Vec3::new(0.25, 0.25, 5.0));
+        let r = spawn_ray_to(&from, &point_light, OffsetMethod::ErrorBound);
+        assert_eq!(r.origin + r.dir, point_light.p);
     }
 
     #[test]

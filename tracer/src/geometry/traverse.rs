@@ -112,7 +112,7 @@ impl Accel {
         let nodes = &self.bvh.nodes;
         let slab = SlabRay::new(ray);
         let sheared = ShearedRay::new(ray);
-        let mut closest = Closest::new(ray);
+        let mut closest = Closest::new(ray, ANY_HIT);
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
 
         stats.nodes += 1;

@@ -26,6 +26,9 @@ use glam::{Vec3, Vec3Swizzles};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TriangleHit {
     pub t: f32,
+    /// A bound on the rounding error of `t` (pbrt-v4's `deltaT`), for queries that must know
+    /// whether a hit certainly lies before a given distance.
+    pub t_error: f32,
     pub b0: f32,
     pub b1: f32,
     pub b2: f32,
@@ -156,8 +159,8 @@ impl ShearedRay {
         let max_e = e0.abs().max(e1.abs()).max(e2.abs());
         let delta_t =
             3.0 * (gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
-        let (t, b) = if t > delta_t && t.is_finite() {
-            (t, [e0 * inv_det, e1 * inv_det, e2 * inv_det])
+        let (t, t_error, b) = if t > delta_t && t.is_finite() {
+            (t, delta_t, [e0 * inv_det, e1 * inv_det, e2 * inv_det])
         } else {
             // The bound grows as 1 / det, so for a ray nearly in the triangle's plane it can
             // exceed a t that is plainly positive (seen: t = 1, bound 2.6, on a facet of a closed
@@ -165,13 +168,15 @@ impl ShearedRay {
             // rejects such hits; we settle them from the plane equation in f64, which is just as
             // conservative. Dividing (rather than multiplying by inv_det, which may overflow when
             // det is tiny) keeps the barycentrics in [0, 1].
+            // The f64 value is good to far better than f32's rounding of it.
             let t = self.plane_distance_f64(&[p0, p1, p2])?;
-            (t, [e0 / det, e1 / det, e2 / det])
+            (t, t * f32::EPSILON, [e0 / det, e1 / det, e2 / det])
         };
         // Only the final t is compared with t_max, so that whether a triangle is hit does not
         // depend on the t_max a traversal happens to pass.
         (t <= t_max).then_some(TriangleHit {
             t,
+            t_error,
             b0: b[0],
             b1: b[1],
             b2: b[2],
