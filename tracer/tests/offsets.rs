@@ -16,27 +16,16 @@
 //! error-bound offset, and the same rays with the fixed-ULP offset show that the counts can
 //! be non-zero.
 
+mod exact;
+
+use exact::{faces_centre, side};
 use glam::Vec3;
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
-use robust::{Coord3D, orient3d};
 use tracer::geometry::{
     Accel, BuildQuality, OffsetMethod, SurfacePoint, TraversalStats, hit_point, is_degenerate,
     offset_ray_origin, spawn_ray, spawn_ray_to,
 };
-
-/// The exact side of `q` relative to the plane of `v`: positive on the side its winding normal
-/// `(v1 - v0) x (v2 - v0)` points to, negative on the other, zero on the plane.
-fn side(v: &[Vec3; 3], q: Vec3) -> f64 {
-    let c = |p: Vec3| Coord3D {
-        x: f64::from(p.x),
-        y: f64::from(p.y),
-        z: f64::from(p.z),
-    };
-    // Shewchuk's orient3d is positive when q lies below the plane, "above" being the side
-    // from which v0, v1, v2 appear counterclockwise, which is where the winding normal points.
-    -orient3d(c(v[0]), c(v[1]), c(v[2]), c(q))
-}
 
 #[test]
 fn the_exact_side_follows_the_winding_normal() {
@@ -318,8 +307,7 @@ fn a_unit_sphere_far_from_the_origin_neither_leaks_nor_self_hits_nor_shadows_its
         // them: what is inside for them is outside the sphere), then collapses some (the
         // loader drops them) and opens holes: that is where f32 stops representing the
         // sphere, and where this test stops.
-        let oriented = v.iter().all(|t| side(t, far(d)) < 0.0);
-        if !(closed(&v) && oriented) {
+        if !(closed(&v) && faces_centre(&v, far(d), false)) {
             break;
         }
         closed_up_to = d;
