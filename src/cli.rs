@@ -210,3 +210,18 @@ pub enum EffectsChoice {
     /// Every effect forced on (bit-identical images; for checking and timing).
     All,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deal has one name: the flag's spelling is the one the balancer's files use.
+    #[test]
+    fn deal_flags_are_spelled_as_the_balancer_serialises_them() {
+        for deal in DealOrder::value_variants() {
+            let serde =
+                serde_json::to_string(&balancer::Order::from(*deal)).expect("an enum serialises");
+            assert_eq!(format!("\"{}\"", flag_name(deal)), serde);
+        }
+    }
+}

@@ -4,7 +4,7 @@
 //! The stats schema (JSON) is documented on [`StatsFile`] and its parts; fields are only ever added.
 
 use indicatif::{ProgressBar, ProgressStyle};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::io::IsTerminal;
 use std::path::Path;
 
@@ -54,8 +54,11 @@ impl Progress {
     }
 }
 
-/// The `--stats` file: one entry per frame, plus what the render was.
-#[derive(Debug, Default, Serialize)]
+/// The `--stats` file: one entry per frame, plus what the render was. The one schema of
+/// `stats.json` (documented in `docs/stats.md`): `render` and `serve` write it and
+/// `simulate --validate` reads it back. Fields missing from older files read as their defaults.
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(default)]
 pub struct StatsFile {
     pub scene: String,
     pub width: u32,
@@ -63,7 +66,8 @@ pub struct StatsFile {
     pub samples_per_pixel: u32,
     /// `pbt` or `regular`.
     pub balancer: String,
-    /// How tiles were dealt to peers: `contiguous` or `round-robin`.
+    /// How tiles were dealt to peers: `interleaved`, `contiguous` or `round-robin` (empty in
+    /// files written before dealing was a choice, which always dealt contiguously).
     pub deal: String,
     /// The light-transport effects the render paid for (see `tracer::Effects`).
     pub effects: String,
@@ -72,7 +76,8 @@ pub struct StatsFile {
 }
 
 /// One frame.
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(default)]
 pub struct FrameStats {
     pub frame: u32,
     /// Wall time from the first tile handed out to the last tile received, in seconds.
@@ -91,7 +96,8 @@ pub struct FrameStats {
 
 /// One peer's account of one frame (times in seconds of slot time: a peer with 2 rendering
 /// threads busy for 1 s reports 2 s busy).
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(default)]
 pub struct PeerFrameStats {
     pub peer: u32,
     pub threads: u32,
@@ -127,7 +133,8 @@ impl PeerFrameStats {
 }
 
 /// One tile of one frame.
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(default)]
 pub struct TileStats {
     /// The tile's index in the frame's partition (depth-first leaf order for the PBT).
     pub tile: u32,

@@ -7,11 +7,11 @@
 //! compares the two, frame by frame.
 
 use crate::cli::{BalancerKind, DealOrder, parse_flag};
+use crate::report::StatsFile;
 use anyhow::{Context, bail};
-use serde::Deserialize;
 use sim::scenario::{self, DEFAULT_WORK_PER_SECOND, Scenario};
 use sim::synthetic::HotSpot;
-use sim::{Crash, GanttChoice, Network, Policy, Sweep, Trace};
+use sim::{Crash, GanttChoice, Network, OwnerCosts, Policy, Sweep, Trace};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -52,9 +52,13 @@ pub struct SimulateArgs {
     /// Links' latencies differ from --latency by up to this fraction either way.
     #[arg(long, default_value_t = 0.0)]
     pub link_spread: f64,
-    /// Bandwidth of each peer's link, each way, in megabits per second (default: unlimited).
-    #[arg(long)]
-    pub bandwidth: Option<f64>,
+    /// Bandwidth of each peer's link, each way, in megabits per second; 0 for unlimited.
+    #[arg(long, default_value_t = 10_000.0)]
+    pub bandwidth: f64,
+    /// What the frame owner's control loop spends per tile result received and per tile dealt:
+    /// `measured` (on the real runtime; see docs/results.md) or `none` (an idealised owner).
+    #[arg(long, value_enum, default_value_t = OwnerCostsChoice::Measured)]
+    pub owner_costs: OwnerCostsChoice,
     /// Probability that a transmission is lost (QUIC resends it after a probe timeout).
     #[arg(long, default_value_t = 0.0)]
     pub loss: f64,
@@ -167,7 +171,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     )?;
     let elapsed = started.elapsed().as_secs_f64();
     println!(
-        "{:>14} {:>6} {:>6} {:>10} {:>8} {:>8} {:>11} {:>8} {:>10} {:>8}",
+        "{:>14} {:>6} {:>6} {:>10} {:>8} {:>8} {:>11} {:>8} {:>10} {:>8} {:>9} {:>9}",
         "policy",
         "peers",
         "tiles",
@@ -177,11 +181,16 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         "makespan s",
         "steals",
         "messages",
-        "wall s"
+        "wall s",
+        "link P",
+        "owner P"
     );
+    // The owner limits: peers beyond which the owner's downlink (T1 x B / S) or its control
+    // loop, not rendering, sets the pace.
+    let limit = |p: Option<f64>| p.map_or("-".to_string(), |p| format!("{p:.0}"));
     for r in &runs {
         println!(
-            "{:>14} {:>6} {:>6} {:>10.4} {:>8.4} {:>8.4} {:>11.4} {:>8} {:>10} {:>8.2}",
+            "{:>14} {:>6} {:>6} {:>10.4} {:>8.4} {:>8.4} {:>11.4} {:>8} {:>10} {:>8.2} {:>9} {:>9}",
             r.policy.to_string(),
             r.peers,
             r.tiles,
@@ -191,7 +200,9 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             r.makespan,
             r.steals,
             r.messages,
-            r.wall_seconds
+            r.wall_seconds,
+            limit(r.owner_link_limit),
+            limit(r.owner_cpu_limit)
         );
     }
     let title = format!(
@@ -258,7 +269,13 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
             latency: millis(args.latency, "latency")?,
             jitter: millis(args.jitter, "jitter")?,
             link_spread: args.link_spread,
-            bandwidth: args.bandwidth.map(|mbit| mbit * 1e6 / 8.0),
+            bandwidth: if args.bandwidth == 0.0 {
+                None
+            } else if args.bandwidth > 0.0 && args.bandwidth.is_finite() {
+                Some(args.bandwidth * 1e6 / 8.0)
+            } else {
+                bail!("--bandwidth must be a positive number of megabits per second, or 0")
+            },
             loss: args.loss,
             loss_detection: millis(args.loss_detection, "loss-detection")?,
         },
@@ -267,6 +284,10 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
         seed: args.seed,
         work_per_second: rate,
         tile_overhead: millis(args.tile_overhead, "tile-overhead")?,
+        owner: match args.owner_costs {
+            OwnerCostsChoice::Measured => OwnerCosts::MEASURED,
+            OwnerCostsChoice::None => OwnerCosts::NONE,
+        },
         frames: args.frames,
         ..Scenario::default()
     };
@@ -334,36 +355,13 @@ fn gantt_choice(
     }))
 }
 
-/// The parts of a `tessera render --stats` file the validation reads.
-#[derive(Deserialize)]
-struct Stats {
-    peers: usize,
-    balancer: String,
-    /// Absent from files written before `--deal` existed, which always dealt contiguously.
-    #[serde(default)]
-    deal: Option<String>,
-    frames: Vec<StatsFrame>,
-}
-
-#[derive(Deserialize)]
-struct StatsFrame {
-    seconds: f64,
-    work: u64,
-    tiles: Vec<StatsTile>,
-    peers: Vec<StatsPeer>,
-}
-
-#[derive(Deserialize)]
-struct StatsTile {
-    tile: u32,
-    rect: [u32; 4],
-    initial_peer: u32,
-}
-
-#[derive(Deserialize)]
-struct StatsPeer {
-    threads: u32,
-    busy_seconds: f64,
+/// The owner's modelled costs, as `--owner-costs` names them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum OwnerCostsChoice {
+    /// Measured on the real runtime (`cargo run --release -p runtime --example owner_costs`).
+    Measured,
+    /// An owner that spends nothing: the idealised cluster of earlier studies.
+    None,
 }
 
 /// Simulates the render `stats_path` describes and compares: frame times (simulated over
@@ -371,7 +369,7 @@ struct StatsPeer {
 fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(stats_path)
         .with_context(|| format!("reading {}", stats_path.display()))?;
-    let stats: Stats = serde_json::from_str(&text)
+    let stats: StatsFile = serde_json::from_str(&text)
         .with_context(|| format!("{} is not a tessera stats file", stats_path.display()))?;
     anyhow::ensure!(
         !stats.frames.is_empty(),
@@ -385,9 +383,9 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
             stats_path.display()
         );
     };
-    let deal = match stats.deal.as_deref() {
-        None => DealOrder::Contiguous,
-        Some(name) => match parse_flag::<DealOrder>(name) {
+    let deal = match stats.deal.as_str() {
+        "" => DealOrder::Contiguous,
+        name => match parse_flag::<DealOrder>(name) {
             Some(deal) => deal,
             None => bail!("unknown deal {name:?} in {}", stats_path.display()),
         },
@@ -448,7 +446,7 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
         .enumerate()
         .take(frames)
     {
-        let mut real_sets: Vec<&StatsTile> = real.tiles.iter().collect();
+        let mut real_sets: Vec<&crate::report::TileStats> = real.tiles.iter().collect();
         real_sets.sort_by_key(|t| t.tile);
         let dealt = &run.assignments[index];
         let same = real_sets.len() == dealt.len()

@@ -110,9 +110,10 @@ impl Default for Grid {
     }
 }
 
-/// How an ordered list of tiles is dealt to peers.
+/// How an ordered list of tiles is dealt to peers. Serialised as the command line spells it
+/// (`round-robin`), so that every file and flag names a deal one way.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[serde(rename_all = "kebab-case")]
 pub enum Order {
     /// Each peer gets one contiguous run of tiles, runs of nearly equal predicted cost
     /// (weighted by peer speed); spatially coherent for the PBT's depth-first order.

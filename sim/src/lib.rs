@@ -36,7 +36,7 @@ mod world;
 
 pub use network::Network;
 pub use report::{FrameReport, RunReport};
-pub use scenario::{Crash, CrashWhen, Scenario};
+pub use scenario::{Crash, CrashWhen, OwnerCosts, Scenario};
 pub use sweep::{Charts, GanttChoice, Policy, Sweep};
 pub use trace::{FrameCosts, Trace, TraceWriter};
 

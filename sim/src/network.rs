@@ -18,14 +18,14 @@
 //!   lost for good while a connection lives, which is what the protocol relies on; only a
 //!   crash loses messages (those addressed to the dead peer).
 //!
-//! Message sizes are the wire encoding's ([`runtime_core::wire::encode`]), except that tile results
-//! are sized without encoding them: their postcard header, their pixels, and the cost map a
-//! real peer sends (16 bytes, then 8 per block the tile touches).
+//! Message sizes are the wire encoding's ([`runtime_core::wire::encoded_len`]: the real encoder,
+//! counting instead of writing); simulated tile results carry pixels and a cost map of a real
+//! result's lengths ([`runtime_core::wire::cost_map_bytes`]), all zeros.
 
 use std::time::Duration;
 
 use runtime_core::rng::SplitMix;
-use runtime_core::wire::{self, Message, PeerId};
+use runtime_core::wire::PeerId;
 use serde::{Deserialize, Serialize};
 
 /// The network model's knobs. All effects default to off.
@@ -82,19 +82,16 @@ pub(crate) struct Links {
     downlink_free: Vec<Duration>,
     seed: u64,
     rng: SplitMix,
-    /// Block side of the cost maps tile results carry, for their size.
-    block: u32,
 }
 
 impl Links {
-    pub(crate) fn new(network: Network, peers: usize, seed: u64, block: u32) -> Self {
+    pub(crate) fn new(network: Network, peers: usize, seed: u64) -> Self {
         Self {
             network,
             uplink_free: vec![Duration::ZERO; peers],
             downlink_free: vec![Duration::ZERO; peers],
             seed,
             rng: SplitMix(seed ^ 0x6C6F_7373),
-            block,
         }
     }
 
@@ -137,71 +134,11 @@ impl Links {
         let mut rng = SplitMix(self.seed ^ (u64::from(lo) << 32 | u64::from(hi)));
         2.0 * rng.unit() - 1.0
     }
-
-    /// The size of `message` on the wire.
-    pub(crate) fn size(&self, message: &Message) -> u64 {
-        message_bytes(message, self.block)
-    }
-}
-
-/// The size of `message` on the wire; tile results as a real peer would send them (see the
-/// module documentation), with cost blocks of `block` pixels.
-pub fn message_bytes(message: &Message, block: u32) -> u64 {
-    let Message::TileDone(result) = message else {
-        return wire::encode(message).len() as u64;
-    };
-    let r = result.rect;
-    let blocks = if r.w == 0 || r.h == 0 {
-        0
-    } else {
-        let across = (r.x + r.w - 1) / block - r.x / block + 1;
-        let down = (r.y + r.h - 1) / block - r.y / block + 1;
-        u64::from(across) * u64::from(down)
-    };
-    let costs = 16 + 8 * blocks;
-    let pixels = r.area() * wire::BYTES_PER_PIXEL;
-    let header = [
-        11, // the variant's index
-        result.frame.0,
-        u64::from(result.tile.0),
-        u64::from(r.x),
-        u64::from(r.y),
-        u64::from(r.w),
-        u64::from(r.h),
-        pixels,
-        costs,
-    ];
-    header.iter().map(|&v| varint_len(v)).sum::<u64>() + pixels + costs
-}
-
-/// Bytes of `value` as a postcard varint.
-fn varint_len(value: u64) -> u64 {
-    u64::from((64 - value.leading_zeros()).max(1).div_ceil(7))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use balancer::Rect;
-    use runtime_core::wire::{FrameId, TileId, TileResult};
-
-    #[test]
-    fn a_tile_result_is_sized_as_its_encoding_with_a_real_cost_map() {
-        let rect = Rect::new(3, 5, 13, 7);
-        let blocks = 2 * 2; // columns 3..16 and rows 5..12 touch two blocks of 8 each way.
-        let result = TileResult {
-            frame: FrameId(300),
-            tile: TileId(70_000),
-            rect,
-            pixels: vec![0; (rect.area() * wire::BYTES_PER_PIXEL) as usize],
-            costs: vec![0; 16 + 8 * blocks],
-        };
-        let message = Message::TileDone(result);
-        assert_eq!(
-            message_bytes(&message, 8),
-            wire::encode(&message).len() as u64
-        );
-    }
 
     #[test]
     fn bandwidth_queues_messages_on_both_links() {
@@ -210,7 +147,7 @@ mod tests {
             latency: Duration::from_millis(10),
             ..Network::default()
         };
-        let mut links = Links::new(network, 3, 1, 8);
+        let mut links = Links::new(network, 3, 1);
         let delay = Duration::from_millis(10);
         let (a, b, owner) = (PeerId(1), PeerId(2), PeerId(0));
         // 100 bytes take 0.1 s on each link: out of the sender, 10 ms across, and the
@@ -229,7 +166,7 @@ mod tests {
             latency: Duration::from_millis(1),
             ..Network::default()
         };
-        let mut links = Links::new(network, 2, 7, 8);
+        let mut links = Links::new(network, 2, 7);
         let delays: Vec<Duration> = (0..200)
             .map(|_| {
                 links.transit(

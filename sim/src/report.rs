@@ -57,6 +57,10 @@ pub struct FrameReport {
     /// What the balancer's update after this frame did (PBT leaves split and merged).
     pub splits: usize,
     pub merges: usize,
+    /// Bytes of the tile results that reached the owner (every result, duplicates included).
+    pub result_bytes: u64,
+    /// Seconds the owner's control loop spent on the frame's deals and results.
+    pub owner_busy: f64,
 }
 
 /// One run: its configuration, its frames and its totals.
@@ -88,6 +92,14 @@ pub struct RunReport {
     pub steps: u64,
     /// Real seconds the simulation took (not part of the fingerprint).
     pub wall_seconds: f64,
+    /// The owner-link limit P = T1 x B / S: one peer's frame time (T1, work over one peer's
+    /// slots) times the link's bandwidth (B) over the bytes of a frame's results (S), averaged
+    /// over frames. Beyond this many peers the owner's downlink, not rendering, sets the pace.
+    /// `None` on unlimited links.
+    pub owner_link_limit: Option<f64>,
+    /// The owner-CPU limit: T1 over the owner's control-loop seconds per frame. `None` for a
+    /// free owner.
+    pub owner_cpu_limit: Option<f64>,
     pub frames: Vec<FrameReport>,
     /// The frame the scenario asked to draw, and every render of it.
     pub gantt_frame: Option<u64>,
@@ -119,6 +131,15 @@ impl RunReport {
         let slot_time = sum(&|f| f.participants as f64 * slots * f.makespan);
         let idle_time = sum(&|f| f.idle_fraction * f.participants as f64 * slots * f.makespan);
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 1.0 };
+        let one_peer = work / slots;
+        let result_bytes = frames.iter().map(|f| f.result_bytes).sum::<u64>() as f64;
+        let owner_busy = sum(&|f| f.owner_busy);
+        let owner_link_limit = scenario
+            .network
+            .bandwidth
+            .filter(|_| result_bytes > 0.0)
+            .map(|bandwidth| one_peer * bandwidth / result_bytes);
+        let owner_cpu_limit = (owner_busy > 0.0).then(|| one_peer / owner_busy);
         Self {
             policy,
             peers: scenario.peers,
@@ -141,6 +162,8 @@ impl RunReport {
             fingerprint: format!("{fingerprint:016x}"),
             steps,
             wall_seconds,
+            owner_link_limit,
+            owner_cpu_limit,
             frames,
             gantt_frame: scenario.gantt_frame,
             gantt,

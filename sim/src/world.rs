@@ -19,6 +19,7 @@ use runtime_core::wire::{self, Message, PeerId, TileId, TileResult};
 
 use crate::network::Links;
 use crate::plot::GanttBar;
+use crate::scenario::{OWNER, OwnerCosts};
 
 /// What the simulator knows and counts of one frame while it runs.
 #[derive(Clone, Debug, Default)]
@@ -43,6 +44,9 @@ pub(crate) struct Tally {
     pub(crate) failures: u64,
     /// Faulty results and refused messages: both mean a bug, in the core or here.
     pub(crate) faults: u64,
+    pub(crate) result_bytes: u64,
+    /// Seconds of the owner's control loop spent on this frame.
+    pub(crate) owner_busy: f64,
 }
 
 pub(crate) struct SimWorld {
@@ -64,6 +68,11 @@ pub(crate) struct SimWorld {
     pub(crate) fingerprint: Fingerprint,
     /// The owner core's events not yet handed to the director.
     owner_events: Vec<Event>,
+    /// What the owner's control loop spends per tile, and when it is next free.
+    pub(crate) owner_costs: OwnerCosts,
+    owner_free: Duration,
+    /// Block side of the cost maps tile results carry, for their size.
+    block: u32,
 }
 
 impl SimWorld {
@@ -75,6 +84,7 @@ impl SimWorld {
         gantt_frame: Option<u64>,
     ) -> Self {
         let peers = speeds.len();
+        let block = maps.first().map_or(8, CostMap::block);
         Self {
             maps,
             seconds_per_unit,
@@ -87,6 +97,9 @@ impl SimWorld {
             gantt: Vec::new(),
             fingerprint: Fingerprint::default(),
             owner_events: Vec::new(),
+            owner_costs: OwnerCosts::NONE,
+            owner_free: Duration::ZERO,
+            block,
         }
     }
 
@@ -148,13 +161,14 @@ impl World for SimWorld {
         // Pixels are opaque to the core, which only checks their length and compares
         // duplicates; zeros are as deterministic as any. The cost map a real peer would add is
         // counted in the message's size instead.
-        let pixels = vec![0; (item.tile.rect.area() * wire::BYTES_PER_PIXEL) as usize];
+        let rect = item.tile.rect;
+        let pixels = vec![0; (rect.area() * wire::BYTES_PER_PIXEL) as usize];
         let result = TileResult {
             frame: item.frame,
             tile: item.tile.id,
-            rect: item.tile.rect,
+            rect,
             pixels,
-            costs: Vec::new(),
+            costs: vec![0; wire::cost_map_bytes(rect, self.block) as usize],
         };
         Rendered { duration, result }
     }
@@ -169,11 +183,33 @@ impl World for SimWorld {
     ) -> Transit {
         // The message's content enters the fingerprint here rather than in `observe`, so that
         // it is encoded once for both its size and its hash.
-        let bytes = self.fingerprint.message(message, &self.links);
+        let bytes = self.fingerprint.message(message);
         if let Some(tally) = message_frame(message).and_then(|f| self.tally(f)) {
             tally.bytes += bytes;
         }
-        let delay = self.links.transit(now, from, to, bytes, delay);
+        // The owner encodes its part of an Assign before the message can leave.
+        let mut leave = now;
+        let frame = message_frame(message);
+        if let (OWNER, Message::Assign { tiles, .. }) = (from, message) {
+            let busy = self.owner_costs.per_dealt_tile * tiles.len() as u32;
+            leave = self.owner_free.max(now) + busy;
+            self.owner_free = leave;
+            if let Some(tally) = frame.and_then(|f| self.frames.get_mut(&f)) {
+                tally.owner_busy += busy.as_secs_f64();
+            }
+        }
+        let mut delay = (leave - now) + self.links.transit(leave, from, to, bytes, delay);
+        // A result is handled once the owner's control loop is done with those before it.
+        if let (OWNER, Message::TileDone(result)) = (to, message) {
+            let busy = self.owner_costs.result(result.rect.area());
+            let handled = self.owner_free.max(now + delay) + busy;
+            self.owner_free = handled;
+            delay = handled - now;
+            if let Some(tally) = frame.and_then(|f| self.frames.get_mut(&f)) {
+                tally.owner_busy += busy.as_secs_f64();
+                tally.result_bytes += bytes;
+            }
+        }
         self.fingerprint.word(delay.as_nanos() as u64);
         Transit { delay, bytes }
     }
@@ -317,8 +353,8 @@ impl Fingerprint {
     }
 
     /// Folds in a message's full encoding (a tile result's: its frame, tile and rectangle, not
-    /// its pixels, which are all zeros here) and returns its size on the wire.
-    fn message(&mut self, message: &Message, links: &Links) -> u64 {
+    /// its pixels and costs, which are all zeros here) and returns its size on the wire.
+    fn message(&mut self, message: &Message) -> u64 {
         if let Message::TileDone(r) = message {
             let rect = r.rect;
             let words = [
@@ -330,7 +366,7 @@ impl Fingerprint {
             ];
             self.words(&words);
             self.words(&[u64::from(rect.w), u64::from(rect.h)]);
-            return links.size(message);
+            return wire::encoded_len(message) as u64;
         }
         let bytes = wire::encode(message);
         self.bytes(&bytes);

@@ -230,13 +230,14 @@ impl Director {
         Ok(Some(deal))
     }
 
-    /// An event of the owner's core. The director acts on completions, faults and statistics;
-    /// the driver still logs whatever it wants of them.
+    /// An event of the owner's core. The director takes a completion of the running frame
+    /// (its results become the pieces of [`Event::FrameComplete`]) and returns every other
+    /// event, having noted faults and statistics, for the driver to log or keep.
     pub fn handle_core_event(
         &mut self,
         now: Duration,
-        event: &CoreEvent,
-    ) -> Result<(), DirectorError> {
+        event: CoreEvent,
+    ) -> Result<Option<CoreEvent>, DirectorError> {
         match (event, &mut self.state) {
             (
                 CoreEvent::FrameComplete {
@@ -246,45 +247,54 @@ impl Director {
                     ..
                 },
                 State::Running { deal, started, .. },
-            ) if *frame == deal.frame => {
+            ) if frame == deal.frame => {
                 let pieces = results
-                    .iter()
+                    .into_iter()
                     .zip(rendered_by)
-                    .map(|(result, &peer)| {
+                    .map(|(result, peer)| {
                         let index = result.tile.0 as usize;
                         Piece {
-                            result: result.clone(),
-                            peer,
                             initial: deal.initial.get(index).copied().unwrap_or(peer),
                             predicted: deal.tiles.get(index).map_or(0.0, |t| t.predicted),
+                            result,
+                            peer,
                         }
                     })
                     .collect();
                 self.events.push_back(Event::FrameComplete {
-                    frame: *frame,
+                    frame,
                     elapsed: now.saturating_sub(*started),
                     pieces,
                 });
-                self.state = State::Measuring { frame: *frame };
+                self.state = State::Measuring { frame };
+                Ok(None)
             }
-            (CoreEvent::FaultyPeer { frame, .. }, State::Running { deal, faults, .. })
-                if *frame == deal.frame =>
-            {
-                *faults += 1;
-                if *faults > 2 * deal.tiles.len() + self.config.fault_allowance {
-                    return Err(DirectorError::Faulty {
-                        frame: *frame,
-                        faults: *faults,
-                    });
+            (event @ CoreEvent::FaultyPeer { .. }, State::Running { deal, faults, .. }) => {
+                let CoreEvent::FaultyPeer { frame, .. } = event else {
+                    unreachable!("matched just above")
+                };
+                if frame == deal.frame {
+                    *faults += 1;
+                    if *faults > 2 * deal.tiles.len() + self.config.fault_allowance {
+                        return Err(DirectorError::Faulty {
+                            frame,
+                            faults: *faults,
+                        });
+                    }
                 }
+                Ok(Some(event))
             }
-            (CoreEvent::PeerStats { frame, peer, .. }, _) if frame.0 + 1 == self.next => {
-                self.unreported.remove(peer);
-                self.settle(now);
+            (event @ CoreEvent::PeerStats { .. }, _) => {
+                if let CoreEvent::PeerStats { frame, peer, .. } = &event
+                    && frame.0 + 1 == self.next
+                {
+                    self.unreported.remove(peer);
+                    self.settle(now);
+                }
+                Ok(Some(event))
             }
-            _ => {}
+            (event, _) => Ok(Some(event)),
         }
-        Ok(())
     }
 
     /// The measured cost map of the frame that waits for it: the balancer learns from it and

@@ -40,6 +40,19 @@ pub const MAX_COST_BYTES_PER_PIXEL: u64 = 8;
 /// carries them.
 pub const COST_HEADER_BYTES: u64 = 64;
 
+/// A tile's cost map as it travels: its ray count and its counted work, then the work of each
+/// block of `block` pixels the tile touches, row by row, every value a little-endian `u64`.
+/// Returns its length in bytes. The encoder is the driver's (the tracer's cost type is opaque
+/// here); this is the one statement of its size, which the simulator uses to size results.
+pub fn cost_map_bytes(rect: Rect, block: u32) -> u64 {
+    if rect.w == 0 || rect.h == 0 || block == 0 {
+        return 16;
+    }
+    let across = (rect.x + rect.w - 1) / block - rect.x / block + 1;
+    let down = (rect.y + rect.h - 1) / block - rect.y / block + 1;
+    16 + 8 * u64::from(across) * u64::from(down)
+}
+
 /// One message between two peers.
 ///
 /// `Hello` to `SceneReady` and `Goodbye` belong to the connection's driver (handshake, scene
@@ -294,6 +307,12 @@ pub enum WireError {
 /// Encodes a message. Pure; never fails.
 pub fn encode(message: &Message) -> Vec<u8> {
     postcard::to_stdvec(message)
+        .expect("invariant: every Message field has a known length, so postcard cannot fail")
+}
+
+/// The length of [`encode`]'s output, computed by the same encoder without writing it.
+pub fn encoded_len(message: &Message) -> usize {
+    postcard::serialize_with_flavor(message, postcard::ser_flavors::Size::default())
         .expect("invariant: every Message field has a known length, so postcard cannot fail")
 }
 

@@ -148,7 +148,9 @@ impl Owner {
         let now = self.session.now();
         match step {
             Step::Core(event) => {
-                director.handle_core_event(now, &event)?;
+                let Some(event) = director.handle_core_event(now, event)? else {
+                    return Ok(());
+                };
                 match event {
                     CoreEvent::PeerStats { frame, peer, stats } => {
                         report.insert((frame.0, peer), stats);

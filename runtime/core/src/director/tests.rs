@@ -63,7 +63,7 @@ fn drive(
             })
             .collect();
         seen = cluster.trace().len();
-        for event in &fresh {
+        for event in fresh {
             director
                 .handle_core_event(now, event)
                 .expect("no faults here");
@@ -218,7 +218,7 @@ fn nothing_is_dealt_while_a_frame_runs_or_waits_for_its_measure() {
         rendered_by: Vec::new(),
     };
     director
-        .handle_core_event(Duration::ZERO, &complete)
+        .handle_core_event(Duration::ZERO, complete)
         .unwrap();
     assert!(director.poll_deal(Duration::ZERO).unwrap().is_none());
     assert!(matches!(
@@ -254,12 +254,12 @@ fn the_last_frame_waits_for_statistics_leavers_or_the_grace_period() {
     let ended = |leave: bool, report: &[u32], wait: Duration| {
         let mut director = director(grid(2, 2), 3, 1);
         director.poll_deal(Duration::ZERO).unwrap();
-        director.handle_core_event(t0, &complete).unwrap();
+        director.handle_core_event(t0, complete.clone()).unwrap();
         director
             .handle_measured(t0, FrameId(0), &halves(1))
             .unwrap();
         for &peer in report {
-            director.handle_core_event(t0, &stats(peer)).unwrap();
+            director.handle_core_event(t0, stats(peer)).unwrap();
         }
         if leave {
             director.handle_peer_left(t0, PeerId(2));
@@ -290,10 +290,12 @@ fn a_peer_that_keeps_sending_faulty_results_stops_the_render() {
     };
     let allowed = 2 * 4 + Config::default().fault_allowance;
     for _ in 0..allowed {
-        director.handle_core_event(Duration::ZERO, &faulty).unwrap();
+        director
+            .handle_core_event(Duration::ZERO, faulty.clone())
+            .unwrap();
     }
     assert!(matches!(
-        director.handle_core_event(Duration::ZERO, &faulty),
+        director.handle_core_event(Duration::ZERO, faulty.clone()),
         Err(DirectorError::Faulty { .. })
     ));
 }
@@ -315,7 +317,7 @@ fn peers_that_join_or_leave_are_dealt_from_the_next_frame() {
         rendered_by: Vec::new(),
     };
     director
-        .handle_core_event(Duration::ZERO, &complete)
+        .handle_core_event(Duration::ZERO, complete)
         .unwrap();
     director
         .handle_measured(Duration::ZERO, FrameId(0), &halves(1))

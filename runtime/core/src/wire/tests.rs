@@ -315,3 +315,27 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn the_encoded_length_is_the_encodings() {
+    let rect = Rect::new(3, 5, 13, 7);
+    let messages = [
+        Message::TileDone(TileResult {
+            frame: FrameId(300),
+            tile: TileId(70_000),
+            rect,
+            pixels: vec![0; (rect.area() * BYTES_PER_PIXEL) as usize],
+            costs: vec![0; cost_map_bytes(rect, 8) as usize],
+        }),
+        Message::StealRefuse {
+            frame: FrameId(u64::MAX),
+        },
+        Message::SceneReady,
+    ];
+    for message in &messages {
+        assert_eq!(encoded_len(message), encode(message).len());
+    }
+    // Columns 3..16 and rows 5..12 touch two blocks of 8 each way.
+    assert_eq!(cost_map_bytes(rect, 8), 16 + 8 * 4);
+    assert_eq!(cost_map_bytes(Rect::new(0, 0, 8, 8), 8), 16 + 8);
+}
