@@ -8,7 +8,6 @@
 //! Prints, for tiles of several sizes, the time per result, and a least-squares line
 //! `per result + per pixel x pixels`; and the time per dealt tile at several tile counts.
 
-use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use balancer::{Grid, Kind, Partitioner};

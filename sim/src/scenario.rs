@@ -97,7 +97,7 @@ impl OwnerCosts {
         per_dealt_tile: Duration::ZERO,
     };
 
-    /// Measured on the development machine (2 AMD EPYC cores, load about 1) with the real code,
+    /// Measured on the development machine (2 AMD EPYC cores, shared) with the real code,
     /// `cargo run --release -p runtime --example owner_costs`: the least-squares line through
     /// the fastest of five runs for tiles of 8 to 128 pixels a side (1024x1024 image, 8 peers),
     /// and per dealt tile the fastest of five runs at 256 to 4096 tiles. See `docs/results.md`.
@@ -114,9 +114,11 @@ impl OwnerCosts {
     }
 }
 
-const OWNER_PER_RESULT_NS: u64 = 0;
-const OWNER_PER_PIXEL_NS: f64 = 0.0;
-const OWNER_PER_DEALT_NS: u64 = 0;
+// 2026-12-01, load average about 3: results of 8x8 to 128x128 pixels took 1.51, 3.18, 7.27,
+// 23.69 and 99.88 us (fit: 0.83 us + 6.02 ns per pixel); a dealt tile 0.35 to 0.38 us.
+const OWNER_PER_RESULT_NS: u64 = 830;
+const OWNER_PER_PIXEL_NS: f64 = 6.02;
+const OWNER_PER_DEALT_NS: u64 = 380;
 
 /// A peer that stops dead `when` it is told to. Its connections time out
 /// `Network::loss_detection` later.

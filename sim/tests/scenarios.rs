@@ -6,7 +6,7 @@ use std::time::Duration;
 use balancer::{Config, Grid, Kind, Partitioner};
 use sim::scenario::{self, Scenario};
 use sim::synthetic::HotSpot;
-use sim::{Crash, Network, Policy, RunReport, Trace};
+use sim::{Crash, Network, OwnerCosts, Policy, RunReport, Trace};
 
 /// A 64 x 64 hot spot over `frames` frames, moving (or not).
 fn hot_spot(frames: u32, moving: bool) -> Trace {
@@ -189,8 +189,9 @@ fn two_blocks() -> (Trace, Config) {
     (trace, config)
 }
 
-/// Two peers, two tiles of 1000 units each, 1000 units per second, no latency: each peer
-/// renders one tile, so the frame takes one second and nothing idles. One peer takes two.
+/// Two peers, two tiles of 1000 units each, 1000 units per second, no latency, an owner that
+/// spends nothing on results: each peer renders one tile, so the frame takes one second and
+/// nothing idles. One peer takes two.
 #[test]
 fn two_equal_tiles_on_two_peers_take_one_tile_time() {
     let (trace, config) = two_blocks();
@@ -199,6 +200,7 @@ fn two_equal_tiles_on_two_peers_take_one_tile_time() {
             let mut scenario = Scenario {
                 peers,
                 work_per_second: 1000.0,
+                owner: OwnerCosts::NONE,
                 ..Scenario::default()
             };
             scenario.core.steal = steal;
@@ -296,4 +298,58 @@ fn bad_scenarios_are_refused_with_a_reason() {
     let wrong_size = Partitioner::new(32, 32, &Config::default()).unwrap();
     let error = scenario::run(&trace, wrong_size, &Scenario::default()).unwrap_err();
     assert!(error.to_string().contains("32x32"), "{error}");
+}
+
+/// The owner's control loop handles remote results one at a time: with a costly owner a frame
+/// takes at least the loop's time, which the report counts; and the owner-link limit is one
+/// peer's frame time x bandwidth over the bytes of the frame's results.
+#[test]
+fn the_owner_loop_bounds_a_frame_and_its_limits_are_reported() {
+    let trace = hot_spot(1, false);
+    let policy: Policy = "regular".parse().unwrap();
+    let free = Scenario {
+        peers: 8,
+        work_per_second: rate(&trace, 8),
+        owner: OwnerCosts::NONE,
+        network: Network {
+            bandwidth: Some(1e9),
+            ..Network::default()
+        },
+        ..Scenario::default()
+    };
+    let per_result = Duration::from_millis(50);
+    let costly = Scenario {
+        owner: OwnerCosts {
+            per_result,
+            per_result_pixel_ns: 0.0,
+            per_dealt_tile: Duration::ZERO,
+        },
+        ..free.clone()
+    };
+    let fast = run(&trace, policy, 16, &free);
+    let slow = run(&trace, policy, 16, &costly);
+    assert_eq!(fast.frames[0].owner_busy, 0.0);
+    assert_eq!(fast.owner_cpu_limit, None);
+    // 16 tiles over 8 peers: the 14 the other peers render reach the owner over the network.
+    let remote = 14;
+    let busy = slow.frames[0].owner_busy;
+    assert!(
+        (busy - remote as f64 * per_result.as_secs_f64()).abs() < 1e-9,
+        "owner busy {busy} s"
+    );
+    assert!(slow.makespan >= busy, "{} s < {busy} s", slow.makespan);
+    assert!(slow.makespan > fast.makespan);
+    // Each 16x16 result carries 3072 bytes of pixels and 48 of costs, plus a header of a few
+    // bytes; T1 is the whole frame's work on one single-slot peer.
+    let bytes = fast.frames[0].result_bytes as f64;
+    assert!(
+        bytes >= remote as f64 * 3120.0 && bytes <= remote as f64 * 3140.0,
+        "{bytes}"
+    );
+    let limit = fast.owner_link_limit.expect("a limited link");
+    let expected = fast.work * 1e9 / bytes;
+    assert!(
+        (limit - expected).abs() < 1e-6 * expected,
+        "{limit} against {expected}"
+    );
 }
