@@ -12,7 +12,7 @@ use super::{Cost, Knob};
 use crate::compare::{Metrics, mean_flip};
 use rayon::prelude::*;
 use std::time::Instant;
-use tracer::geometry::{Accel, BuildQuality, Traversal};
+use tracer::geometry::{Accel, BuildQuality, OffsetMethod, Traversal};
 use tracer::output::RgbImage;
 use tracer::scene::RenderSettings;
 use tracer::{Film, Rect, World};
@@ -306,6 +306,32 @@ impl<'a> Bench<'a> {
             rows.push(row);
         }
         self.world.traversal = Traversal::Robust;
+        rows
+    }
+
+    /// The error-bound spawn offset and the fixed-ULP one, at `spp`. On a scene of the scale of
+    /// its coordinates both start rays on the right side; the images differ by the noise of
+    /// paths that took other turns, and the times by the cost of computing the bound.
+    pub fn offset_ladder(&mut self, spp: u32) -> Vec<Row> {
+        let settings = RenderSettings {
+            samples_per_pixel: spp,
+            ..self.baseline.clone()
+        };
+        let mut rows = Vec::new();
+        let mut first_image = None;
+        for offset in OffsetMethod::ALL {
+            self.world.offset = offset;
+            let (mut row, image) =
+                self.measure(Knob::Offset, offset.name().to_owned(), settings.clone());
+            match &first_image {
+                None => first_image = Some(image),
+                Some(first) => {
+                    row.note = difference_note(&image, first, "the error-bound offset's image")
+                }
+            }
+            rows.push(row);
+        }
+        self.world.offset = OffsetMethod::default();
         rows
     }
 

@@ -14,7 +14,8 @@
 //!
 //! - `bench`: the timed render of a whole frame, and the one-knob-at-a-time ladders.
 //! - `reference`: the reference image: analytic, cached, or rendered and cached.
-//! - `leaks`: robust against obvhs's traversal on a closed sphere: leaks and self-hits.
+//! - `leaks`: robust against obvhs's traversal on a closed sphere, and the two spawn offsets on
+//!   the sphere far from the origin: leaks and self-hits.
 //! - `report`: accuracy.csv, accuracy.md and accuracy.svg.
 //! - `findings`: the equal-time and equal-error comparisons, in sentences; `curve`: the spp
 //!   ladder as the yardstick they are read off.
@@ -138,15 +139,18 @@ pub enum Knob {
     Bvh,
     /// Our robust traversal against obvhs's own.
     Traversal,
+    /// Spawn offsets from each hit point's error bound against the fixed 256 ULPs.
+    Offset,
 }
 
 impl Knob {
-    pub const ALL: [Knob; 5] = [
+    pub const ALL: [Knob; 6] = [
         Knob::Spp,
         Knob::Depth,
         Knob::Roulette,
         Knob::Bvh,
         Knob::Traversal,
+        Knob::Offset,
     ];
 
     pub fn name(self) -> &'static str {
@@ -156,6 +160,7 @@ impl Knob {
             Knob::Roulette => "roulette",
             Knob::Bvh => "bvh",
             Knob::Traversal => "traversal",
+            Knob::Offset => "offset",
         }
     }
 }
@@ -239,6 +244,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
     let mut bench = bench::Bench::new(world, &pool, &reference, timing);
     let mut rows = Vec::new();
     let mut leak_checks = Vec::new();
+    let mut offset_checks = Vec::new();
     for &knob in &args.knobs {
         rows.extend(match knob {
             Knob::Spp => bench.spp_ladder(args.max_spp),
@@ -251,6 +257,13 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
                     println!("  {}", check.describe());
                 }
                 bench.traversal_ladder(args.knob_spp)
+            }
+            Knob::Offset => {
+                offset_checks = leaks::far_sphere(&pool, args.leak_rays);
+                for check in &offset_checks {
+                    println!("  {}", check.describe());
+                }
+                bench.offset_ladder(args.knob_spp)
             }
         });
     }
@@ -271,6 +284,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
         reference: &reference,
         rows: &rows,
         leak_checks: &leak_checks,
+        offset_checks: &offset_checks,
     };
     report::write_all(&args.out, &run)?;
     println!(

@@ -41,6 +41,8 @@ pub struct Run<'a> {
     pub reference: &'a Reference,
     pub rows: &'a [Row],
     pub leak_checks: &'a [LeakCheck],
+    /// The closed-sphere check far from the origin, one per offset method.
+    pub offset_checks: &'a [LeakCheck],
 }
 
 impl Run<'_> {
@@ -333,6 +335,31 @@ pub fn markdown(run: &Run) -> String {
             })
             .collect(),
     );
+    table(
+        format!(
+            "Spawn offset, at {} spp, and the closed-sphere check {} from the origin",
+            run.knob_spp,
+            super::leaks::FAR.x
+        ),
+        &format!("offset | {COMMON} | image | far sphere: bounce leaks | self-hits"),
+        run.rows_of(Knob::Offset)
+            .map(|r| {
+                let check = run
+                    .offset_checks
+                    .iter()
+                    .find(|c| c.offset.name() == r.setting)
+                    .map_or("- | -".to_owned(), |c| {
+                        format!("{} of {} | {}", c.bounce_leaks, c.bounce_rays, c.self_hits)
+                    });
+                let image = if r.note.is_empty() {
+                    "(the baseline)"
+                } else {
+                    r.note.as_str()
+                };
+                format!("{} | {} | {} | {}", r.setting, common(r), image, check)
+            })
+            .collect(),
+    );
     if let Source::Rendered { .. } | Source::Cached = run.reference.source {
         let _ = writeln!(
             md,
@@ -480,7 +507,7 @@ fn label(row: &Row) -> String {
             .settings
             .russian_roulette_depth
             .map_or("off".to_owned(), |d| format!("rr {d}")),
-        Knob::Bvh | Knob::Traversal => row.setting.clone(),
+        Knob::Bvh | Knob::Traversal | Knob::Offset => row.setting.clone(),
     }
 }
 
@@ -491,5 +518,6 @@ fn colour(knob: Knob) -> RGBColor {
         Knob::Roulette => RGBColor(44, 160, 44),
         Knob::Bvh => RGBColor(255, 127, 14),
         Knob::Traversal => RGBColor(148, 103, 189),
+        Knob::Offset => RGBColor(140, 86, 75),
     }
 }

@@ -27,12 +27,12 @@
 //! Not done, on purpose: "no shadow rays when nothing can block" beyond the case where nothing
 //! emits. A shadow ray can be skipped exactly only if the occlusion test would certainly say
 //! "unoccluded", and the obvious candidate, a camera and point lights inside one closed convex
-//! mesh, fails that: spawned origins are offset by ULPs of each coordinate, so the offset is not
-//! parallel to the normal, and near creases it can cross a neighbour's plane. Measured with
-//! `--effects all` (points on every triangle, edges and vertices included, shadow rays to an
-//! interior light): an inward box falsely occludes 4 of 2,400 rays at its 90-degree edges, and a
-//! radius-3 sphere centred at (1e5, 1e5, 0) 596 of 256,000; only spheres near the origin showed
-//! none. Skipping would be *more* correct there, but no longer bit-identical, so we don't.
+//! mesh, needs more than it seems. With the old fixed-ULP spawn offset it failed outright (the
+//! offset was not parallel to the normal and crossed neighbours' planes: an inward box falsely
+//! occluded 4 of 2,400 rays at its edges, a radius-3 sphere at (1e5, 1e5, 0) 596 of 256,000).
+//! With the error-bound offset `tracer/tests/offsets.rs` counts no false occlusion inside
+//! spheres that are convex in f32, but the skip would have to establish that convexity exactly,
+//! per mesh, and a scene's mesh far from the origin can stop being convex by rounding alone.
 
 use crate::material::Bsdf;
 use crate::scene::Scene;

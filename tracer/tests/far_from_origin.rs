@@ -197,3 +197,18 @@ fn a_furnace_far_away_gives_one_while_its_facets_are_large_beside_an_ulp() {
         "the fixed-ULP offset loses light at 1e5: {m}"
     );
 }
+
+#[test]
+fn the_loader_flags_objects_past_the_ratio_f32_keeps_closed() {
+    let too_far = |d: f32| {
+        let mut files = tracer::scene::MemoryFiles::new();
+        files.insert("scene.toml", furnace(d, 0.0));
+        let (_, report) = tracer::scene::load_with_report(&files, "scene.toml").unwrap();
+        report.objects[0].too_far
+    };
+    // The facets' longest edges are about 0.15: 1e5 away is 7e5 of them, 3e5 away 2e6, past
+    // the 2^20 where the furnace above stops holding.
+    assert_eq!((too_far(0.0), too_far(1e5)), (None, None));
+    let ratio = too_far(3e5).expect("3e5 radii away is past the limit");
+    assert!(ratio > 1 << 20 && ratio < 4_000_000, "{ratio}");
+}

@@ -32,6 +32,9 @@ pub struct ObjectReport {
     pub triangles: usize,
     /// Zero-area triangles dropped.
     pub degenerate: usize,
+    /// The object's farthest coordinate from the origin over its median edge, rounded, when
+    /// that is past [`MAX_DISTANCE_PER_FEATURE`] (and the loader warned).
+    pub too_far: Option<u64>,
 }
 
 impl LoadReport {
@@ -252,6 +255,7 @@ impl Builder<'_> {
             }
         }
         let kept = self.triangles.len() - before;
+        let too_far = warn_if_too_far(&source, &self.triangles[before..]);
         if degenerate > 0 {
             tracing::warn!(
                 "{source}: dropped {degenerate} zero-area triangles of {}",
@@ -265,9 +269,50 @@ impl Builder<'_> {
             source,
             triangles: kept,
             degenerate,
+            too_far,
         });
         Ok(())
     }
+}
+
+/// How far beyond its feature size an object may lie from the origin: 2^20, where a typical
+/// edge spans 8 ULPs of its coordinates (an ULP at distance `d` is at most `2^-23 d`). Past it
+/// rounding starts to fold the mesh, and spawn offsets (two or three ULPs) cross its sharp
+/// creases; see `scenes/README.md` for what was measured.
+pub const MAX_DISTANCE_PER_FEATURE: f32 = 1_048_576.0;
+
+/// Warns, naming the object, when its median edge (each triangle's longest) is smaller than
+/// `1 / MAX_DISTANCE_PER_FEATURE` of its farthest coordinate from the origin. The median rather
+/// than the smallest: a few slivers do not make a mesh unrepresentable, most of it small does.
+/// Returns the ratio when it warned.
+fn warn_if_too_far(source: &str, triangles: &[Triangle]) -> Option<u64> {
+    let distance = triangles
+        .iter()
+        .flat_map(|t| t.p)
+        .map(|p| p.abs().max_element())
+        .fold(0.0f32, f32::max);
+    let mut edges: Vec<f32> = triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.p;
+            (b - a).length().max((c - b).length()).max((a - c).length())
+        })
+        .collect();
+    if edges.is_empty() {
+        return None;
+    }
+    let middle = edges.len() / 2;
+    let (_, &mut median, _) = edges.select_nth_unstable_by(middle, f32::total_cmp);
+    if median * MAX_DISTANCE_PER_FEATURE < distance {
+        tracing::warn!(
+            "{source}: its median edge ({median:e}) is {:.1e} times smaller than its distance from \
+             the origin ({distance:e}), past the 2^20 that 32-bit floats keep closed meshes \
+             representable at: expect light to leak (move the scene nearer the origin)",
+            distance / median
+        );
+        return Some((distance / median).round() as u64);
+    }
+    None
 }
 
 fn camera_track(file: &str, text: &str, spec: &SceneSpec) -> Result<CameraTrack, SceneError> {
