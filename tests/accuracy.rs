@@ -297,9 +297,10 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             count("depth"),
             count("roulette"),
             count("bvh"),
-            count("traversal")
+            count("traversal"),
+            count("offset")
         ],
-        [3, 6, 6, 5, 2]
+        [3, 6, 6, 5, 2, 2]
     );
     for row in rows.iter().filter(|r| r["knob"] == "bvh") {
         assert!(
@@ -321,6 +322,7 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
         "## Russian roulette",
         "## BVH",
         "## Traversal",
+        "## Spawn offset",
     ] {
         assert!(
             markdown.contains(section),
