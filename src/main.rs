@@ -20,8 +20,25 @@ mod report;
 mod simulate;
 
 use clap::Parser;
+use std::process::ExitCode;
 
-fn main() -> anyhow::Result<()> {
+/// Runs the command; a failure prints its message and each cause on a line of its own and exits
+/// with status 1. Never a backtrace, even with `RUST_BACKTRACE` set (common among Rust users):
+/// errors here are the user's to read, not ours to debug. Panics keep theirs.
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error}");
+            for cause in error.chain().skip(1) {
+                eprintln!("  caused by: {cause}");
+            }
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> anyhow::Result<()> {
     let cli = cli::Cli::parse();
     tracing_subscriber::fmt()
         .with_env_filter(

@@ -1,0 +1,75 @@
+//! What a user sees when something is wrong: the message and its causes, and exit status 1;
+//! never a backtrace, even with `RUST_BACKTRACE` set, as many Rust users have it.
+
+mod common;
+
+use common::tessera;
+use std::process::Command;
+
+/// Runs `command` with backtraces asked for, expects it to fail as a user error, and returns
+/// its standard error.
+fn user_error(command: &mut Command) -> String {
+    let output = command
+        .env("RUST_BACKTRACE", "1")
+        .env("RUST_LIB_BACKTRACE", "1")
+        .output()
+        .expect("the tessera binary runs");
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert_eq!(output.status.code(), Some(1), "{command:?}:\n{stderr}");
+    assert!(stderr.contains("error: "), "{command:?}:\n{stderr}");
+    assert!(
+        !stderr.to_lowercase().contains("backtrace"),
+        "{command:?} printed a backtrace:\n{stderr}"
+    );
+    stderr
+}
+
+#[test]
+fn user_errors_print_their_message_and_causes_without_a_backtrace() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let scene = common::repo("scenes/point-in-sphere/point-in-sphere.toml");
+
+    // A setting refused before rendering.
+    let stderr = user_error(
+        tessera()
+            .arg("render")
+            .arg(&scene)
+            .args(["--spp", "0"])
+            .arg("--out")
+            .arg(&out),
+    );
+    assert!(stderr.contains("samples per pixel"), "{stderr}");
+
+    // A bad OBJ line: the file and line are named.
+    std::fs::write(
+        dir.path().join("bad.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n",
+    )
+    .unwrap();
+    let toml = dir.path().join("bad.toml");
+    std::fs::write(
+        &toml,
+        "[render]\nwidth = 8\nheight = 8\nspp = 1\n[camera]\nposition = [0, 0, 3]\n\
+         look_at = [0, 0, 0]\nvfov = 40\n[[object]]\nobj = \"bad.obj\"\n",
+    )
+    .unwrap();
+    let stderr = user_error(tessera().arg("render").arg(&toml).arg("--out").arg(&out));
+    assert!(
+        stderr.contains("bad.obj") && stderr.contains(":4"),
+        "{stderr}"
+    );
+
+    // A file that is not there: the cause (the operating system's word) is on a line of its own.
+    let stderr = user_error(tessera().args(["compare", "missing-a.exr", "missing-b.exr"]));
+    assert!(stderr.contains("missing-a.exr"), "{stderr}");
+
+    // A simulator setting out of range names its flag.
+    let stderr = user_error(
+        tessera()
+            .args(["simulate", "synthetic:64x64:2", "--bandwidth=-1"])
+            .arg("--out")
+            .arg(&out),
+    );
+    assert!(stderr.contains("--bandwidth"), "{stderr}");
+}
