@@ -16,7 +16,7 @@
 //! - `reference`: the reference image: analytic, cached, or rendered and cached.
 //! - `leaks`: robust against obvhs's traversal on a closed sphere, and the two spawn offsets on
 //!   the sphere far from the origin: leaks and self-hits.
-//! - `report`: accuracy.csv, accuracy.md and accuracy.svg.
+//! - `report`: accuracy.csv and accuracy.md; `plot`: accuracy.svg.
 //! - `findings`: the equal-time and equal-error comparisons, in sentences; `curve`: the spp
 //!   ladder as the yardstick they are read off.
 
@@ -24,6 +24,7 @@ pub(crate) mod bench;
 mod curve;
 mod findings;
 mod leaks;
+mod plot;
 mod reference;
 mod report;
 
