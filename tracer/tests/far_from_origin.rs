@@ -214,3 +214,23 @@ fn the_loader_flags_objects_past_the_ratio_f32_keeps_closed() {
     let ratio = too_far(3e5).expect("3e5 radii away is past the limit");
     assert!(ratio > 1 << 20 && ratio < 4_000_000, "{ratio}");
 }
+
+#[test]
+fn no_shipped_scene_is_past_the_limit() {
+    let scenes = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes");
+    for name in [
+        "cornell-box",
+        "furnace",
+        "point-in-sphere",
+        "glass-cluster-pan",
+    ] {
+        let files = tracer::scene::DiskFiles {
+            root: std::path::Path::new(scenes).join(name),
+        };
+        let toml = format!("{name}.toml");
+        let (_, report) = tracer::scene::load_with_report(&files, &toml).expect("shipped scene");
+        for object in &report.objects {
+            assert_eq!(object.too_far, None, "{name}: {}", object.source);
+        }
+    }
+}
