@@ -19,6 +19,15 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let peers = args.peers.max(1);
     let threads = args.job.threads.unwrap_or_else(available_threads);
     let options = options(&args.job, (threads / peers).max(1));
+    // Every peer keeps a connection to every other: past the transport's limit some would be
+    // refused and the render would wait for them forever.
+    let most = options.net.max_connections + 1;
+    anyhow::ensure!(
+        peers <= most,
+        "--peers {peers}: at most {most} peers fit in one process (each keeps a QUIC connection \
+         to every other, and a node accepts at most {})",
+        options.net.max_connections
+    );
     execute(&args.job, peers, threads, |job, sink| {
         let tokio = tokio_runtime()?;
         Ok(tokio.block_on(node::run_local(job, peers, options, sink))?)
@@ -32,6 +41,12 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
         .with_context(|| format!("loading peer 0's certificate from {}", args.certs.display()))?;
     let threads = args.job.threads.unwrap_or_else(available_threads);
     let options = options(&args.job, threads);
+    anyhow::ensure!(
+        args.expect <= options.net.max_connections,
+        "--expect {}: a node accepts at most {} connections",
+        args.expect,
+        options.net.max_connections
+    );
     execute(&args.job, args.expect + 1, threads, |job, sink| {
         let tokio = tokio_runtime()?;
         tokio.block_on(async {

@@ -193,3 +193,46 @@ fn peers_of_another_cluster_are_refused_and_the_render_goes_on() {
     wait_success(member, Duration::from_secs(30));
     assert_eq!(frames(&out).len(), 6);
 }
+
+/// An owner that dies mid-render (SIGKILL: no goodbye, no close) is reported by its peers: they
+/// exit with an error that says so, within the transport's idle timeout (10 s), not with
+/// success as if the render were over.
+#[test]
+fn peers_report_a_lost_owner_and_fail() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    keygen(&certs, 2);
+    let port = free_port();
+    let (mut server, lines) = serve(&certs, &dir.path().join("cluster"), port, 1);
+    let mut orphan = peer(&certs, port, 1)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    assert!(
+        wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
+        "the cluster never finished frame 0"
+    );
+    server.kill().unwrap();
+    server.wait().unwrap();
+    let killed = std::time::Instant::now();
+    let deadline = killed + Duration::from_secs(30);
+    let status = loop {
+        if let Some(status) = orphan.try_wait().unwrap() {
+            break status;
+        }
+        if std::time::Instant::now() > deadline {
+            orphan.kill().ok();
+            panic!("the peer did not notice its owner was gone within 30 s");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut orphan.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(!status.success(), "the peer exited with success:\n{stderr}");
+    assert!(stderr.contains("owner was lost"), "{stderr}");
+    assert!(
+        killed.elapsed() < Duration::from_secs(15),
+        "took {:?}",
+        killed.elapsed()
+    );
+}

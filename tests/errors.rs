@@ -73,3 +73,22 @@ fn user_errors_print_their_message_and_causes_without_a_backtrace() {
     );
     assert!(stderr.contains("--bandwidth"), "{stderr}");
 }
+
+/// More in-process peers than can connect to each other is refused before rendering, naming
+/// the flag, instead of waiting forever for refused connections.
+#[test]
+fn more_peers_than_can_connect_are_refused_before_rendering() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::repo("scenes/point-in-sphere/point-in-sphere.toml");
+    let started = std::time::Instant::now();
+    let stderr = user_error(
+        tessera()
+            .arg("render")
+            .arg(&scene)
+            .args(["--peers", "500", "--out"])
+            .arg(dir.path()),
+    );
+    assert!(stderr.contains("--peers 500"), "{stderr}");
+    assert!(started.elapsed() < std::time::Duration::from_secs(10));
+    assert!(!dir.path().join("frame-0000.exr").exists());
+}

@@ -234,6 +234,19 @@ impl fmt::Display for ConnId {
     }
 }
 
+impl fmt::Display for CloseReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Local(code) => write!(f, "closed here: {code:?}"),
+            Self::Remote { code, reason } => {
+                write!(f, "closed by the other side, code {code}: {reason}")
+            }
+            Self::TimedOut => write!(f, "nothing heard for the idle timeout"),
+            Self::Transport(error) => write!(f, "transport failure: {error}"),
+        }
+    }
+}
+
 impl CloseReason {
     pub(super) fn new(error: ConnectionError, peer: &PeerConn) -> Self {
         match error {

@@ -80,6 +80,8 @@ pub enum NodeError {
     BadTile(TileId),
     #[error("the transport stopped")]
     Stopped,
+    #[error("the frame owner was lost ({0}); the render is incomplete")]
+    OwnerLost(crate::net::CloseReason),
     #[error("writing a frame: {0}")]
     Sink(String),
     #[error("a peer task failed: {0}")]

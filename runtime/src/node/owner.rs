@@ -18,6 +18,9 @@ use std::sync::Arc;
 use std::time::Duration;
 use tracer::{Film, World};
 
+/// The longest the owner waits for its goodbyes to leave at the end of a render.
+const GOODBYE_BOUND: Duration = Duration::from_secs(2);
+
 /// What the owner renders.
 pub struct Job {
     pub world: Arc<World>,
@@ -131,8 +134,9 @@ impl Owner {
                 },
             );
         }
-        // The goodbyes must leave before the endpoint closes every connection.
-        self.session.drain_sends().await;
+        // The goodbyes must leave before the endpoint closes every connection. A peer that
+        // stopped reading would hold its send forever; it gets no more than this.
+        let _ = tokio::time::timeout(GOODBYE_BOUND, self.session.drain_sends()).await;
         self.session.link.shutdown().await;
         Ok((report, std::mem::take(&mut self.session.local_tiles)))
     }

@@ -3,7 +3,7 @@
 
 use super::session::{Renderer, Session, Step};
 use super::{NodeError, Options, bundle};
-use crate::net::{CloseCode, ConnId, Expect, PeerIdentity};
+use crate::net::{CloseCode, CloseReason, ConnId, Expect, PeerIdentity};
 use runtime_core::membership::check_hello;
 use runtime_core::peer::Event as CoreEvent;
 use runtime_core::wire::{GoodbyeReason, Message, PROTOCOL_VERSION, PeerId};
@@ -174,7 +174,20 @@ pub async fn run_peer(
                     ),
                 }
             }
-            Step::Closed { conn, .. } if conn == owner_conn => break,
+            Step::Closed { conn, reason } if conn == owner_conn => {
+                // An owner that finished says goodbye (which ends the loop above) or closes with
+                // `Shutdown`; anything else (silence past the idle timeout, a reset, a crash, a
+                // refusal) leaves the render incomplete, and the user must hear of it.
+                let finished = matches!(
+                    reason,
+                    CloseReason::Remote { code, .. } if code == CloseCode::Shutdown as u64
+                );
+                if !finished {
+                    session.link.shutdown().await;
+                    return Err(NodeError::OwnerLost(reason));
+                }
+                break;
+            }
             Step::Closed { conn, .. } => {
                 inbound.remove(&conn);
                 outbound.remove(&conn);

@@ -3,7 +3,9 @@
 //! core's timer. The core decides everything; this only carries.
 
 use super::{NodeError, Options, bundle};
-use crate::net::{CloseCode, ConnId, Event as NetEvent, Link, PeerCertificate, PeerIdentity};
+use crate::net::{
+    CloseCode, CloseReason, ConnId, Event as NetEvent, Link, PeerCertificate, PeerIdentity,
+};
 use runtime_core::peer::{Core, Event as CoreEvent, WorkItem};
 use runtime_core::wire::{self, Message, PeerId};
 use std::collections::BTreeMap;
@@ -121,7 +123,7 @@ pub(crate) enum Step {
         outbound: bool,
     },
     /// A connection is gone (the core has already been told if it was a known peer's).
-    Closed { conn: ConnId },
+    Closed { conn: ConnId, reason: CloseReason },
     /// The transport stopped.
     Stopped,
 }
@@ -302,7 +304,7 @@ impl Session {
                     self.core.handle_peer_lost(now, peer);
                     self.flush();
                 }
-                Some(Step::Closed { conn })
+                Some(Step::Closed { conn, reason })
             }
             NetEvent::Message {
                 conn,
