@@ -272,20 +272,20 @@ fn key_differences(cached: &Key, wanted: &Key) -> String {
     out
 }
 
-/// A BLAKE3 hash of every file the scene was read from, in the loader's order.
+/// The scene's content hash ([`runtime::node::bundle::scene_hash`], the one the peers log),
+/// over every file it was read from in the loader's order, named as the loader names them.
 pub fn hash_scene_files(scene: &Path, files: &[String]) -> anyhow::Result<String> {
     let root = scene.parent().unwrap_or(Path::new(""));
-    let mut hasher = blake3::Hasher::new();
-    for name in files {
-        let path = root.join(name);
-        let bytes = std::fs::read(&path)
-            .with_context(|| format!("cannot read {} to hash it", path.display()))?;
-        hasher.update(name.as_bytes());
-        hasher.update(&(name.len() as u64).to_le_bytes());
-        hasher.update(&(bytes.len() as u64).to_le_bytes());
-        hasher.update(&bytes);
-    }
-    Ok(hasher.finalize().to_hex().to_string())
+    let files = files
+        .iter()
+        .map(|name| {
+            let path = root.join(name);
+            let bytes = std::fs::read(&path)
+                .with_context(|| format!("cannot read {} to hash it", path.display()))?;
+            Ok(runtime::node::bundle::scene_file(name.clone(), bytes))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(runtime::node::bundle::scene_hash(&files))
 }
 
 #[cfg(test)]

@@ -76,12 +76,7 @@ pub fn scene_files(toml_path: &Path, scene: &Scene) -> Result<Vec<SceneFile>, Bu
             } else {
                 format!("{prefix}/{name}")
             };
-            let name = normalize(&rooted).unwrap_or(rooted);
-            Ok(SceneFile {
-                name,
-                hash: *blake3::hash(&bytes).as_bytes(),
-                bytes,
-            })
+            Ok(scene_file(normalize(&rooted).unwrap_or(rooted), bytes))
         })
         .collect()
 }
@@ -126,14 +121,32 @@ fn apply(scene: &mut Scene, params: &RenderParams) {
     s.seed = params.seed;
 }
 
-/// A content hash of a whole scene, for logs: peers print it so a user can see they agree.
-pub fn scene_digest(files: &[SceneFile]) -> String {
+/// The content hash of a whole scene: BLAKE3 over every file's name (length-prefixed, so names
+/// cannot run into each other) and its own content hash, in order, as 64 hex digits. The one
+/// scene hash: peers log it (first 16 digits, [`scene_digest`]) so a user can see they agree,
+/// and `tessera accuracy` keys its cached references by it.
+pub fn scene_hash(files: &[SceneFile]) -> String {
     let mut hasher = blake3::Hasher::new();
     for file in files {
+        hasher.update(&(file.name.len() as u64).to_le_bytes());
         hasher.update(file.name.as_bytes());
         hasher.update(&file.hash);
     }
-    hasher.finalize().to_hex()[..16].to_owned()
+    hasher.finalize().to_hex().to_string()
+}
+
+/// The first 16 hex digits of [`scene_hash`], for logs.
+pub fn scene_digest(files: &[SceneFile]) -> String {
+    scene_hash(files)[..16].to_owned()
+}
+
+/// `name` with `bytes`, hashed as the wire carries it.
+pub fn scene_file(name: String, bytes: Vec<u8>) -> SceneFile {
+    SceneFile {
+        name,
+        hash: *blake3::hash(&bytes).as_bytes(),
+        bytes,
+    }
 }
 
 /// Pixels as little-endian `f32` triples.
