@@ -102,6 +102,16 @@ fn drive(
     panic!("the director did not finish");
 }
 
+/// The owner core's completion of frame 0, without results (for the director alone).
+fn empty_completion() -> crate::peer::Event {
+    crate::peer::Event::FrameComplete {
+        frame: FrameId(0),
+        elapsed: Duration::ZERO,
+        results: Vec::new(),
+        rendered_by: Vec::new(),
+    }
+}
+
 fn cluster(peers: u32) -> Cluster {
     let ids: Vec<(PeerId, usize)> = (0..peers).map(|p| (PeerId(p), 1)).collect();
     Cluster::new(
@@ -211,12 +221,7 @@ fn nothing_is_dealt_while_a_frame_runs_or_waits_for_its_measure() {
         director.handle_measured(Duration::ZERO, FrameId(0), &halves(1)),
         Err(DirectorError::NotWaiting { .. })
     ));
-    let complete = crate::peer::Event::FrameComplete {
-        frame: FrameId(0),
-        elapsed: Duration::ZERO,
-        results: Vec::new(),
-        rendered_by: Vec::new(),
-    };
+    let complete = empty_completion();
     director
         .handle_core_event(Duration::ZERO, complete)
         .unwrap();
@@ -244,12 +249,7 @@ fn the_last_frame_waits_for_statistics_leavers_or_the_grace_period() {
         peer: PeerId(peer),
         stats: PeerStats::default(),
     };
-    let complete = crate::peer::Event::FrameComplete {
-        frame: FrameId(0),
-        elapsed: Duration::ZERO,
-        results: Vec::new(),
-        rendered_by: Vec::new(),
-    };
+    let complete = empty_completion();
     let t0 = Duration::from_secs(5);
     let ended = |leave: bool, report: &[u32], wait: Duration| {
         let mut director = director(grid(2, 2), 3, 1);
@@ -310,12 +310,7 @@ fn peers_that_join_or_leave_are_dealt_from_the_next_frame() {
     );
     director.handle_peer_joined(Duration::ZERO, PeerId(7));
     director.handle_peer_left(Duration::ZERO, PeerId(1));
-    let complete = crate::peer::Event::FrameComplete {
-        frame: FrameId(0),
-        elapsed: Duration::ZERO,
-        results: Vec::new(),
-        rendered_by: Vec::new(),
-    };
+    let complete = empty_completion();
     director
         .handle_core_event(Duration::ZERO, complete)
         .unwrap();
