@@ -220,6 +220,17 @@ pub fn tile_result(
     }
 }
 
+/// The tracer's rectangle for a balancer's (the two crates do not know each other; this is the
+/// one place that converts).
+pub fn tracer_rect(rect: balancer::Rect) -> tracer::Rect {
+    tracer::Rect {
+        x: rect.x,
+        y: rect.y,
+        w: rect.w,
+        h: rect.h,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -269,16 +280,5 @@ mod tests {
             load_scene(vec![file], &params),
             Err(BundleError::HashMismatch { .. })
         ));
-    }
-}
-
-/// The tracer's rectangle for a balancer's (the two crates do not know each other; this is the
-/// one place that converts).
-pub fn tracer_rect(rect: balancer::Rect) -> tracer::Rect {
-    tracer::Rect {
-        x: rect.x,
-        y: rect.y,
-        w: rect.w,
-        h: rect.h,
     }
 }
