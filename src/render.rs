@@ -65,6 +65,60 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
     })
 }
 
+/// Refuses, before anything is rendered, settings that cannot work: more tiles than the image
+/// has blocks (the smallest tile) or than one message can assign, tiles whose results cannot fit
+/// in one message, and frame buffers larger than this machine's free memory. Each error names
+/// the flag and the limit; none of these may surface later as a peer failure.
+fn check_limits(args: &FrameArgs, settings: &tracer::scene::RenderSettings) -> anyhow::Result<()> {
+    let (width, height) = (u64::from(settings.width), u64::from(settings.height));
+    // The owner holds the frame's film (12 bytes a pixel) and every result until the frame is
+    // assembled (as much again), and writes an EXR and a PNG from the film.
+    let needed = width * height * (12 + 12 + 12 + 4);
+    if let Some(available) = available_memory() {
+        anyhow::ensure!(
+            needed <= available,
+            "--width {width} --height {height}: a frame needs about {} MiB, and this machine \
+             has {} MiB free",
+            needed >> 20,
+            available >> 20
+        );
+    }
+    let block = u64::from(tracer::BLOCK_SIZE);
+    let blocks = width.div_ceil(block) * height.div_ceil(block);
+    let tiles = args.tiles as u64;
+    anyhow::ensure!(
+        tiles <= blocks,
+        "--tiles {tiles}: the {width}x{height} image has only {blocks} blocks of \
+         {block}x{block} pixels, the smallest tile"
+    );
+    let limits = node::Options::default().limits;
+    let per_message = limits.max_tiles_per_message as u64;
+    anyhow::ensure!(
+        tiles <= per_message,
+        "--tiles {tiles}: at most {per_message} tiles (a peer's share travels in one message)"
+    );
+    // The first frame's tiles are cut by area, so its largest is about the image over the tile
+    // count (rounded up each way); its result must fit in one message.
+    let side = (tiles as f64).sqrt().max(1.0);
+    let largest = (width as f64 / side).ceil() * (height as f64 / side).ceil();
+    let result_bytes = largest * runtime_core::wire::BYTES_PER_PIXEL as f64;
+    anyhow::ensure!(
+        result_bytes <= limits.max_message_bytes as f64 / 2.0,
+        "--tiles {tiles}: tiles of about {largest:.0} pixels are too large to send \
+         (a result may be at most {} MiB); use more tiles",
+        limits.max_message_bytes >> 21
+    );
+    Ok(())
+}
+
+/// Free memory as the kernel estimates it (`MemAvailable`), where `/proc/meminfo` says.
+fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
 /// Loads the scene, runs `drive` with a sink that writes frames, and writes the statistics,
 /// the Gantt chart and a one-line summary.
 fn execute(
@@ -75,6 +129,7 @@ fn execute(
 ) -> anyhow::Result<()> {
     let started = Instant::now();
     let scene = load_scene(args)?;
+    check_limits(args, &scene.settings)?;
     let files = node::bundle::scene_files(&args.scene, &scene)?;
     let params = node::bundle::params(&scene, args.effects == EffectsChoice::All);
     let settings = scene.settings.clone();

@@ -92,3 +92,45 @@ fn more_peers_than_can_connect_are_refused_before_rendering() {
     assert!(started.elapsed() < std::time::Duration::from_secs(10));
     assert!(!dir.path().join("frame-0000.exr").exists());
 }
+
+/// Settings whose messages or buffers cannot exist are refused before rendering, each naming
+/// its flag and the limit, instead of surfacing as a lost peer.
+#[test]
+fn settings_past_the_limits_are_refused_naming_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::repo("scenes/point-in-sphere/point-in-sphere.toml");
+    let render = |flags: &[&str]| {
+        let mut command = tessera();
+        command
+            .arg("render")
+            .arg(&scene)
+            .args(flags)
+            .arg("--out")
+            .arg(dir.path());
+        user_error(&mut command)
+    };
+    // 512x512 has 4096 blocks of 8x8.
+    let stderr = render(&["--width", "512", "--height", "512", "--tiles", "100000000"]);
+    assert!(
+        stderr.contains("--tiles 100000000") && stderr.contains("4096 blocks"),
+        "{stderr}"
+    );
+    let stderr = render(&["--width", "4096", "--height", "4096", "--tiles", "100000"]);
+    assert!(
+        stderr.contains("--tiles 100000") && stderr.contains("65536"),
+        "{stderr}"
+    );
+    // A frame of 4e10 pixels needs far more memory than any machine running these tests.
+    let stderr = render(&["--width", "200000", "--height", "200000", "--spp", "1"]);
+    assert!(
+        stderr.contains("--width 200000 --height 200000"),
+        "{stderr}"
+    );
+    // Two tiles of an 8192x8192 frame would be results of 400 MB each.
+    let stderr = render(&["--width", "8192", "--height", "8192", "--tiles", "2"]);
+    assert!(
+        stderr.contains("--tiles 2") && stderr.contains("too large"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("frame-0000.exr").exists());
+}
