@@ -21,6 +21,13 @@
 //! - `textures`, `shading_normals`: without them the branches never match anyway (a texture on a
 //!   zero albedo only multiplies zero by a finite texel); the flags also let the integrator skip
 //!   interpolating texture coordinates, which only a texture lookup reads.
+//! - `environment_map`: reported; which lookup and which sampler run is told by the closed enum
+//!   [`Environment`], so a constant environment never touches map code in either mode. A map
+//!   whose every texel is zero is no environment at all (the flag above).
+//! - `depth_of_field`: rays start across the lens only at frames whose aperture is above zero,
+//!   in either mode; a pinhole frame traces exactly the rays it traced before lenses existed,
+//!   and the lens's random numbers come from a stream of their own ([`crate::sampler`]), so
+//!   drawing them or not shifts no other number.
 //! - `specular_reflection`, `glossy_reflection`, `refraction`, `diffuse`: reported, and counted
 //!   per sample (refractions); the BSDF is a closed enum, so no code of an absent material runs.
 //!
@@ -34,6 +41,7 @@
 //! spheres that are convex in f32, but the skip would have to establish that convexity exactly,
 //! per mesh, and a scene's mesh far from the origin can stop being convex by rounding alone.
 
+use crate::environment::Environment;
 use crate::material::Bsdf;
 use crate::scene::Scene;
 use glam::Vec3;
@@ -46,9 +54,13 @@ pub struct Effects {
     pub area_lights: bool,
     /// Point lights with non-zero intensity exist: they are sampled by next-event estimation.
     pub point_lights: bool,
-    /// A non-zero constant environment surrounds the scene: escaped rays pick it up, and it is
-    /// sampled.
+    /// A non-zero environment (constant or a map) surrounds the scene: escaped rays pick it up,
+    /// and it is sampled.
     pub environment: bool,
+    /// The environment is a lat-long map (with a texel other than zero), importance-sampled.
+    pub environment_map: bool,
+    /// The camera has a lens (an aperture above zero) at some frame: rays start across it.
+    pub depth_of_field: bool,
     /// Next-event estimation: a light is sampled and a shadow ray traced at non-delta surfaces.
     pub shadows: bool,
     /// Some surface scatters diffusely (a Lambertian albedo other than zero).
@@ -71,6 +83,8 @@ impl Effects {
         area_lights: true,
         point_lights: true,
         environment: true,
+        environment_map: true,
+        depth_of_field: true,
         shadows: true,
         diffuse: true,
         specular_reflection: true,
@@ -90,13 +104,22 @@ impl Effects {
         };
         let area_lights = scene.emissive_triangles().next().is_some();
         let point_lights = scene.point_lights.iter().any(|l| l.intensity != Vec3::ZERO);
-        let environment = scene.environment.is_some_and(|e| e != Vec3::ZERO);
+        let environment = scene.environment.as_ref().is_some_and(|e| !e.is_black());
+        let environment_map =
+            environment && matches!(scene.environment, Some(Environment::Map(_)));
+        let depth_of_field = scene
+            .camera
+            .keys()
+            .iter()
+            .any(|k| k.camera.aperture_radius > 0.0);
         let diffuse = used(|b| matches!(b, Bsdf::Diffuse { albedo, .. } if *albedo != Vec3::ZERO));
         let glossy_reflection = used(|b| matches!(b, Bsdf::Conductor { .. }));
         Effects {
             area_lights,
             point_lights,
             environment,
+            environment_map,
+            depth_of_field,
             // A light sample pays off only where a non-delta lobe reflects something.
             shadows: (area_lights || point_lights || environment) && (diffuse || glossy_reflection),
             diffuse,
@@ -121,6 +144,8 @@ impl Effects {
             (self.area_lights, "area-lights"),
             (self.point_lights, "point-lights"),
             (self.environment, "environment"),
+            (self.environment_map, "environment-map"),
+            (self.depth_of_field, "depth-of-field"),
             (self.shadows, "shadows"),
             (self.diffuse, "diffuse"),
             (self.specular_reflection, "specular-reflection"),

@@ -1,5 +1,5 @@
 //! The path tracer: next-event estimation with multiple importance sampling (power heuristic) for
-//! area lights and the environment, point lights by next-event estimation alone, and Russian
+//! area lights and the environment (constant or an importance-sampled map), point lights by next-event estimation alone, and Russian
 //! roulette.
 //!
 //! Depth follows pbrt: `max_depth` counts scattering events, so 0 shows emitters only, 1 adds
@@ -16,7 +16,7 @@ use crate::effects::Effects;
 use crate::geometry::{
     Accel, Hit, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats, spawn_ray, spawn_ray_to,
 };
-use crate::lights::Lights;
+use crate::lights::{EnvironmentSampling, Lights};
 use crate::material::{Bsdf, Frame};
 use crate::sampler::PixelSampler;
 use crate::scene::Scene;
@@ -109,6 +109,13 @@ impl World {
         Self::new(scene, accel, effects)
     }
 
+    /// This world with its environment sampled as `sampling` says (a comparison knob: every
+    /// choice has the same mean, see [`EnvironmentSampling`]).
+    pub fn with_environment_sampling(mut self, sampling: EnvironmentSampling) -> Self {
+        self.lights = Lights::with_sampling(&self.scene, &self.effects, sampling);
+        self
+    }
+
     /// The radiance arriving along `ray` for one sample.
     pub fn radiance(&self, ray: Ray, sampler: &mut PixelSampler, stats: &mut PathStats) -> Vec3 {
         let settings = &self.scene.settings;
@@ -130,15 +137,16 @@ impl World {
                 .intersect_with(&ray, self.traversal, &mut stats.traversal)
             else {
                 if effects.environment
-                    && let Some(env) = self.scene.environment
+                    && let Some(environment) = &self.scene.environment
                 {
                     stats.environment_lookups += 1;
                     let weight = if last_delta {
                         1.0
                     } else {
-                        power_heuristic(last_pdf, self.lights.environment_pdf())
+                        let light_pdf = self.lights.environment_pdf(&self.scene, ray.dir);
+                        power_heuristic(last_pdf, light_pdf)
                     };
-                    radiance += beta * env * weight;
+                    radiance += beta * environment.radiance(ray.dir) * weight;
                 }
                 break;
             };

@@ -10,13 +10,17 @@
 //! - [`material`]: the closed set of materials ([`Material`]) and their BSDFs in a local frame.
 //! - [`effects`]: the light-transport effects a scene calls for, so absent ones cost nothing.
 //! - [`lights`]: area, point and environment lights and their power-proportional sampling.
+//! - [`environment`]: the constant or lat-long map environment and the map's importance sampling,
+//!   on the piecewise-constant densities of [`distribution`].
 //! - [`sampler`]: the deterministic per-pixel random stream: a pure function of
 //!   (seed, frame, pixel, sample index, dimension).
 //! - [`integrator`]: the path tracer with next-event estimation and multiple importance sampling.
 //! - [`tile`]: the unit of work: render a rectangle of a frame, get its pixels and its cost map.
 //! - [`output`]: OpenEXR (linear float RGB) and tone-mapped sRGB PNG writers.
 
+pub mod distribution;
 pub mod effects;
+pub mod environment;
 pub mod geometry;
 pub mod integrator;
 pub mod lights;

@@ -1,7 +1,8 @@
 //! The lights of a scene and how next-event estimation samples them.
 //!
 //! Lights are emissive triangles (one-sided: they emit on the side of their winding normal), point
-//! lights and a constant environment. One light is chosen per shading point: first its kind, each
+//! lights and the environment (constant, sampled uniformly over the sphere, or a map, sampled by
+//! its luminance: [`crate::environment`]). One light is chosen per shading point: first its kind, each
 //! present kind equally likely, then a light of that kind with probability proportional to its
 //! power, so a large sky quad is not starved by a hundred tiny lamps. Kinds are not weighed by
 //! power against each other because an environment's power depends on the scene's extent (a wide
@@ -14,6 +15,7 @@
 //! [`crate::effects`]).
 
 use crate::effects::Effects;
+use crate::environment::{Environment, MapSampler};
 use crate::geometry::SurfacePoint;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
@@ -28,9 +30,22 @@ pub enum Light {
         position: Vec3,
         intensity: Vec3,
     },
-    Environment {
-        radiance: Vec3,
-    },
+    /// The scene's environment, [`Scene::environment`].
+    Environment,
+}
+
+/// How next-event estimation samples the environment; every choice is unbiased, and they differ
+/// in noise only. A comparison knob, like [`crate::geometry::Traversal`]: renders pick the default.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum EnvironmentSampling {
+    /// A map by its luminance times sin(theta), combined with BSDF sampling by the power
+    /// heuristic; a constant environment uniformly over the sphere (which is its importance).
+    #[default]
+    Importance,
+    /// Uniformly over the sphere, map or not, combined with BSDF sampling.
+    Uniform,
+    /// Not at all: the environment is found only by BSDF sampling, with full weight (no MIS).
+    Bsdf,
 }
 
 /// A sampled direction towards a light, as seen from a shading point.
@@ -59,14 +74,21 @@ pub struct Lights {
     cdf: Vec<f32>,
     /// For each scene triangle, its light's index, or `u32::MAX` when it does not emit.
     triangle_light: Vec<u32>,
-    /// The density of an escaped direction under [`Lights::sample`], fixed for the scene.
-    environment_pdf: f32,
+    /// The probability of choosing the environment; zero when it is not a sampled light.
+    environment_choice: f32,
+    /// The map's importance sampler, when the environment is a map sampled by importance.
+    map_sampler: Option<MapSampler>,
     scene_radius: f32,
 }
 
 impl Lights {
     /// The lights of the kinds `effects` turns on that have positive, finite power.
     pub fn new(scene: &Scene, effects: &Effects) -> Self {
+        Self::with_sampling(scene, effects, EnvironmentSampling::default())
+    }
+
+    /// [`Lights::new`] with the environment sampled as `sampling` says.
+    pub fn with_sampling(scene: &Scene, effects: &Effects, sampling: EnvironmentSampling) -> Self {
         let radius = bounding_radius(scene);
         let mut lights = Vec::new();
         let mut power = Vec::new();
@@ -94,12 +116,25 @@ impl Lights {
                 add(point, 4.0 * PI * luminance(light.intensity));
             }
         }
+        let mut map_sampler = None;
         if effects.environment
-            && let Some(radiance) = scene.environment
+            && sampling != EnvironmentSampling::Bsdf
+            && let Some(environment) = &scene.environment
         {
             // The power the environment sends through the scene's bounding sphere.
-            let p = luminance(radiance) * PI * 4.0 * PI * radius * radius;
-            add(Light::Environment { radiance }, p);
+            let p = environment.mean_luminance() * PI * 4.0 * PI * radius * radius;
+            if let (Environment::Map(map), EnvironmentSampling::Importance) =
+                (environment, sampling)
+            {
+                map_sampler = MapSampler::new(map);
+            }
+            // A map too faint for its distribution (every weight rounded to zero) is not listed.
+            let sampleable = map_sampler.is_some()
+                || sampling == EnvironmentSampling::Uniform
+                || matches!(environment, Environment::Constant(_));
+            if sampleable {
+                add(Light::Environment, p);
+            }
         }
         let cdf = choice_cdf(&lights, &power);
         let mut triangle_light = vec![u32::MAX; scene.triangles.len()];
@@ -107,7 +142,7 @@ impl Lights {
         for (index, light) in lights.iter().enumerate() {
             match light {
                 Light::Triangle(t) => triangle_light[*t as usize] = index as u32,
-                Light::Environment { .. } => environment_light = Some(index as u32),
+                Light::Environment => environment_light = Some(index as u32),
                 Light::Point { .. } => {}
             }
         }
@@ -115,11 +150,11 @@ impl Lights {
             lights,
             cdf,
             triangle_light,
-            environment_pdf: 0.0,
+            environment_choice: 0.0,
+            map_sampler,
             scene_radius: radius,
         };
-        result.environment_pdf =
-            environment_light.map_or(0.0, |i| result.choice_pdf(i as usize) / (4.0 * PI));
+        result.environment_choice = environment_light.map_or(0.0, |i| result.choice_pdf(i as usize));
         result
     }
 
@@ -205,14 +240,29 @@ impl Lights {
                     delta: true,
                 })
             }
-            Light::Environment { radiance } => {
-                let wi = uniform_sphere(u);
+            Light::Environment => {
+                let environment = scene
+                    .environment
+                    .as_ref()
+                    .expect("the environment is listed only when the scene has one");
+                // The uniform density is written as before maps existed, `choice / 4 pi`, so
+                // that constant environments keep their bits.
+                let (wi, radiance, pdf) = match (&self.map_sampler, environment) {
+                    (Some(sampler), Environment::Map(map)) => {
+                        let sample = sampler.sample(map, u)?;
+                        (sample.wi, sample.radiance, choice * sample.pdf)
+                    }
+                    _ => {
+                        let wi = uniform_sphere(u);
+                        (wi, environment.radiance(wi), choice / (4.0 * PI))
+                    }
+                };
                 Some(LightSample {
                     wi,
                     distance: f32::INFINITY,
                     at: SurfacePoint::exact(Vec3::ZERO),
                     radiance,
-                    pdf: choice / (4.0 * PI),
+                    pdf,
                     delta: false,
                 })
             }
@@ -243,9 +293,17 @@ impl Lights {
         self.choice_pdf(index as usize) * distance_squared / (cos_light * area)
     }
 
-    /// The density with which `sample` would have produced an escaped direction.
-    pub fn environment_pdf(&self) -> f32 {
-        self.environment_pdf
+    /// The density with which `sample` would have produced the escaped direction `dir`.
+    pub fn environment_pdf(&self, scene: &Scene, dir: Vec3) -> f32 {
+        if self.environment_choice == 0.0 {
+            return 0.0;
+        }
+        match (&self.map_sampler, &scene.environment) {
+            (Some(sampler), Some(Environment::Map(map))) => {
+                self.environment_choice * sampler.pdf(map, dir)
+            }
+            _ => self.environment_choice / (4.0 * PI),
+        }
     }
 }
 
@@ -255,7 +313,7 @@ fn choice_cdf(lights: &[Light], power: &[f32]) -> Vec<f32> {
     let kind = |light: &Light| match light {
         Light::Triangle(_) => 0,
         Light::Point { .. } => 1,
-        Light::Environment { .. } => 2,
+        Light::Environment => 2,
     };
     let mut kind_power = [0.0f64; 3];
     for (light, &p) in lights.iter().zip(power) {

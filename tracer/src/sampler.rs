@@ -5,6 +5,11 @@
 //! change a bit. The integrator gives each bounce a fixed block of dimensions
 //! ([`DIMENSIONS_PER_BOUNCE`]) whether or not it uses them all, so turning an effect off (say,
 //! shadow rays) never shifts the numbers the next bounce sees.
+//!
+//! The thin lens's two numbers ([`PixelSampler::lens`]) are camera dimensions too, but they come
+//! from a stream of their own rather than from dimensions 2 and 3: placing them there would have
+//! moved every bounce's block, so every image rendered before the lens existed would have changed
+//! its bits. A pinhole camera never draws them, and its images are the same bits as before.
 
 use glam::Vec2;
 
@@ -48,7 +53,20 @@ impl PixelSampler {
         let x = self.next_1d();
         Vec2::new(x, self.next_1d())
     }
+
+    /// The point on the lens, in [0, 1)^2: a fixed pair of camera dimensions in the lens's own
+    /// stream, the same whenever it is asked for and independent of every other number.
+    pub fn lens(&self) -> Vec2 {
+        let mut lens = PixelSampler {
+            key: mix(self.key ^ LENS_STREAM),
+            dimension: 0,
+        };
+        lens.next_2d()
+    }
 }
+
+/// Tells the lens's stream from the main one (any constant that is not a small integer would do).
+const LENS_STREAM: u64 = 0x1e45_0000_0000_0001;
 
 /// The SplitMix64 finaliser: a bijection on u64 with full avalanche.
 fn mix(mut z: u64) -> u64 {
@@ -98,6 +116,17 @@ mod tests {
         let mean = sum / f64::from(n);
         // Standard error of the mean of U(0,1) over 1e5 draws is 0.0009.
         assert!((mean - 0.5).abs() < 0.005, "mean {mean}");
+    }
+
+    #[test]
+    fn the_lens_stream_is_fixed_and_apart_from_the_main_one() {
+        let s = PixelSampler::new(1, 0, 0, 0, 0);
+        let lens = s.lens();
+        let mut t = s.clone();
+        let main: Vec<f32> = (0..64).map(|_| t.next_1d()).collect();
+        assert_eq!(t.lens(), lens, "drawing other numbers moves nothing in the lens stream");
+        assert!(!main.contains(&lens.x) && !main.contains(&lens.y));
+        assert_ne!(PixelSampler::new(1, 0, 0, 0, 1).lens(), lens);
     }
 
     #[test]

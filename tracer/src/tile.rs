@@ -67,6 +67,9 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
         .camera
         .at(frame)
         .rays(settings.width, settings.height);
+    // A pinhole frame never draws the lens's numbers, so it traces exactly the rays it traced
+    // before lenses existed.
+    let lens = world.effects.depth_of_field && camera.has_lens();
     let (bx0, by0, bw, bh) = rect.blocks();
     let mut blocks = vec![0u64; (bw * bh) as usize];
     let mut pixels = Vec::with_capacity(rect.area() as usize);
@@ -79,7 +82,12 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
             for sample in 0..spp {
                 let mut sampler = PixelSampler::new(settings.seed, frame, x, y, sample);
                 let jitter = sampler.next_2d();
-                let ray = camera.ray(x as f32 + jitter.x, y as f32 + jitter.y);
+                let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
+                let ray = if lens {
+                    camera.ray_through_lens(px, py, sampler.lens())
+                } else {
+                    camera.ray(px, py)
+                };
                 let radiance = world.radiance(ray, &mut sampler, &mut pixel_stats);
                 if radiance.is_finite() {
                     sum += radiance;

@@ -1,9 +1,18 @@
-//! The pinhole camera and its keyframed animation.
+//! The camera, a pinhole or a thin lens, and its keyframed animation.
+//!
+//! The thin lens is pbrt's: a disk of `aperture_radius` around `position`, perpendicular to the
+//! view direction, focused on the plane `focus_distance` ahead. A ray aims at the point of that
+//! plane the pinhole ray through the same image position would reach, from a point of the disk,
+//! so everything on the plane is sharp and a point at distance `d` spreads into a disk of
+//! diameter `2 aperture_radius |d - focus_distance| / d` measured on the focus plane. An aperture
+//! of zero is the pinhole, and traces exactly the pinhole's rays (not a lens of size zero, whose
+//! rounding would differ).
 
 use crate::geometry::Ray;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
+use std::f32::consts::FRAC_PI_4;
 
-/// A pinhole camera.
+/// A pinhole (`aperture_radius` zero) or thin-lens camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     pub position: Vec3,
@@ -11,6 +20,10 @@ pub struct Camera {
     pub up: Vec3,
     /// Vertical field of view in degrees.
     pub vfov_degrees: f32,
+    /// The radius of the lens, in scene units; zero is a pinhole.
+    pub aperture_radius: f32,
+    /// The distance along the view direction of the plane in focus, greater than zero.
+    pub focus_distance: f32,
 }
 
 /// A camera pose at a frame; the track interpolates linearly between keys.
@@ -62,10 +75,17 @@ impl CameraTrack {
             position: a.camera.position.lerp(b.camera.position, s),
             look_at: a.camera.look_at.lerp(b.camera.look_at, s),
             up: a.camera.up.lerp(b.camera.up, s),
-            vfov_degrees: a.camera.vfov_degrees
-                + s * (b.camera.vfov_degrees - a.camera.vfov_degrees),
+            vfov_degrees: lerp(a.camera.vfov_degrees, b.camera.vfov_degrees, s),
+            aperture_radius: lerp(a.camera.aperture_radius, b.camera.aperture_radius, s),
+            focus_distance: lerp(a.camera.focus_distance, b.camera.focus_distance, s),
         }
     }
+}
+
+/// `a` moved a fraction `s` towards `b`; `a` itself at `s` = 0, so a key's own frame shows the
+/// key's own values.
+fn lerp(a: f32, b: f32, s: f32) -> f32 {
+    a + s * (b - a)
 }
 
 /// A camera set up for one image size: generates primary rays.
@@ -77,6 +97,10 @@ pub struct CameraRays {
     down: Vec3,
     width: f32,
     height: f32,
+    /// The lens's axes scaled by its radius (zero for a pinhole).
+    lens_right: Vec3,
+    lens_up: Vec3,
+    focus_distance: f32,
 }
 
 impl Camera {
@@ -93,6 +117,9 @@ impl Camera {
             down: -up * half_height,
             width: width as f32,
             height: height as f32,
+            lens_right: right * self.aperture_radius,
+            lens_up: up * self.aperture_radius,
+            focus_distance: self.focus_distance,
         }
     }
 }
@@ -100,15 +127,57 @@ impl Camera {
 impl CameraRays {
     /// The primary ray through image position (`x`, `y`) in pixels, (0, 0) the top-left corner.
     pub fn ray(&self, x: f32, y: f32) -> Ray {
-        let sx = 2.0 * x / self.width - 1.0;
-        let sy = 2.0 * y / self.height - 1.0;
-        let dir = (self.forward + sx * self.right + sy * self.down).normalize();
         Ray {
             origin: self.origin,
-            dir,
+            dir: self.towards(x, y).normalize(),
             t_max: f32::INFINITY,
         }
     }
+
+    /// Whether rays start across a lens rather than at one point.
+    pub fn has_lens(&self) -> bool {
+        self.lens_right != Vec3::ZERO
+    }
+
+    /// The ray through image position (`x`, `y`) from the point `lens` (in [0, 1)^2, mapped
+    /// onto the disk) of the lens; the pinhole ray when there is no lens.
+    pub fn ray_through_lens(&self, x: f32, y: f32, lens: Vec2) -> Ray {
+        if !self.has_lens() {
+            return self.ray(x, y);
+        }
+        let disk = concentric_disk(lens);
+        let offset = disk.x * self.lens_right + disk.y * self.lens_up;
+        // `towards` has a forward component of one, so this is the focus plane's point.
+        let focus = self.towards(x, y) * self.focus_distance;
+        Ray {
+            origin: self.origin + offset,
+            dir: (focus - offset).normalize(),
+            t_max: f32::INFINITY,
+        }
+    }
+
+    /// The pinhole direction through (`x`, `y`), unnormalised: forward plus the image offset.
+    fn towards(&self, x: f32, y: f32) -> Vec3 {
+        let sx = 2.0 * x / self.width - 1.0;
+        let sy = 2.0 * y / self.height - 1.0;
+        self.forward + sx * self.right + sy * self.down
+    }
+}
+
+/// Shirley and Chiu's concentric map of the unit square onto the unit disk: uniform in area, and
+/// it keeps neighbouring points neighbours (stratification survives).
+fn concentric_disk(u: Vec2) -> Vec2 {
+    let o = 2.0 * u - Vec2::ONE;
+    if o == Vec2::ZERO {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, FRAC_PI_4 * (o.y / o.x))
+    } else {
+        (o.y, 2.0 * FRAC_PI_4 - FRAC_PI_4 * (o.x / o.y))
+    };
+    let (sin, cos) = theta.sin_cos();
+    Vec2::new(r * cos, r * sin)
 }
 
 #[cfg(test)]
@@ -121,6 +190,8 @@ mod tests {
             look_at: Vec3::new(x, 0.0, 1.0),
             up: Vec3::Y,
             vfov_degrees: 40.0,
+            aperture_radius: 0.0,
+            focus_distance: 1.0,
         }
     }
 
@@ -150,5 +221,39 @@ mod tests {
         assert!((top.y.atan2(top.z).to_degrees() - 20.0).abs() < 1e-4);
         // Image x grows to the right of the view: with up +y and forward +z, right is -x.
         assert!(rays.ray(100.0, 25.0).dir.x < 0.0);
+    }
+
+    #[test]
+    fn lens_rays_start_on_the_disk_and_meet_on_the_focus_plane() {
+        let camera = Camera {
+            aperture_radius: 0.5,
+            focus_distance: 3.0,
+            ..cam(0.0)
+        };
+        let rays = camera.rays(100, 50);
+        let pinhole = rays.ray(30.0, 10.0);
+        let on_plane = pinhole.dir * (3.0 / pinhole.dir.z);
+        for lens in [Vec2::new(0.1, 0.9), Vec2::new(0.7, 0.2), Vec2::new(0.5, 0.5)] {
+            let ray = rays.ray_through_lens(30.0, 10.0, lens);
+            assert!(ray.origin.z == 0.0 && ray.origin.length() <= 0.5 + 1e-6);
+            let t = (3.0 - ray.origin.z) / ray.dir.z;
+            let hit = ray.origin + ray.dir * t;
+            assert!((hit - on_plane).length() < 1e-5, "{lens}: {hit} vs {on_plane}");
+        }
+        // The map fills the disk uniformly: a quarter of the area lies within half the radius.
+        let n = 64;
+        let inner = (0..n * n)
+            .filter(|i| {
+                let u = Vec2::new((i % n) as f32 + 0.5, (i / n) as f32 + 0.5) / n as f32;
+                concentric_disk(u).length() < 0.5
+            })
+            .count();
+        assert!((inner as f32 / (n * n) as f32 - 0.25).abs() < 0.01, "{inner}");
+        let pinhole_camera = cam(0.0).rays(100, 50);
+        assert!(!pinhole_camera.has_lens());
+        assert_eq!(
+            pinhole_camera.ray_through_lens(30.0, 10.0, Vec2::new(0.1, 0.9)).dir,
+            pinhole.dir
+        );
     }
 }

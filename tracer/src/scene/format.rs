@@ -27,7 +27,7 @@ pub(crate) struct SceneSpec {
     pub materials: BTreeMap<Spanned<String>, MaterialSpec>,
     #[serde(default, rename = "light")]
     pub lights: Vec<LightSpec>,
-    pub environment: Option<EnvironmentSpec>,
+    pub environment: Option<Spanned<EnvironmentSpec>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -65,6 +65,8 @@ pub(crate) struct CameraSpec {
     pub look_at: Option<Point>,
     pub up: Option<Point>,
     pub vfov: Option<Fov>,
+    pub aperture_radius: Option<NonNegative>,
+    pub focus_distance: Option<Positive>,
     #[serde(default)]
     pub keys: Vec<Spanned<CameraKeySpec>>,
 }
@@ -79,6 +81,8 @@ pub(crate) struct CameraKeySpec {
     pub look_at: Option<Point>,
     pub up: Option<Point>,
     pub vfov: Option<Fov>,
+    pub aperture_radius: Option<NonNegative>,
+    pub focus_distance: Option<Positive>,
 }
 
 /// The pose keys of `[camera]` or of one of its keys; missing ones are `None`.
@@ -88,6 +92,8 @@ pub(crate) struct Pose {
     pub look_at: Option<Point>,
     pub up: Option<Point>,
     pub vfov: Option<Fov>,
+    pub aperture_radius: Option<NonNegative>,
+    pub focus_distance: Option<Positive>,
 }
 
 impl Pose {
@@ -98,6 +104,8 @@ impl Pose {
             look_at: self.look_at.or(fallback.look_at),
             up: self.up.or(fallback.up),
             vfov: self.vfov.or(fallback.vfov),
+            aperture_radius: self.aperture_radius.or(fallback.aperture_radius),
+            focus_distance: self.focus_distance.or(fallback.focus_distance),
         }
     }
 }
@@ -109,6 +117,8 @@ impl CameraSpec {
             look_at: self.look_at,
             up: self.up,
             vfov: self.vfov,
+            aperture_radius: self.aperture_radius,
+            focus_distance: self.focus_distance,
         }
     }
 }
@@ -120,6 +130,8 @@ impl CameraKeySpec {
             look_at: self.look_at,
             up: self.up,
             vfov: self.vfov,
+            aperture_radius: self.aperture_radius,
+            focus_distance: self.focus_distance,
         }
     }
 }
@@ -197,10 +209,15 @@ pub(crate) enum LightKind {
     Point,
 }
 
+/// `[environment]`: a constant `radiance`, or a `map` with its `scale` and `rotate`. Which keys
+/// go together is checked by the loader.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct EnvironmentSpec {
-    pub radiance: Radiance,
+    pub radiance: Option<Radiance>,
+    pub map: Option<Spanned<String>>,
+    pub scale: Option<Radiance>,
+    pub rotate: Option<Finite>,
 }
 
 /// Parses a scene file; errors name `file`, the line and the key path.
@@ -265,6 +282,9 @@ pub(crate) struct Finite(pub f32);
 /// A finite number greater than 0.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Positive(pub f32);
+/// A finite number of at least 0.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct NonNegative(pub f32);
 /// A number in [0, 0.5).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Fraction(pub f32);
@@ -322,6 +342,11 @@ checked_type!(Positive, f32, |v| in_range(
     v,
     |v| v > 0.0,
     "must be greater than 0"
+));
+checked_type!(NonNegative, f32, |v| in_range(
+    v,
+    |v| v >= 0.0,
+    "must not be negative"
 ));
 checked_type!(Fraction, f32, |v| in_range(
     v,

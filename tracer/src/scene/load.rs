@@ -12,6 +12,7 @@ use super::materials::MaterialTable;
 use super::obj::{self, NO_MATERIAL};
 use super::shapes::{Transform, given_keys, shape_triangles};
 use super::{Camera, CameraKey, CameraTrack, PointLight, RenderSettings, Scene, Triangle};
+use crate::environment::{Environment, EnvironmentMap, decode_exr};
 use glam::Vec3;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -102,6 +103,7 @@ pub fn load_with_report(
     if let Some(unused) = builder.table.unused_definition() {
         return Err(unused);
     }
+    let environment = environment(&mut builder.log, &toml, text, spec.environment.as_ref())?;
     let Builder {
         log,
         table,
@@ -116,7 +118,7 @@ pub fn load_with_report(
         materials: table.materials,
         textures: table.textures,
         point_lights: spec.lights.iter().map(point_light).collect(),
-        environment: spec.environment.map(|e| e.radiance.0),
+        environment,
         files: log.into_read(),
     };
     Ok((scene, report))
@@ -360,12 +362,64 @@ fn camera(file: &str, line: usize, pose: format::Pose) -> Result<Camera, SceneEr
         return Err(err("`up` is zero or parallel to the view direction"));
     }
     let vfov_degrees = pose.vfov.map_or(40.0, |v| v.0);
+    // In focus by default at the point looked at, as photographers aim.
+    let focus_distance = pose.focus_distance.map_or(forward.length(), |f| f.0);
+    if !focus_distance.is_finite() {
+        return Err(err("the distance from `position` to `look_at` overflows 32-bit floats"));
+    }
     Ok(Camera {
         position,
         look_at,
         up,
         vfov_degrees,
+        aperture_radius: pose.aperture_radius.map_or(0.0, |a| a.0),
+        focus_distance,
     })
+}
+
+/// The environment of `[environment]`: a constant radiance, or a map read through `log` (so it is
+/// among the scene's files and ships to peers) and multiplied by its scale.
+fn environment(
+    log: &mut FileLog,
+    file: &str,
+    text: &str,
+    spec: Option<&Spanned<format::EnvironmentSpec>>,
+) -> Result<Option<Environment>, SceneError> {
+    let Some(spanned) = spec else {
+        return Ok(None);
+    };
+    let e = spanned.get_ref();
+    let line = line_of(text, spanned.span().start);
+    let err = |detail: &str| SceneError::at_line(file, line, format!("[environment]: {detail}"));
+    let map = match (&e.radiance, &e.map) {
+        (Some(radiance), None) => {
+            if e.scale.is_some() || e.rotate.is_some() {
+                return Err(err("`scale` and `rotate` apply to a `map` only"));
+            }
+            return Ok(Some(Environment::Constant(radiance.0)));
+        }
+        (None, Some(map)) => map,
+        (Some(_), Some(_)) => return Err(err("give `radiance` or `map`, not both")),
+        (None, None) => return Err(err("needs `radiance = ...` or `map = \"file.exr\"`")),
+    };
+    let at = (file, line_of(text, map.span().start));
+    let (resolved, bytes) = log.read(Some(at), map.get_ref())?;
+    let (width, height, mut texels) =
+        decode_exr(&bytes).map_err(|detail| SceneError::in_file(&resolved, detail))?;
+    if width == 0 || height == 0 {
+        return Err(SceneError::in_file(&resolved, "the image has no texels"));
+    }
+    if let Some(scale) = e.scale {
+        for t in &mut texels {
+            *t *= scale.0;
+        }
+        if texels.iter().any(|t| !t.is_finite()) {
+            return Err(err("`scale` times the map overflows 32-bit floats"));
+        }
+    }
+    let rotate = e.rotate.map_or(0.0, |r| r.0);
+    let map = EnvironmentMap::new(width, height, texels, rotate);
+    Ok(Some(Environment::Map(map)))
 }
 
 fn point_light(l: &format::LightSpec) -> PointLight {

@@ -22,6 +22,7 @@ pub use files::{DiskFiles, MemoryFiles, SceneFiles, normalize};
 pub use load::{LoadReport, ObjectReport, load, load_from, load_str, load_with_report};
 pub use texture::Texture;
 
+use crate::environment::Environment;
 use crate::material::Material;
 use glam::{Vec2, Vec3};
 
@@ -35,8 +36,8 @@ pub struct Scene {
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub point_lights: Vec<PointLight>,
-    /// Constant radiance arriving from every direction that escapes the scene, if any.
-    pub environment: Option<Vec3>,
+    /// The radiance arriving along directions that escape the scene (constant or a map), if any.
+    pub environment: Option<Environment>,
     /// Every file the scene was read from (the TOML first), relative to the TOML's folder, so a
     /// frame owner can ship the scene to peers that share no filesystem with it.
     pub files: Vec<String>,

@@ -1,0 +1,282 @@
+//! What arrives from outside the scene: a constant radiance, or an HDR lat-long map, and how the
+//! map is importance-sampled.
+//!
+//! The map is equirectangular about the world's +y axis: row 0 (the top) looks straight up, the
+//! bottom row straight down, and along a row the azimuth turns from -z (the left edge) through
+//! +x (three quarters across) with the centre column looking along +z, before `rotate` turns the
+//! whole map right-handedly about +y. Texels are looked up nearest, not filtered, so the radiance
+//! is piecewise constant over the (u, v) cells, exactly like the distribution that samples it:
+//! cells are chosen by luminance times sin(theta) (the solid angle a cell covers shrinks towards
+//! the poles), so the estimate's variance comes from colour and from sin(theta) varying within a
+//! cell only. The density in solid angle is the (u, v) density over `2 pi^2 sin(theta)`.
+
+use crate::distribution::Distribution2D;
+use crate::lights::luminance;
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// Radiance arriving along every direction that escapes the scene.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Environment {
+    /// The same radiance from everywhere.
+    Constant(Vec3),
+    /// An HDR lat-long image.
+    Map(EnvironmentMap),
+}
+
+/// A lat-long environment map, already multiplied by its scale.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvironmentMap {
+    pub width: u32,
+    pub height: u32,
+    /// Linear RGB radiance, row-major, top row (+y) first; finite and non-negative.
+    pub texels: Vec<Vec3>,
+    /// The turn of the map about +y, as (sin, cos) of its angle.
+    pub rotation: (f32, f32),
+}
+
+impl Environment {
+    /// The radiance arriving along the unit direction `dir` (pointing away from the scene).
+    pub fn radiance(&self, dir: Vec3) -> Vec3 {
+        match self {
+            Environment::Constant(radiance) => *radiance,
+            Environment::Map(map) => map.radiance(dir),
+        }
+    }
+
+    /// Whether nothing at all arrives (then the environment is no effect of the scene's).
+    pub fn is_black(&self) -> bool {
+        match self {
+            Environment::Constant(radiance) => *radiance == Vec3::ZERO,
+            Environment::Map(map) => map.texels.iter().all(|&t| t == Vec3::ZERO),
+        }
+    }
+
+    /// The luminance of the radiance averaged over all directions.
+    pub fn mean_luminance(&self) -> f32 {
+        match self {
+            Environment::Constant(radiance) => luminance(*radiance),
+            Environment::Map(map) => map.mean_luminance(),
+        }
+    }
+}
+
+impl EnvironmentMap {
+    /// A map of `width` x `height` texels (row-major, top first) turned by `rotate_degrees`
+    /// about +y.
+    pub fn new(width: u32, height: u32, texels: Vec<Vec3>, rotate_degrees: f32) -> Self {
+        assert_eq!(
+            texels.len(),
+            width as usize * height as usize,
+            "texel count must match the size"
+        );
+        Self {
+            width,
+            height,
+            texels,
+            rotation: rotate_degrees.to_radians().sin_cos(),
+        }
+    }
+
+    /// The radiance along world direction `dir`.
+    pub fn radiance(&self, dir: Vec3) -> Vec3 {
+        self.texel(self.to_uv(dir))
+    }
+
+    fn texel(&self, uv: Vec2) -> Vec3 {
+        let x = ((uv.x * self.width as f32) as u32).min(self.width - 1);
+        let y = ((uv.y * self.height as f32) as u32).min(self.height - 1);
+        self.texels[(y * self.width + x) as usize]
+    }
+
+    /// The map coordinates of world direction `dir`, each in [0, 1].
+    pub fn to_uv(&self, dir: Vec3) -> Vec2 {
+        let (sin, cos) = self.rotation;
+        // Undo the map's turn: world to map space.
+        let x = dir.x * cos - dir.z * sin;
+        let z = dir.x * sin + dir.z * cos;
+        let theta = dir.y.clamp(-1.0, 1.0).acos();
+        let phi = x.atan2(z);
+        Vec2::new(0.5 + phi * (0.5 / PI), theta * (1.0 / PI))
+    }
+
+    /// The world direction at map coordinates `uv`, with sin(theta) (for the density).
+    pub fn direction(&self, uv: Vec2) -> (Vec3, f32) {
+        let theta = PI * uv.y;
+        let phi = 2.0 * PI * (uv.x - 0.5);
+        let (sin_theta, cos_theta) = theta.sin_cos();
+        let (sin_phi, cos_phi) = phi.sin_cos();
+        let (x, z) = (sin_theta * sin_phi, sin_theta * cos_phi);
+        let (sin, cos) = self.rotation;
+        let dir = Vec3::new(x * cos + z * sin, cos_theta, z * cos - x * sin);
+        (dir, sin_theta)
+    }
+
+    /// Each texel's luminance times the sine of its row's centre: the weights of the sampling
+    /// distribution, proportional to each texel's share of the arriving power.
+    fn weights(&self) -> Vec<f32> {
+        let h = self.height as f32;
+        self.texels
+            .chunks(self.width as usize)
+            .enumerate()
+            .flat_map(|(row, texels)| {
+                let sin_theta = (PI * (row as f32 + 0.5) / h).sin();
+                texels.iter().map(move |&t| luminance(t) * sin_theta)
+            })
+            .collect()
+    }
+
+    /// The luminance averaged over the sphere: each row weighted by the exact solid angle of
+    /// its band, `2 pi (cos theta_top - cos theta_bottom)`.
+    fn mean_luminance(&self) -> f32 {
+        let h = f64::from(self.height);
+        let mut sum = 0.0f64;
+        for (row, texels) in self.texels.chunks(self.width as usize).enumerate() {
+            let top = (std::f64::consts::PI * row as f64 / h).cos();
+            let bottom = (std::f64::consts::PI * (row + 1) as f64 / h).cos();
+            let row_sum: f64 = texels.iter().map(|&t| f64::from(luminance(t))).sum();
+            sum += row_sum / f64::from(self.width) * 0.5 * (top - bottom);
+        }
+        sum as f32
+    }
+}
+
+/// A sampled direction towards the environment.
+#[derive(Clone, Copy, Debug)]
+pub struct EnvironmentSample {
+    pub wi: Vec3,
+    pub radiance: Vec3,
+    /// Density in solid angle (not including the choice of the environment among lights).
+    pub pdf: f32,
+}
+
+/// Importance sampling of a map: its texels by luminance times sin(theta).
+#[derive(Clone, Debug)]
+pub struct MapSampler {
+    distribution: Distribution2D,
+}
+
+impl MapSampler {
+    /// `None` when the map is black everywhere (nothing to sample).
+    pub fn new(map: &EnvironmentMap) -> Option<Self> {
+        let distribution = Distribution2D::new(&map.weights(), map.width as usize)?;
+        Some(Self { distribution })
+    }
+
+    /// A direction for `u` in [0, 1)^2; `None` at a pole, where the density is infinite.
+    pub fn sample(&self, map: &EnvironmentMap, u: Vec2) -> Option<EnvironmentSample> {
+        let (uv, pdf_uv) = self.distribution.sample(u);
+        let (wi, sin_theta) = map.direction(uv);
+        if sin_theta <= 0.0 || pdf_uv <= 0.0 {
+            return None;
+        }
+        Some(EnvironmentSample {
+            wi,
+            radiance: map.texel(uv),
+            pdf: pdf_uv / (2.0 * PI * PI * sin_theta),
+        })
+    }
+
+    /// The solid-angle density with which [`MapSampler::sample`] produces `dir`.
+    pub fn pdf(&self, map: &EnvironmentMap, dir: Vec3) -> f32 {
+        let uv = map.to_uv(dir);
+        let sin_theta = (1.0 - dir.y * dir.y).max(0.0).sqrt();
+        if sin_theta <= 0.0 {
+            return 0.0;
+        }
+        self.distribution.pdf(uv) / (2.0 * PI * PI * sin_theta)
+    }
+}
+
+/// The largest map the loader accepts, in texels (16384 x 8192): 1.5 GB of radiance, so that a
+/// corrupt or hostile header cannot ask for unbounded memory.
+pub const MAX_MAP_TEXELS: u64 = 1 << 27;
+
+/// Decodes an OpenEXR image (its first layer with R, G and B channels, any sample type) into
+/// linear RGB texels, row-major, top first. The error is said in words.
+pub fn decode_exr(bytes: &[u8]) -> Result<(u32, u32, Vec<Vec3>), String> {
+    use exr::prelude::*;
+    let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
+        .map_err(|e| format!("not a readable OpenEXR image: {e}"))?;
+    for header in &meta.headers {
+        let size = header.layer_size;
+        if size.area() as u64 > MAX_MAP_TEXELS {
+            return Err(format!(
+                "{}x{} texels is more than the {MAX_MAP_TEXELS} an environment map may have",
+                size.width(),
+                size.height()
+            ));
+        }
+    }
+    // Decoded on this thread: loading never spawns work of its own.
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgb_channels(
+            |resolution, _| {
+                (
+                    resolution.width(),
+                    vec![Vec3::ZERO; resolution.width() * resolution.height()],
+                )
+            },
+            |(width, texels): &mut (usize, Vec<Vec3>), position, (r, g, b): (f32, f32, f32)| {
+                texels[position.y() * *width + position.x()] = Vec3::new(r, g, b);
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .non_parallel()
+        .from_buffered(std::io::Cursor::new(bytes))
+        .map_err(|e| format!("not a readable OpenEXR RGB image: {e}"))?;
+    let size = image.layer_data.size;
+    let (_, texels) = image.layer_data.channel_data.pixels;
+    if let Some(i) = texels
+        .iter()
+        .position(|t| !t.is_finite() || t.cmplt(Vec3::ZERO).any())
+    {
+        return Err(format!(
+            "texel ({}, {}) is {} (radiance must be finite and not negative)",
+            i % size.width(),
+            i / size.width(),
+            texels[i]
+        ));
+    }
+    Ok((size.width() as u32, size.height() as u32, texels))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn directions_and_map_coordinates_invert_each_other_under_rotation() {
+        for rotate in [0.0, 37.0, -90.0, 180.0] {
+            let map = EnvironmentMap::new(1, 1, vec![Vec3::ONE], rotate);
+            for uv in [
+                Vec2::new(0.1, 0.2),
+                Vec2::new(0.5, 0.5),
+                Vec2::new(0.9, 0.7),
+            ] {
+                let (dir, sin_theta) = map.direction(uv);
+                assert!((dir.length() - 1.0).abs() < 1e-6);
+                assert!((sin_theta - (1.0 - dir.y * dir.y).sqrt()).abs() < 1e-6);
+                let back = map.to_uv(dir);
+                assert!((back - uv).abs().max_element() < 1e-5, "{rotate}: {uv} {back}");
+            }
+        }
+        // The documented orientation: centre column +z, three quarters +x, top row +y; a turn of
+        // 90 degrees brings the centre to +x.
+        let map = EnvironmentMap::new(1, 1, vec![Vec3::ONE], 0.0);
+        assert!((map.direction(Vec2::new(0.5, 0.5)).0 - Vec3::Z).length() < 1e-6);
+        assert!((map.direction(Vec2::new(0.75, 0.5)).0 - Vec3::X).length() < 1e-6);
+        assert!((map.direction(Vec2::new(0.5, 0.0)).0 - Vec3::Y).length() < 1e-6);
+        let turned = EnvironmentMap::new(1, 1, vec![Vec3::ONE], 90.0);
+        assert!((turned.direction(Vec2::new(0.5, 0.5)).0 - Vec3::X).length() < 1e-6);
+    }
+
+    #[test]
+    fn a_constant_map_has_the_constant_mean() {
+        let map = EnvironmentMap::new(7, 5, vec![Vec3::splat(2.0); 35], 0.0);
+        assert!((Environment::Map(map).mean_luminance() - 2.0).abs() < 1e-5);
+    }
+}
