@@ -95,7 +95,8 @@ impl EnvironmentMap {
         // Undo the map's turn: world to map space.
         let x = dir.x * cos - dir.z * sin;
         let z = dir.x * sin + dir.z * cos;
-        let theta = dir.y.clamp(-1.0, 1.0).acos();
+        // atan2 rather than acos: it keeps its precision near the poles.
+        let theta = sin_theta(dir).atan2(dir.y);
         let phi = x.atan2(z);
         Vec2::new(0.5 + phi * (0.5 / PI), theta * (1.0 / PI))
     }
@@ -141,6 +142,12 @@ impl EnvironmentMap {
     }
 }
 
+/// The sine of the angle between `dir` and +y, from the components across the axis: near the
+/// poles `sqrt(1 - y^2)` would cancel away most of its digits.
+fn sin_theta(dir: Vec3) -> f32 {
+    (dir.x * dir.x + dir.z * dir.z).sqrt()
+}
+
 /// A sampled direction towards the environment.
 #[derive(Clone, Copy, Debug)]
 pub struct EnvironmentSample {
@@ -180,7 +187,7 @@ impl MapSampler {
     /// The solid-angle density with which [`MapSampler::sample`] produces `dir`.
     pub fn pdf(&self, map: &EnvironmentMap, dir: Vec3) -> f32 {
         let uv = map.to_uv(dir);
-        let sin_theta = (1.0 - dir.y * dir.y).max(0.0).sqrt();
+        let sin_theta = sin_theta(dir);
         if sin_theta <= 0.0 {
             return 0.0;
         }

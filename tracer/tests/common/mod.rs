@@ -1,0 +1,116 @@
+//! Helpers shared by the tests of image-based lighting and depth of field: rendering a scene
+//! whole, in either effect mode, and the image's mean with its standard error.
+
+#![allow(dead_code)]
+
+use glam::Vec3;
+use tracer::lights::EnvironmentSampling;
+use tracer::scene::{MemoryFiles, Scene};
+use tracer::{Effects, PathStats, Rect, TileOutput, World};
+
+/// Renders frame `frame` of `scene` whole with `effects` (`None`: the scene's own) and the
+/// environment sampled as `sampling` says; no sample may come out NaN or infinite.
+pub fn render_with(
+    scene: &Scene,
+    effects: Option<Effects>,
+    frame: u32,
+    sampling: EnvironmentSampling,
+) -> TileOutput {
+    let world = World::prepare(scene.clone(), effects).with_environment_sampling(sampling);
+    let (w, h) = (scene.settings.width, scene.settings.height);
+    let out = tracer::render_tile(&world, frame, Rect { x: 0, y: 0, w, h });
+    assert_eq!(out.stats.invalid_samples, 0, "a sample was NaN or infinite");
+    out
+}
+
+pub fn render(scene: &Scene, effects: Option<Effects>, frame: u32) -> TileOutput {
+    render_with(scene, effects, frame, EnvironmentSampling::default())
+}
+
+/// Renders `scene` specialised and with every effect on, asserts the same bits, and returns the
+/// specialised render and the forced one's counters.
+pub fn assert_same_bits(what: &str, scene: &Scene, frame: u32) -> (TileOutput, PathStats) {
+    let auto = render(scene, None, frame);
+    let all = render(scene, Some(Effects::ALL), frame);
+    let bits = |o: &TileOutput| -> Vec<u32> {
+        o.pixels.iter().flatten().map(|c| c.to_bits()).collect()
+    };
+    let differing = bits(&auto)
+        .iter()
+        .zip(bits(&all))
+        .filter(|(a, b)| **a != *b)
+        .count();
+    assert_eq!(
+        differing,
+        0,
+        "{what}: {differing} channels differ between effects {} and all",
+        Effects::of(scene)
+    );
+    assert!(
+        auto.pixels.iter().flatten().any(|&c| c > 0.0),
+        "{what}: a black image proves little"
+    );
+    (auto, all.stats)
+}
+
+/// Per-channel mean of an image and its standard error (pixels are independent).
+pub fn mean_and_error(out: &TileOutput) -> (Vec3, Vec3) {
+    let n = out.pixels.len() as f64;
+    let mut sum = [0.0f64; 3];
+    let mut sum_sq = [0.0f64; 3];
+    for p in &out.pixels {
+        for c in 0..3 {
+            sum[c] += f64::from(p[c]);
+            sum_sq[c] += f64::from(p[c]).powi(2);
+        }
+    }
+    let mean = sum.map(|s| s / n);
+    let se: [f64; 3] =
+        std::array::from_fn(|c| ((sum_sq[c] / n - mean[c].powi(2)).max(0.0) / n).sqrt());
+    (
+        Vec3::from_array(mean.map(|m| m as f32)),
+        Vec3::from_array(se.map(|s| s as f32)),
+    )
+}
+
+/// Asserts `mean` lies within four standard errors (plus a relative `slack`) of `expected` in
+/// every channel.
+pub fn assert_close(what: &str, (mean, se): (Vec3, Vec3), expected: Vec3, slack: f32) {
+    for c in 0..3 {
+        let tolerance = 4.0 * se[c] + slack * expected[c].abs() + 1e-6;
+        assert!(
+            (mean[c] - expected[c]).abs() <= tolerance,
+            "{what}: channel {c} mean {} expected {} (se {}, tolerance {tolerance})",
+            mean[c],
+            expected[c],
+            se[c]
+        );
+    }
+}
+
+/// An OpenEXR file of `width` x `height` float RGB texels, `texel(x, y)` each, row 0 the top,
+/// written by the exr crate into memory.
+pub fn exr_bytes(width: usize, height: usize, texel: impl Fn(usize, usize) -> [f32; 3] + Sync) -> Vec<u8> {
+    use exr::prelude::*;
+    let channels = SpecificChannels::rgb(|p: Vec2<usize>| {
+        let [r, g, b] = texel(p.x(), p.y());
+        (r, g, b)
+    });
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    Image::from_channels((width, height), channels)
+        .write()
+        .non_parallel()
+        .to_buffered(&mut bytes)
+        .expect("the EXR encodes");
+    bytes.into_inner()
+}
+
+/// Loads `toml` as `scene.toml` beside the given files.
+pub fn load_with(toml: &str, files: &[(&str, Vec<u8>)]) -> Result<Scene, tracer::SceneError> {
+    let mut set = MemoryFiles::new();
+    set.insert("scene.toml", toml);
+    for (name, bytes) in files {
+        set.insert(name, bytes.clone());
+    }
+    tracer::scene::load_from(&set, "scene.toml")
+}
