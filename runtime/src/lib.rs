@@ -6,6 +6,9 @@
 //! - [`net`]: the QUIC transport that moves encoded messages between peers (mutual TLS,
 //!   certificates).
 //! - [`node`]: the driver: the owner and peer roles, the in-process cluster, rendering on rayon.
+//! - [`slurm`]: a SLURM task's place in its step (rank, owner host, port) from its environment,
+//!   with SLURM's compressed host lists expanded; pure, no I/O.
 
 pub mod net;
 pub mod node;
+pub mod slurm;
