@@ -57,10 +57,15 @@ pub struct FrameReport {
     /// What the balancer's update after this frame did (PBT leaves split and merged).
     pub splits: usize,
     pub merges: usize,
-    /// Bytes of the tile results that reached the owner (every result, duplicates included).
+    /// Bytes of the tile results that reached the owner over the network (every result,
+    /// duplicates included; not the owner's own).
     pub result_bytes: u64,
-    /// Seconds the owner's control loop spent on the frame's deals and results.
+    /// Seconds the owner's control loop spent on the frame's deals and remote results.
     pub owner_busy: f64,
+    /// Bytes of one result per tile of the frame, wherever rendered: `S` of the owner-link limit.
+    pub frame_result_bytes: u64,
+    /// The owner's seconds to deal every tile and receive one result per tile.
+    pub frame_owner_time: f64,
 }
 
 /// One run: its configuration, its frames and its totals.
@@ -97,8 +102,8 @@ pub struct RunReport {
     /// over frames. Beyond this many peers the owner's downlink, not rendering, sets the pace.
     /// `None` on unlimited links.
     pub owner_link_limit: Option<f64>,
-    /// The owner-CPU limit: T1 over the owner's control-loop seconds per frame. `None` for a
-    /// free owner.
+    /// The owner-CPU limit: T1 over the owner's control-loop seconds to deal and receive a whole
+    /// frame. `None` for a free owner.
     pub owner_cpu_limit: Option<f64>,
     pub frames: Vec<FrameReport>,
     /// The frame the scenario asked to draw, and every render of it.
@@ -132,8 +137,8 @@ impl RunReport {
         let idle_time = sum(&|f| f.idle_fraction * f.participants as f64 * slots * f.makespan);
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 1.0 };
         let one_peer = work / slots;
-        let result_bytes = frames.iter().map(|f| f.result_bytes).sum::<u64>() as f64;
-        let owner_busy = sum(&|f| f.owner_busy);
+        let result_bytes = frames.iter().map(|f| f.frame_result_bytes).sum::<u64>() as f64;
+        let owner_busy = sum(&|f| f.frame_owner_time);
         let owner_link_limit = scenario
             .network
             .bandwidth

@@ -229,6 +229,10 @@ struct Plan {
     largest: f64,
     splits: usize,
     merges: usize,
+    /// Bytes of one result per tile, as the wire encodes them, wherever they are rendered.
+    results: u64,
+    /// The owner's control-loop seconds to deal every tile and receive one result per tile.
+    owner_time: f64,
 }
 
 /// Simulates `scenario` on `trace`, the owner cutting frames with `partitioner` (which must
@@ -289,6 +293,7 @@ pub fn run(
     let mut steps = 0u64;
     let policy = Policy::of(&partitioner, &scenario.core);
     let first_tiles = partitioner.tiles().len();
+    let block = trace.header.block_size;
     let config = director::Config {
         frames,
         ..director::Config::default()
@@ -324,6 +329,15 @@ pub fn run(
                 * seconds_per_unit,
             splits: 0,
             merges: 0,
+            results: deal.tiles.iter().map(|t| result_bytes(t.rect, block)).sum(),
+            owner_time: deal
+                .tiles
+                .iter()
+                .map(|t| {
+                    (scenario.owner.result(t.rect.area()) + scenario.owner.per_dealt_tile)
+                        .as_secs_f64()
+                })
+                .sum(),
         };
         if scenario.keep_assignments {
             let dealt = deal
@@ -412,6 +426,19 @@ pub fn run(
     Ok(report)
 }
 
+/// The encoded size of a tile result covering `rect`, with its pixels and a cost map of `block`
+/// pixels a side: the real encoder, counting (the zeroed buffers are never touched).
+fn result_bytes(rect: balancer::Rect, block: u32) -> u64 {
+    let result = runtime_core::wire::TileResult {
+        frame: runtime_core::wire::FrameId(0),
+        tile: runtime_core::wire::TileId(0),
+        rect,
+        pixels: vec![0; (rect.area() * runtime_core::wire::BYTES_PER_PIXEL) as usize],
+        costs: vec![0; runtime_core::wire::cost_map_bytes(rect, block) as usize],
+    };
+    runtime_core::wire::encoded_len(&runtime_core::wire::Message::TileDone(result)) as u64
+}
+
 /// Hands the owner core's events since the last call to the director.
 fn feed(director: &mut Director, cluster: &mut Cluster<SimWorld>) -> Result<(), Error> {
     let now = cluster.now();
@@ -466,5 +493,7 @@ fn frame_report(frame: u64, plan: &Plan, world: &SimWorld, slots: usize) -> Fram
         merges: plan.merges,
         result_bytes: tally.result_bytes,
         owner_busy: tally.owner_busy,
+        frame_result_bytes: plan.results,
+        frame_owner_time: plan.owner_time,
     }
 }
