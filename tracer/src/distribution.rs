@@ -104,7 +104,7 @@ impl Distribution2D {
     /// The distribution proportional to `func`, `width` values per row, rows top first; `None`
     /// when the function is zero everywhere or has a negative or non-finite value.
     pub fn new(func: &[f32], width: usize) -> Option<Self> {
-        if width == 0 || func.is_empty() || func.len() % width != 0 {
+        if width == 0 || func.is_empty() || !func.len().is_multiple_of(width) {
             return None;
         }
         if func.iter().any(|f| !f.is_finite() || *f < 0.0) {
@@ -215,7 +215,11 @@ mod tests {
             let mut s = PixelSampler::new(11, 0, i, 0, 0);
             let (p, pdf) = d.sample(s.next_2d());
             let cell = ((p.y * h as f32) as usize) * w + (p.x * w as f32) as usize;
-            assert_eq!(pdf, d.pdf(p), "the reported density is the density at the point");
+            assert_eq!(
+                pdf,
+                d.pdf(p),
+                "the reported density is the density at the point"
+            );
             assert!(pdf > 0.0 && func[cell] > 0.0, "sampled a zero cell");
             counts[cell] += 1;
         }
@@ -237,7 +241,10 @@ mod tests {
             chi2 += (f64::from(count) - expected).powi(2) / expected;
             cells += 1;
         }
-        assert!((total_probability - 1.0).abs() < 1e-5, "{total_probability}");
+        assert!(
+            (total_probability - 1.0).abs() < 1e-5,
+            "{total_probability}"
+        );
         let limit = cells as f64 + 7.0 * (2.0 * cells as f64).sqrt();
         assert!(chi2 < limit, "chi-square {chi2} over {cells} cells");
     }

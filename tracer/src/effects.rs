@@ -105,8 +105,7 @@ impl Effects {
         let area_lights = scene.emissive_triangles().next().is_some();
         let point_lights = scene.point_lights.iter().any(|l| l.intensity != Vec3::ZERO);
         let environment = scene.environment.as_ref().is_some_and(|e| !e.is_black());
-        let environment_map =
-            environment && matches!(scene.environment, Some(Environment::Map(_)));
+        let environment_map = environment && matches!(scene.environment, Some(Environment::Map(_)));
         let depth_of_field = scene
             .camera
             .keys()

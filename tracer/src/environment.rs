@@ -268,7 +268,10 @@ mod tests {
                 assert!((dir.length() - 1.0).abs() < 1e-6);
                 assert!((sin_theta - (1.0 - dir.y * dir.y).sqrt()).abs() < 1e-6);
                 let back = map.to_uv(dir);
-                assert!((back - uv).abs().max_element() < 1e-5, "{rotate}: {uv} {back}");
+                assert!(
+                    (back - uv).abs().max_element() < 1e-5,
+                    "{rotate}: {uv} {back}"
+                );
             }
         }
         // The documented orientation: centre column +z, three quarters +x, top row +y; a turn of

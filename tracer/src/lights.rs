@@ -154,7 +154,8 @@ impl Lights {
             map_sampler,
             scene_radius: radius,
         };
-        result.environment_choice = environment_light.map_or(0.0, |i| result.choice_pdf(i as usize));
+        result.environment_choice =
+            environment_light.map_or(0.0, |i| result.choice_pdf(i as usize));
         result
     }
 

@@ -124,7 +124,11 @@ mod tests {
         let lens = s.lens();
         let mut t = s.clone();
         let main: Vec<f32> = (0..64).map(|_| t.next_1d()).collect();
-        assert_eq!(t.lens(), lens, "drawing other numbers moves nothing in the lens stream");
+        assert_eq!(
+            t.lens(),
+            lens,
+            "drawing other numbers moves nothing in the lens stream"
+        );
         assert!(!main.contains(&lens.x) && !main.contains(&lens.y));
         assert_ne!(PixelSampler::new(1, 0, 0, 0, 1).lens(), lens);
     }

@@ -19,7 +19,10 @@ fn moments(pixels: &[[f32; 3]], width: u32) -> (f64, (f64, f64), f64) {
     let (mut sx, mut sy) = (0.0f64, 0.0f64);
     for (i, p) in pixels.iter().enumerate() {
         let value = f64::from(p[1]);
-        let (x, y) = ((i as u32 % width) as f64 + 0.5, (i as u32 / width) as f64 + 0.5);
+        let (x, y) = (
+            (i as u32 % width) as f64 + 0.5,
+            (i as u32 / width) as f64 + 0.5,
+        );
         total += value;
         sx += value * x;
         sy += value * y;
@@ -27,7 +30,10 @@ fn moments(pixels: &[[f32; 3]], width: u32) -> (f64, (f64, f64), f64) {
     let centre = (sx / total, sy / total);
     let mut second = 0.0f64;
     for (i, p) in pixels.iter().enumerate() {
-        let (x, y) = ((i as u32 % width) as f64 + 0.5, (i as u32 / width) as f64 + 0.5);
+        let (x, y) = (
+            (i as u32 % width) as f64 + 0.5,
+            (i as u32 / width) as f64 + 0.5,
+        );
         second += f64::from(p[1]) * ((x - centre.0).powi(2) + (y - centre.1).powi(2));
     }
     (total, centre, second / total)
@@ -40,7 +46,10 @@ fn extent(pixels: &[[f32; 3]], width: u32, centre: (f64, f64)) -> f64 {
         .enumerate()
         .filter(|(_, p)| p[1] > 0.0)
         .map(|(i, _)| {
-            let (x, y) = ((i as u32 % width) as f64 + 0.5, (i as u32 / width) as f64 + 0.5);
+            let (x, y) = (
+                (i as u32 % width) as f64 + 0.5,
+                (i as u32 / width) as f64 + 0.5,
+            );
             ((x - centre.0).powi(2) + (y - centre.1).powi(2)).sqrt()
         })
         .fold(0.0, f64::max)
@@ -85,7 +94,10 @@ fn a_defocused_emitter_spreads_into_the_thin_lens_circle_of_confusion() {
         );
         // The blur keeps the image centred and spends no light: the lens only moves rays.
         for (a, b) in [(centre.0, pinhole_centre.0), (centre.1, pinhole_centre.1)] {
-            assert!((a - b).abs() < 0.25, "d {d}: centre {centre:?} vs {pinhole_centre:?}");
+            assert!(
+                (a - b).abs() < 0.25,
+                "d {d}: centre {centre:?} vs {pinhole_centre:?}"
+            );
         }
         // About 7,000 samples hit the emitter: 1.2 % of noise in the flux, 4 sigma allowed.
         assert!(
@@ -150,7 +162,10 @@ fn aperture_zero_is_the_pinhole_to_the_bit_and_lenses_animate_by_keys() {
     ));
     assert!(!Effects::of(&closed).depth_of_field);
     let reference = render(&pinhole, None, 0);
-    assert_eq!(bits(&render(&closed, None, 0).pixels), bits(&reference.pixels));
+    assert_eq!(
+        bits(&render(&closed, None, 0).pixels),
+        bits(&reference.pixels)
+    );
     assert_eq!(
         bits(&render(&closed, Some(Effects::ALL), 0).pixels),
         bits(&reference.pixels),
@@ -158,11 +173,9 @@ fn aperture_zero_is_the_pinhole_to_the_bit_and_lenses_animate_by_keys() {
     );
 
     // The lens opens from a pinhole at frame 0 to radius 0.3 at frame 8, focusing nearer.
-    let opening = lit(
-        "[camera]\nposition = [0, 1.5, -5]\nlook_at = [0, 0.5, 0]\n\
+    let opening = lit("[camera]\nposition = [0, 1.5, -5]\nlook_at = [0, 0.5, 0]\n\
          [[camera.keys]]\nframe = 0\naperture_radius = 0\n\
-         [[camera.keys]]\nframe = 8\naperture_radius = 0.3\nfocus_distance = 4\n",
-    );
+         [[camera.keys]]\nframe = 8\naperture_radius = 0.3\nfocus_distance = 4\n");
     assert!(Effects::of(&opening).depth_of_field);
     let camera = opening.camera.at(4);
     // Unless a key says otherwise, it focuses on the point looked at.
@@ -178,13 +191,17 @@ fn aperture_zero_is_the_pinhole_to_the_bit_and_lenses_animate_by_keys() {
     );
     for frame in [4, 8] {
         let (out, _) = assert_same_bits(&format!("opening lens, frame {frame}"), &opening, frame);
-        assert_ne!(bits(&out.pixels), bits(&render(&pinhole, None, frame).pixels));
+        assert_ne!(
+            bits(&out.pixels),
+            bits(&render(&pinhole, None, frame).pixels)
+        );
     }
 }
 
 #[test]
 fn lens_keys_are_checked_and_default_to_focus_on_the_point_looked_at() {
-    let base = "[[object]]\nshape = \"sphere\"\nmaterial = \"m\"\n[materials.m]\ntype = \"diffuse\"\n";
+    let base =
+        "[[object]]\nshape = \"sphere\"\nmaterial = \"m\"\n[materials.m]\ntype = \"diffuse\"\n";
     let scene = tracer::scene::load_str(&format!(
         "[camera]\nposition = [0, 0, -5]\nlook_at = [0, 0, 0]\naperture_radius = 0.1\n{base}"
     ))

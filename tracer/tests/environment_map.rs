@@ -53,8 +53,8 @@ fn the_importance_sampler_density_integrates_to_one_and_matches_its_samples() {
     for y in 0..h {
         let band = (PI * y as f64 / h as f64).cos() - (PI * (y + 1) as f64 / h as f64).cos();
         for x in 0..w {
-            exact += f64::from(luminance(Vec3::from_array(texel(x, y)))) * 2.0 * PI / w as f64
-                * band;
+            exact +=
+                f64::from(luminance(Vec3::from_array(texel(x, y)))) * 2.0 * PI / w as f64 * band;
         }
     }
     let n = 400_000u32;
@@ -78,7 +78,10 @@ fn the_importance_sampler_density_integrates_to_one_and_matches_its_samples() {
     }
     let n = f64::from(n);
     let integral = density_mean / n * 4.0 * PI;
-    assert!((integral - 1.0).abs() < 0.02, "density integrates to {integral}");
+    assert!(
+        (integral - 1.0).abs() < 0.02,
+        "density integrates to {integral}"
+    );
     let mean = estimate / n;
     let se = ((estimate_sq / n - mean * mean).max(0.0) / n).sqrt();
     assert!(
@@ -89,7 +92,10 @@ fn the_importance_sampler_density_integrates_to_one_and_matches_its_samples() {
     // sin(theta) within a cell, far less than the map does.
     assert!(se < 0.01 * exact, "se {se} of {exact}");
     // A direction found again by its map coordinates lands in the same cell but at cell borders.
-    assert!(f64::from(disagreeing) < 1e-3 * n, "{disagreeing} densities disagree");
+    assert!(
+        f64::from(disagreeing) < 1e-3 * n,
+        "{disagreeing} densities disagree"
+    );
 }
 
 #[test]
@@ -173,7 +179,12 @@ fn direct_light_from_a_map_matches_the_integral_over_its_cells_by_every_sampling
             let scene = load_with(&toml, &[("sky.exr", exr.clone())]).expect("scene loads");
             let out = render_with(&scene, None, 0, sampling);
             let result = mean_and_error(&out);
-            assert_close(&format!("{sampling:?}, rotate {rotate}"), result, expected, 0.0);
+            assert_close(
+                &format!("{sampling:?}, rotate {rotate}"),
+                result,
+                expected,
+                0.0,
+            );
             if rotate == 0.0 {
                 errors.push((sampling, result.1.x * (spp as f32).sqrt()));
             }
@@ -203,10 +214,18 @@ fn a_constant_map_renders_like_the_constant_environment_and_keeps_the_white_furn
         let (a, a_se) = mean_and_error(&render_with(&constant, None, 0, Default::default()));
         let (b, b_se) = mean_and_error(&render_with(&map, None, 0, Default::default()));
         let se = (a_se * a_se + b_se * b_se).x.sqrt();
-        assert!((a.x - b.x).abs() < 4.0 * se + 1e-6, "albedo {albedo}: {a} vs {b}");
+        assert!(
+            (a.x - b.x).abs() < 4.0 * se + 1e-6,
+            "albedo {albedo}: {a} vs {b}"
+        );
         if albedo == 1.0 {
             // The white furnace: a white diffuse sphere vanishes into a uniform environment.
-            assert_close("white furnace under a map", (b, b_se), Vec3::splat(0.8), 0.0);
+            assert_close(
+                "white furnace under a map",
+                (b, b_se),
+                Vec3::splat(0.8),
+                0.0,
+            );
         }
     }
 }
@@ -239,17 +258,27 @@ fn scenes_with_a_map_render_the_same_bits_specialised_or_forced() {
         )
     };
     let files = [("sky.exr", exr), ("black.exr", black)];
-    let lit = load_with(&toml("map = \"sky.exr\"\nrotate = 30\nscale = [1, 0.5, 2]"), &files)
-        .expect("scene loads");
+    let lit = load_with(
+        &toml("map = \"sky.exr\"\nrotate = 30\nscale = [1, 0.5, 2]"),
+        &files,
+    )
+    .expect("scene loads");
     let effects = Effects::of(&lit);
     assert!(effects.environment && effects.environment_map, "{effects}");
-    assert_eq!(lit.files, ["scene.toml", "sky.exr"], "the map ships with the scene");
+    assert_eq!(
+        lit.files,
+        ["scene.toml", "sky.exr"],
+        "the map ships with the scene"
+    );
     let (auto, _) = assert_same_bits("map", &lit, 0);
     assert!(auto.stats.environment_lookups > 0);
     // A black map is no environment: nothing looked up specialised, the same bits forced.
     let dark = load_with(&toml("map = \"black.exr\""), &files).expect("scene loads");
     let effects = Effects::of(&dark);
-    assert!(!effects.environment && !effects.environment_map, "{effects}");
+    assert!(
+        !effects.environment && !effects.environment_map,
+        "{effects}"
+    );
     let (auto, all) = assert_same_bits("black map", &dark, 0);
     assert_eq!(auto.stats.environment_lookups, 0);
     assert!(all.environment_lookups > 0);
@@ -272,14 +301,30 @@ fn bad_maps_are_errors_that_name_the_file_and_line() {
         ("text.exr", b"not an image".to_vec()),
     ];
     for (environment, file, words) in [
-        ("map = \"missing.exr\"", "missing.exr", "cannot read missing.exr (referenced at scene.toml:8)"),
+        (
+            "map = \"missing.exr\"",
+            "missing.exr",
+            "cannot read missing.exr (referenced at scene.toml:8)",
+        ),
         ("map = \"text.exr\"", "text.exr", "not a readable OpenEXR"),
         ("map = \"nan.exr\"", "nan.exr", "texel (3, 0)"),
         ("map = \"good.exr\"\nradiance = 1", "scene.toml", "not both"),
-        ("radiance = 1\nrotate = 3", "scene.toml", "apply to a `map` only"),
+        (
+            "radiance = 1\nrotate = 3",
+            "scene.toml",
+            "apply to a `map` only",
+        ),
         ("scale = 2", "scene.toml", "needs `radiance"),
-        ("map = \"good.exr\"\nscale = -1", "scene.toml", "must not be negative"),
-        ("map = \"/etc/sky.exr\"", "scene.toml", "not a relative path"),
+        (
+            "map = \"good.exr\"\nscale = -1",
+            "scene.toml",
+            "must not be negative",
+        ),
+        (
+            "map = \"/etc/sky.exr\"",
+            "scene.toml",
+            "not a relative path",
+        ),
     ] {
         let error = load_with(&toml(environment), &files).expect_err(environment);
         let message = error.to_string();

@@ -233,12 +233,19 @@ mod tests {
         let rays = camera.rays(100, 50);
         let pinhole = rays.ray(30.0, 10.0);
         let on_plane = pinhole.dir * (3.0 / pinhole.dir.z);
-        for lens in [Vec2::new(0.1, 0.9), Vec2::new(0.7, 0.2), Vec2::new(0.5, 0.5)] {
+        for lens in [
+            Vec2::new(0.1, 0.9),
+            Vec2::new(0.7, 0.2),
+            Vec2::new(0.5, 0.5),
+        ] {
             let ray = rays.ray_through_lens(30.0, 10.0, lens);
             assert!(ray.origin.z == 0.0 && ray.origin.length() <= 0.5 + 1e-6);
             let t = (3.0 - ray.origin.z) / ray.dir.z;
             let hit = ray.origin + ray.dir * t;
-            assert!((hit - on_plane).length() < 1e-5, "{lens}: {hit} vs {on_plane}");
+            assert!(
+                (hit - on_plane).length() < 1e-5,
+                "{lens}: {hit} vs {on_plane}"
+            );
         }
         // The map fills the disk uniformly: a quarter of the area lies within half the radius.
         let n = 64;
@@ -248,11 +255,16 @@ mod tests {
                 concentric_disk(u).length() < 0.5
             })
             .count();
-        assert!((inner as f32 / (n * n) as f32 - 0.25).abs() < 0.01, "{inner}");
+        assert!(
+            (inner as f32 / (n * n) as f32 - 0.25).abs() < 0.01,
+            "{inner}"
+        );
         let pinhole_camera = cam(0.0).rays(100, 50);
         assert!(!pinhole_camera.has_lens());
         assert_eq!(
-            pinhole_camera.ray_through_lens(30.0, 10.0, Vec2::new(0.1, 0.9)).dir,
+            pinhole_camera
+                .ray_through_lens(30.0, 10.0, Vec2::new(0.1, 0.9))
+                .dir,
             pinhole.dir
         );
     }

@@ -365,7 +365,9 @@ fn camera(file: &str, line: usize, pose: format::Pose) -> Result<Camera, SceneEr
     // In focus by default at the point looked at, as photographers aim.
     let focus_distance = pose.focus_distance.map_or(forward.length(), |f| f.0);
     if !focus_distance.is_finite() {
-        return Err(err("the distance from `position` to `look_at` overflows 32-bit floats"));
+        return Err(err(
+            "the distance from `position` to `look_at` overflows 32-bit floats",
+        ));
     }
     Ok(Camera {
         position,

@@ -32,9 +32,8 @@ pub fn render(scene: &Scene, effects: Option<Effects>, frame: u32) -> TileOutput
 pub fn assert_same_bits(what: &str, scene: &Scene, frame: u32) -> (TileOutput, PathStats) {
     let auto = render(scene, None, frame);
     let all = render(scene, Some(Effects::ALL), frame);
-    let bits = |o: &TileOutput| -> Vec<u32> {
-        o.pixels.iter().flatten().map(|c| c.to_bits()).collect()
-    };
+    let bits =
+        |o: &TileOutput| -> Vec<u32> { o.pixels.iter().flatten().map(|c| c.to_bits()).collect() };
     let differing = bits(&auto)
         .iter()
         .zip(bits(&all))
@@ -90,7 +89,11 @@ pub fn assert_close(what: &str, (mean, se): (Vec3, Vec3), expected: Vec3, slack:
 
 /// An OpenEXR file of `width` x `height` float RGB texels, `texel(x, y)` each, row 0 the top,
 /// written by the exr crate into memory.
-pub fn exr_bytes(width: usize, height: usize, texel: impl Fn(usize, usize) -> [f32; 3] + Sync) -> Vec<u8> {
+pub fn exr_bytes(
+    width: usize,
+    height: usize,
+    texel: impl Fn(usize, usize) -> [f32; 3] + Sync,
+) -> Vec<u8> {
     use exr::prelude::*;
     let channels = SpecificChannels::rgb(|p: Vec2<usize>| {
         let [r, g, b] = texel(p.x(), p.y());
