@@ -19,6 +19,10 @@ pub enum Command {
     Serve(ServeArgs),
     /// Join a render served by `tessera serve`, and render until it is over.
     Peer(PeerArgs),
+    /// Run one task of a SLURM step (`srun tessera slurm ...`): task 0 serves, the others join
+    /// it; rank, task count, owner node, port and threads (`SLURM_CPUS_PER_TASK`) come from
+    /// SLURM's environment.
+    Slurm(SlurmArgs),
     /// Make a cluster certificate authority and peer certificates for `serve` and `peer`.
     Keygen(KeygenArgs),
     /// Compare two OpenEXR images (B is the reference): RMSE, relative MSE, FLIP, ...
@@ -74,6 +78,29 @@ pub struct PeerArgs {
     /// The address to listen on for other peers (default: any port on all interfaces).
     #[arg(long, default_value = "0.0.0.0:0")]
     pub listen: std::net::SocketAddr,
+}
+
+/// Every task of a step runs the same command line: the render flags take effect on task 0,
+/// which ships them to the others with the scene.
+#[derive(Debug, clap::Args)]
+pub struct SlurmArgs {
+    #[command(flatten)]
+    pub job: FrameArgs,
+    /// The job's `tessera keygen` folder on the shared file system, with a certificate for
+    /// every task (`--peers` at least the task count): task K uses `peer-K`.
+    #[arg(long)]
+    pub certs: PathBuf,
+    /// The owner's port (default: 20000 + job id mod 20000, the same in every task).
+    #[arg(long)]
+    pub port: Option<u16>,
+    /// The owner's host name, where task 0 is not on the step's first node (e.g. with
+    /// `--distribution=arbitrary`) or the node's SLURM name is not its host name.
+    #[arg(long)]
+    pub owner: Option<String>,
+    /// Seconds a peer keeps knocking while the owner is not yet listening (it loads the scene
+    /// first); each try waits for the transport's 10 s handshake timeout.
+    #[arg(long, default_value_t = 120.0)]
+    pub join_timeout: f64,
 }
 
 #[derive(Debug, clap::Args)]

@@ -1,10 +1,14 @@
-//! `tessera keygen` and `tessera peer`: the two commands of a real cluster besides `serve`.
+//! `tessera keygen`, `tessera peer` and `tessera slurm`: the commands of a real cluster
+//! besides `serve`.
 
-use crate::cli::{KeygenArgs, PeerArgs};
+use crate::cli::{KeygenArgs, PeerArgs, ServeArgs, SlurmArgs};
 use anyhow::Context;
 use runtime::net::{ClusterCerts, PeerIdentity};
 use runtime::node;
+use runtime::slurm::{self, Role};
+use std::net::{Ipv4Addr, SocketAddr, ToSocketAddrs};
 use std::path::Path;
+use std::time::{Duration, Instant};
 
 pub fn keygen(args: &KeygenArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
@@ -28,26 +32,143 @@ pub fn peer(args: &PeerArgs) -> anyhow::Result<()> {
         Some(index) => index,
         None => only_peer_index(&args.certs)?,
     };
+    // A plain peer is started by hand after the owner: one try, as it always was.
+    join(
+        args.join,
+        args.listen,
+        &args.certs,
+        index,
+        args.threads,
+        Duration::ZERO,
+    )
+}
+
+/// `tessera slurm`: one task of a SLURM step. Rank 0 is `tessera serve` listening on every
+/// interface for the other tasks; rank K is `tessera peer --index K` dialing rank 0's node.
+/// Where each stands comes from the environment, read by `runtime::slurm`.
+pub fn slurm(mut args: SlurmArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.port != Some(0),
+        "--port 0: every task must know the owner's port; give a fixed one or leave it to the \
+         job id"
+    );
+    anyhow::ensure!(
+        args.join_timeout.is_finite() && args.join_timeout >= 0.0,
+        "--join-timeout {}: must be a number of seconds, 0 or more",
+        args.join_timeout
+    );
+    // Variables that are not Unicode are none of SLURM's, which writes ASCII.
+    let env: slurm::Env = std::env::vars_os()
+        .filter_map(|(k, v)| Some((k.into_string().ok()?, v.into_string().ok()?)))
+        .collect();
+    let overrides = slurm::Overrides {
+        owner: args.owner.clone(),
+        port: args.port,
+    };
+    let step = slurm::Step::from_env(&env, &overrides)?;
+    let threads = args.job.threads.or(step.cpus_per_task);
+    match step.role() {
+        Role::Owner { peers } => {
+            let most = node::Options::default().net.max_connections;
+            anyhow::ensure!(
+                peers <= most,
+                "the step has {} tasks: an owner accepts at most {most} peers",
+                step.tasks
+            );
+            tracing::info!(
+                "SLURM task 0 of {}: owning the frames on {}, port {}",
+                step.tasks,
+                step.owner,
+                step.port
+            );
+            args.job.threads = threads;
+            crate::render::serve(&ServeArgs {
+                job: args.job,
+                listen: SocketAddr::from((Ipv4Addr::UNSPECIFIED, step.port)),
+                certs: args.certs,
+                expect: peers,
+            })
+        }
+        Role::Peer { index } => {
+            let owner = owner_address(&step.owner, step.port)?;
+            tracing::info!(
+                "SLURM task {index} of {}: joining {} ({owner})",
+                step.tasks,
+                step.owner
+            );
+            let listen = SocketAddr::from((Ipv4Addr::UNSPECIFIED, 0));
+            let patience = Duration::from_secs_f64(args.join_timeout);
+            join(owner, listen, &args.certs, index, threads, patience)
+        }
+    }
+}
+
+/// The owner's IPv4 address: it listens on 0.0.0.0, and a peer's endpoint, bound the same way,
+/// can only dial IPv4.
+fn owner_address(host: &str, port: u16) -> anyhow::Result<SocketAddr> {
+    let addresses: Vec<SocketAddr> = (host, port)
+        .to_socket_addrs()
+        .with_context(|| {
+            format!(
+                "cannot resolve the owner's host {host:?}; name a host peers can reach with --owner"
+            )
+        })?
+        .collect();
+    addresses
+        .iter()
+        .find(|a| a.is_ipv4())
+        .copied()
+        .with_context(|| {
+            format!("the owner's host {host:?} has no IPv4 address ({addresses:?}); name another with --owner")
+        })
+}
+
+/// Joins the owner at `owner` as peer `index` and renders until the render is over. While
+/// nobody answers and `patience` lasts, it tries again: tasks started together find an owner
+/// still loading its scene. A refusal ends it at once.
+fn join(
+    owner: SocketAddr,
+    listen: SocketAddr,
+    certs: &Path,
+    index: u32,
+    threads: Option<usize>,
+    patience: Duration,
+) -> anyhow::Result<()> {
     anyhow::ensure!(
         index >= 1,
         "peer 0 is the frame owner's certificate; peers use 1 and up"
     );
-    let identity = PeerIdentity::load(&args.certs, index).with_context(|| {
+    let identity = PeerIdentity::load(certs, index).with_context(|| {
         format!(
             "loading peer {index}'s certificate from {}",
-            args.certs.display()
+            certs.display()
         )
     })?;
-    let threads = args
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let threads =
+        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let options = node::Options {
         threads,
         ..node::Options::default()
     };
     let tokio = crate::render::tokio_runtime()?;
-    tracing::info!("peer {index} joining {} with {threads} threads", args.join);
-    let tiles = tokio.block_on(node::run_peer(args.join, args.listen, &identity, options))?;
+    tracing::info!("peer {index} joining {owner} with {threads} threads");
+    let started = Instant::now();
+    let tiles = loop {
+        match tokio.block_on(node::run_peer(owner, listen, &identity, options.clone())) {
+            Err(error) if slurm::nobody_answered(&error) && started.elapsed() < patience => {
+                tracing::info!("nobody answers at {owner} yet: trying again");
+            }
+            Err(error) if slurm::nobody_answered(&error) => {
+                return Err(error).with_context(|| {
+                    format!(
+                        "nobody answered at {owner} within {:.0} s: is the owner running there?",
+                        patience.as_secs_f64()
+                    )
+                });
+            }
+            result => break result?,
+        }
+    };
     println!(
         "peer {index}: rendered {} tiles; the render is over",
         tiles.len()

@@ -3,7 +3,7 @@
 //! - `cli`: the argument definitions (clap); `--help` is generated from their doc comments.
 //! - `render`: `tessera render` (peers in this process) and `tessera serve` (the frame owner of a
 //!   cluster of processes): frames balanced by the PBT or a grid, stolen between peers.
-//! - `cluster`: `tessera keygen` and `tessera peer`.
+//! - `cluster`: `tessera keygen`, `tessera peer` and `tessera slurm` (one task of a SLURM step).
 //! - `report`: progress on a terminal, log lines elsewhere, the stats JSON and the tile-map PNGs.
 //! - `compare`: `tessera compare`, the error metrics of one image against another.
 //! - `accuracy`: `tessera accuracy`, what accuracy costs in time, as a table and a plot.
@@ -52,6 +52,7 @@ fn run() -> anyhow::Result<()> {
         cli::Command::Render(args) => render::run(&args),
         cli::Command::Serve(args) => render::serve(&args),
         cli::Command::Peer(args) => cluster::peer(&args),
+        cli::Command::Slurm(args) => cluster::slurm(args),
         cli::Command::Keygen(args) => cluster::keygen(&args),
         cli::Command::Compare(args) => compare::run(&args),
         cli::Command::Accuracy(args) => accuracy::run(&args),

@@ -1,0 +1,243 @@
+//! `tessera slurm` as srun would run it: one process per task, each told its place by the
+//! SLURM_* variables srun sets, here scripted, on loopback. No SLURM is installed; what is
+//! tested is everything after srun has started the tasks.
+
+mod common;
+
+use common::{frames, repo, run_ok, tessera};
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+const SCENE: &str = "scenes/glass-cluster-pan/glass-cluster-pan.toml";
+const SIZE: [&str; 8] = [
+    "--width", "96", "--height", "80", "--spp", "8", "--frames", "6",
+];
+
+/// The step's node list: task 0's node first (the block layout), then two that are never dialed.
+const NODES: &str = "localhost,node-b[1-2]";
+
+/// A job id whose derived port (20000 + id mod 20000) is free for UDP right now.
+fn job_with_free_port() -> u64 {
+    let start = std::process::id() as u64 % 20000;
+    (0..20000)
+        .map(|i| (start + i) % 20000)
+        .find(|offset| std::net::UdpSocket::bind(("0.0.0.0", 20000 + *offset as u16)).is_ok())
+        .map(|offset| 1_000_000 + offset) // 1_000_000 is a multiple of 20000.
+        .expect("some port in 20000..40000 is free")
+}
+
+/// `tessera slurm` as task `rank` of a `tasks`-task step of job `job`, with every SLURM
+/// variable of the machine running the tests removed first.
+fn task(certs: &Path, out: &Path, job: u64, rank: u32, tasks: u32) -> Command {
+    let mut command = slurm_command();
+    command
+        .arg(repo(SCENE))
+        .args(SIZE)
+        .args(["--threads", "1", "--tiles", "64", "--certs"])
+        .arg(certs)
+        .arg("--out")
+        .arg(out)
+        .envs([
+            ("SLURM_JOB_ID", job.to_string()),
+            ("SLURM_PROCID", rank.to_string()),
+            ("SLURM_STEP_NUM_TASKS", tasks.to_string()),
+            ("SLURM_STEP_NODELIST", NODES.to_string()),
+            ("SLURMD_NODENAME", "localhost".to_string()),
+        ])
+        .env("NO_COLOR", "1")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null());
+    command
+}
+
+fn slurm_command() -> Command {
+    let mut command = tessera();
+    command.arg("slurm");
+    for (name, _) in std::env::vars_os() {
+        if name.to_string_lossy().starts_with("SLURM") {
+            command.env_remove(name);
+        }
+    }
+    command
+}
+
+/// Spawns `command` with its stderr lines sent to the returned channel.
+fn spawn_reading(command: &mut Command) -> (Child, mpsc::Receiver<String>) {
+    let mut child = command.stderr(Stdio::piped()).spawn().unwrap();
+    let (lines, receiver) = mpsc::channel();
+    let stderr = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if lines.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    (child, receiver)
+}
+
+fn wait_for(lines: &mpsc::Receiver<String>, needle: &str, timeout: Duration) -> bool {
+    let deadline = Instant::now() + timeout;
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match lines.recv_timeout(left) {
+            Ok(line) if line.contains(needle) => return true,
+            Ok(_) => {}
+            Err(_) => return false,
+        }
+    }
+    false
+}
+
+fn wait_success(mut child: Child, what: &str, timeout: Duration) {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            assert!(status.success(), "{what} failed: {status}");
+            return;
+        }
+        if Instant::now() > deadline {
+            child.kill().ok();
+            panic!("{what} did not finish within {timeout:?}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn keygen(dir: &Path, peers: u32) {
+    run_ok(
+        tessera()
+            .args(["keygen", "--peers", &peers.to_string(), "--out"])
+            .arg(dir),
+    );
+}
+
+fn failure(command: &mut Command) -> String {
+    let Output { status, stderr, .. } = command.stderr(Stdio::piped()).output().unwrap();
+    assert!(!status.success(), "{command:?} succeeded");
+    String::from_utf8_lossy(&stderr).into_owned()
+}
+
+/// Three tasks, ranks 0..3, the peers started first: they knock until the owner listens (as
+/// when task 0 is slow to load its scene), then all three render, and the frames are the
+/// bytes one peer alone renders.
+#[test]
+fn a_three_task_step_renders_what_one_peer_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    keygen(&certs, 3);
+    let job = job_with_free_port();
+    let out = dir.path().join("step");
+    let (first, lines) = spawn_reading(&mut task(&certs, &out, job, 1, 3));
+    let second = task(&certs, &out, job, 2, 3).spawn().unwrap();
+    // The first try of a peer gives up after the transport's 10 s handshake timeout.
+    assert!(
+        wait_for(&lines, "trying again", Duration::from_secs(40)),
+        "a peer that found nobody listening did not try again"
+    );
+    let owner = task(&certs, &out, job, 0, 3).spawn().unwrap();
+    wait_success(owner, "task 0", Duration::from_secs(180));
+    wait_success(first, "task 1", Duration::from_secs(30));
+    wait_success(second, "task 2", Duration::from_secs(30));
+
+    let reference = dir.path().join("reference");
+    run_ok(
+        tessera()
+            .arg("render")
+            .arg(repo(SCENE))
+            .args(SIZE)
+            .args(["--peers", "1", "--threads", "1", "--tiles", "64", "--out"])
+            .arg(&reference),
+    );
+    let (got, expected) = (frames(&out), frames(&reference));
+    assert_eq!(got.len(), 6);
+    assert_eq!(got.len(), expected.len());
+    for ((name, a), (_, b)) in got.iter().zip(&expected) {
+        assert!(a == b, "{name} differs from the one-peer render");
+    }
+    // It was a cluster of three: every task rendered tiles.
+    let stats: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    let tiles: Vec<&serde_json::Value> = stats["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|frame| frame["tiles"].as_array().unwrap())
+        .collect();
+    for peer in 0..3 {
+        assert!(
+            tiles.iter().any(|tile| tile["peer"] == peer),
+            "task {peer} rendered no tile"
+        );
+    }
+}
+
+/// Outside SLURM it says what is missing and renders nothing.
+#[test]
+fn outside_slurm_it_refuses_naming_what_is_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let message = failure(
+        slurm_command()
+            .arg(repo(SCENE))
+            .arg("--certs")
+            .arg(dir.path())
+            .arg("--out")
+            .arg(&out),
+    );
+    for name in [
+        "SLURM_PROCID",
+        "SLURM_STEP_NUM_TASKS",
+        "SLURM_STEP_NODELIST",
+        "srun",
+    ] {
+        assert!(message.contains(name), "{message}");
+    }
+    assert!(!out.exists(), "it created {}", out.display());
+}
+
+/// Task 0 on a node that is not the step's first refuses, naming both nodes, instead of
+/// leaving its peers to dial where nobody listens.
+#[test]
+fn task_zero_on_the_wrong_node_refuses() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let message = failure(
+        task(dir.path(), &out, 7, 0, 3)
+            .env("SLURM_STEP_NODELIST", "n[1-3]")
+            .env("SLURMD_NODENAME", "n2"),
+    );
+    assert!(
+        message.contains("n2") && message.contains("n1") && message.contains("--owner"),
+        "{message}"
+    );
+    assert!(!out.exists());
+}
+
+/// A task whose certificate the job's folder lacks (keygen made too few) fails at once,
+/// naming it, rather than waiting for the owner.
+#[test]
+fn a_task_without_its_certificate_fails_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    keygen(&certs, 2);
+    let started = Instant::now();
+    let message = failure(&mut task(&certs, &dir.path().join("out"), 7, 2, 3));
+    assert!(message.contains("peer 2's certificate"), "{message}");
+    assert!(started.elapsed() < Duration::from_secs(5));
+}
+
+/// A malformed node list is refused with the variable and what is wrong with it.
+#[test]
+fn a_malformed_node_list_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let message = failure(
+        task(dir.path(), &dir.path().join("out"), 7, 1, 3).env("SLURM_STEP_NODELIST", "n[1-3"),
+    );
+    assert!(
+        message.contains("SLURM_STEP_NODELIST") && message.contains("never closed"),
+        "{message}"
+    );
+}
