@@ -298,10 +298,18 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             count("roulette"),
             count("bvh"),
             count("traversal"),
-            count("offset")
+            count("offset"),
+            count("environment")
         ],
-        [3, 6, 6, 5, 2, 2]
+        [3, 6, 6, 5, 2, 2, 3]
     );
+    // The furnace has no environment: how it would be sampled changes no bit.
+    for row in rows.iter().filter(|r| r["knob"] == "environment").skip(1) {
+        assert!(
+            row["note"].starts_with("bit-identical"),
+            "environment sampling changed an image without an environment: {row:?}"
+        );
+    }
     for row in rows.iter().filter(|r| r["knob"] == "bvh") {
         assert!(
             row["note"].starts_with("bit-identical"),
@@ -323,6 +331,7 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
         "## BVH",
         "## Traversal",
         "## Spawn offset",
+        "## Environment sampling",
     ] {
         assert!(
             markdown.contains(section),

@@ -13,6 +13,7 @@ use crate::compare::{Metrics, mean_flip};
 use rayon::prelude::*;
 use std::time::Instant;
 use tracer::geometry::{Accel, BuildQuality, OffsetMethod, Traversal};
+use tracer::lights::{EnvironmentSampling, Lights};
 use tracer::output::RgbImage;
 use tracer::scene::RenderSettings;
 use tracer::{Film, Rect, World};
@@ -332,6 +333,36 @@ impl<'a> Bench<'a> {
             rows.push(row);
         }
         self.world.offset = OffsetMethod::default();
+        rows
+    }
+
+    /// The environment sampled by importance, uniformly and not at all (BSDF sampling alone),
+    /// at `spp`. All three are unbiased: the images differ by noise, which is the point; in a
+    /// scene without an environment they are the same bits.
+    pub fn environment_ladder(&mut self, spp: u32) -> Vec<Row> {
+        let settings = RenderSettings {
+            samples_per_pixel: spp,
+            ..self.baseline.clone()
+        };
+        let mut rows = Vec::new();
+        let mut first_image = None;
+        for sampling in EnvironmentSampling::ALL {
+            self.world.lights =
+                Lights::with_sampling(&self.world.scene, &self.world.effects, sampling);
+            let (mut row, image) = self.measure(
+                Knob::Environment,
+                sampling.name().to_owned(),
+                settings.clone(),
+            );
+            match &first_image {
+                None => first_image = Some(image),
+                Some(first) => {
+                    row.note = difference_note(&image, first, "importance sampling's image")
+                }
+            }
+            rows.push(row);
+        }
+        self.world.lights = Lights::new(&self.world.scene, &self.world.effects);
         rows
     }
 

@@ -142,16 +142,20 @@ pub enum Knob {
     Traversal,
     /// Spawn offsets from each hit point's error bound against the fixed 256 ULPs.
     Offset,
+    /// The environment sampled by importance (a map by luminance), uniformly, or by BSDF
+    /// sampling alone (no MIS).
+    Environment,
 }
 
 impl Knob {
-    pub const ALL: [Knob; 6] = [
+    pub const ALL: [Knob; 7] = [
         Knob::Spp,
         Knob::Depth,
         Knob::Roulette,
         Knob::Bvh,
         Knob::Traversal,
         Knob::Offset,
+        Knob::Environment,
     ];
 
     pub fn name(self) -> &'static str {
@@ -162,6 +166,7 @@ impl Knob {
             Knob::Bvh => "bvh",
             Knob::Traversal => "traversal",
             Knob::Offset => "offset",
+            Knob::Environment => "environment",
         }
     }
 }
@@ -266,6 +271,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
                 }
                 bench.offset_ladder(args.knob_spp)
             }
+            Knob::Environment => bench.environment_ladder(args.knob_spp),
         });
     }
     let run = report::Run {

@@ -141,7 +141,7 @@ fn label(row: &Row) -> String {
             .settings
             .russian_roulette_depth
             .map_or("off".to_owned(), |d| format!("rr {d}")),
-        Knob::Bvh | Knob::Traversal | Knob::Offset => row.setting.clone(),
+        Knob::Bvh | Knob::Traversal | Knob::Offset | Knob::Environment => row.setting.clone(),
     }
 }
 
@@ -153,5 +153,6 @@ fn colour(knob: Knob) -> RGBColor {
         Knob::Bvh => RGBColor(255, 127, 14),
         Knob::Traversal => RGBColor(148, 103, 189),
         Knob::Offset => RGBColor(140, 86, 75),
+        Knob::Environment => RGBColor(23, 190, 207),
     }
 }

@@ -349,6 +349,25 @@ pub fn markdown(run: &Run) -> String {
             })
             .collect(),
     );
+    table(
+        format!(
+            "Environment sampling, at {} spp (next-event estimation of the environment: by \
+             importance, uniformly over the sphere, or not at all, leaving it to BSDF sampling)",
+            run.knob_spp
+        ),
+        &format!("environment sampling | {COMMON} | {versus_head} | image"),
+        run.rows_of(Knob::Environment)
+            .map(|r| {
+                format!(
+                    "{} | {} | {} | {}",
+                    r.setting,
+                    common(r),
+                    versus(r),
+                    image(r)
+                )
+            })
+            .collect(),
+    );
     if let Source::Rendered { .. } | Source::Cached = run.reference.source {
         let _ = writeln!(
             md,

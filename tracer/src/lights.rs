@@ -48,6 +48,23 @@ pub enum EnvironmentSampling {
     Bsdf,
 }
 
+impl EnvironmentSampling {
+    pub const ALL: [EnvironmentSampling; 3] = [
+        EnvironmentSampling::Importance,
+        EnvironmentSampling::Uniform,
+        EnvironmentSampling::Bsdf,
+    ];
+
+    /// The name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            EnvironmentSampling::Importance => "importance",
+            EnvironmentSampling::Uniform => "uniform",
+            EnvironmentSampling::Bsdf => "bsdf-only",
+        }
+    }
+}
+
 /// A sampled direction towards a light, as seen from a shading point.
 #[derive(Clone, Copy, Debug)]
 pub struct LightSample {
