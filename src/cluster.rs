@@ -159,11 +159,13 @@ fn join(
                 tracing::info!("nobody answers at {owner} yet: trying again");
             }
             Err(error) if slurm::nobody_answered(&error) => {
+                let waited = if patience.is_zero() {
+                    String::new()
+                } else {
+                    format!(" within {:.0} s", patience.as_secs_f64())
+                };
                 return Err(error).with_context(|| {
-                    format!(
-                        "nobody answered at {owner} within {:.0} s: is the owner running there?",
-                        patience.as_secs_f64()
-                    )
+                    format!("nobody answered at {owner}{waited}: is the owner running there?")
                 });
             }
             result => break result?,
