@@ -52,10 +52,15 @@ pub fn slurm(mut args: SlurmArgs) -> anyhow::Result<()> {
         "--port 0: every task must know the owner's port; give a fixed one or leave it to the \
          job id"
     );
+    let patience = Duration::try_from_secs_f64(args.join_timeout).map_err(|_| {
+        anyhow::anyhow!(
+            "--join-timeout {:?}: must be a number of seconds, 0 or more and not absurdly large",
+            args.join_timeout
+        )
+    })?;
     anyhow::ensure!(
-        args.join_timeout.is_finite() && args.join_timeout >= 0.0,
-        "--join-timeout {}: must be a number of seconds, 0 or more",
-        args.join_timeout
+        args.job.threads != Some(0),
+        "--threads 0: a task needs at least one rendering thread"
     );
     // Variables that are not Unicode are none of SLURM's, which writes ASCII.
     let env: slurm::Env = std::env::vars_os()
@@ -97,7 +102,6 @@ pub fn slurm(mut args: SlurmArgs) -> anyhow::Result<()> {
                 step.owner
             );
             let listen = SocketAddr::from((Ipv4Addr::UNSPECIFIED, 0));
-            let patience = Duration::from_secs_f64(args.join_timeout);
             join(owner, listen, &args.certs, index, threads, patience)
         }
     }
