@@ -162,9 +162,10 @@ pub struct FrameArgs {
     /// How frames are cut into tiles.
     #[arg(long, value_enum, default_value_t = BalancerKind::Pbt)]
     pub balancer: BalancerKind,
-    /// Number of tiles per frame (PBT leaves, or grid cells rounded to a k x k grid).
-    #[arg(long, default_value_t = 256)]
-    pub tiles: usize,
+    /// Number of tiles per frame (PBT leaves, or grid cells rounded to a k x k grid); at most
+    /// one per pixel. Default: the balancer's (256), or one per pixel on smaller images.
+    #[arg(long)]
+    pub tiles: Option<usize>,
     /// How each frame's tiles are dealt to peers before stealing starts.
     #[arg(long, value_enum, default_value_t = DealOrder::Interleaved)]
     pub deal: DealOrder,

@@ -66,10 +66,14 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
 }
 
 /// Refuses, before anything is rendered, settings that cannot work: more tiles than the image
-/// has blocks (the smallest tile) or than one message can assign, tiles whose results cannot fit
+/// has pixels or than one message can assign, tiles whose results cannot fit
 /// in one message, and frame buffers larger than this machine's free memory. Each error names
 /// the flag and the limit; none of these may surface later as a peer failure.
-fn check_limits(args: &FrameArgs, settings: &tracer::scene::RenderSettings) -> anyhow::Result<()> {
+/// Returns the tile count to cut frames into: `--tiles`, or its default for this image.
+fn check_limits(
+    args: &FrameArgs,
+    settings: &tracer::scene::RenderSettings,
+) -> anyhow::Result<usize> {
     let (width, height) = (u64::from(settings.width), u64::from(settings.height));
     // The owner holds the frame's film (12 bytes a pixel) and every result until the frame is
     // assembled (as much again), and writes an EXR and a PNG from the film.
@@ -83,13 +87,16 @@ fn check_limits(args: &FrameArgs, settings: &tracer::scene::RenderSettings) -> a
             available >> 20
         );
     }
-    let block = u64::from(tracer::BLOCK_SIZE);
-    let blocks = width.div_ceil(block) * height.div_ceil(block);
-    let tiles = args.tiles as u64;
+    // Tiles smaller than a cost block work (blocks then carry partial work), so the floor is a
+    // pixel per tile.
+    let pixels = width * height;
+    let tiles = match args.tiles {
+        Some(tiles) => tiles as u64,
+        None => (balancer::Config::default().leaves as u64).min(pixels),
+    };
     anyhow::ensure!(
-        tiles <= blocks,
-        "--tiles {tiles}: the {width}x{height} image has only {blocks} blocks of \
-         {block}x{block} pixels, the smallest tile"
+        tiles <= pixels,
+        "--tiles {tiles}: the {width}x{height} image has only {pixels} pixels"
     );
     let limits = node::Options::default().limits;
     let per_message = limits.max_tiles_per_message as u64;
@@ -108,7 +115,7 @@ fn check_limits(args: &FrameArgs, settings: &tracer::scene::RenderSettings) -> a
          (a result may be at most {} MiB); use more tiles",
         limits.max_message_bytes >> 21
     );
-    Ok(())
+    Ok(tiles as usize)
 }
 
 /// Free memory as the kernel estimates it (`MemAvailable`), where `/proc/meminfo` says.
@@ -129,7 +136,7 @@ fn execute(
 ) -> anyhow::Result<()> {
     let started = Instant::now();
     let scene = load_scene(args)?;
-    check_limits(args, &scene.settings)?;
+    let tiles = check_limits(args, &scene.settings)?;
     let files = node::bundle::scene_files(&args.scene, &scene)?;
     let params = node::bundle::params(&scene, args.effects == EffectsChoice::All);
     let settings = scene.settings.clone();
@@ -138,7 +145,7 @@ fn execute(
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let partitioner = partitioner(
         args.balancer,
-        args.tiles,
+        tiles,
         args.deal,
         settings.width,
         settings.height,

@@ -109,10 +109,9 @@ fn settings_past_the_limits_are_refused_naming_the_flag() {
             .arg(dir.path());
         user_error(&mut command)
     };
-    // 512x512 has 4096 blocks of 8x8.
     let stderr = render(&["--width", "512", "--height", "512", "--tiles", "100000000"]);
     assert!(
-        stderr.contains("--tiles 100000000") && stderr.contains("4096 blocks"),
+        stderr.contains("--tiles 100000000") && stderr.contains("262144 pixels"),
         "{stderr}"
     );
     let stderr = render(&["--width", "4096", "--height", "4096", "--tiles", "100000"]);
