@@ -3,8 +3,7 @@
 
 mod common;
 
-use common::{frames, repo, run_ok, tessera};
-use std::io::{BufRead, BufReader};
+use common::{frames, keygen, repo, run_ok, spawn_reading, tessera, wait_for, wait_success};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
@@ -24,17 +23,10 @@ fn free_port() -> u16 {
         .port()
 }
 
-fn keygen(dir: &Path, peers: u32) {
-    run_ok(
-        tessera()
-            .args(["keygen", "--peers", &peers.to_string(), "--out"])
-            .arg(dir),
-    );
-}
-
 /// Starts `tessera serve`; its stderr lines arrive on the returned channel.
 fn serve(certs: &Path, out: &Path, port: u16, expect: usize) -> (Child, mpsc::Receiver<String>) {
-    let mut child = tessera()
+    let mut command = tessera();
+    command
         .arg("serve")
         .arg(repo(SCENE))
         .args(SIZE)
@@ -57,20 +49,8 @@ fn serve(certs: &Path, out: &Path, port: u16, expect: usize) -> (Child, mpsc::Re
         .arg("--out")
         .arg(out)
         .env("NO_COLOR", "1")
-        .stderr(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
-    let (lines, receiver) = mpsc::channel();
-    let stderr = child.stderr.take().unwrap();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            if lines.send(line).is_err() {
-                break;
-            }
-        }
-    });
-    (child, receiver)
+        .stdout(Stdio::null());
+    spawn_reading(&mut command)
 }
 
 fn peer(certs: &Path, port: u16, index: u32) -> Command {
@@ -88,34 +68,6 @@ fn peer(certs: &Path, port: u16, index: u32) -> Command {
         .stdout(Stdio::null())
         .stderr(Stdio::null());
     command
-}
-
-/// Waits for a log line containing `needle`, up to `timeout`.
-fn wait_for(lines: &mpsc::Receiver<String>, needle: &str, timeout: Duration) -> bool {
-    let deadline = std::time::Instant::now() + timeout;
-    while let Some(left) = deadline.checked_duration_since(std::time::Instant::now()) {
-        match lines.recv_timeout(left) {
-            Ok(line) if line.contains(needle) => return true,
-            Ok(_) => {}
-            Err(_) => return false,
-        }
-    }
-    false
-}
-
-fn wait_success(mut child: Child, timeout: Duration) {
-    let deadline = std::time::Instant::now() + timeout;
-    loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            assert!(status.success(), "process failed: {status}");
-            return;
-        }
-        if std::time::Instant::now() > deadline {
-            child.kill().ok();
-            panic!("process did not finish within {timeout:?}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
 }
 
 /// The same frames rendered by one process alone.
@@ -148,8 +100,8 @@ fn a_peer_killed_mid_render_costs_time_not_tiles() {
     );
     victim.kill().unwrap(); // SIGKILL: no goodbye, no connection close.
     victim.wait().unwrap();
-    wait_success(server, Duration::from_secs(120));
-    wait_success(survivor, Duration::from_secs(30));
+    wait_success(server, "serve", Duration::from_secs(120));
+    wait_success(survivor, "peer 1", Duration::from_secs(30));
     let got = frames(&out);
     let expected = reference(dir.path());
     assert_eq!(got.len(), expected.len());
@@ -189,8 +141,8 @@ fn peers_of_another_cluster_are_refused_and_the_render_goes_on() {
     );
     // A member then joins, and the render completes with it.
     let member = peer(&ours, port, 1).spawn().unwrap();
-    wait_success(server, Duration::from_secs(120));
-    wait_success(member, Duration::from_secs(30));
+    wait_success(server, "serve", Duration::from_secs(120));
+    wait_success(member, "peer 1", Duration::from_secs(30));
     assert_eq!(frames(&out).len(), 6);
 }
 

@@ -4,11 +4,9 @@
 
 mod common;
 
-use common::{frames, repo, run_ok, tessera};
-use std::io::{BufRead, BufReader};
+use common::{frames, keygen, repo, run_ok, spawn_reading, tessera, wait_for, wait_success};
 use std::path::Path;
-use std::process::{Child, Command, Output, Stdio};
-use std::sync::mpsc;
+use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 const SCENE: &str = "scenes/glass-cluster-pan/glass-cluster-pan.toml";
@@ -62,56 +60,6 @@ fn slurm_command() -> Command {
         }
     }
     command
-}
-
-/// Spawns `command` with its stderr lines sent to the returned channel.
-fn spawn_reading(command: &mut Command) -> (Child, mpsc::Receiver<String>) {
-    let mut child = command.stderr(Stdio::piped()).spawn().unwrap();
-    let (lines, receiver) = mpsc::channel();
-    let stderr = child.stderr.take().unwrap();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            if lines.send(line).is_err() {
-                break;
-            }
-        }
-    });
-    (child, receiver)
-}
-
-fn wait_for(lines: &mpsc::Receiver<String>, needle: &str, timeout: Duration) -> bool {
-    let deadline = Instant::now() + timeout;
-    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
-        match lines.recv_timeout(left) {
-            Ok(line) if line.contains(needle) => return true,
-            Ok(_) => {}
-            Err(_) => return false,
-        }
-    }
-    false
-}
-
-fn wait_success(mut child: Child, what: &str, timeout: Duration) {
-    let deadline = Instant::now() + timeout;
-    loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            assert!(status.success(), "{what} failed: {status}");
-            return;
-        }
-        if Instant::now() > deadline {
-            child.kill().ok();
-            panic!("{what} did not finish within {timeout:?}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-}
-
-fn keygen(dir: &Path, peers: u32) {
-    run_ok(
-        tessera()
-            .args(["keygen", "--peers", &peers.to_string(), "--out"])
-            .arg(dir),
-    );
 }
 
 fn failure(command: &mut Command) -> String {

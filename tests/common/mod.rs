@@ -2,8 +2,11 @@
 
 #![allow(dead_code)]
 
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
 
 pub fn tessera() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tessera"))
@@ -52,4 +55,57 @@ pub fn pixels(path: &Path) -> Vec<[f32; 3]> {
 pub fn shared_scenes() -> Option<PathBuf> {
     let dir = repo("../shared/scenes");
     dir.is_dir().then_some(dir)
+}
+
+/// A cluster CA and certificates for `peers` peers in `dir` (`tessera keygen`).
+pub fn keygen(dir: &Path, peers: u32) {
+    run_ok(
+        tessera()
+            .args(["keygen", "--peers", &peers.to_string(), "--out"])
+            .arg(dir),
+    );
+}
+
+/// Spawns `command` with its stderr lines sent to the returned channel.
+pub fn spawn_reading(command: &mut Command) -> (Child, mpsc::Receiver<String>) {
+    let mut child = command.stderr(Stdio::piped()).spawn().unwrap();
+    let (lines, receiver) = mpsc::channel();
+    let stderr = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if lines.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    (child, receiver)
+}
+
+/// Waits for a line containing `needle`, up to `timeout`.
+pub fn wait_for(lines: &mpsc::Receiver<String>, needle: &str, timeout: Duration) -> bool {
+    let deadline = Instant::now() + timeout;
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match lines.recv_timeout(left) {
+            Ok(line) if line.contains(needle) => return true,
+            Ok(_) => {}
+            Err(_) => return false,
+        }
+    }
+    false
+}
+
+/// Waits for `child` (called `what` in failures) to exit successfully within `timeout`.
+pub fn wait_success(mut child: Child, what: &str, timeout: Duration) {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            assert!(status.success(), "{what} failed: {status}");
+            return;
+        }
+        if Instant::now() > deadline {
+            child.kill().ok();
+            panic!("{what} did not finish within {timeout:?}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
 }
