@@ -3,8 +3,10 @@
 //! The frame owner's loop is the real owner's: the same [`Director`] the QUIC node drives deals
 //! each frame to the live participants, the owner's core runs it, and when the core reports it
 //! complete the director is given the frame's measured cost map (the trace's) and re-cuts the
-//! partition for the next frame. Only time is virtual. The next frame starts the instant the last one completes: the owner's
-//! own work between frames (writing the image, re-cutting the tree) is not simulated.
+//! partition for the next frame. Only time is virtual. The owner's control loop is charged per
+//! tile dealt and per result received ([`OwnerCosts`]); its work between frames (writing the
+//! image, re-cutting the tree) is not simulated: the next frame starts the instant the last one
+//! completes.
 //!
 //! Time is counted work divided by a rate: a slot of a peer of speed 1 renders
 //! [`Scenario::work_per_second`] units of counted work per second. The default,

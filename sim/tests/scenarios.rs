@@ -343,12 +343,12 @@ fn the_owner_loop_bounds_a_frame_and_its_limits_are_reported() {
     // bytes; T1 is the whole frame's work on one single-slot peer.
     let bytes = fast.frames[0].result_bytes as f64;
     assert!(
-        bytes >= remote as f64 * 3120.0 && bytes <= remote as f64 * 3140.0,
+        (remote as f64 * 3120.0..=remote as f64 * 3140.0).contains(&bytes),
         "{bytes}"
     );
     // The limit counts a result for every tile, the owner's own too.
     let all = fast.frames[0].frame_result_bytes as f64;
-    assert!(all >= 16.0 * 3120.0 && all <= 16.0 * 3140.0, "{all}");
+    assert!((16.0 * 3120.0..=16.0 * 3140.0).contains(&all), "{all}");
     assert!((slow.frames[0].frame_owner_time - 16.0 * 0.05).abs() < 1e-9);
     let limit = fast.owner_link_limit.expect("a limited link");
     let expected = fast.work * 1e9 / all;

@@ -181,10 +181,10 @@ impl Director {
 
     /// `peer` is gone. The owner's core re-issues whatever it held; the director deals it
     /// nothing more and stops waiting for its statistics.
-    pub fn handle_peer_left(&mut self, now: Duration, peer: PeerId) {
+    pub fn handle_peer_left(&mut self, _now: Duration, peer: PeerId) {
         self.peers.remove(&peer);
         self.unreported.remove(&peer);
-        self.settle(now);
+        self.settle();
     }
 
     /// The next frame to start, if the director is ready for one. The driver starts it with
@@ -289,7 +289,7 @@ impl Director {
                     && frame.0 + 1 == self.next
                 {
                     self.unreported.remove(peer);
-                    self.settle(now);
+                    self.settle();
                 }
                 Ok(Some(event))
             }
@@ -316,7 +316,7 @@ impl Director {
                 deadline: now + self.config.stats_grace,
             }
         };
-        self.settle(now);
+        self.settle();
         Ok(update)
     }
 
@@ -345,7 +345,7 @@ impl Director {
         matches!(self.state, State::Finished)
     }
 
-    fn settle(&mut self, _now: Duration) {
+    fn settle(&mut self) {
         if matches!(self.state, State::Closing { .. }) && self.unreported.is_empty() {
             self.finish();
         }

@@ -157,11 +157,10 @@ impl<C: Ord + Copy> Membership<C> {
             return;
         };
         match (stage, message) {
+            // The connection closes next: a member leaves then, a joiner is forgotten now.
+            (Stage::Member { .. }, Message::Goodbye { .. }) => {}
             (_, Message::Goodbye { .. }) => {
-                // The connection closes next; a member leaves then, a joiner is forgotten now.
-                if !matches!(self.conns.get(&conn), Some(Stage::Member { .. })) {
-                    self.conns.remove(&conn);
-                }
+                self.conns.remove(&conn);
             }
             (Stage::Connected { remote }, hello @ Message::Hello { .. }) => {
                 let peer = match check_hello(&hello, certifies) {

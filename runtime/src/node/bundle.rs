@@ -214,14 +214,14 @@ pub fn tile_result(
     TileResult {
         frame,
         tile,
-        rect: balancer::Rect::new(output.rect.x, output.rect.y, output.rect.w, output.rect.h),
+        rect: balancer_rect(output.rect),
         pixels: encode_pixels(&output.pixels),
         costs: encode_cost(&output.cost),
     }
 }
 
-/// The tracer's rectangle for a balancer's (the two crates do not know each other; this is the
-/// one place that converts).
+/// The tracer's rectangle for a balancer's. The two crates do not know each other; this and
+/// [`balancer_rect`] are the runtime's only conversions between them.
 pub fn tracer_rect(rect: balancer::Rect) -> tracer::Rect {
     tracer::Rect {
         x: rect.x,
@@ -229,6 +229,11 @@ pub fn tracer_rect(rect: balancer::Rect) -> tracer::Rect {
         w: rect.w,
         h: rect.h,
     }
+}
+
+/// The balancer's rectangle for a tracer's; the inverse of [`tracer_rect`].
+pub fn balancer_rect(rect: tracer::Rect) -> balancer::Rect {
+    balancer::Rect::new(rect.x, rect.y, rect.w, rect.h)
 }
 
 #[cfg(test)]

@@ -36,6 +36,8 @@ pub async fn run_peer(
     let mut outbound: BTreeMap<ConnId, PeerId> = BTreeMap::new();
     // Where the peers we dial listen: their certificates were required at connect time.
     let mut dialing: BTreeMap<SocketAddr, PeerId> = BTreeMap::new();
+    // Why the owner's connection ended, if not as a finished render's does.
+    let mut lost = None;
     loop {
         match session.step().await {
             Step::Connected {
@@ -183,8 +185,7 @@ pub async fn run_peer(
                     CloseReason::Remote { code, .. } if code == CloseCode::Shutdown as u64
                 );
                 if !finished {
-                    session.link.shutdown().await;
-                    return Err(NodeError::OwnerLost(reason));
+                    lost = Some(reason);
                 }
                 break;
             }
@@ -200,5 +201,8 @@ pub async fn run_peer(
         }
     }
     session.link.shutdown().await;
-    Ok(std::mem::take(&mut session.local_tiles))
+    match lost {
+        Some(reason) => Err(NodeError::OwnerLost(reason)),
+        None => Ok(std::mem::take(&mut session.local_tiles)),
+    }
 }
