@@ -8,25 +8,12 @@
 //! furnace and point-in-sphere answers hold for every material and every integrator setting
 //! (depth limit, Russian roulette), in both effect modes.
 
-use glam::Vec3;
-use std::path::Path;
-use tracer::geometry::{Accel, BuildQuality};
-use tracer::scene::{MemoryFiles, Scene};
-use tracer::{Effects, PathStats, Rect, TileOutput, World, render_tile};
+mod common;
 
-/// Renders frame `frame` of `scene` whole with `effects` (`None`: the scene's own).
-fn render(scene: &Scene, effects: Option<Effects>, frame: u32) -> TileOutput {
-    let effects = effects.unwrap_or_else(|| Effects::of(scene));
-    let accel = Accel::build(&scene.triangles, BuildQuality::default());
-    let (w, h) = (scene.settings.width, scene.settings.height);
-    let world = World::new(scene.clone(), accel, effects);
-    let out = render_tile(&world, frame, Rect { x: 0, y: 0, w, h });
-    assert_eq!(
-        out.stats.invalid_samples, 0,
-        "no sample may be NaN or infinite"
-    );
-    out
-}
+use common::{mean_and_error, render};
+use std::path::Path;
+use tracer::scene::{MemoryFiles, Scene};
+use tracer::{Effects, PathStats, TileOutput};
 
 /// Renders `scene` specialised and with every effect on, asserts the pixels are the same bits,
 /// and returns the specialised render and the forced one's counters.
@@ -336,26 +323,6 @@ fn textures_and_shading_normals_render_the_same_bits_specialised_or_forced() {
 }
 
 // The closed forms, for every material and integrator setting.
-
-/// Per-channel mean of an image and its standard error (pixels are independent).
-fn mean_and_error(out: &TileOutput) -> (Vec3, Vec3) {
-    let n = out.pixels.len() as f64;
-    let mut sum = [0.0f64; 3];
-    let mut sum_sq = [0.0f64; 3];
-    for p in &out.pixels {
-        for c in 0..3 {
-            sum[c] += f64::from(p[c]);
-            sum_sq[c] += f64::from(p[c]).powi(2);
-        }
-    }
-    let mean = sum.map(|s| s / n);
-    let se: [f64; 3] =
-        std::array::from_fn(|c| ((sum_sq[c] / n - mean[c].powi(2)).max(0.0) / n).sqrt());
-    (
-        Vec3::from_array(mean.map(|m| m as f32)),
-        Vec3::from_array(se.map(|s| s as f32)),
-    )
-}
 
 /// The integrator settings every material is run under: (`max_depth`, `russian_roulette_depth`).
 const SETTINGS: [(Option<u32>, Option<u32>); 6] = [

@@ -3,6 +3,9 @@
 //! Each test renders a small image and compares its mean with the exact value, within a few
 //! standard errors of the mean estimated from the pixels themselves (pixels are independent).
 
+mod common;
+
+use common::{assert_close, mean_and_error};
 use glam::Vec3;
 use tracer::geometry::{Accel, BuildQuality};
 use tracer::{Effects, Rect, World, render_tile};
@@ -10,47 +13,9 @@ use tracer::{Effects, Rect, World, render_tile};
 /// Renders the whole image of `toml` and returns the per-channel mean and its standard error.
 fn render_mean(toml: &str) -> (Vec3, Vec3) {
     let scene = tracer::scene::load_str(toml).expect("test scene loads");
-    let accel = Accel::build(&scene.triangles, BuildQuality::default());
-    let effects = Effects::of(&scene);
-    let (w, h) = (scene.settings.width, scene.settings.height);
-    let world = World::new(scene, accel, effects);
-    let out = render_tile(&world, 0, Rect { x: 0, y: 0, w, h });
-    assert_eq!(
-        out.stats.invalid_samples, 0,
-        "no sample may be NaN or infinite"
-    );
-    let n = out.pixels.len() as f64;
-    let mut sum = [0.0f64; 3];
-    let mut sum_sq = [0.0f64; 3];
-    for p in &out.pixels {
-        for c in 0..3 {
-            assert!(p[c].is_finite());
-            sum[c] += f64::from(p[c]);
-            sum_sq[c] += f64::from(p[c]).powi(2);
-        }
-    }
-    let mean = sum.map(|s| s / n);
-    let se: [f64; 3] =
-        std::array::from_fn(|c| ((sum_sq[c] / n - mean[c].powi(2)).max(0.0) / n).sqrt());
-    (
-        Vec3::new(mean[0] as f32, mean[1] as f32, mean[2] as f32),
-        Vec3::new(se[0] as f32, se[1] as f32, se[2] as f32),
-    )
-}
-
-/// Asserts `mean` is within four standard errors (plus a relative `slack` for tessellation) of
-/// `expected` in every channel.
-fn assert_close(what: &str, (mean, se): (Vec3, Vec3), expected: Vec3, slack: f32) {
-    for c in 0..3 {
-        let tolerance = 4.0 * se[c] + slack * expected[c].abs() + 1e-6;
-        assert!(
-            (mean[c] - expected[c]).abs() <= tolerance,
-            "{what}: channel {c} mean {} expected {} (se {}, tolerance {tolerance})",
-            mean[c],
-            expected[c],
-            se[c]
-        );
-    }
+    let out = common::render(&scene, None, 0);
+    assert!(out.pixels.iter().flatten().all(|c| c.is_finite()));
+    mean_and_error(&out)
 }
 
 fn furnace(albedo: f32, emission: f32, depth: &str, roulette: &str, seed: u64) -> String {

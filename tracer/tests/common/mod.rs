@@ -1,5 +1,6 @@
-//! Helpers shared by the tests of image-based lighting and depth of field: rendering a scene
-//! whole, in either effect mode, and the image's mean with its standard error.
+//! Helpers shared by the tracer's image tests (effects, analytic integrator checks, image-based
+//! lighting, depth of field): rendering a scene whole, in either effect mode, and the image's
+//! mean with its standard error.
 
 #![allow(dead_code)]
 
