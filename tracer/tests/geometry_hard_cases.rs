@@ -5,6 +5,9 @@
 //! triangles, never from the code under test. Randomness is a local splitmix64 stream with fixed
 //! seeds, so every run checks the same rays.
 
+mod common;
+
+use common::rng::Rng;
 use glam::{Mat3, Vec3};
 use proptest::prelude::*;
 use tracer::geometry::{
@@ -12,54 +15,6 @@ use tracer::geometry::{
     intersect_triangle, is_degenerate, occluded_brute_force, offset_ray_origin, spawn_ray,
 };
 use tracer::scene::Triangle;
-
-/// splitmix64: a tiny, fixed, well-mixed stream.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
-
-    fn index(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-
-    /// Uniform on the unit sphere.
-    fn direction(&mut self) -> Vec3 {
-        let z = 1.0 - 2.0 * self.unit();
-        let phi = std::f32::consts::TAU * self.unit();
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        Vec3::new(r * phi.cos(), r * phi.sin(), z)
-    }
-
-    /// Uniform on the hemisphere around the unit vector `n`, grazing directions included.
-    fn hemisphere(&mut self, n: Vec3) -> Vec3 {
-        let d = self.direction();
-        if d.dot(n) < 0.0 { -d } else { d }
-    }
-
-    /// A random rotation: an orthonormal frame from two random directions.
-    fn rotation(&mut self) -> Mat3 {
-        let a = self.direction();
-        let d = self.direction();
-        let b = (d - a * a.dot(d)).normalize();
-        Mat3::from_cols(a, b, a.cross(b))
-    }
-}
 
 fn ray(origin: Vec3, dir: Vec3) -> Ray {
     Ray {

@@ -16,8 +16,10 @@
 //! error-bound offset, and the same rays with the fixed-ULP offset show that the counts can
 //! be non-zero.
 
+mod common;
 mod exact;
 
+use common::rng::Rng;
 use exact::{faces_centre, side};
 use glam::Vec3;
 use proptest::prelude::*;
@@ -36,50 +38,6 @@ fn the_exact_side_follows_the_winding_normal() {
     // One ULP above a plane far from the origin is still above, exactly.
     let far = v.map(|p| p + Vec3::splat(1e6));
     assert!(side(&far, Vec3::new(1e6, 1e6, 1e6f32.next_up())) > 0.0);
-}
-
-/// splitmix64: a small fixed stream, so that every run checks the same points.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    fn index(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-
-    fn direction(&mut self) -> Vec3 {
-        let z = 1.0 - 2.0 * self.unit();
-        let phi = std::f32::consts::TAU * self.unit();
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        Vec3::new(r * phi.cos(), r * phi.sin(), z)
-    }
-
-    /// Barycentrics (b1, b2): inside, on an edge, or at a vertex, each often.
-    fn barycentrics(&mut self) -> (f32, f32) {
-        let (r, s) = (self.unit().sqrt(), self.unit());
-        match self.index(6) {
-            0 => [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)][self.index(3)],
-            1 => (self.unit(), 0.0),
-            2 => (0.0, self.unit()),
-            3 => {
-                let b1 = self.unit();
-                (b1, 1.0 - b1)
-            }
-            _ => (r * (1.0 - s), r * s),
-        }
-    }
 }
 
 /// A triangle of size about `10^scale` at about `10^distance` from the origin, its vertices

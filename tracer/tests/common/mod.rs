@@ -4,6 +4,8 @@
 
 #![allow(dead_code)]
 
+pub mod rng;
+
 use glam::Vec3;
 use tracer::lights::EnvironmentSampling;
 use tracer::scene::{MemoryFiles, Scene};
