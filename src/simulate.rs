@@ -83,6 +83,16 @@ pub struct SimulateArgs {
     /// Tiles a peer keeps committed to its renderer beyond its slots (the core's prefetch).
     #[arg(long, default_value_t = 1)]
     pub prefetch: usize,
+    /// Peers render pieces of at most this many times the frame's mean tile area, so that the
+    /// unrendered part of a large tile can still be stolen; `off` renders tiles whole.
+    #[arg(long, default_value = "2", value_parser = parse_render_pieces)]
+    pub render_pieces: RenderPieces,
+    /// Whether a victim cuts a tile too large to give whole and gives its far half.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub split_on_steal: bool,
+    /// Whether the owner backs up an overdue peer's work on idle peers (speculation).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub backups: bool,
     /// Seed of victim choice, jitter, link latencies and loss.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -104,6 +114,22 @@ pub struct SimulateArgs {
     /// balancer and tiles) and compare frame times and initial tile sets with it.
     #[arg(long)]
     pub validate: Option<PathBuf>,
+}
+
+/// `--render-pieces`: a factor of the mean tile area, or tiles rendered whole.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderPieces(pub Option<f64>);
+
+fn parse_render_pieces(text: &str) -> Result<RenderPieces, String> {
+    if text == "off" {
+        return Ok(RenderPieces(None));
+    }
+    match text.parse::<f64>() {
+        Ok(factor) if factor > 0.0 && factor.is_finite() => Ok(RenderPieces(Some(factor))),
+        _ => Err(format!(
+            "{text:?}: give a positive multiple of the mean tile area, or off"
+        )),
+    }
 }
 
 /// The x axis of a line chart.
@@ -292,6 +318,11 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
         ..Scenario::default()
     };
     scenario.core.prefetch_depth = args.prefetch;
+    scenario.core.split_on_steal = args.split_on_steal;
+    if !args.backups {
+        scenario.core.speculation = None;
+    }
+    scenario.render_piece_factor = args.render_pieces.0;
     Ok(scenario)
 }
 
@@ -421,6 +452,7 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
     let frames = stats.frames.len().min(args.frames.unwrap_or(usize::MAX));
     let mut scenario = base_scenario(args, slots, rate)?;
     scenario.peers = stats.peers;
+    // As the real runtime does: only stealing follows the flag, backups stay on.
     scenario.core.steal = steal;
     scenario.frames = Some(frames);
     scenario.keep_assignments = true;

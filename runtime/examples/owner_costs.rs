@@ -43,7 +43,12 @@ fn started(partitioner: Partitioner) -> (Core, director::Deal) {
         .poll_deal(Duration::ZERO)
         .expect("the grid deals")
         .expect("a first frame");
-    core.start_frame(Duration::ZERO, deal.frame, deal.assignments.clone())
+    core.start_frame(
+        Duration::ZERO,
+        deal.frame,
+        deal.assignments.clone(),
+        deal.render_pixels,
+    )
         .expect("the core starts it");
     while core.poll_transmit().is_some() {}
     (core, deal)
@@ -71,6 +76,7 @@ fn per_result(side: u32, tile: u32) -> (f64, u64) {
                 let result = TileResult {
                     frame: FrameId(0),
                     tile: spec.id,
+                    piece: spec.piece,
                     rect: spec.rect,
                     pixels: bundle::encode_pixels(&pixels),
                     costs: bundle::encode_cost(&cost),

@@ -8,7 +8,9 @@
 //! - **efficiency** = work / (capacity x makespan): 1 when every slot renders from the first
 //!   instant to the last and nothing is rendered twice.
 //! - **lower bound** on the makespan = max(work / capacity, largest tile / fastest speed): no
-//!   schedule of this partition can beat it. **bound efficiency** is the efficiency a run
+//!   schedule of this partition can beat it. Where tiles can be cut on the way (rendered in
+//!   pieces, or halved for thieves), the largest tile is no bound, and the lower bound is the
+//!   fair share work / capacity alone. **bound efficiency** is the efficiency a run
 //!   achieving it would have, so efficiency <= bound efficiency <= 1 always.
 //! - **idle fraction** = 1 - busy slot time / (participant slots x makespan): slot time spent
 //!   not rendering (waiting for work, for the network, or for the frame's last tile).
@@ -39,9 +41,16 @@ pub struct FrameReport {
     pub efficiency: f64,
     pub bound_efficiency: f64,
     pub idle_fraction: f64,
-    /// Tiles handed to renderers: `tiles`, plus any rendered twice after a failure.
+    /// Pieces handed to renderers: `tiles`, plus the extra pieces of tiles cut on the way, plus
+    /// any rendered twice (re-issued after a failure, or backed up).
     pub renders: usize,
-    /// The owner's completion held exactly one result per tile, in tile order.
+    /// Results the frame was assembled from: one per tile, or more where tiles were cut.
+    #[serde(default)]
+    pub pieces: usize,
+    /// Duplicate results the owner compared with the first and found bit-identical.
+    #[serde(default)]
+    pub duplicates_agreed: u32,
+    /// The owner's completion covered every tile exactly once, in tile order.
     pub results_ok: bool,
     pub steal_requests: u64,
     /// Steal requests answered with tiles, and the tiles they moved.

@@ -73,6 +73,9 @@ pub struct Scenario {
     /// Keep every frame's initial assignment (tile rectangles and their peers) in the report,
     /// to compare with a real render's.
     pub keep_assignments: bool,
+    /// The director's bound on the pieces peers render at once, as a multiple of the frame's
+    /// mean tile area (`runtime_core::director::Config::render_piece_factor`).
+    pub render_piece_factor: Option<f64>,
 }
 
 /// What the frame owner's control loop spends on each tile, one thing at a time, besides
@@ -172,6 +175,7 @@ impl Default for Scenario {
             frames: None,
             gantt_frame: None,
             keep_assignments: false,
+            render_piece_factor: director::Config::default().render_piece_factor,
         }
     }
 }
@@ -298,6 +302,7 @@ pub fn run(
     let block = trace.header.block_size;
     let config = director::Config {
         frames,
+        render_piece_factor: scenario.render_piece_factor,
         ..director::Config::default()
     };
     let mut director = Director::new(OWNER, partitioner, config);
@@ -352,7 +357,7 @@ pub fn run(
         cluster
             .world_mut()
             .begin_frame(frame, now, deal.initial.clone());
-        cluster.start_frame(OWNER, deal.frame, deal.assignments)?;
+        cluster.start_frame_in_pieces(OWNER, deal.frame, deal.assignments, deal.render_pixels)?;
         while !cluster.world().is_complete(frame) {
             let due = cluster.next_due();
             if let Some(&(at, peer)) = crashes.front().filter(|c| due.is_none_or(|d| c.0 <= d)) {
@@ -412,7 +417,7 @@ pub fn run(
     let frame_reports = plans
         .iter()
         .enumerate()
-        .map(|(frame, plan)| frame_report(frame as u64, plan, &world, scenario.slots))
+        .map(|(frame, plan)| frame_report(frame as u64, plan, &world, scenario))
         .collect();
     let mut report = RunReport::new(
         policy,
@@ -434,6 +439,7 @@ fn result_bytes(rect: balancer::Rect, block: u32) -> u64 {
     let result = runtime_core::wire::TileResult {
         frame: runtime_core::wire::FrameId(0),
         tile: runtime_core::wire::TileId(0),
+        piece: runtime_core::wire::Piece::WHOLE,
         rect,
         pixels: vec![0; (rect.area() * runtime_core::wire::BYTES_PER_PIXEL) as usize],
         costs: vec![0; runtime_core::wire::cost_map_bytes(rect, block) as usize],
@@ -450,13 +456,23 @@ fn feed(director: &mut Director, cluster: &mut Cluster<SimWorld>) -> Result<(), 
     Ok(())
 }
 
-fn frame_report(frame: u64, plan: &Plan, world: &SimWorld, slots: usize) -> FrameReport {
+fn frame_report(frame: u64, plan: &Plan, world: &SimWorld, scenario: &Scenario) -> FrameReport {
+    let slots = scenario.slots;
     let tally = &world.frames[&frame];
     let (_, elapsed) = tally
         .completed
         .expect("invariant: the run loop waits for every frame to complete");
     let makespan = elapsed.as_secs_f64();
-    let lower_bound = (plan.work / plan.capacity).max(plan.largest / plan.fastest);
+    // A tile that can be cut on the way (rendered in pieces, or halved for a thief) no longer
+    // bounds its frame: then the fair share alone does.
+    let cuttable =
+        scenario.render_piece_factor.is_some() || (scenario.core.steal && scenario.core.split_on_steal);
+    let fair_share = plan.work / plan.capacity;
+    let lower_bound = if cuttable {
+        fair_share
+    } else {
+        fair_share.max(plan.largest / plan.fastest)
+    };
     let slot_time = (plan.participants * slots) as f64 * makespan;
     FrameReport {
         frame,
@@ -483,6 +499,8 @@ fn frame_report(frame: u64, plan: &Plan, world: &SimWorld, slots: usize) -> Fram
             0.0
         },
         renders: tally.renders,
+        pieces: tally.pieces,
+        duplicates_agreed: tally.audit.agreed,
         results_ok: tally.results_ok,
         steal_requests: tally.steal_requests,
         grants: tally.grants,

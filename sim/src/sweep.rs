@@ -61,6 +61,16 @@ impl Policy {
         }
     }
 
+    /// Sets a core's policy to this one. A policy without stealing is a fixed assignment, the
+    /// baseline dynamic balancing is measured against: it backs up no stragglers either (the
+    /// owner still re-issues the work of peers that fail).
+    pub fn apply(self, core: &mut Config) {
+        core.steal = self.steal;
+        if !self.steal {
+            core.speculation = None;
+        }
+    }
+
     /// Its position in [`Policy::ALL`]: a stable colour and order in charts and tables.
     pub fn index(self) -> usize {
         Self::ALL
@@ -158,7 +168,7 @@ impl Sweep {
                 let (tiles, policy, peers) = combinations[i];
                 let mut scenario = self.base.clone();
                 scenario.peers = peers;
-                scenario.core.steal = policy.steal;
+                policy.apply(&mut scenario.core);
                 scenario.gantt_frame = gantt
                     .filter(|g| (g.peers, g.policy, g.tiles) == (peers, policy, tiles))
                     .map(|g| g.frame);

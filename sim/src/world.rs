@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use balancer::CostMap;
-use runtime_core::peer::Event;
+use runtime_core::peer::{Audit, Event};
 use runtime_core::peer::WorkItem;
 use runtime_core::peer::testing::{Rendered, Seen, Transit, World};
 use runtime_core::wire::{self, Message, PeerId, TileId, TileResult};
@@ -30,8 +30,11 @@ pub(crate) struct Tally {
     pub(crate) tiles: usize,
     /// When the owner's core reported the frame complete, and in how long.
     pub(crate) completed: Option<(Duration, Duration)>,
-    /// Whether the completion held exactly one result for each tile of the frame.
+    /// Whether the completion covered each tile of the frame exactly once.
     pub(crate) results_ok: bool,
+    /// Results the completion held (more than `tiles` where tiles were cut).
+    pub(crate) pieces: usize,
+    pub(crate) audit: Audit,
     /// Tiles handed to renderers (more than `tiles` when some were rendered twice).
     pub(crate) renders: usize,
     /// Slot-seconds spent rendering this frame's tiles.
@@ -166,6 +169,7 @@ impl World for SimWorld {
         let result = TileResult {
             frame: item.frame,
             tile: item.tile.id,
+            piece: item.tile.piece,
             rect,
             pixels,
             costs: vec![0; wire::cost_map_bytes(rect, self.block) as usize],
@@ -270,6 +274,7 @@ impl SimWorld {
                 elapsed,
                 results,
                 rendered_by,
+                audit,
             } => {
                 print.words(&[10, frame.0, elapsed.as_nanos() as u64]);
                 for peer in rendered_by {
@@ -279,10 +284,22 @@ impl SimWorld {
                     return;
                 };
                 let at = tally.started + *elapsed;
-                let ids = results.iter().map(|r| r.tile);
-                tally.results_ok = results.len() == tally.tiles
-                    && ids.eq((0..tally.tiles as u32).map(TileId))
+                // The ledger's cover has no two overlapping pieces, so it covers every tile
+                // exactly once when the ids run through every tile in order and the areas add
+                // up to the image.
+                let mut ids: Vec<TileId> = results.iter().map(|r| r.tile).collect();
+                let sorted = ids.is_sorted();
+                ids.dedup();
+                let area: u64 = results.iter().map(|r| r.rect.area()).sum();
+                let image = self.maps.first().map_or(0, |m| {
+                    u64::from(m.width()) * u64::from(m.height())
+                });
+                tally.results_ok = sorted
+                    && ids.iter().copied().eq((0..tally.tiles as u32).map(TileId))
+                    && area == image
                     && results.iter().all(|r| r.frame == *frame);
+                tally.pieces = results.len();
+                tally.audit = *audit;
                 tally.completed = Some((at, *elapsed));
             }
             Event::PeerStats { frame, peer, stats } => {

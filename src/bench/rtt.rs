@@ -78,10 +78,9 @@ async fn exchange(exchanges: usize) -> anyhow::Result<StealRtt> {
     let (victim, mut victim_events) = Link::bind(loopback, &certs.peers()[1], config, decode)?;
 
     let grant_tiles: Vec<TileSpec> = (0..GRANT_TILES as u32)
-        .map(|i| TileSpec {
-            id: TileId(i),
-            rect: balancer::Rect::new(16 * (i % 16), 16 * (i / 16), 16, 16),
-            predicted: 1e6,
+        .map(|i| {
+            let rect = balancer::Rect::new(16 * (i % 16), 16 * (i / 16), 16, 16);
+            TileSpec::whole(TileId(i), rect, 1e6)
         })
         .collect();
     let grant_bytes = wire::encode(&Message::StealGrant {

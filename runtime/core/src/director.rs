@@ -22,7 +22,7 @@ use std::time::Duration;
 
 use balancer::{CostMap, Partitioner, Update};
 
-use crate::peer::Event as CoreEvent;
+use crate::peer::{Audit, Event as CoreEvent};
 use crate::wire::{FrameId, PeerId, TileId, TileResult, TileSpec};
 
 /// The director's policy knobs.
@@ -38,6 +38,12 @@ pub struct Config {
     /// besides two per tile. A renderer that keeps producing results the ledger refuses would
     /// have its tiles re-issued forever; past this the render stops with an error.
     pub fault_allowance: usize,
+    /// Peers hand their renderers pieces of at most this many times the frame's mean tile
+    /// area; larger tiles are rendered half by half, so that the unrendered part of a tile
+    /// stays in a queue a thief can take from. The partition makes large tiles where it
+    /// predicts cheap pixels, which is exactly where a misprediction leaves one peer with a
+    /// long tile. `None` renders every tile whole.
+    pub render_piece_factor: Option<f64>,
 }
 
 impl Default for Config {
@@ -46,6 +52,7 @@ impl Default for Config {
             frames: 1,
             stats_grace: Duration::from_secs(1),
             fault_allowance: 8,
+            render_piece_factor: Some(2.0),
         }
     }
 }
@@ -60,6 +67,8 @@ pub struct Deal {
     pub initial: Vec<PeerId>,
     /// Each participant's initial tiles, for [`Core::start_frame`](crate::peer::Core::start_frame).
     pub assignments: BTreeMap<PeerId, Vec<TileSpec>>,
+    /// The largest piece a participant renders at once (see [`Config::render_piece_factor`]).
+    pub render_pixels: u64,
 }
 
 impl Deal {
@@ -84,12 +93,15 @@ pub struct Piece {
 /// What the director tells its driver.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Event {
-    /// Every tile of `frame` is in, `elapsed` after it was dealt; `pieces` are in tile order.
-    /// The driver measures them and calls [`Director::handle_measured`].
+    /// Every tile of `frame` is in, `elapsed` after it was dealt; `pieces` cover the image once,
+    /// in tile order (a tile that was cut on the way by its pieces, in tree order). The driver
+    /// measures them and calls [`Director::handle_measured`].
     FrameComplete {
         frame: FrameId,
         elapsed: Duration,
         pieces: Vec<Piece>,
+        /// How the frame's duplicate results compared with the first.
+        audit: Audit,
     },
     /// Every frame is measured and every participant's statistics are in (or it left, or
     /// [`Config::stats_grace`] ran out): the driver may say goodbye and close.
@@ -188,7 +200,7 @@ impl Director {
     }
 
     /// The next frame to start, if the director is ready for one. The driver starts it with
-    /// `core.start_frame(now, deal.frame, deal.assignments.clone())`.
+    /// `core.start_frame(now, deal.frame, deal.assignments, deal.render_pixels)`.
     pub fn poll_deal(&mut self, now: Duration) -> Result<Option<Deal>, DirectorError> {
         if !matches!(self.state, State::Idle) {
             return Ok(None);
@@ -205,21 +217,29 @@ impl Director {
                 .iter()
                 .map(|&index| {
                     initial[index] = peer;
-                    TileSpec {
-                        id: TileId(index as u32),
-                        rect: tiles[index].rect,
-                        predicted: tiles[index].predicted,
-                    }
+                    TileSpec::whole(
+                        TileId(index as u32),
+                        tiles[index].rect,
+                        tiles[index].predicted,
+                    )
                 })
                 .collect();
             assignments.insert(peer, specs);
         }
         self.unreported = participants.iter().copied().collect();
+        let area: u64 = tiles.iter().map(|tile| tile.rect.area()).sum();
+        let render_pixels = match self.config.render_piece_factor {
+            Some(factor) if !tiles.is_empty() => {
+                ((area as f64 / tiles.len() as f64) * factor).ceil().max(1.0) as u64
+            }
+            _ => u64::MAX,
+        };
         let deal = Deal {
             frame: FrameId(self.next),
             tiles,
             initial,
             assignments,
+            render_pixels,
         };
         self.next += 1;
         self.state = State::Running {
@@ -244,6 +264,7 @@ impl Director {
                     frame,
                     results,
                     rendered_by,
+                    audit,
                     ..
                 },
                 State::Running { deal, started, .. },
@@ -253,9 +274,14 @@ impl Director {
                     .zip(rendered_by)
                     .map(|(result, peer)| {
                         let index = result.tile.0 as usize;
+                        // A piece's prediction is its tile's, shared out by area as the
+                        // worker that cut it shared it.
+                        let predicted = deal.tiles.get(index).map_or(0.0, |tile| {
+                            tile.predicted * result.rect.area() as f64 / tile.rect.area() as f64
+                        });
                         Piece {
                             initial: deal.initial.get(index).copied().unwrap_or(peer),
-                            predicted: deal.tiles.get(index).map_or(0.0, |t| t.predicted),
+                            predicted,
                             result,
                             peer,
                         }
@@ -265,6 +291,7 @@ impl Director {
                     frame,
                     elapsed: now.saturating_sub(*started),
                     pieces,
+                    audit,
                 });
                 self.state = State::Measuring { frame };
                 Ok(None)

@@ -27,7 +27,7 @@ use crate::peer::PeerStats;
 mod tests;
 
 /// The version of this protocol. Bump it on any change to [`Message`]'s layout.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// Pixels travel as linear RGB `f32` triples, little-endian: 12 bytes per pixel.
 pub const BYTES_PER_PIXEL: u64 = 12;
@@ -78,10 +78,13 @@ pub enum Message {
     SceneReady,
     /// The owner gives tiles of `frame` to the receiver (its initial set, or re-issued tiles).
     /// `peers` are the frame's live participants: the receiver steals only from them.
+    /// `render_pixels` is the largest piece the receiver hands its renderer at once: larger
+    /// tiles are rendered half by half, so that what is not yet rendered can still be stolen.
     Assign {
         frame: FrameId,
         peers: Vec<PeerId>,
         tiles: Vec<TileSpec>,
+        render_pixels: u64,
     },
     /// A thief asks for work; `remaining` is the predicted work it still holds.
     StealRequest { frame: FrameId, remaining: f64 },
@@ -97,7 +100,7 @@ pub enum Message {
     StealNotice {
         frame: FrameId,
         victim: PeerId,
-        tiles: Vec<TileId>,
+        tiles: Vec<(TileId, Piece)>,
         stolen: u32,
     },
     /// A peer's report to the owner: alive, and idle (holding no work of the frame) or not.
@@ -195,15 +198,98 @@ macro_rules! display_id {
         }
     )*};
 }
-display_id!(PeerId => "peer ", TileId => "tile ", FrameId => "frame ");
+display_id!(PeerId => "peer ", TileId => "tile ", FrameId => "frame ", Piece => "piece ");
 
-/// A tile to render: a leaf of the partition with the predictor's cost estimate (in the
-/// predictor's units; only ratios between estimates matter to the core).
+/// Which part of its tile a piece is: a node of the tile's halving tree, numbered as in a
+/// binary heap. [`Piece::WHOLE`] (1) is the tile itself; node `n`'s halves are `2n` and
+/// `2n + 1`, cut as [`Rect::halves`] cuts (across the longer side, the first half the left or
+/// top one). Because the cut is a pure function of the rectangle, a piece's number and its
+/// tile's rectangle determine its rectangle, and any two peers that split the same tile agree
+/// on what every piece is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct Piece(pub u64);
+
+impl Piece {
+    /// The whole tile.
+    pub const WHOLE: Piece = Piece(1);
+    /// The deepest piece the decoder accepts: a tile halved this many times is far below one
+    /// pixel for any tile the limits allow, so no honest peer gets near it.
+    pub const MAX_DEPTH: u32 = 48;
+
+    /// How many halvings from the whole tile; `None` for the invalid number 0.
+    pub fn depth(self) -> Option<u32> {
+        (self.0 != 0).then(|| 63 - self.0.leading_zeros())
+    }
+
+    /// The two halves of this piece.
+    pub fn halves(self) -> (Piece, Piece) {
+        (Piece(self.0 << 1), Piece((self.0 << 1) | 1))
+    }
+
+    /// Whether `self` is `ancestor` or lies inside it.
+    pub fn is_within(self, ancestor: Piece) -> bool {
+        match (self.depth(), ancestor.depth()) {
+            (Some(mine), Some(theirs)) if mine >= theirs => self.0 >> (mine - theirs) == ancestor.0,
+            _ => false,
+        }
+    }
+
+    /// This piece's rectangle within a tile of rectangle `tile`; `None` if the piece number is
+    /// invalid or the tile cannot be halved that often.
+    pub fn rect(self, tile: Rect) -> Option<Rect> {
+        let depth = self.depth()?;
+        let mut rect = tile;
+        for level in (0..depth).rev() {
+            let (first, second) = rect.halves()?;
+            rect = if (self.0 >> level) & 1 == 0 { first } else { second };
+        }
+        Some(rect)
+    }
+}
+
+/// Work to render: a leaf of the partition, or a piece of one, with the predictor's cost
+/// estimate (in the predictor's units; only ratios between estimates matter to the core).
+/// `rect` is the piece's own rectangle; `id` names the partition's tile it belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TileSpec {
     pub id: TileId,
+    pub piece: Piece,
     pub rect: Rect,
     pub predicted: f64,
+}
+
+impl TileSpec {
+    /// A whole tile of the partition.
+    pub fn whole(id: TileId, rect: Rect, predicted: f64) -> Self {
+        Self {
+            id,
+            piece: Piece::WHOLE,
+            rect,
+            predicted,
+        }
+    }
+
+    /// Its two halves, each predicted in proportion to its area; `None` for a single pixel.
+    pub fn halves(&self) -> Option<(TileSpec, TileSpec)> {
+        let (first_rect, second_rect) = self.rect.halves()?;
+        let (first_piece, second_piece) = self.piece.halves();
+        let share = first_rect.area() as f64 / self.rect.area() as f64;
+        let first_cost = self.predicted * share;
+        let first = TileSpec {
+            id: self.id,
+            piece: first_piece,
+            rect: first_rect,
+            predicted: first_cost,
+        };
+        let second = TileSpec {
+            id: self.id,
+            piece: second_piece,
+            rect: second_rect,
+            predicted: (self.predicted - first_cost).max(0.0),
+        };
+        Some((first, second))
+    }
 }
 
 /// A rendered tile: its pixels (see [`BYTES_PER_PIXEL`]) and its measured block cost map, both
@@ -212,6 +298,8 @@ pub struct TileSpec {
 pub struct TileResult {
     pub frame: FrameId,
     pub tile: TileId,
+    /// Which part of the tile `rect` is.
+    pub piece: Piece,
     pub rect: Rect,
     #[serde(with = "serde_bytes")]
     pub pixels: Vec<u8>,
@@ -375,7 +463,8 @@ fn validate(message: &Message, limits: &Limits) -> Result<(), WireError> {
         Message::StealRequest { remaining, .. } => check_cost(*remaining),
         Message::StealGrant { tiles, .. } => check_tiles(tiles, limits),
         Message::StealNotice { tiles, .. } => {
-            bound("tiles", tiles.len(), limits.max_tiles_per_message)
+            bound("tiles", tiles.len(), limits.max_tiles_per_message)?;
+            tiles.iter().try_for_each(|(_, piece)| check_piece(*piece))
         }
         Message::TileDone(result) => check_result(result, limits),
         Message::StealRefuse { .. }
@@ -402,8 +491,17 @@ fn check_tiles(tiles: &[TileSpec], limits: &Limits) -> Result<(), WireError> {
     for tile in tiles {
         check_rect(tile.rect, limits)?;
         check_cost(tile.predicted)?;
+        check_piece(tile.piece)?;
     }
     Ok(())
+}
+
+/// A piece number is a node of a halving tree no deeper than [`Piece::MAX_DEPTH`].
+pub(crate) fn check_piece(piece: Piece) -> Result<(), WireError> {
+    match piece.depth() {
+        Some(depth) if depth <= Piece::MAX_DEPTH => Ok(()),
+        _ => Err(WireError::Invalid { what: "piece" }),
+    }
 }
 
 /// A predicted cost is a finite, non-negative number: anything else would poison the steal
@@ -440,6 +538,7 @@ pub(crate) fn check_rect(rect: Rect, limits: &Limits) -> Result<(), WireError> {
 /// at most [`MAX_COST_BYTES_PER_PIXEL`] bytes of cost map per pixel plus [`COST_HEADER_BYTES`].
 pub(crate) fn check_result(result: &TileResult, limits: &Limits) -> Result<(), WireError> {
     check_rect(result.rect, limits)?;
+    check_piece(result.piece)?;
     check_buffers(result)
 }
 

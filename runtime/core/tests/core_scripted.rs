@@ -18,6 +18,10 @@ use runtime_core::wire::{FrameId, Message, PeerId, TileId, TileResult, TileSpec}
 #[path = "core_scripted/faults.rs"]
 mod faults;
 
+/// The end of a frame: tiles cut on steal and rendered in pieces, stragglers backed up.
+#[path = "core_scripted/tails.rs"]
+mod tails;
+
 const OWNER: PeerId = PeerId(0);
 const LIMIT: Duration = Duration::from_secs(60);
 /// One unit of predicted cost takes a millisecond of virtual time.
@@ -25,18 +29,29 @@ const MS_PER_UNIT: f64 = 1e-3;
 
 /// Tiles `first..` with the given costs, laid out in a row of 4x4 rectangles.
 fn tiles(first: u32, costs: &[f64]) -> Vec<TileSpec> {
+    sized_tiles(first, costs, 4)
+}
+
+/// Tiles `first..` with the given costs, in a row of `side` x `side` squares.
+fn sized_tiles(first: u32, costs: &[f64], side: u32) -> Vec<TileSpec> {
     (0..costs.len() as u32)
-        .map(|i| TileSpec {
-            id: TileId(first + i),
-            rect: Rect::new((first + i) * 4, 0, 4, 4),
-            predicted: costs[i as usize],
+        .map(|i| {
+            TileSpec::whole(
+                TileId(first + i),
+                Rect::new((first + i) * side, 0, side, side),
+                costs[i as usize],
+            )
         })
         .collect()
 }
 
 /// Splits `costs` into contiguous runs, one per peer `0..peers`.
 fn contiguous(peers: u32, costs: &[f64]) -> BTreeMap<PeerId, Vec<TileSpec>> {
-    let all = tiles(0, costs);
+    contiguous_tiles(peers, tiles(0, costs))
+}
+
+/// Splits `all` into contiguous runs, one per peer `0..peers`.
+fn contiguous_tiles(peers: u32, all: Vec<TileSpec>) -> BTreeMap<PeerId, Vec<TileSpec>> {
     let run = all.len().div_ceil(peers as usize);
     (0..peers)
         .map(|p| {
@@ -140,8 +155,12 @@ fn sent(cluster: &Cluster) -> impl Iterator<Item = (PeerId, PeerId, &Message)> {
     })
 }
 
+/// Every tile `0..count` is in `results`, in tile order: once, or as pieces of it (which the
+/// owner's cover never lets overlap).
 fn assert_all_results(results: &[TileResult], frame: FrameId, count: u32) {
-    let ids: Vec<TileId> = results.iter().map(|result| result.tile).collect();
+    let mut ids: Vec<TileId> = results.iter().map(|result| result.tile).collect();
+    assert!(ids.is_sorted(), "{ids:?}");
+    ids.dedup();
     assert_eq!(ids, (0..count).map(TileId).collect::<Vec<_>>());
     for result in results {
         assert_eq!(result.frame, frame);
@@ -405,7 +424,7 @@ fn bad_inputs_are_refused_with_errors() {
     ));
 
     let start =
-        |core: &mut Core, assignments| core.start_frame(Duration::ZERO, FrameId(1), assignments);
+        |core: &mut Core, assignments| core.start_frame(Duration::ZERO, FrameId(1), assignments, u64::MAX);
     let one = tiles(0, &[1.0]);
     let stranger = BTreeMap::from([(PeerId(9), one.clone())]);
     assert!(matches!(

@@ -208,12 +208,13 @@ pub fn decode_cost(bytes: &[u8]) -> Option<TileCost> {
 /// A rendered tile as the wire carries it.
 pub fn tile_result(
     frame: runtime_core::wire::FrameId,
-    tile: runtime_core::wire::TileId,
+    spec: &runtime_core::wire::TileSpec,
     output: &TileOutput,
 ) -> TileResult {
     TileResult {
         frame,
-        tile,
+        tile: spec.id,
+        piece: spec.piece,
         rect: balancer_rect(output.rect),
         pixels: encode_pixels(&output.pixels),
         costs: encode_cost(&output.cost),

@@ -97,9 +97,11 @@ pub struct CompletedFrame {
     /// From starting the frame to its last tile, in seconds.
     pub seconds: f64,
     pub rays: u64,
+    /// How duplicate results (backups of stragglers, re-issued tiles) compared with the first.
+    pub audit: runtime_core::peer::Audit,
 }
 
-/// One tile of a finished frame.
+/// One piece of a finished frame: a whole tile, or a part of one that was cut on the way.
 #[derive(Clone, Debug)]
 pub struct TileRecord {
     pub tile: TileId,

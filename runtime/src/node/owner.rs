@@ -95,7 +95,7 @@ impl Owner {
             while let Some(deal) = director.poll_deal(now)? {
                 self.session
                     .core
-                    .start_frame(now, deal.frame, deal.assignments)?;
+                    .start_frame(now, deal.frame, deal.assignments, deal.render_pixels)?;
                 self.session.flush();
             }
             while let Some(event) = director.poll_event() {
@@ -103,9 +103,11 @@ impl Owner {
                     frame,
                     elapsed,
                     pieces,
+                    audit,
                 } = event
                 {
-                    let (completed, map) = assemble(frame, pieces, &job.world, elapsed)?;
+                    let (mut completed, map) = assemble(frame, pieces, &job.world, elapsed)?;
+                    completed.audit = audit;
                     director.handle_measured(self.session.now(), frame, &map)?;
                     sink.frame(completed).map_err(NodeError::Sink)?;
                 }
@@ -281,6 +283,7 @@ fn assemble(
         tiles: records,
         seconds: elapsed.as_secs_f64(),
         rays,
+        audit: runtime_core::peer::Audit::default(),
     };
     Ok((completed, map))
 }

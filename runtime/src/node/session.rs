@@ -271,7 +271,7 @@ impl Session {
                 Some((item, output, took)) = results => {
                     let now = self.now();
                     self.local_tiles.push(LocalTile { frame: item.frame.0, tile: item.tile.id.0, start: now.saturating_sub(took), end: now });
-                    let result = bundle::tile_result(item.frame, item.tile.id, &output);
+                    let result = bundle::tile_result(item.frame, &item.tile, &output);
                     self.core.handle_tile_rendered(now, result);
                 }
                 () = sleep => {

@@ -109,6 +109,7 @@ fn empty_completion() -> crate::peer::Event {
         elapsed: Duration::ZERO,
         results: Vec::new(),
         rendered_by: Vec::new(),
+        audit: crate::peer::Audit::default(),
     }
 }
 

@@ -37,8 +37,12 @@ pub struct Config {
     /// Round-trip time assumed until one is measured (from steal exchanges or the driver).
     pub initial_rtt: Duration,
     /// A steal request unanswered for this long counts as refused; a grant arriving later is
-    /// still kept, never dropped.
+    /// still kept, never dropped. The longest wait: see `steal_timeout_rtts`.
     pub steal_timeout: Duration,
+    /// A request times out sooner, after this many measured round trips (but never under
+    /// 2 ms), so that a victim that froze or died costs its thieves a few round trips, not
+    /// `steal_timeout`. Giving up early is always safe: a late grant is still kept.
+    pub steal_timeout_rtts: f64,
     /// After every victim of a round refused, a thief waits this long before its next round,
     /// twice as long after two fruitless rounds in a row, and so on up to `steal_backoff_max`.
     /// A grant, new work or a new frame start again from `steal_backoff`.
@@ -51,6 +55,41 @@ pub struct Config {
     /// The owner declares a peer failed, and re-issues the tiles it holds, when the peer may hold
     /// work and has sent nothing for this long. Keep it several heartbeat intervals long.
     pub peer_timeout: Duration,
+    /// Whether a victim whose farthest tile is worth more than it should give cuts it in half
+    /// (again and again, down to `min_piece_pixels`) and gives the far half, rather than giving
+    /// the whole tile or nothing. Off, tiles only ever move whole.
+    pub split_on_steal: bool,
+    /// The smallest piece a victim cuts a tile into, in pixels: below this a transfer costs more
+    /// than the work it moves. One 8x8 block (the unit the tracer measures cost in) by default.
+    pub min_piece_pixels: u64,
+    /// (Owner) When to render again, elsewhere, work that is overdue on a peer; `None`: never
+    /// (a peer that stops answering then costs `peer_timeout`).
+    pub speculation: Option<Speculation>,
+}
+
+/// When the owner gives copies of a straggler's work to idle peers, as MapReduce's backup tasks
+/// and Spark's speculation do. A missing tile is *overdue* when the participants believed to
+/// hold it have made no progress (sent no result, received no work) for `factor` times its
+/// predicted time, and at least `min_wait`; its predicted time is its predicted cost at the
+/// frame's pace so far (the predicted cost of the results received, per participant-second).
+/// While some participant is idle, the owner re-issues the unrendered pieces of overdue tiles to
+/// the idle ones, each tile at most once. The first result wins; a second must be bit-identical
+/// (checked, and counted in the frame's audit). The straggler itself is not declared failed: a
+/// peer stalled for seconds that then resumes has only wasted its work, and `peer_timeout`
+/// still decides when it is forgotten.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Speculation {
+    pub factor: f64,
+    pub min_wait: Duration,
+}
+
+impl Default for Speculation {
+    fn default() -> Self {
+        Self {
+            factor: 4.0,
+            min_wait: Duration::from_millis(50),
+        }
+    }
 }
 
 /// The order in which a thief tries its victims.
@@ -79,10 +118,14 @@ impl Default for Config {
             victims_per_round: 8,
             initial_rtt: Duration::from_millis(1),
             steal_timeout: Duration::from_millis(250),
+            steal_timeout_rtts: 20.0,
             steal_backoff: Duration::from_millis(10),
             steal_backoff_max: Duration::from_millis(80),
             heartbeat_interval: Duration::from_secs(1),
             peer_timeout: Duration::from_secs(10),
+            split_on_steal: true,
+            min_piece_pixels: 64,
+            speculation: Some(Speculation::default()),
         }
     }
 }

@@ -9,13 +9,17 @@ use crate::wire::{FrameId, PeerId, TileId, TileResult};
 /// Something the driver should know about or act on.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Event {
-    /// (Owner) every tile of `frame` is in; `results` holds one result per tile, by tile id.
+    /// (Owner) every tile of `frame` is in. `results` cover the image once, no two
+    /// overlapping: by tile id, and within a tile its pieces in tree order (one whole-tile
+    /// result for a tile that never was cut).
     FrameComplete {
         frame: FrameId,
         elapsed: Duration,
         results: Vec<TileResult>,
         /// Who sent each of `results`, in the same order (for statistics and Gantt charts).
         rendered_by: Vec<PeerId>,
+        /// How the frame's duplicate results compared with the first.
+        audit: Audit,
     },
     /// (Owner) a participant's statistics for `frame`, its own included.
     PeerStats {
@@ -40,6 +44,16 @@ pub enum Event {
     },
     /// (Peer) the owner of `frame` is gone; this peer dropped the frame.
     OwnerLost { frame: FrameId },
+}
+
+/// A free audit of determinism: every result that overlapped one already received (a backup
+/// of a straggler's work, a re-issued tile) was compared with it pixel for pixel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Audit {
+    /// Duplicates whose pixels matched.
+    pub agreed: u32,
+    /// Duplicates whose pixels differed (each also reported as [`Fault::Mismatch`]).
+    pub disagreed: u32,
 }
 
 /// Why the owner gave up on a peer.

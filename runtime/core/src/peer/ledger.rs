@@ -13,8 +13,10 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use super::Outbox;
-use super::event::{Event, Failure, Fault};
-use crate::wire::{self, FrameId, Message, PeerId, TileId, TileResult, TileSpec};
+use super::config::{Config, Speculation};
+use super::event::{Audit, Event, Failure, Fault};
+use super::pieces::{self, Pieces};
+use crate::wire::{self, FrameId, Message, PeerId, Piece, TileId, TileResult, TileSpec};
 
 pub(super) struct Ledger {
     frame: FrameId,
@@ -24,16 +26,27 @@ pub(super) struct Ledger {
     missing: usize,
     peers: BTreeMap<PeerId, PeerView>,
     peer_timeout: Duration,
+    /// The largest piece a participant hands its renderer at once (sent with every `Assign`).
+    render_pixels: u64,
+    speculation: Option<Speculation>,
+    /// Predicted cost of the results accepted this frame: the frame's pace, for speculation.
+    predicted_received: f64,
+    audit: Audit,
     /// No participant can have been silent too long before this instant: deadlines only move
     /// later as peers are heard from, so the owner scans for silent peers only when it passes.
     next_check: Option<Duration>,
+    /// When to look for overdue peers next; armed while some participant is idle.
+    next_speculation: Option<Duration>,
 }
 
 struct Entry {
     spec: TileSpec,
-    /// Live peers believed to hold the tile; empty once a result is in.
+    /// Live peers believed to hold some part of the tile; empty once it is complete.
     holders: Vec<PeerId>,
-    result: Option<(PeerId, TileResult)>,
+    pieces: Pieces,
+    complete: bool,
+    /// Whether its missing parts were already given to idle peers as backups.
+    speculated: bool,
 }
 
 struct PeerView {
@@ -45,6 +58,9 @@ struct PeerView {
     grants_seen: u32,
     results_received: u32,
     last_heard: Duration,
+    /// When the peer last sent a result or was given work (an `Assign`, a grant it told of):
+    /// how long it has gone without progress, for speculation.
+    last_progress: Duration,
 }
 
 impl Ledger {
@@ -55,7 +71,8 @@ impl Ledger {
         me: PeerId,
         frame: FrameId,
         assignments: BTreeMap<PeerId, Vec<TileSpec>>,
-        peer_timeout: Duration,
+        render_pixels: u64,
+        config: &Config,
         out: &mut Outbox,
     ) -> Self {
         let mut ledger = Self {
@@ -65,8 +82,13 @@ impl Ledger {
             tiles: BTreeMap::new(),
             missing: 0,
             peers: BTreeMap::new(),
-            peer_timeout,
-            next_check: Some(now + peer_timeout),
+            peer_timeout: config.peer_timeout,
+            render_pixels,
+            speculation: config.speculation,
+            predicted_received: 0.0,
+            audit: Audit::default(),
+            next_check: Some(now + config.peer_timeout),
+            next_speculation: None,
         };
         for (&peer, tiles) in &assignments {
             ledger.peers.insert(peer, PeerView::new(now));
@@ -74,7 +96,9 @@ impl Ledger {
                 let entry = Entry {
                     spec: *spec,
                     holders: vec![peer],
-                    result: None,
+                    pieces: Pieces::default(),
+                    complete: false,
+                    speculated: false,
                 };
                 ledger.tiles.insert(spec.id, entry);
             }
@@ -111,6 +135,7 @@ impl Ledger {
     ) {
         let counted = self.peers.get_mut(&from).map(|view| {
             view.results_received += 1;
+            view.last_progress = now;
             view.idle()
         });
         if let Some(fault) = self.record(now, from, result, out) {
@@ -142,41 +167,61 @@ impl Ledger {
         let Some(entry) = self.tiles.get_mut(&tile) else {
             return fault(Fault::UnknownTile);
         };
-        if result.rect != entry.spec.rect {
+        if result.piece.rect(entry.spec.rect) != Some(result.rect) {
             return fault(Fault::WrongRect);
         }
         if wire::check_buffers(&result).is_err() {
             return fault(Fault::BadBuffers);
         }
-        match &entry.result {
-            // Rendering is deterministic, so an honest duplicate is bit-identical.
-            Some((_, kept)) if kept.pixels == result.pixels => None,
-            Some((first, _)) => fault(Fault::Mismatch { first: *first }),
-            None => {
-                entry.result = Some((from, result));
-                entry.holders.clear();
-                self.missing -= 1;
-                if self.missing == 0 {
-                    self.complete(now, out);
-                }
-                None
+        // Rendering is deterministic, so an honest duplicate is bit-identical wherever it
+        // overlaps what is already in.
+        let mut duplicate = false;
+        for (first, kept) in entry.pieces.overlapping(result.piece) {
+            if !pieces::agree(kept, &result) {
+                self.audit.disagreed += 1;
+                return fault(Fault::Mismatch { first });
+            }
+            duplicate = true;
+        }
+        if duplicate {
+            self.audit.agreed += 1;
+        }
+        if entry.complete {
+            return None;
+        }
+        let share = result.rect.area() as f64 / entry.spec.rect.area() as f64;
+        self.predicted_received += entry.spec.predicted * share;
+        entry.pieces.insert(from, result);
+        if entry.pieces.complete() {
+            entry.complete = true;
+            entry.holders.clear();
+            self.missing -= 1;
+            if self.missing == 0 {
+                self.complete(now, out);
             }
         }
+        None
     }
 
     /// A thief took `tiles` from `victim`: it holds them now.
+    ///
+    /// A whole tile moved from the victim to the thief. A piece moved to the thief, but the
+    /// victim may still hold other parts of its tile, so it stays a holder: believing a peer
+    /// holds a part it does not costs at most a late re-issue (when all are idle, or the
+    /// victim is lost or overdue), never a lost tile.
     pub(super) fn on_notice(
         &mut self,
         now: Duration,
         thief: PeerId,
         victim: PeerId,
-        tiles: &[TileId],
+        tiles: &[(TileId, Piece)],
         grants: u32,
         out: &mut Outbox,
     ) {
         let thief_alive = match self.peers.get_mut(&thief) {
             Some(view) => {
                 view.grants_seen = view.grants_seen.max(grants);
+                view.last_progress = view.last_progress.max(now);
                 view.alive
             }
             None => false,
@@ -184,11 +229,13 @@ impl Ledger {
         // The thief holds work again, so its silence matters again.
         self.watch(now + self.peer_timeout);
         let mut orphans = Vec::new();
-        for id in tiles {
-            let Some(entry) = self.tiles.get_mut(id).filter(|e| e.result.is_none()) else {
+        for (id, piece) in tiles {
+            let Some(entry) = self.tiles.get_mut(id).filter(|e| !e.complete) else {
                 continue;
             };
-            entry.holders.retain(|&holder| holder != victim);
+            if *piece == Piece::WHOLE {
+                entry.holders.retain(|&holder| holder != victim);
+            }
             if thief_alive && !entry.holders.contains(&thief) {
                 entry.holders.push(thief);
             }
@@ -219,6 +266,7 @@ impl Ledger {
             view.idle_report = Some(newest);
         }
         if view.idle() {
+            self.arm_speculation(now);
             self.reissue_if_all_idle(now, out);
         }
     }
@@ -238,7 +286,7 @@ impl Ledger {
         for (id, entry) in &mut self.tiles {
             let before = entry.holders.len();
             entry.holders.retain(|&holder| holder != peer);
-            if before > 0 && entry.holders.is_empty() && entry.result.is_none() {
+            if before > 0 && entry.holders.is_empty() && !entry.complete {
                 orphans.push(*id);
             }
         }
@@ -254,8 +302,13 @@ impl Ledger {
         self.reissue_if_all_idle(now, out);
     }
 
-    /// Declares failed every participant that may hold work and has been silent too long.
+    /// Declares failed every participant that may hold work and has been silent too long, and
+    /// backs up the work of overdue ones.
     pub(super) fn on_timeout(&mut self, now: Duration, out: &mut Outbox) {
+        if self.next_speculation.is_some_and(|due| now >= due) {
+            self.next_speculation = None;
+            self.speculate(now, out);
+        }
         if self.next_check.is_none_or(|check| now < check) {
             return;
         }
@@ -271,7 +324,10 @@ impl Ledger {
     }
 
     pub(super) fn poll_timeout(&self) -> Option<Duration> {
-        self.next_check
+        [self.next_check, self.next_speculation]
+            .into_iter()
+            .flatten()
+            .min()
     }
 
     /// Makes sure the owner looks for silent peers by `deadline`.
@@ -300,7 +356,7 @@ impl Ledger {
             let missing: Vec<TileId> = self
                 .tiles
                 .iter()
-                .filter(|(_, entry)| entry.result.is_none())
+                .filter(|(_, entry)| !entry.complete)
                 .map(|(id, _)| *id)
                 .collect();
             tracing::info!(frame = %self.frame, tiles = missing.len(), "every peer is idle: re-issuing missing tiles");
@@ -308,10 +364,16 @@ impl Ledger {
         }
     }
 
-    /// Gives `tiles` (in id order) to live participants in contiguous runs: to the idle ones
-    /// if any, else to all. With none left alive, the owner takes them itself.
+    /// Gives the missing parts of `tiles` (in id order) to live participants in contiguous
+    /// runs: to the idle ones if any, else to all. With none left alive, the owner takes them
+    /// itself.
     fn reissue(&mut self, now: Duration, tiles: Vec<TileId>, out: &mut Outbox) {
-        if tiles.is_empty() {
+        let parts: Vec<TileSpec> = tiles
+            .iter()
+            .filter_map(|id| self.tiles.get(id))
+            .flat_map(|entry| entry.pieces.missing(&entry.spec))
+            .collect();
+        if parts.is_empty() {
             return;
         }
         let live = self.live_peers();
@@ -329,23 +391,81 @@ impl Ledger {
             }
         };
         let participants = self.live_peers();
-        let run = tiles.len().div_ceil(targets.len());
-        for (chunk, &target) in tiles.chunks(run).zip(&targets) {
-            let specs = chunk
-                .iter()
-                .map(|id| {
-                    let entry = self
-                        .tiles
-                        .get_mut(id)
-                        .expect("invariant: re-issued ids exist");
-                    if !entry.holders.contains(&target) {
-                        entry.holders.push(target);
-                    }
-                    entry.spec
-                })
-                .collect();
-            self.send_assign(now, target, participants.clone(), specs, out);
+        let run = parts.len().div_ceil(targets.len());
+        for (chunk, &target) in parts.chunks(run).zip(&targets) {
+            for part in chunk {
+                let entry = self
+                    .tiles
+                    .get_mut(&part.id)
+                    .expect("invariant: re-issued parts are of the frame's tiles");
+                if !entry.holders.contains(&target) {
+                    entry.holders.push(target);
+                }
+            }
+            self.send_assign(now, target, participants.clone(), chunk.to_vec(), out);
         }
+    }
+
+    /// Looks for overdue participants once some participant is idle (see [`Speculation`]).
+    fn arm_speculation(&mut self, now: Duration) {
+        let Some(speculation) = self.speculation else {
+            return;
+        };
+        if self.next_speculation.is_none() && self.missing > 0 {
+            self.next_speculation = Some(now + speculation.min_wait);
+        }
+    }
+
+    /// Gives idle participants copies of the missing parts of overdue tiles, and looks again
+    /// when the next would become overdue. A tile is overdue when its busy holders have made no
+    /// progress for `factor` times its predicted time, at the frame's pace so far (predicted
+    /// cost received per participant-second), and at least `min_wait`.
+    fn speculate(&mut self, now: Duration, out: &mut Outbox) {
+        let Some(speculation) = self.speculation else {
+            return;
+        };
+        if self.missing == 0 || !self.peers.values().any(PeerView::idle) {
+            return;
+        }
+        let participants = self.peers.values().filter(|view| view.alive).count().max(1);
+        let elapsed = now.saturating_sub(self.started).as_secs_f64();
+        let pace = self.predicted_received / (elapsed * participants as f64);
+        if !(pace > 0.0 && pace.is_finite()) {
+            // Nothing measured yet: look again once results have set the pace.
+            self.next_speculation = Some(now + speculation.min_wait);
+            return;
+        }
+        let mut backups = Vec::new();
+        let mut next: Option<Duration> = None;
+        for (id, entry) in &mut self.tiles {
+            if entry.complete || entry.speculated {
+                continue;
+            }
+            let predicted: f64 = entry.pieces.missing(&entry.spec).iter().map(|p| p.predicted).sum();
+            let patience = Duration::try_from_secs_f64(speculation.factor * predicted / pace)
+                .unwrap_or(Duration::MAX)
+                .max(speculation.min_wait);
+            let busy = entry
+                .holders
+                .iter()
+                .filter_map(|holder| self.peers.get(holder))
+                .filter(|view| view.alive && !view.idle());
+            let Some(due) = busy.map(|view| view.last_progress.saturating_add(patience)).min()
+            else {
+                continue;
+            };
+            if now >= due {
+                entry.speculated = true;
+                backups.push(*id);
+            } else {
+                next = Some(next.map_or(due, |n| n.min(due)));
+            }
+        }
+        if !backups.is_empty() {
+            tracing::info!(frame = %self.frame, tiles = backups.len(), "backing up overdue tiles on idle peers");
+            self.reissue(now, backups, out);
+        }
+        self.next_speculation = next.map(|due| due.max(now + speculation.min_wait));
     }
 
     /// Sends `peer` tiles. Its silence counts from now: an idle peer sends no heartbeats.
@@ -363,6 +483,7 @@ impl Ledger {
             .expect("invariant: tiles go to participants");
         view.assigns_sent += 1;
         view.last_heard = view.last_heard.max(now);
+        view.last_progress = view.last_progress.max(now);
         self.watch(now + self.peer_timeout);
         out.send(
             peer,
@@ -370,6 +491,7 @@ impl Ledger {
                 frame: self.frame,
                 peers,
                 tiles,
+                render_pixels: self.render_pixels,
             },
         );
     }
@@ -386,11 +508,7 @@ impl Ledger {
     fn complete(&mut self, now: Duration, out: &mut Outbox) {
         let (rendered_by, results) = std::mem::take(&mut self.tiles)
             .into_values()
-            .map(|entry| {
-                entry
-                    .result
-                    .expect("invariant: complete only when no tile is missing")
-            })
+            .flat_map(|entry| entry.pieces.into_cover())
             .unzip();
         let elapsed = now.saturating_sub(self.started);
         out.events.push_back(Event::FrameComplete {
@@ -398,6 +516,7 @@ impl Ledger {
             elapsed,
             results,
             rendered_by,
+            audit: self.audit,
         });
         for peer in self.live_peers() {
             out.send(peer, Message::FrameDone { frame: self.frame });
@@ -414,6 +533,7 @@ impl PeerView {
             grants_seen: 0,
             results_received: 0,
             last_heard: now,
+            last_progress: now,
         }
     }
 

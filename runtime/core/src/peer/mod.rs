@@ -15,6 +15,7 @@
 mod config;
 mod event;
 mod ledger;
+mod pieces;
 mod steal;
 pub mod testing;
 mod worker;
@@ -22,8 +23,8 @@ mod worker;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::Duration;
 
-pub use config::{Config, VictimOrder};
-pub use event::{Event, Failure, Fault, PeerStats};
+pub use config::{Config, Speculation, VictimOrder};
+pub use event::{Audit, Event, Failure, Fault, PeerStats};
 
 use crate::rng::SplitMix;
 use crate::wire::{self, FrameId, Message, PeerId, TileId, TileResult, TileSpec};
@@ -110,11 +111,14 @@ impl Core {
 
     /// (Owner) starts `frame`: `assignments` maps each participant (this peer included, if it
     /// renders) to its initial tiles, typically a contiguous run of partition leaves in order.
+    /// Every participant hands its renderer pieces of at most `render_pixels` pixels (larger
+    /// tiles half by half); `u64::MAX` renders tiles whole.
     pub fn start_frame(
         &mut self,
         now: Duration,
         frame: FrameId,
         assignments: BTreeMap<PeerId, Vec<TileSpec>>,
+        render_pixels: u64,
     ) -> Result<(), FrameError> {
         if let Some(ledger) = &self.ledger {
             return Err(FrameError::Busy(ledger.frame()));
@@ -134,7 +138,8 @@ impl Core {
                     ..wire::Limits::default()
                 };
                 let valid = wire::check_rect(tile.rect, &limits).is_ok()
-                    && wire::check_cost(tile.predicted).is_ok();
+                    && wire::check_cost(tile.predicted).is_ok()
+                    && tile.piece == wire::Piece::WHOLE;
                 if !valid {
                     return Err(FrameError::InvalidTile(tile.id));
                 }
@@ -146,13 +151,13 @@ impl Core {
         if seen.is_empty() {
             return Err(FrameError::NoTiles);
         }
-        let timeout = self.config.peer_timeout;
         self.ledger = Some(Ledger::start(
             now,
             self.id(),
             frame,
             assignments,
-            timeout,
+            render_pixels.max(1),
+            &self.config,
             &mut self.out,
         ));
         self.settle(now);
@@ -282,7 +287,8 @@ impl Core {
                 frame,
                 peers,
                 tiles,
-            } => worker.on_assign(&mut cx, from, frame, peers, tiles),
+                render_pixels,
+            } => worker.on_assign(&mut cx, from, frame, peers, tiles, render_pixels),
             Message::StealRequest { frame, remaining } => {
                 worker.on_steal_request(&mut cx, from, frame, remaining)
             }

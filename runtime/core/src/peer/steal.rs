@@ -141,6 +141,15 @@ impl Estimates {
         self.rtt_measured = true;
     }
 
+    /// How long a steal request may stay unanswered: `steal_timeout_rtts` round trips, at
+    /// least 2 ms, at most `steal_timeout`.
+    pub(super) fn steal_timeout(&self, config: &Config) -> Duration {
+        let floor = Duration::from_millis(2).min(config.steal_timeout);
+        self.rtt
+            .mul_f64(config.steal_timeout_rtts.max(0.0))
+            .clamp(floor, config.steal_timeout)
+    }
+
     /// Seconds this peer needs for `work`, if it has measured its rate yet.
     fn seconds_for(&self, work: f64, slots: usize) -> Option<f64> {
         self.slot_rate
@@ -240,44 +249,64 @@ impl Worker {
     ) {
         self.stats.steal_requests_received += 1;
         let running = self.frame.as_ref().is_some_and(|state| state.id == frame);
-        let count = if cx.config.steal && running {
-            self.grant_size(cx.config, cx.now, thief_remaining)
+        let tiles = if cx.config.steal && running {
+            self.take_grant(cx.config, cx.now, thief_remaining)
         } else {
-            0
+            Vec::new()
         };
-        if count == 0 {
+        if tiles.is_empty() {
             cx.out.send(thief, Message::StealRefuse { frame });
             return;
         }
-        let state = self
-            .frame
-            .as_mut()
-            .expect("invariant: a grant needs a running frame");
-        let tiles: Vec<TileSpec> = state.queue.split_off(state.queue.len() - count).into();
-        let given: f64 = tiles.iter().map(|tile| tile.predicted).sum();
-        state.queue_work = shrink(state.queue_work, given, state.queue.is_empty());
-        self.stats.tiles_given += count as u32;
+        self.stats.tiles_given += tiles.len() as u32;
         cx.out.send(thief, Message::StealGrant { frame, tiles });
     }
 
-    /// How many tiles from the back of the queue to give a thief holding `thief_remaining`: as
-    /// many as fit in half the difference between the two peers' work (at most half the queue),
-    /// or none when that is worth less than the transfer. A first tile larger than half the
-    /// difference is still given if it is smaller than the whole difference: the pair then
-    /// finishes sooner, and the tile cannot come back (the thief would hold the lesser share).
-    fn grant_size(&self, config: &Config, now: Duration, thief_remaining: f64) -> usize {
-        let Some(state) = &self.frame else { return 0 };
+    /// Takes from the back of the queue what to give a thief holding `thief_remaining`: as
+    /// much as fits in half the difference between the two peers' work (at most half the
+    /// queue's pieces), or nothing when that is worth less than the transfer. A piece too large
+    /// to fit is cut in half, and its far half considered, while `split_on_steal` allows and
+    /// the halves stay above `min_piece_pixels`. A first piece larger than half the difference
+    /// that cannot be cut is still given if it is smaller than the whole difference: the pair
+    /// then finishes sooner, and it cannot come back (the thief would hold the lesser share).
+    fn take_grant(&mut self, config: &Config, now: Duration, thief_remaining: f64) -> Vec<TileSpec> {
         let difference = self.remaining_work(now) - thief_remaining;
-        let most = config.max_grant_tiles.min(state.queue.len().div_ceil(2));
-        let (mut count, mut given) = (0, 0.0);
-        for tile in state.queue.iter().rev().take(most) {
-            let fits = given + tile.predicted <= difference / 2.0;
-            let first_pays = count == 0 && tile.predicted < difference;
-            if !(fits || first_pays) {
+        let Some(state) = self.frame.as_mut() else {
+            return Vec::new();
+        };
+        let mut taken: Vec<TileSpec> = Vec::new();
+        let mut given = 0.0;
+        loop {
+            let most = config
+                .max_grant_tiles
+                .min((state.queue.len() + taken.len()).div_ceil(2));
+            if taken.len() >= most {
                 break;
             }
-            count += 1;
-            given += tile.predicted;
+            let Some(&tile) = state.queue.back() else {
+                break;
+            };
+            if given + tile.predicted <= difference / 2.0 {
+                taken.push(tile);
+                given += tile.predicted;
+                state.queue.pop_back();
+                continue;
+            }
+            let cuttable = config.split_on_steal
+                && tile.rect.area() >= 2 * config.min_piece_pixels.max(1)
+                && tile.piece.depth().is_some_and(|d| d < crate::wire::Piece::MAX_DEPTH);
+            if cuttable && let Some((near, far)) = tile.halves() {
+                state.queue.pop_back();
+                state.queue.push_back(near);
+                state.queue.push_back(far);
+                continue;
+            }
+            if taken.is_empty() && tile.predicted < difference {
+                taken.push(tile);
+                given += tile.predicted;
+                state.queue.pop_back();
+            }
+            break;
         }
         let worth_time = self
             .estimates
@@ -285,10 +314,15 @@ impl Worker {
             .is_none_or(|seconds| {
                 seconds >= config.min_grant_rtts * self.estimates.rtt.as_secs_f64()
             });
+        let state = self.frame.as_mut().expect("invariant: matched Some above");
+        // Back to front as taken; the queue's order is front to back.
+        taken.reverse();
         if given > 0.0 && given >= config.min_steal_cost && worth_time {
-            count
+            state.queue_work = shrink(state.queue_work, given, state.queue.is_empty());
+            taken
         } else {
-            0
+            state.queue.extend(taken);
+            Vec::new()
         }
     }
 
@@ -326,7 +360,7 @@ impl Worker {
         state.stolen += 1;
         self.stats.tiles_stolen += tiles.len() as u32;
         state.queue_work += tiles.iter().map(|tile| tile.predicted).sum::<f64>();
-        let ids = tiles.iter().map(|tile| tile.id).collect();
+        let ids = tiles.iter().map(|tile| (tile.id, tile.piece)).collect();
         state.queue.extend(tiles);
         let notice = Message::StealNotice {
             frame,
@@ -357,7 +391,7 @@ impl Worker {
     pub(super) fn thief_deadline(&self, config: &Config) -> Option<Duration> {
         match self.frame.as_ref()?.thief {
             Thief::Ready => None,
-            Thief::Asking { sent, .. } => Some(sent + config.steal_timeout),
+            Thief::Asking { sent, .. } => Some(sent + self.estimates.steal_timeout(config)),
             Thief::Backoff { until } => Some(until),
         }
     }
@@ -367,7 +401,7 @@ impl Worker {
     pub(super) fn thief_timeout(&mut self, cx: &mut Ctx) {
         let Some(state) = &mut self.frame else { return };
         if let Thief::Asking { sent, .. } = state.thief
-            && cx.now >= sent + cx.config.steal_timeout
+            && cx.now >= sent + self.estimates.steal_timeout(cx.config)
         {
             self.stats.steal_requests_refused += 1;
             state.give_up_on_victim();

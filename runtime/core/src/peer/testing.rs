@@ -302,14 +302,28 @@ impl<W: World> Cluster<W> {
         self.world
     }
 
+    /// Starts `frame` at `owner`, every tile rendered whole.
     pub fn start_frame(
         &mut self,
         owner: PeerId,
         frame: FrameId,
         assignments: BTreeMap<PeerId, Vec<TileSpec>>,
     ) -> Result<(), FrameError> {
+        self.start_frame_in_pieces(owner, frame, assignments, u64::MAX)
+    }
+
+    /// Starts `frame` at `owner`, renderers taking pieces of at most `render_pixels` pixels.
+    pub fn start_frame_in_pieces(
+        &mut self,
+        owner: PeerId,
+        frame: FrameId,
+        assignments: BTreeMap<PeerId, Vec<TileSpec>>,
+        render_pixels: u64,
+    ) -> Result<(), FrameError> {
         let now = self.now;
-        self.node(owner).core.start_frame(now, frame, assignments)?;
+        self.node(owner)
+            .core
+            .start_frame(now, frame, assignments, render_pixels)?;
         self.flush(owner);
         Ok(())
     }
@@ -564,18 +578,25 @@ pub fn cost_renderer(seconds_per_unit: f64) -> Renderer {
     })
 }
 
-/// A result whose pixels are a pure function of (frame, tile, pixel), as a real render's are.
+/// A result whose pixels are a pure function of (frame, pixel), as a real render's are: the
+/// same whichever tile or piece the pixel was rendered in.
 pub fn synthetic_result(item: &WorkItem) -> TileResult {
-    let len = item.tile.rect.area() * BYTES_PER_PIXEL;
-    let seed = item.frame.0.wrapping_mul(31) ^ u64::from(item.tile.id.0).wrapping_mul(131);
-    let pixels = (0..len)
-        .map(|i| (seed.wrapping_add(i) % 251) as u8)
-        .collect();
+    let rect = item.tile.rect;
+    let mut pixels = Vec::with_capacity((rect.area() * BYTES_PER_PIXEL) as usize);
+    for y in rect.y..rect.y + rect.h {
+        for x in rect.x..rect.x + rect.w {
+            let seed = item.frame.0.wrapping_mul(31)
+                ^ u64::from(x).wrapping_mul(131)
+                ^ u64::from(y).wrapping_mul(1_000_003);
+            pixels.extend((0..BYTES_PER_PIXEL).map(|c| (seed.wrapping_add(c) % 251) as u8));
+        }
+    }
     TileResult {
         frame: item.frame,
         tile: item.tile.id,
-        rect: item.tile.rect,
+        piece: item.tile.piece,
+        rect,
         pixels,
-        costs: vec![1; item.tile.rect.area() as usize],
+        costs: vec![1; rect.area() as usize],
     }
 }

@@ -14,7 +14,10 @@ use std::time::Duration;
 use super::steal::{Estimates, Round, Thief};
 use super::{Ctx, WorkItem};
 use crate::peer::event::{Event, PeerStats};
-use crate::wire::{FrameId, Message, PeerId, TileId, TileResult, TileSpec};
+use crate::wire::{FrameId, Message, PeerId, Piece, TileId, TileResult, TileSpec};
+
+/// A piece of work in the renderer: its frame, tile and piece.
+pub(super) type FlightKey = (FrameId, TileId, Piece);
 
 pub(super) struct Worker {
     pub(super) me: PeerId,
@@ -24,7 +27,7 @@ pub(super) struct Worker {
     newest: Option<FrameId>,
     /// Tiles handed to the renderer (or waiting in `ready` for the driver to hand over), of any
     /// frame: a tile of a finished frame still occupies its slot until the renderer returns it.
-    pub(super) in_flight: BTreeMap<(FrameId, TileId), InFlight>,
+    pub(super) in_flight: BTreeMap<FlightKey, InFlight>,
     ready: VecDeque<WorkItem>,
     pub(super) estimates: Estimates,
     /// Counts since the last `FrameStats`, reported and reset when a frame ends.
@@ -40,6 +43,8 @@ pub(super) struct FrameState {
     pub(super) queue_work: f64,
     pub(super) prefetch: VecDeque<TileSpec>,
     pub(super) prefetch_work: f64,
+    /// The largest piece handed to the renderer at once, as the owner's newest `Assign` said.
+    render_pixels: u64,
     started: Duration,
     /// `Assign`s and grants received and `TileDone`s sent this frame: the owner compares them
     /// with what it knows of, to tell a stale idle report from a current one.
@@ -96,6 +101,7 @@ impl Worker {
         frame: FrameId,
         mut peers: Vec<PeerId>,
         tiles: Vec<TileSpec>,
+        render_pixels: u64,
     ) {
         if self.newest.is_some_and(|newest| frame < newest)
             || (self.newest == Some(frame) && self.frame.is_none())
@@ -126,6 +132,7 @@ impl Worker {
             FrameState::new(frame, from, now)
         });
         state.peers = peers;
+        state.render_pixels = render_pixels.max(1);
         state.queue_work += tiles.iter().map(|tile| tile.predicted).sum::<f64>();
         state.queue.extend(tiles);
         state.assigned += 1;
@@ -184,14 +191,17 @@ impl Worker {
         self.ready.retain(|item| {
             let keep = item.frame != frame;
             if !keep {
-                in_flight.remove(&(item.frame, item.tile.id));
+                in_flight.remove(&(item.frame, item.tile.id, item.tile.piece));
             }
             keep
         });
     }
 
     pub(super) fn on_tile_rendered(&mut self, cx: &mut Ctx, result: TileResult) {
-        let Some(flight) = self.in_flight.remove(&(result.frame, result.tile)) else {
+        let Some(flight) = self
+            .in_flight
+            .remove(&(result.frame, result.tile, result.piece))
+        else {
             tracing::warn!(frame = %result.frame, tile = %result.tile, "result of a tile not in flight: dropped");
             return;
         };
@@ -246,7 +256,7 @@ impl Worker {
                 started: now,
                 accounted_from: now,
             };
-            self.in_flight.insert((state.id, tile.id), flight);
+            self.in_flight.insert((state.id, tile.id, tile.piece), flight);
             self.ready.push_back(WorkItem {
                 frame: state.id,
                 tile,
@@ -263,7 +273,7 @@ impl Worker {
     /// Tiles of the running frame in the renderer.
     pub(super) fn frame_in_flight(&self, frame: FrameId) -> impl Iterator<Item = &InFlight> {
         self.in_flight
-            .range((frame, TileId(0))..=(frame, TileId(u32::MAX)))
+            .range((frame, TileId(0), Piece(0))..=(frame, TileId(u32::MAX), Piece(u64::MAX)))
             .map(|(_, f)| f)
     }
 
@@ -316,6 +326,7 @@ impl FrameState {
             queue_work: 0.0,
             prefetch: VecDeque::new(),
             prefetch_work: 0.0,
+            render_pixels: u64::MAX,
             started: now,
             assigned: 0,
             stolen: 0,
@@ -328,8 +339,19 @@ impl FrameState {
         }
     }
 
+    /// The next piece for the renderer (or the prefetch), from the front of the queue. A tile
+    /// larger than `render_pixels` is rendered half by half: its first half is taken (halved
+    /// again while still too large) and the rest stays at the front of the queue, where it is
+    /// rendered next unless a thief takes it first. That is how the unrendered part of the tile
+    /// a peer is busy with can still move.
     fn pop_queue(&mut self) -> Option<TileSpec> {
-        let tile = self.queue.pop_front()?;
+        let mut tile = self.queue.pop_front()?;
+        while tile.rect.area() > self.render_pixels
+            && let Some((first, second)) = tile.halves()
+        {
+            self.queue.push_front(second);
+            tile = first;
+        }
         self.queue_work = shrink(self.queue_work, tile.predicted, self.queue.is_empty());
         Some(tile)
     }

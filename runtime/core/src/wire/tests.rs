@@ -8,11 +8,7 @@ use proptest::prelude::*;
 use super::*;
 
 fn tile(id: u32, w: u32, h: u32) -> TileSpec {
-    TileSpec {
-        id: TileId(id),
-        rect: Rect::new(8, 16, w, h),
-        predicted: 2.5,
-    }
+    TileSpec::whole(TileId(id), Rect::new(8, 16, w, h), 2.5)
 }
 
 fn result(w: u32, h: u32) -> TileResult {
@@ -20,6 +16,7 @@ fn result(w: u32, h: u32) -> TileResult {
     TileResult {
         frame: FrameId(3),
         tile: TileId(9),
+        piece: Piece(5),
         rect: Rect::new(0, 0, w, h),
         pixels: (0..area * BYTES_PER_PIXEL).map(|i| i as u8).collect(),
         costs: vec![7; area as usize],
@@ -70,6 +67,7 @@ fn samples() -> Vec<Message> {
             frame: FrameId(1),
             peers: vec![PeerId(0), PeerId(1)],
             tiles: vec![tile(1, 4, 2)],
+            render_pixels: 64,
         },
         Message::StealRequest {
             frame: FrameId(1),
@@ -83,7 +81,7 @@ fn samples() -> Vec<Message> {
         Message::StealNotice {
             frame: FrameId(1),
             victim: PeerId(3),
-            tiles: vec![TileId(4)],
+            tiles: vec![(TileId(4), Piece::WHOLE), (TileId(5), Piece(6))],
             stolen: 2,
         },
         Message::Status {
@@ -226,7 +224,8 @@ fn hostile_values_are_refused() {
     assert!(refused(Message::Assign {
         frame: FrameId(1),
         peers: vec![],
-        tiles: vec![empty]
+        tiles: vec![empty],
+        render_pixels: 1,
     }));
     let overflowing = TileSpec {
         rect: Rect::new(u32::MAX, 0, 2, 1),
@@ -235,7 +234,8 @@ fn hostile_values_are_refused() {
     assert!(refused(Message::Assign {
         frame: FrameId(1),
         peers: vec![],
-        tiles: vec![overflowing]
+        tiles: vec![overflowing],
+        render_pixels: 1,
     }));
     for name in [
         "../etc/passwd",
@@ -323,6 +323,7 @@ fn the_encoded_length_is_the_encodings() {
         Message::TileDone(TileResult {
             frame: FrameId(300),
             tile: TileId(70_000),
+            piece: Piece(1 << 40),
             rect,
             pixels: vec![0; (rect.area() * BYTES_PER_PIXEL) as usize],
             costs: vec![0; cost_map_bytes(rect, 8) as usize],

@@ -167,7 +167,7 @@ fn a_duplicate_result_is_accepted_only_if_bit_identical() {
     let all = tiles(0, &[1.0, 1.0]);
     let assignments = BTreeMap::from([(PeerId(1), vec![all[0]]), (OWNER, vec![all[1]])]);
     owner
-        .start_frame(Duration::ZERO, FrameId(1), assignments)
+        .start_frame(Duration::ZERO, FrameId(1), assignments, u64::MAX)
         .unwrap();
     let item = runtime_core::peer::WorkItem {
         frame: FrameId(1),
@@ -202,8 +202,13 @@ fn a_duplicate_result_is_accepted_only_if_bit_identical() {
     let own = owner.poll_work().unwrap();
     owner.handle_tile_rendered(at, synthetic_result(&own));
     match owner.poll_event() {
-        Some(Event::FrameComplete { results, .. }) => {
+        Some(Event::FrameComplete { results, audit, .. }) => {
             assert_eq!(results[0], synthetic_result(&item));
+            let expected = runtime_core::peer::Audit {
+                agreed: 1,
+                disagreed: 1,
+            };
+            assert_eq!(audit, expected, "both duplicates were compared and counted");
         }
         other => panic!("expected the frame to complete, got {other:?}"),
     }
@@ -278,7 +283,7 @@ fn reports_overtaken_by_other_messages_do_not_count() {
     let all = tiles(0, &[1.0, 1.0, 1.0]);
     let assignments = BTreeMap::from([(PeerId(1), vec![all[0]]), (PeerId(2), all[1..].to_vec())]);
     owner
-        .start_frame(Duration::ZERO, FrameId(1), assignments)
+        .start_frame(Duration::ZERO, FrameId(1), assignments, u64::MAX)
         .unwrap();
     while owner.poll_transmit().is_some() {}
     let at = Duration::from_millis(1);
@@ -368,9 +373,9 @@ fn mishap() -> impl Strategy<Value = (u64, u32, Mishap)> {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
-    /// Whatever dies, freezes, races or overtakes, every frame completes with every tile, and
-    /// nothing is reported faulty (the renderer is deterministic, so every duplicate is
-    /// identical).
+    /// Whatever dies, freezes, races or overtakes, however tiles are cut or backed up, every
+    /// frame completes with every pixel once, and nothing is reported faulty (the renderer is
+    /// deterministic, so every duplicate is identical).
     #[test]
     fn no_tile_is_ever_lost(
         peers in 2..7u32,
@@ -382,18 +387,29 @@ proptest! {
         jitter_us in prop_oneof![Just(0u64), 1..5000u64],
         short_steal_timeout in any::<bool>(),
         mishaps in proptest::collection::vec(mishap(), 0..4),
+        side in prop_oneof![Just(4u32), Just(16u32), Just(23u32)],
+        render_pixels in prop_oneof![Just(u64::MAX), 8..300u64],
+        split_on_steal in any::<bool>(),
+        backups in any::<bool>(),
     ) {
         let config = Config {
             steal,
             steal_timeout: if short_steal_timeout { Duration::from_micros(300) } else { Duration::from_millis(250) },
             heartbeat_interval: Duration::from_millis(10),
             peer_timeout: Duration::from_millis(60),
+            split_on_steal,
+            min_piece_pixels: 16,
+            speculation: backups.then(|| runtime_core::peer::Speculation {
+                factor: 2.0,
+                min_wait: Duration::from_millis(5),
+            }),
             ..Config::default()
         };
         let mut cluster = cluster(&config, peers, slots, seed);
         cluster.latency = Duration::from_micros(latency_us);
         cluster.jitter = Duration::from_micros(jitter_us);
-        cluster.start_frame(OWNER, FrameId(1), contiguous(peers, &costs)).unwrap();
+        let deal = contiguous_tiles(peers, sized_tiles(0, &costs, side));
+        cluster.start_frame_in_pieces(OWNER, FrameId(1), deal, render_pixels).unwrap();
         let mut mishaps: Vec<_> = mishaps.into_iter().filter(|(_, peer, _)| *peer < peers).collect();
         mishaps.sort_by_key(|(at, _, _)| *at);
         let calm = mishaps.is_empty();
@@ -422,6 +438,8 @@ proptest! {
         finish(&mut cluster);
         let (_, results) = completion(&cluster, FrameId(1));
         assert_all_results(&results, FrameId(1), costs.len() as u32);
+        let area: u64 = results.iter().map(|r| r.rect.area()).sum();
+        prop_assert_eq!(area, costs.len() as u64 * u64::from(side * side));
         assert_no_refusals_or_faults(&cluster);
         if calm {
             let failed = cluster.events().find(|(_, e)| matches!(e, Event::PeerFailed { .. }));
