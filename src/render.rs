@@ -294,18 +294,9 @@ impl FrameSink for Sink<'_> {
             seconds: done.seconds,
             rays: done.rays,
             work: done.tiles.iter().map(|t| t.measured).sum(),
-            tiles: done
-                .tiles
-                .iter()
-                .map(|t| TileStats {
-                    tile: t.tile.0,
-                    rect: [t.rect.x, t.rect.y, t.rect.w, t.rect.h],
-                    predicted: t.predicted,
-                    measured: t.measured,
-                    peer: t.peer.0,
-                    initial_peer: t.initial.0,
-                })
-                .collect(),
+            tiles: TileStats::per_tile(&done.tiles),
+            duplicates_agreed: done.audit.agreed,
+            duplicates_disagreed: done.audit.disagreed,
             ..FrameStats::default()
         };
         frame.summarise_leaves();

@@ -92,6 +92,10 @@ pub struct FrameStats {
     pub tiles: Vec<TileStats>,
     /// Each peer's own account of the frame.
     pub peers: Vec<PeerFrameStats>,
+    /// Duplicate results (backups of stragglers, re-issued tiles) the owner compared with the
+    /// first and found bit-identical, and found different: a free audit of determinism.
+    pub duplicates_agreed: u32,
+    pub duplicates_disagreed: u32,
 }
 
 /// One peer's account of one frame (times in seconds of slot time: a peer with 2 rendering
@@ -144,10 +148,72 @@ pub struct TileStats {
     pub predicted: f64,
     /// The measured counted work.
     pub measured: u64,
-    /// The peer that rendered it (0 is the frame owner).
+    /// The peer that rendered it (0 is the frame owner); of a tile rendered in pieces, the
+    /// peer that rendered most of its pixels.
     pub peer: u32,
     /// The peer whose initial set held it; differs from `peer` when stolen or re-issued.
     pub initial_peer: u32,
+    /// The pieces it arrived in: 1, or more where it was cut on the way (rendered half by half,
+    /// or halved for a thief).
+    pub pieces: u32,
+}
+
+impl TileStats {
+    /// One entry per tile of the partition from a frame's pieces (in tile order, a tile's
+    /// pieces together): the tile's rectangle is their bounding box, its costs their sums.
+    pub fn per_tile(records: &[runtime::node::TileRecord]) -> Vec<TileStats> {
+        let mut tiles: Vec<TileStats> = Vec::new();
+        let mut rendered: Vec<(u32, u64)> = Vec::new();
+        for record in records {
+            let r = record.rect;
+            let area = r.area();
+            match tiles.last_mut().filter(|t| t.tile == record.tile.0) {
+                Some(tile) => {
+                    let [x, y, w, h] = tile.rect;
+                    let (x1, y1) = ((x + w).max(r.x + r.w), (y + h).max(r.y + r.h));
+                    let (x0, y0) = (x.min(r.x), y.min(r.y));
+                    tile.rect = [x0, y0, x1 - x0, y1 - y0];
+                    tile.predicted += record.predicted;
+                    tile.measured += record.measured;
+                    tile.pieces += 1;
+                }
+                None => {
+                    if let Some(tile) = tiles.last_mut() {
+                        tile.peer = most_pixels(&rendered);
+                    }
+                    rendered.clear();
+                    tiles.push(TileStats {
+                        tile: record.tile.0,
+                        rect: [r.x, r.y, r.w, r.h],
+                        predicted: record.predicted,
+                        measured: record.measured,
+                        peer: record.peer.0,
+                        initial_peer: record.initial.0,
+                        pieces: 1,
+                    });
+                }
+            }
+            match rendered.iter_mut().find(|(peer, _)| *peer == record.peer.0) {
+                Some((_, pixels)) => *pixels += area,
+                None => rendered.push((record.peer.0, area)),
+            }
+        }
+        if let Some(tile) = tiles.last_mut() {
+            tile.peer = most_pixels(&rendered);
+        }
+        tiles
+    }
+}
+
+/// The peer with the most pixels (the first of equals).
+fn most_pixels(rendered: &[(u32, u64)]) -> u32 {
+    let mut best = (0, 0);
+    for &(peer, pixels) in rendered {
+        if pixels > best.1 {
+            best = (peer, pixels);
+        }
+    }
+    best.0
 }
 
 impl FrameStats {

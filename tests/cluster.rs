@@ -188,3 +188,62 @@ fn peers_report_a_lost_owner_and_fail() {
         killed.elapsed()
     );
 }
+
+/// A peer stopped for a while (SIGSTOP, as a long pause, swap storm or debugger would) has its
+/// tiles backed up on the others instead of holding the frame until its silence timeout; when
+/// it resumes within that timeout it is not declared failed, corrupts nothing, and finishes the
+/// render with the others.
+#[test]
+fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    keygen(&certs, 3);
+    let port = free_port();
+    let out = dir.path().join("cluster");
+    let (server, lines) = serve(&certs, &out, port, 2);
+    let steady = peer(&certs, port, 1).spawn().unwrap();
+    let paused = peer(&certs, port, 2).spawn().unwrap();
+    assert!(
+        wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
+        "the cluster never finished frame 0"
+    );
+    let signal = |name: &str| {
+        let status = Command::new("kill")
+            .args([name, &paused.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success(), "kill {name} failed");
+    };
+    signal("-STOP");
+    // Under the owner's 2 s silence timeout (`serve` above).
+    std::thread::sleep(Duration::from_millis(1200));
+    signal("-CONT");
+    let mut log = Vec::new();
+    let deadline = std::time::Instant::now() + Duration::from_secs(120);
+    while std::time::Instant::now() < deadline {
+        match lines.recv_timeout(Duration::from_millis(100)) {
+            Ok(line) => log.push(line),
+            Err(mpsc::RecvTimeoutError::Timeout) => continue,
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+    }
+    wait_success(server, "serve", Duration::from_secs(30));
+    wait_success(steady, "peer 1", Duration::from_secs(30));
+    wait_success(paused, "peer 2", Duration::from_secs(30));
+    assert!(
+        !log.iter().any(|line| line.contains("peer failed")),
+        "a peer paused for less than the timeout was declared failed:\n{}",
+        log.join("\n")
+    );
+    let got = frames(&out);
+    let expected = reference(dir.path());
+    assert_eq!(got.len(), expected.len());
+    for ((name, a), (_, b)) in got.iter().zip(&expected) {
+        assert!(a == b, "{name} differs from the single-process render");
+    }
+    let stats: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    for frame in stats["frames"].as_array().unwrap() {
+        assert_eq!(frame["duplicates_disagreed"], 0, "{frame}");
+    }
+}
