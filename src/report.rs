@@ -72,6 +72,13 @@ pub struct StatsFile {
     /// The light-transport effects the render paid for (see `tracer::Effects`).
     pub effects: String,
     pub peers: usize,
+    /// The render's identity: a hash of the scene files and the render settings
+    /// (`runtime::node::bundle::render_hash`), also in every frame's EXR header. Empty in files
+    /// written before `--resume` existed.
+    pub render_hash: String,
+    /// The first frame this run rendered: 0, or with `--resume` the first frame missing. The
+    /// frames before it were done already and have no entry in `frames`.
+    pub first_frame: u32,
     pub frames: Vec<FrameStats>,
 }
 

@@ -48,6 +48,7 @@ fn job() -> Result<Job, Box<dyn std::error::Error>> {
         files,
         params,
         frames: FRAMES,
+        first: 0,
     })
 }
 

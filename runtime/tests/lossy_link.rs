@@ -38,6 +38,7 @@ fn job(frames: u32) -> Job {
         files,
         params,
         frames,
+        first: 0,
     }
 }
 

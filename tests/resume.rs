@@ -1,0 +1,122 @@
+//! `--resume` as users meet it: a render killed mid-animation (SIGKILL, no chance to tidy up) is
+//! run again with `--resume`; it keeps the frames already written, renders the rest, and every
+//! frame is bit for bit what an uninterrupted render writes. With other settings, `--resume`
+//! re-renders from frame 0.
+
+mod common;
+
+use common::{frames, repo, run_ok, spawn_reading, tessera, wait_for};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, SystemTime};
+
+const SCENE: &str = "scenes/glass-cluster-pan/glass-cluster-pan.toml";
+const FRAMES: usize = 12;
+/// The image; `--spp` and `--frames` are each call's, since the last render changes them.
+const SIZE: [&str; 4] = ["--width", "64", "--height", "48"];
+
+fn render(out: &Path, extra: &[&str]) -> Command {
+    let mut command = tessera();
+    command
+        .arg("render")
+        .arg(repo(SCENE))
+        .args(SIZE)
+        .args(["--threads", "2", "--out"])
+        .arg(out)
+        .args(extra)
+        .env("NO_COLOR", "1");
+    command
+}
+
+fn modified(path: &Path) -> SystemTime {
+    std::fs::metadata(path).unwrap().modified().unwrap()
+}
+
+#[test]
+fn a_killed_render_resumes_from_its_first_missing_frame_with_the_same_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let reference_dir = dir.path().join("reference");
+    run_ok(&mut render(
+        &reference_dir,
+        &["--spp", "8", "--frames", "12", "--peers", "1"],
+    ));
+    let reference = frames(&reference_dir);
+    assert_eq!(reference.len(), FRAMES);
+
+    // Killed once two frames are written: the owner gets no chance to finish anything.
+    let out = dir.path().join("out");
+    let (mut child, lines) = spawn_reading(
+        render(&out, &["--spp", "8", "--frames", "12", "--peers", "2"]).stdout(Stdio::null()),
+    );
+    assert!(
+        wait_for(&lines, "frame 1 done", Duration::from_secs(120)),
+        "the render never finished frame 1"
+    );
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let written = frames(&out).len();
+    assert!(
+        (2..FRAMES).contains(&written),
+        "{written} frames were written before the kill; the test needs some but not all"
+    );
+    let kept: Vec<SystemTime> = (0..written)
+        .map(|f| modified(&out.join(format!("frame-{f:04}.exr"))))
+        .collect();
+
+    let resumed = run_ok(&mut render(
+        &out,
+        &["--spp", "8", "--frames", "12", "--peers", "2", "--resume"],
+    ));
+    let log = String::from_utf8_lossy(&resumed.stderr);
+    let expected = format!("rendering frames {written}-{}", FRAMES - 1);
+    assert!(log.contains(&expected), "no {expected:?} in:\n{log}");
+    for (f, time) in kept.iter().enumerate() {
+        let path = out.join(format!("frame-{f:04}.exr"));
+        assert_eq!(modified(&path), *time, "frame {f} was written again");
+    }
+    let got = frames(&out);
+    assert_eq!(got.len(), reference.len());
+    for ((name, a), (_, b)) in got.iter().zip(&reference) {
+        assert!(a == b, "{name} differs from the uninterrupted render");
+    }
+    let stats: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    assert_eq!(stats["first_frame"], written);
+    assert_eq!(stats["frames"][0]["frame"], written);
+    assert_eq!(stats["render_hash"].as_str().map(str::len), Some(64));
+
+    // Other settings: nothing is done, so it renders from frame 0 (two frames here, to be quick).
+    let before = std::fs::read(out.join("frame-0000.exr")).unwrap();
+    let changed = run_ok(&mut render(
+        &out,
+        &["--spp", "4", "--peers", "1", "--resume", "--frames", "2"],
+    ));
+    let log = String::from_utf8_lossy(&changed.stderr);
+    assert!(
+        log.contains("frame-0000.exr is of other scene files or settings")
+            && log.contains("rendering frames 0-1"),
+        "{log}"
+    );
+    assert!(std::fs::read(out.join("frame-0000.exr")).unwrap() != before);
+}
+
+#[test]
+fn resume_and_trace_together_are_refused_naming_both_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = render(
+        dir.path(),
+        &[
+            "--resume",
+            "--trace",
+            &dir.path().join("t").display().to_string(),
+        ],
+    )
+    .output()
+    .unwrap();
+    assert_eq!(output.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("--trace cannot be combined with --resume"),
+        "{stderr}"
+    );
+}
