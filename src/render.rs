@@ -164,14 +164,6 @@ fn execute(
     )?;
     let tiles = partitioner.tiles().len();
     let progress = Progress::new(settings.frames - first);
-    if args.resume {
-        progress.line(&resume::describe(
-            first,
-            settings.frames,
-            &missing,
-            &render_hash,
-        ));
-    }
     progress.line(&format!(
         "{}: {}x{}, {} spp, {} frames, {} triangles, effects {}; {} peers, {} threads here, {:?} balancer with {} tiles, stealing {}",
         args.scene.display(),
@@ -187,6 +179,14 @@ fn execute(
         tiles,
         if args.no_steal { "off" } else { "on" },
     ));
+    if args.resume {
+        progress.line(&resume::describe(
+            first,
+            settings.frames,
+            &missing,
+            &render_hash,
+        ));
+    }
     let mut sink = Sink {
         args,
         progress,

@@ -225,7 +225,9 @@ pub fn write_gantt(
         for t in tiles {
             let stolen = stats
                 .frames
-                .get(t.frame as usize)
+                .iter()
+                // By number, not position: a resumed render's entries start at its first frame.
+                .find(|f| u64::from(f.frame) == t.frame)
                 .and_then(|f| f.tiles.iter().find(|r| r.tile == t.tile))
                 .is_some_and(|r| r.initial_peer != peer.0);
             bars.push(sim::plot::GanttBar {

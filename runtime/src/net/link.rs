@@ -142,7 +142,7 @@ impl<M: Send + 'static> Link<M> {
             Some(impairment) => {
                 let runtime: Arc<dyn quinn::Runtime> = Arc::new(quinn::TokioRuntime);
                 let socket = runtime.wrap_udp_socket(std::net::UdpSocket::bind(addr)?)?;
-                let socket = lossy::LossySocket::new(socket, impairment.clone(), identity.index());
+                let socket = lossy::LossySocket::new(socket, impairment.clone(), identity.index())?;
                 Endpoint::new_with_abstract_socket(
                     quinn::EndpointConfig::default(),
                     Some(server),

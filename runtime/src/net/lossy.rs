@@ -94,16 +94,21 @@ pub struct LossySocket {
 }
 
 impl LossySocket {
-    /// Wraps `inner` for peer `peer`. Must be called within a tokio runtime: delayed copies are
-    /// sent from tasks of it.
-    pub fn new(inner: Arc<dyn AsyncUdpSocket>, impairment: Impairment, peer: u32) -> Self {
-        Self {
+    /// Wraps `inner` for peer `peer`. Fails outside a tokio runtime: delayed copies are sent
+    /// from tasks of the runtime it is made in.
+    pub fn new(
+        inner: Arc<dyn AsyncUdpSocket>,
+        impairment: Impairment,
+        peer: u32,
+    ) -> io::Result<Self> {
+        let runtime = tokio::runtime::Handle::try_current().map_err(io::Error::other)?;
+        Ok(Self {
             inner,
             impairment,
             peer,
             sent: AtomicU64::new(0),
-            runtime: tokio::runtime::Handle::current(),
-        }
+            runtime,
+        })
     }
 
     /// Sends one copy of a datagram after `delay`, waiting for the socket if its buffer is
@@ -117,7 +122,7 @@ impl LossySocket {
             for _ in 0..16 {
                 let transmit = Transmit {
                     destination: datagram.destination,
-                    ecn: None,
+                    ecn: datagram.ecn,
                     contents: &datagram.contents,
                     segment_size: None,
                     src_ip: datagram.src_ip,
@@ -142,6 +147,7 @@ impl LossySocket {
 /// An owned copy of one datagram, for sending later.
 struct Datagram {
     destination: SocketAddr,
+    ecn: Option<quinn::udp::EcnCodepoint>,
     src_ip: Option<std::net::IpAddr>,
     contents: Vec<u8>,
 }
@@ -176,6 +182,7 @@ impl AsyncUdpSocket for LossySocket {
                     delay,
                     Datagram {
                         destination: transmit.destination,
+                        ecn: transmit.ecn,
                         src_ip: transmit.src_ip,
                         contents: segment.to_vec(),
                     },
@@ -301,7 +308,8 @@ mod tests {
             runtime.wrap_udp_socket(bind()).unwrap(),
             impairment.clone(),
             5,
-        );
+        )
+        .unwrap();
         let receiver = bind();
         receiver
             .set_read_timeout(Some(Duration::from_millis(300)))
