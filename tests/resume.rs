@@ -5,7 +5,9 @@
 
 mod common;
 
-use common::{frames, repo, run_ok, spawn_reading, tessera, wait_for};
+use common::{
+    frames, free_port, keygen, repo, run_ok, spawn_reading, tessera, wait_for, wait_success,
+};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, SystemTime};
@@ -118,5 +120,70 @@ fn resume_and_trace_together_are_refused_naming_both_flags() {
     assert!(
         stderr.contains("--trace cannot be combined with --resume"),
         "{stderr}"
+    );
+}
+
+/// `serve --resume` with a peer process: it deals only the frames missing (a longer `--frames`
+/// here), and when none is missing its peer is sent home and both exit with success.
+#[test]
+fn a_served_render_resumes_and_one_with_nothing_left_ends_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let reference_dir = dir.path().join("reference");
+    run_ok(&mut render(
+        &reference_dir,
+        &["--spp", "4", "--frames", "5", "--peers", "1"],
+    ));
+    let out = dir.path().join("out");
+    run_ok(&mut render(
+        &out,
+        &["--spp", "4", "--frames", "3", "--peers", "1"],
+    ));
+    let certs = dir.path().join("certs");
+    keygen(&certs, 2);
+    let serve_resumed = |expect_line: &str| {
+        let port = free_port();
+        let mut command = tessera();
+        command
+            .arg("serve")
+            .arg(repo(SCENE))
+            .args(SIZE)
+            .args(["--spp", "4", "--frames", "5", "--resume", "--threads", "1"])
+            .args(["--listen", &format!("127.0.0.1:{port}"), "--expect", "1"])
+            .arg("--certs")
+            .arg(&certs)
+            .arg("--out")
+            .arg(&out)
+            .env("NO_COLOR", "1")
+            .stdout(Stdio::null());
+        let (server, lines) = spawn_reading(&mut command);
+        let peer = tessera()
+            .args(["peer", "--join", &format!("127.0.0.1:{port}")])
+            .args(["--listen", "127.0.0.1:0", "--threads", "1", "--index", "1"])
+            .arg("--certs")
+            .arg(&certs)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        assert!(
+            wait_for(&lines, expect_line, Duration::from_secs(60)),
+            "serve never said {expect_line:?}"
+        );
+        wait_success(server, "serve", Duration::from_secs(120));
+        wait_success(peer, "peer 1", Duration::from_secs(30));
+    };
+    serve_resumed("rendering frames 3-4");
+    let got = frames(&out);
+    let expected = frames(&reference_dir);
+    assert_eq!(got.len(), 5);
+    for ((name, a), (_, b)) in got.iter().zip(&expected) {
+        assert!(a == b, "{name} differs from the uninterrupted render");
+    }
+    let stats = std::fs::read(out.join("stats.json")).unwrap();
+    serve_resumed("all 5 frames are done; nothing to render");
+    assert_eq!(frames(&out), got);
+    assert!(
+        std::fs::read(out.join("stats.json")).unwrap() == stats,
+        "a render with nothing left rewrote stats.json"
     );
 }
