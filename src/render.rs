@@ -148,9 +148,10 @@ fn execute(
     let render_hash = node::bundle::render_hash(&files, &params);
     let settings = scene.settings.clone();
     let (first, missing) = if args.resume {
-        resume::first_missing(&args.out, settings.frames, &render_hash)
+        let (first, why) = resume::first_missing(&args.out, settings.frames, &render_hash);
+        (first, Some(why))
     } else {
-        (0, resume::Missing::Absent)
+        (0, None)
     };
     let world = Arc::new(prepare_world(scene, args.effects));
     std::fs::create_dir_all(&args.out)
@@ -179,13 +180,8 @@ fn execute(
         tiles,
         if args.no_steal { "off" } else { "on" },
     ));
-    if args.resume {
-        progress.line(&resume::describe(
-            first,
-            settings.frames,
-            &missing,
-            &render_hash,
-        ));
+    if let Some(why) = &missing {
+        progress.line(&resume::describe(first, settings.frames, why, &render_hash));
     }
     let mut sink = Sink {
         args,
@@ -226,7 +222,7 @@ fn execute(
     let run = drive(job, &mut sink)?;
     let render_seconds = render_started.elapsed().as_secs_f64();
     sink.progress.finish();
-    if first == settings.frames && args.resume {
+    if first == settings.frames && missing.is_some() {
         // Nothing was rendered: the statistics and chart of the render that made the frames
         // are worth more than empty ones.
         println!(
