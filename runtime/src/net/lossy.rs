@@ -39,7 +39,7 @@ pub struct Impairment {
     /// Every copy is held back this long before it is sent. Default 1 ms.
     pub delay: Duration,
     /// Plus a uniform share of this, drawn per copy. Datagrams sent closer together than this
-    /// are reordered. Default 2 ms.
+    /// may overtake each other. Default 2 ms.
     pub jitter: Duration,
 }
 
@@ -89,6 +89,7 @@ pub struct LossySocket {
     inner: Arc<dyn AsyncUdpSocket>,
     impairment: Impairment,
     peer: u32,
+    /// Datagrams handed to this socket so far: the index of the next one's fate.
     sent: AtomicU64,
     runtime: tokio::runtime::Handle,
 }
@@ -111,9 +112,9 @@ impl LossySocket {
         })
     }
 
-    /// Sends one copy of a datagram after `delay`, waiting for the socket if its buffer is
-    /// full: a copy the impairment let through is not lost to back-pressure, so the loss rate
-    /// stays the configured one.
+    /// Sends one copy of a datagram after `delay`, waiting for the socket (up to 16 times) if
+    /// its buffer is full: a copy the impairment let through is not lost to back-pressure, so
+    /// the loss rate stays the configured one unless the socket stays full.
     fn send_later(&self, delay: Duration, datagram: Datagram) {
         let inner = self.inner.clone();
         self.runtime.spawn(async move {
