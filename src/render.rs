@@ -148,6 +148,11 @@ fn execute(
     let render_hash = node::bundle::render_hash(&files, &params);
     let settings = scene.settings.clone();
     let (first, missing) = if args.resume {
+        let removed = resume::remove_leftovers(&args.out)
+            .with_context(|| format!("removing half-written files in {}", args.out.display()))?;
+        if removed > 0 {
+            tracing::info!("--resume: removed {removed} half-written files of a stopped render");
+        }
         let (first, why) = resume::first_missing(&args.out, settings.frames, &render_hash);
         (first, Some(why))
     } else {

@@ -23,6 +23,28 @@ pub fn frame_path(out: &Path, frame: u32, ext: &str) -> PathBuf {
     out.join(format!("frame-{frame:04}.{ext}"))
 }
 
+/// Removes what a killed render left half-written in `out`: the temporary files of its frames'
+/// images (`frame-NNNN.exr.partial`, `tiles-NNNN.png.partial`, ...), which no reader takes for a
+/// frame but which would otherwise stay forever. Returns how many it removed.
+pub fn remove_leftovers(out: &Path) -> std::io::Result<usize> {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        // No folder yet: nothing was left.
+        return Ok(0);
+    };
+    let mut removed = 0;
+    for entry in entries {
+        let entry = entry?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        let ours = name.starts_with("frame-") || name.starts_with("tiles-");
+        if ours && name.ends_with(tracer::output::TEMPORARY_SUFFIX) && entry.path().is_file() {
+            std::fs::remove_file(entry.path())?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
 /// Why the first frame not done is not done.
 #[derive(Debug, PartialEq)]
 pub enum Missing {
@@ -131,5 +153,28 @@ mod tests {
         assert_eq!(first, 1);
         assert!(matches!(why, Missing::Unreadable(_)), "{why:?}");
         assert!(describe(first, 4, &why, &hash).starts_with("--resume: frame 0 is done;"));
+    }
+
+    #[test]
+    fn only_the_temporary_files_of_frames_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        assert_eq!(remove_leftovers(&out.join("absent")).unwrap(), 0);
+        let names = [
+            "frame-0003.exr.partial",
+            "tiles-0002.png.partial",
+            "frame-0002.exr",
+            "notes.partial",
+        ];
+        for name in names {
+            std::fs::write(out.join(name), b"x").unwrap();
+        }
+        assert_eq!(remove_leftovers(out).unwrap(), 2);
+        let mut left: Vec<String> = std::fs::read_dir(out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["frame-0002.exr", "notes.partial"]);
     }
 }

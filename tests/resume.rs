@@ -61,6 +61,8 @@ fn a_killed_render_resumes_from_its_first_missing_frame_with_the_same_bits() {
         (2..FRAMES).contains(&written),
         "{written} frames were written before the kill; the test needs some but not all"
     );
+    // What a writer killed midway leaves (the kill may or may not have hit one).
+    std::fs::write(out.join("frame-0011.exr.partial"), b"half a frame").unwrap();
     let kept: Vec<SystemTime> = (0..written)
         .map(|f| modified(&out.join(format!("frame-{f:04}.exr"))))
         .collect();
@@ -76,6 +78,12 @@ fn a_killed_render_resumes_from_its_first_missing_frame_with_the_same_bits() {
         let path = out.join(format!("frame-{f:04}.exr"));
         assert_eq!(modified(&path), *time, "frame {f} was written again");
     }
+    let leftovers: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .filter(|n| n.to_string_lossy().ends_with(".partial"))
+        .collect();
+    assert!(leftovers.is_empty(), "left half-written: {leftovers:?}");
     let got = frames(&out);
     assert_eq!(got.len(), reference.len());
     for ((name, a), (_, b)) in got.iter().zip(&reference) {

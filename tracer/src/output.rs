@@ -184,12 +184,16 @@ fn write_then_rename(
     })
 }
 
+/// What a file being written is called until it is renamed: its name plus this. A writer killed
+/// midway leaves such a file and nothing under the real name.
+pub const TEMPORARY_SUFFIX: &str = ".partial";
+
 fn temporary(path: &Path) -> PathBuf {
     let mut name = path
         .file_name()
         .map(|n| n.to_os_string())
         .unwrap_or_default();
-    name.push(".partial");
+    name.push(TEMPORARY_SUFFIX);
     path.with_file_name(name)
 }
 
