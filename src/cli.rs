@@ -186,6 +186,11 @@ pub struct FrameArgs {
     /// Exposure of the PNG previews (the EXR files are always linear and unscaled).
     #[arg(long, default_value_t = 1.0)]
     pub exposure: f32,
+    /// Keep the frames OUT already holds from a render of the same scene files and settings
+    /// (each frame-NNNN.exr records their hash) and render from the first one missing. A frame
+    /// of other settings counts as missing, so changed settings re-render every frame.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 /// A value as the command line spells it (`round-robin`), which is also how files record it.

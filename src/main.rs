@@ -17,6 +17,7 @@ mod cluster;
 mod compare;
 mod render;
 mod report;
+mod resume;
 mod simulate;
 
 use clap::Parser;

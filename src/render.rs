@@ -7,6 +7,7 @@ use crate::cli::{
     BalancerKind, DealOrder, EffectsChoice, FrameArgs, ImageArgs, RenderArgs, ServeArgs, flag_name,
 };
 use crate::report::{self, FrameStats, PeerFrameStats, Progress, StatsFile, TileStats};
+use crate::resume;
 use anyhow::Context;
 use runtime::net::PeerIdentity;
 use runtime::node::{self, CompletedFrame, FrameSink, Job};
@@ -135,11 +136,28 @@ fn execute(
     drive: impl FnOnce(Job, &mut Sink<'_>) -> anyhow::Result<node::LocalRun>,
 ) -> anyhow::Result<()> {
     let started = Instant::now();
+    // A trace feeds the simulator every frame's costs in order; a resumed render has only some.
+    anyhow::ensure!(
+        !(args.resume && args.trace.is_some()),
+        "--trace cannot be combined with --resume: a trace must hold every frame of the render"
+    );
     let scene = load_scene(args)?;
     let tiles = check_limits(args, &scene.settings)?;
     let files = node::bundle::scene_files(&args.scene, &scene)?;
     let params = node::bundle::params(&scene, args.effects == EffectsChoice::All);
+    let render_hash = node::bundle::render_hash(&files, &params);
     let settings = scene.settings.clone();
+    let (first, missing) = if args.resume {
+        let removed = resume::remove_leftovers(&args.out)
+            .with_context(|| format!("removing half-written files in {}", args.out.display()))?;
+        if removed > 0 {
+            tracing::info!("--resume: removed {removed} half-written files of a stopped render");
+        }
+        let (first, why) = resume::first_missing(&args.out, settings.frames, &render_hash);
+        (first, Some(why))
+    } else {
+        (0, None)
+    };
     let world = Arc::new(prepare_world(scene, args.effects));
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
@@ -151,7 +169,7 @@ fn execute(
         settings.height,
     )?;
     let tiles = partitioner.tiles().len();
-    let progress = Progress::new(settings.frames);
+    let progress = Progress::new(settings.frames - first);
     progress.line(&format!(
         "{}: {}x{}, {} spp, {} frames, {} triangles, effects {}; {} peers, {} threads here, {:?} balancer with {} tiles, stealing {}",
         args.scene.display(),
@@ -167,6 +185,9 @@ fn execute(
         tiles,
         if args.no_steal { "off" } else { "on" },
     ));
+    if let Some(why) = &missing {
+        progress.line(&resume::describe(first, settings.frames, why, &render_hash));
+    }
     let mut sink = Sink {
         args,
         progress,
@@ -179,6 +200,8 @@ fn execute(
             deal: flag_name(&args.deal),
             effects: world.effects.to_string(),
             peers,
+            render_hash,
+            first_frame: first,
             frames: Vec::new(),
         },
         rays: 0,
@@ -197,15 +220,30 @@ fn execute(
         files,
         params,
         frames: settings.frames,
+        first,
         partitioner,
     };
     let render_started = Instant::now();
     let run = drive(job, &mut sink)?;
     let render_seconds = render_started.elapsed().as_secs_f64();
     sink.progress.finish();
+    if first == settings.frames && missing.is_some() {
+        // Nothing was rendered: the statistics and chart of the render that made the frames
+        // are worth more than empty ones.
+        println!(
+            "all {} frames in {} were done already; stats.json and gantt.svg left as they were",
+            settings.frames,
+            args.out.display()
+        );
+        return Ok(());
+    }
     let mut stats = sink.stats;
     for ((frame, peer), peer_stats) in &run.peers {
-        if let Some(entry) = stats.frames.get_mut(*frame as usize) {
+        if let Some(entry) = stats
+            .frames
+            .iter_mut()
+            .find(|f| u64::from(f.frame) == *frame)
+        {
             entry.peers.push(PeerFrameStats::new(peer.0, peer_stats));
         }
     }
@@ -224,7 +262,7 @@ fn execute(
     report::write_gantt(&gantt_path, &stats, &run.timelines)?;
     println!(
         "rendered {} frames of {}x{} with {} peers in {:.2} s ({:.2} s in all): {:.2} Mrays/s; frames, stats.json and gantt.svg in {}",
-        settings.frames,
+        settings.frames - first,
         settings.width,
         settings.height,
         peers,
@@ -308,8 +346,7 @@ impl FrameSink for Sink<'_> {
 impl Sink<'_> {
     fn write(&self, done: &CompletedFrame) -> anyhow::Result<()> {
         let (args, film) = (self.args, &done.film);
-        let name = |ext: &str| args.out.join(format!("frame-{:04}.{ext}", done.frame));
-        tracer::output::write_exr(&name("exr"), film.width, film.height, &film.pixels)?;
+        let name = |ext: &str| resume::frame_path(&args.out, done.frame, ext);
         tracer::output::write_png(
             &name("png"),
             film.width,
@@ -327,6 +364,15 @@ impl Sink<'_> {
                 .collect();
             report::write_tile_map(&path, film.width, film.height, &preview, &costs)?;
         }
+        // The EXR goes last: `--resume` takes a frame whose EXR is there for done, so the
+        // previews must be there before it.
+        tracer::output::write_exr_with_text(
+            &name("exr"),
+            film.width,
+            film.height,
+            &film.pixels,
+            &[(resume::ATTRIBUTE, &self.stats.render_hash)],
+        )?;
         Ok(())
     }
 }

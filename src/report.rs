@@ -72,6 +72,13 @@ pub struct StatsFile {
     /// The light-transport effects the render paid for (see `tracer::Effects`).
     pub effects: String,
     pub peers: usize,
+    /// The render's identity: a hash of the scene files and the render settings
+    /// (`runtime::node::bundle::render_hash`), also in every frame's EXR header. Empty in files
+    /// written before `--resume` existed.
+    pub render_hash: String,
+    /// The first frame this run rendered: 0, or with `--resume` the first frame missing. The
+    /// frames before it were done already and have no entry in `frames`.
+    pub first_frame: u32,
     pub frames: Vec<FrameStats>,
 }
 
@@ -284,7 +291,9 @@ pub fn write_gantt(
         for t in tiles {
             let stolen = stats
                 .frames
-                .get(t.frame as usize)
+                .iter()
+                // By number, not position: a resumed render's entries start at its first frame.
+                .find(|f| u64::from(f.frame) == t.frame)
                 .and_then(|f| f.tiles.iter().find(|r| r.tile == t.tile))
                 .is_some_and(|r| r.initial_peer != peer.0);
             bars.push(sim::plot::GanttBar {

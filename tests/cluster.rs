@@ -3,7 +3,9 @@
 
 mod common;
 
-use common::{frames, keygen, repo, run_ok, spawn_reading, tessera, wait_for, wait_success};
+use common::{
+    frames, free_port, keygen, repo, run_ok, spawn_reading, tessera, wait_for, wait_success,
+};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
@@ -13,15 +15,6 @@ const SCENE: &str = "scenes/glass-cluster-pan/glass-cluster-pan.toml";
 const SIZE: [&str; 8] = [
     "--width", "96", "--height", "80", "--spp", "8", "--frames", "6",
 ];
-
-/// A free UDP port on 127.0.0.1 (released before use; tests run few enough servers for this).
-fn free_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 /// Starts `tessera serve`; its stderr lines arrive on the returned channel.
 fn serve(certs: &Path, out: &Path, port: u16, expect: usize) -> (Child, mpsc::Receiver<String>) {

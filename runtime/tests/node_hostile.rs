@@ -61,6 +61,7 @@ fn job() -> Job {
         files,
         params,
         frames,
+        first: 0,
         partitioner,
     }
 }

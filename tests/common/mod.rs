@@ -57,6 +57,15 @@ pub fn shared_scenes() -> Option<PathBuf> {
     dir.is_dir().then_some(dir)
 }
 
+/// A free UDP port on 127.0.0.1 (released before use; tests run few enough servers for this).
+pub fn free_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
 /// A cluster CA and certificates for `peers` peers in `dir` (`tessera keygen`).
 pub fn keygen(dir: &Path, peers: u32) {
     run_ok(

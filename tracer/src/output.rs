@@ -33,6 +33,18 @@ pub fn write_exr(
     height: u32,
     pixels: &[[f32; 3]],
 ) -> Result<(), OutputError> {
+    write_exr_with_text(path, width, height, pixels, &[])
+}
+
+/// Writes like [`write_exr`], with `(name, value)` text attributes in the header, which
+/// [`read_exr_with_text`] reads back (names and values in ASCII; names up to 31 bytes).
+pub fn write_exr_with_text(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[[f32; 3]],
+    text: &[(&str, &str)],
+) -> Result<(), OutputError> {
     assert_eq!(
         pixels.len(),
         width as usize * height as usize,
@@ -43,22 +55,46 @@ pub fn write_exr(
         let p = pixels[position.y() * width as usize + position.x()];
         (p[0], p[1], p[2])
     });
+    let exr_error = |message: String| OutputError::Exr {
+        path: path.to_owned(),
+        message,
+    };
+    let mut image = Image::from_channels((width as usize, height as usize), channels);
+    for (name, value) in text {
+        let (Some(name), Some(value)) = (Text::new_or_none(*name), Text::new_or_none(*value))
+        else {
+            return Err(exr_error(format!(
+                "the header attribute {name:?} = {value:?} is not plain text"
+            )));
+        };
+        image
+            .layer_data
+            .attributes
+            .other
+            .insert(name, AttributeValue::Text(value));
+    }
     // Written on one thread: parallel compression stores chunks in the order they finish, so
     // the same pixels would give different bytes from run to run.
     write_then_rename(path, |tmp| {
-        Image::from_channels((width as usize, height as usize), channels)
+        image
             .write()
             .non_parallel()
             .to_file(tmp)
-            .map_err(|e| OutputError::Exr {
-                path: path.to_owned(),
-                message: e.to_string(),
-            })
+            .map_err(|e| exr_error(e.to_string()))
     })
 }
 
 /// Reads the first RGB(A) layer of an OpenEXR file as linear RGB (alpha ignored).
 pub fn read_exr(path: &Path) -> Result<RgbImage, OutputError> {
+    read_exr_with_text(path, "").map(|(image, _)| image)
+}
+
+/// Reads like [`read_exr`], and the value of the layer's text attribute `name`, if it has one.
+/// Every pixel is read, so a file cut short or corrupt is an error, not an image.
+pub fn read_exr_with_text(
+    path: &Path,
+    name: &str,
+) -> Result<(RgbImage, Option<String>), OutputError> {
     use exr::prelude::*;
     let image = read_first_rgba_layer_from_file(
         path,
@@ -76,7 +112,13 @@ pub fn read_exr(path: &Path) -> Result<RgbImage, OutputError> {
         path: path.to_owned(),
         message: e.to_string(),
     })?;
-    Ok(image.layer_data.channel_data.pixels)
+    let text = Text::new_or_none(name)
+        .and_then(|name| image.layer_data.attributes.other.get(&name))
+        .and_then(|value| match value {
+            AttributeValue::Text(text) => Some(text.to_string()),
+            _ => None,
+        });
+    Ok((image.layer_data.channel_data.pixels, text))
 }
 
 /// Writes a preview PNG: linear RGB times `exposure`, clamped, sRGB-encoded, 8 bits.
@@ -142,12 +184,16 @@ fn write_then_rename(
     })
 }
 
+/// What a file being written is called until it is renamed: its name plus this. A writer killed
+/// midway leaves such a file and nothing under the real name.
+pub const TEMPORARY_SUFFIX: &str = ".partial";
+
 fn temporary(path: &Path) -> PathBuf {
     let mut name = path
         .file_name()
         .map(|n| n.to_os_string())
         .unwrap_or_default();
-    name.push(".partial");
+    name.push(TEMPORARY_SUFFIX);
     path.with_file_name(name)
 }
 
@@ -167,6 +213,18 @@ mod tests {
         assert_eq!((back.width, back.height), (4, 3));
         let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&back.pixels), bits(&pixels));
+        let (_, none) = read_exr_with_text(&path, "tessera.render").unwrap();
+        assert_eq!(none, None);
+        let tagged = dir.path().join("tagged.exr");
+        write_exr_with_text(&tagged, 4, 3, &pixels, &[("tessera.render", "abc123")]).unwrap();
+        let (back, text) = read_exr_with_text(&tagged, "tessera.render").unwrap();
+        assert_eq!(text.as_deref(), Some("abc123"));
+        assert_eq!(bits(&back.pixels), bits(&pixels));
+        // A file cut short is an error, whatever its header says.
+        let bytes = std::fs::read(&tagged).unwrap();
+        let cut = dir.path().join("cut.exr");
+        std::fs::write(&cut, &bytes[..bytes.len() - 8]).unwrap();
+        assert!(read_exr_with_text(&cut, "tessera.render").is_err());
         let png = dir.path().join("a.png");
         write_png(&png, 4, 3, &pixels, 1.0).unwrap();
         let decoded = image::open(&png).unwrap().to_rgb8();

@@ -28,8 +28,12 @@ use crate::wire::{FrameId, PeerId, TileId, TileResult, TileSpec};
 /// The director's policy knobs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Config {
-    /// Frames to render, numbered from 0.
+    /// The frame count of the animation: frames are numbered from 0 to `frames - 1`.
     pub frames: u64,
+    /// The first frame to deal. The frames before it are done already (a resumed render), so
+    /// the director deals `first..frames`. Default 0. The balancer has then no costs of frame
+    /// `first - 1` and cuts `first` as it would cut frame 0; pixels do not depend on tiles.
+    pub first: u64,
     /// How long after the last frame completes the director waits for participants'
     /// statistics before it finishes without them. Default 1 s: statistics are sent the moment
     /// a peer learns the frame is done, so this only matters for a peer that is dying.
@@ -50,6 +54,7 @@ impl Default for Config {
     fn default() -> Self {
         Self {
             frames: 1,
+            first: 0,
             stats_grace: Duration::from_secs(1),
             fault_allowance: 8,
             render_piece_factor: Some(2.0),
@@ -163,13 +168,13 @@ impl Director {
             me,
             partitioner,
             peers: BTreeSet::new(),
-            next: 0,
+            next: config.first,
             state: State::Idle,
             unreported: BTreeSet::new(),
             events: VecDeque::new(),
             config,
         };
-        if director.config.frames == 0 {
+        if director.next >= director.config.frames {
             director.finish();
         }
         director

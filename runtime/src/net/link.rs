@@ -21,7 +21,7 @@ use tokio::sync::{OwnedSemaphorePermit, Semaphore, mpsc};
 use tracing::{debug, warn};
 
 use super::certs::{ANY_PEER_NAME, PeerCertificate, PeerIdentity, peer_name};
-use super::{CloseCode, Config, ConfigError, TlsError, reader, tls};
+use super::{CloseCode, Config, ConfigError, TlsError, lossy, reader, tls};
 
 /// This peer's end of the cluster network. Cheap to clone; all clones share one endpoint.
 pub struct Link<M> {
@@ -137,7 +137,20 @@ impl<M: Send + 'static> Link<M> {
         server.transport_config(transport.clone());
         let mut client = quinn::ClientConfig::new(Arc::new(tls::client_config(identity)?));
         client.transport_config(transport);
-        let mut endpoint = Endpoint::server(server, addr)?;
+        let mut endpoint = match &config.impairment {
+            None => Endpoint::server(server, addr)?,
+            Some(impairment) => {
+                let runtime: Arc<dyn quinn::Runtime> = Arc::new(quinn::TokioRuntime);
+                let socket = runtime.wrap_udp_socket(std::net::UdpSocket::bind(addr)?)?;
+                let socket = lossy::LossySocket::new(socket, impairment.clone(), identity.index())?;
+                Endpoint::new_with_abstract_socket(
+                    quinn::EndpointConfig::default(),
+                    Some(server),
+                    Arc::new(socket),
+                    runtime,
+                )?
+            }
+        };
         endpoint.set_default_client_config(client);
 
         let (events, receiver) = mpsc::channel(config.event_capacity);

@@ -8,6 +8,8 @@
 //! - `link`: the endpoint every peer both accepts and connects on, sending and connection events.
 //! - `reader`: one task per connection that turns incoming streams into messages, and closes the
 //!   connection of a peer that sends something it must not.
+//! - [`lossy`]: a socket wrapper that drops, duplicates and reorders datagrams from a seed, for
+//!   tests and measurements of the link over a bad network ([`Config::impairment`]).
 //!
 //! # Why this shape
 //! The transport knows nothing of the message types: it moves byte strings, and the decoding is a
@@ -41,6 +43,7 @@
 
 pub mod certs;
 mod link;
+pub mod lossy;
 mod reader;
 pub mod tls;
 
@@ -132,6 +135,9 @@ pub struct Config {
     /// Events queued for the driver before readers wait (and QUIC flow control pushes back on the
     /// senders). Default 256.
     pub event_capacity: usize,
+    /// For tests and measurements only: send through a [`lossy::LossySocket`] that mistreats
+    /// datagrams so. Default `None`, a plain UDP socket.
+    pub impairment: Option<lossy::Impairment>,
 }
 
 impl Default for Config {
@@ -147,6 +153,7 @@ impl Default for Config {
             keep_alive: Duration::from_secs(2),
             max_connections: 256,
             event_capacity: 256,
+            impairment: None,
         }
     }
 }

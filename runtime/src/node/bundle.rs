@@ -135,6 +135,40 @@ pub fn scene_hash(files: &[SceneFile]) -> String {
     hasher.finalize().to_hex().to_string()
 }
 
+/// The identity of a render's frames: BLAKE3 over [`scene_hash`] and every render parameter, as
+/// 64 hex digits. A frame's pixels are a pure function of the scene, these parameters and the
+/// frame number (ARCHITECTURE.md), so two renders of one render hash give every frame the same
+/// bits, and `--resume` keeps a frame whose EXR carries it. The frame count is left out on
+/// purpose: a camera key sits at an absolute frame, so frame `k` is the same in a longer render.
+pub fn render_hash(files: &[SceneFile], params: &RenderParams) -> String {
+    // Destructured so that a parameter added to RenderParams cannot be forgotten here.
+    let RenderParams {
+        width,
+        height,
+        samples_per_pixel,
+        max_depth,
+        russian_roulette_depth,
+        seed,
+        all_effects,
+    } = *params;
+    let depth = |d: Option<u32>| d.map_or(u64::MAX, u64::from);
+    let mut hasher = blake3::Hasher::new();
+    hasher.update(b"tessera render 1\0");
+    hasher.update(scene_hash(files).as_bytes());
+    for value in [
+        u64::from(width),
+        u64::from(height),
+        u64::from(samples_per_pixel),
+        depth(max_depth),
+        depth(russian_roulette_depth),
+        seed,
+        u64::from(all_effects),
+    ] {
+        hasher.update(&value.to_le_bytes());
+    }
+    hasher.finalize().to_hex().to_string()
+}
+
 /// The first 16 hex digits of [`scene_hash`], for logs.
 pub fn scene_digest(files: &[SceneFile]) -> String {
     scene_hash(files)[..16].to_owned()
@@ -255,6 +289,52 @@ mod tests {
         assert_eq!(decode_cost(&encode_cost(&cost)), Some(cost));
         assert_eq!(decode_pixels(&[0; 13]), None);
         assert_eq!(decode_cost(&[0; 12]), None);
+    }
+
+    /// Every parameter and every file is part of the render hash; nothing else is.
+    #[test]
+    fn the_render_hash_changes_with_every_parameter_and_file() {
+        let files = vec![scene_file("a.toml".into(), b"x".to_vec())];
+        let params = RenderParams {
+            width: 8,
+            height: 4,
+            samples_per_pixel: 2,
+            max_depth: None,
+            russian_roulette_depth: Some(3),
+            seed: 1,
+            all_effects: false,
+        };
+        let base = render_hash(&files, &params);
+        assert_eq!(base, render_hash(&files.clone(), &params));
+        let changed = [
+            RenderParams { width: 9, ..params },
+            RenderParams {
+                height: 5,
+                ..params
+            },
+            RenderParams {
+                samples_per_pixel: 3,
+                ..params
+            },
+            RenderParams {
+                max_depth: Some(8),
+                ..params
+            },
+            RenderParams {
+                russian_roulette_depth: None,
+                ..params
+            },
+            RenderParams { seed: 2, ..params },
+            RenderParams {
+                all_effects: true,
+                ..params
+            },
+        ];
+        for other in &changed {
+            assert_ne!(render_hash(&files, other), base, "{other:?}");
+        }
+        let edited = vec![scene_file("a.toml".into(), b"y".to_vec())];
+        assert_ne!(render_hash(&edited, &params), base);
     }
 
     #[test]

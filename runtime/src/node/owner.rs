@@ -28,7 +28,10 @@ pub struct Job {
     pub files: Vec<SceneFile>,
     /// The settings every peer renders with (the scene's, after command-line overrides).
     pub params: RenderParams,
+    /// The animation's frame count.
     pub frames: u32,
+    /// The first frame to render: those before it are done already (`--resume`). Usually 0.
+    pub first: u32,
     pub partitioner: balancer::Partitioner,
 }
 
@@ -80,6 +83,7 @@ impl Owner {
         let mut membership = Membership::new(me, job.files, job.params);
         let config = director::Config {
             frames: u64::from(job.frames),
+            first: u64::from(job.first),
             ..director::Config::default()
         };
         let mut director = Director::new(me, job.partitioner, config);

@@ -324,3 +324,40 @@ fn peers_that_join_or_leave_are_dealt_from_the_next_frame() {
         [PeerId(0), PeerId(7)]
     );
 }
+
+/// A resumed render deals from its first missing frame on, numbered as in the whole animation;
+/// one with nothing left finishes without dealing.
+#[test]
+fn a_resumed_render_deals_from_its_first_frame() {
+    let mut cluster = cluster(2);
+    let config = Config {
+        frames: 4,
+        first: 2,
+        ..Config::default()
+    };
+    let mut resumed = Director::new(OWNER, pbt(8), config.clone());
+    resumed.handle_peer_joined(Duration::ZERO, PeerId(1));
+    let (deals, events) = drive(&mut resumed, &mut cluster, &|_| halves(3));
+    let dealt: Vec<u64> = deals.iter().map(|d| d.frame.0).collect();
+    assert_eq!(dealt, [2, 3]);
+    let completed: Vec<u64> = events
+        .iter()
+        .filter_map(|e| match e {
+            Event::FrameComplete { frame, .. } => Some(frame.0),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(completed, [2, 3]);
+    assert_eq!(events.last(), Some(&Event::Finished));
+    // Frame 2 is cut as frame 0 would be: the balancer has no costs of frame 1.
+    let fresh = director(pbt(8), 2, 1)
+        .poll_deal(Duration::ZERO)
+        .unwrap()
+        .unwrap();
+    assert_eq!(deals[0].tiles, fresh.tiles);
+
+    let mut done = Director::new(OWNER, pbt(8), Config { first: 4, ..config });
+    assert!(done.is_finished());
+    assert_eq!(done.poll_deal(Duration::ZERO).unwrap(), None);
+    assert_eq!(done.poll_event(), Some(Event::Finished));
+}
