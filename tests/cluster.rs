@@ -77,30 +77,62 @@ fn reference(dir: &Path) -> Vec<(String, Vec<u8>)> {
     frames(&out)
 }
 
-#[test]
-fn a_peer_killed_mid_render_costs_time_not_tiles() {
-    let dir = tempfile::tempdir().unwrap();
-    let certs = dir.path().join("certs");
+/// `serve` and peers 1 and 2 in `dir`, once frame 0 is done.
+struct Trio {
+    out: std::path::PathBuf,
+    server: Child,
+    lines: mpsc::Receiver<String>,
+    first: Child,
+    second: Child,
+}
+
+fn trio_past_frame_0(dir: &Path) -> Trio {
+    let certs = dir.join("certs");
     keygen(&certs, 3);
     let port = free_port();
-    let out = dir.path().join("cluster");
+    let out = dir.join("cluster");
     let (server, lines) = serve(&certs, &out, port, 2);
-    let survivor = peer(&certs, port, 1).spawn().unwrap();
-    let mut victim = peer(&certs, port, 2).spawn().unwrap();
+    let first = peer(&certs, port, 1).spawn().unwrap();
+    let second = peer(&certs, port, 2).spawn().unwrap();
     assert!(
         wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
         "the cluster never finished frame 0"
     );
-    victim.kill().unwrap(); // SIGKILL: no goodbye, no connection close.
-    victim.wait().unwrap();
-    wait_success(server, "serve", Duration::from_secs(120));
-    wait_success(survivor, "peer 1", Duration::from_secs(30));
-    let got = frames(&out);
-    let expected = reference(dir.path());
+    Trio {
+        out,
+        server,
+        lines,
+        first,
+        second,
+    }
+}
+
+/// Every frame in `out` is bit-identical to a single-process render of the same frames.
+fn assert_frames_match_reference(dir: &Path, out: &Path) {
+    let got = frames(out);
+    let expected = reference(dir);
     assert_eq!(got.len(), expected.len());
     for ((name, a), (_, b)) in got.iter().zip(&expected) {
         assert!(a == b, "{name} differs from the single-process render");
     }
+}
+
+#[test]
+fn a_peer_killed_mid_render_costs_time_not_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let Trio {
+        out,
+        server,
+        // Kept open: serve writes its log into this pipe until it exits.
+        lines: _lines,
+        first: survivor,
+        second: mut victim,
+    } = trio_past_frame_0(dir.path());
+    victim.kill().unwrap(); // SIGKILL: no goodbye, no connection close.
+    victim.wait().unwrap();
+    wait_success(server, "serve", Duration::from_secs(120));
+    wait_success(survivor, "peer 1", Duration::from_secs(30));
+    assert_frames_match_reference(dir.path(), &out);
     // The victim did take part before it died.
     let stats: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
@@ -189,17 +221,13 @@ fn peers_report_a_lost_owner_and_fail() {
 #[test]
 fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
     let dir = tempfile::tempdir().unwrap();
-    let certs = dir.path().join("certs");
-    keygen(&certs, 3);
-    let port = free_port();
-    let out = dir.path().join("cluster");
-    let (server, lines) = serve(&certs, &out, port, 2);
-    let steady = peer(&certs, port, 1).spawn().unwrap();
-    let paused = peer(&certs, port, 2).spawn().unwrap();
-    assert!(
-        wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
-        "the cluster never finished frame 0"
-    );
+    let Trio {
+        out,
+        server,
+        lines,
+        first: steady,
+        second: paused,
+    } = trio_past_frame_0(dir.path());
     let signal = |name: &str| {
         let status = Command::new("kill")
             .args([name, &paused.id().to_string()])
@@ -228,12 +256,7 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
         "a peer paused for less than the timeout was declared failed:\n{}",
         log.join("\n")
     );
-    let got = frames(&out);
-    let expected = reference(dir.path());
-    assert_eq!(got.len(), expected.len());
-    for ((name, a), (_, b)) in got.iter().zip(&expected) {
-        assert!(a == b, "{name} differs from the single-process render");
-    }
+    assert_frames_match_reference(dir.path(), &out);
     let stats: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
     for frame in stats["frames"].as_array().unwrap() {
