@@ -13,7 +13,9 @@
 //! The tree is deterministic: the same triangles and quality give the same tree (see `build.rs`).
 
 use super::build::{build_bvh2, tree_depth};
+use super::offset::plane_normal;
 use super::triangle::{ShearedRay, is_degenerate};
+use super::wide::Bvh4;
 use super::{Hit, Ray, TraversalStats};
 use crate::scene::Triangle;
 use glam::{Vec3, Vec3A};
@@ -70,14 +72,23 @@ impl BuildQuality {
 /// Which code walks the tree and tests triangles.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Traversal {
-    /// Ours: conservative slab test (Ize 2013, pbrt-v4) and the watertight triangle test.
+    /// Ours: conservative slab test (Ize 2013, pbrt-v4) and the watertight triangle test, over
+    /// the binary tree collapsed into 4-wide nodes whose boxes are tested together (`wide.rs`).
     /// What the renderer uses.
     #[default]
     Robust,
+    /// The same tests over obvhs's binary tree, two boxes per node: the traversal `Robust`
+    /// replaced, kept to show that the 4-wide one finds the same hits, bit for bit, and what
+    /// it saves.
+    RobustBinary,
     /// obvhs's `Bvh2` traversal with its `Ray` and Moller-Trumbore `Triangle::intersect`, for
     /// accuracy and speed comparisons. Its `TraversalStats::nodes` counts only the leaves obvhs
     /// hands back (it does not expose its inner-node tests), so compare triangle counts only.
     Obvhs,
+}
+
+impl Traversal {
+    pub const ALL: [Traversal; 3] = [Traversal::Robust, Traversal::RobustBinary, Traversal::Obvhs];
 }
 
 /// A BVH over a scene's triangles, with the triangles' vertices copied in leaf order.
@@ -92,6 +103,11 @@ pub struct Accel {
     pub(super) original: Vec<u32>,
     /// Number of levels of the tree (a lone leaf is 1); bounds the traversal stack.
     pub(super) depth: usize,
+    /// The same tree collapsed into 4-wide nodes, over the same leaves: what `Robust` walks.
+    pub(super) wide: Bvh4,
+    /// The [`plane_normal`] of every input triangle, degenerate ones included, by input index:
+    /// computed once here rather than at every hit (see [`Accel::plane_normal`]).
+    plane_normals: Vec<Vec3>,
 }
 
 impl Accel {
@@ -102,12 +118,15 @@ impl Accel {
             .filter(|&i| !is_degenerate(&triangles[i].p))
             .map(|i| u32::try_from(i).expect("fewer than 2^32 triangles: Hit::triangle is a u32"))
             .collect();
+        let plane_normals = triangles.iter().map(|t| plane_normal(&t.p)).collect();
         if kept.is_empty() {
             return Accel {
                 bvh: Bvh2::default(),
                 vertices: Vec::new(),
                 original: Vec::new(),
                 depth: 0,
+                wide: Bvh4::default(),
+                plane_normals,
             };
         }
         let shapes: Vec<obvhs::triangle::Triangle> = kept
@@ -126,13 +145,23 @@ impl Accel {
             .iter()
             .map(|&k| kept[k as usize])
             .collect();
-        let vertices = original.iter().map(|&i| triangles[i as usize].p).collect();
+        let vertices: Vec<[Vec3; 3]> = original.iter().map(|&i| triangles[i as usize].p).collect();
+        let wide = Bvh4::collapse(&bvh, &vertices);
         Accel {
             bvh,
             vertices,
             original,
             depth,
+            wide,
+            plane_normals,
         }
+    }
+
+    /// The unit plane normal of input triangle `triangle`, as [`plane_normal`] computes it, for
+    /// [`crate::geometry::SurfacePoint::on_triangle_with_normal`].
+    #[inline]
+    pub fn plane_normal(&self, triangle: u32) -> Vec3 {
+        self.plane_normals[triangle as usize]
     }
 
     /// The closest hit in `(0, ray.t_max)`, by our robust traversal. Ties in `t` go to the lower
@@ -157,7 +186,8 @@ impl Accel {
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
         match traversal {
-            Traversal::Robust => self.traverse_robust::<false>(ray, stats),
+            Traversal::Robust => self.traverse_wide::<false>(ray, stats),
+            Traversal::RobustBinary => self.traverse_robust::<false>(ray, stats),
             Traversal::Obvhs => self.traverse_obvhs::<false>(ray, stats),
         }
     }
@@ -170,7 +200,8 @@ impl Accel {
         stats: &mut TraversalStats,
     ) -> bool {
         match traversal {
-            Traversal::Robust => self.traverse_robust::<true>(ray, stats).is_some(),
+            Traversal::Robust => self.traverse_wide::<true>(ray, stats).is_some(),
+            Traversal::RobustBinary => self.traverse_robust::<true>(ray, stats).is_some(),
             Traversal::Obvhs => self.traverse_obvhs::<true>(ray, stats).is_some(),
         }
     }
@@ -320,7 +351,7 @@ mod tests {
         for triangles in [Vec::new(), degenerate] {
             let accel = Accel::build(&triangles, BuildQuality::Medium);
             let mut stats = TraversalStats::default();
-            for traversal in [Traversal::Robust, Traversal::Obvhs] {
+            for traversal in Traversal::ALL {
                 assert_eq!(
                     accel.intersect_with(&down(0.5, 0.0), traversal, &mut stats),
                     None
