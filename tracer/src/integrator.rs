@@ -290,7 +290,7 @@ impl World {
         // Normals keep the winding's orientation: the side a ray arrives from is what tells a
         // dielectric whether it is entering or leaving, and an emitter whether it is seen from
         // the front. Reflection-only BSDFs are two-sided by themselves.
-        let geometric = triangle.area_vector().normalize();
+        let geometric = self.accel.unit_normal(hit.triangle);
         let front_facing = ray.dir.dot(geometric) < 0.0;
         let b0 = 1.0 - hit.b1 - hit.b2;
         let shading_normal = match triangle.n {

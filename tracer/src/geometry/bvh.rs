@@ -14,7 +14,7 @@
 
 use super::build::{build_bvh2, tree_depth};
 use super::offset::plane_normal;
-use super::triangle::{ShearedRay, is_degenerate};
+use super::triangle::{ShearedRay, TriangleHit, is_degenerate};
 use super::wide::Bvh4;
 use super::{Hit, Ray, TraversalStats};
 use crate::scene::Triangle;
@@ -108,6 +108,9 @@ pub struct Accel {
     /// The [`plane_normal`] of every input triangle, degenerate ones included, by input index:
     /// computed once here rather than at every hit (see [`Accel::plane_normal`]).
     plane_normals: Vec<Vec3>,
+    /// Every input triangle's `(p1 - p0) x (p2 - p0)` normalised in f32 (NaN without area),
+    /// by input index: the shading side of a hit, also computed once here.
+    unit_normals: Vec<Vec3>,
 }
 
 impl Accel {
@@ -119,6 +122,10 @@ impl Accel {
             .map(|i| u32::try_from(i).expect("fewer than 2^32 triangles: Hit::triangle is a u32"))
             .collect();
         let plane_normals = triangles.iter().map(|t| plane_normal(&t.p)).collect();
+        let unit_normals = triangles
+            .iter()
+            .map(|t| t.area_vector().normalize())
+            .collect();
         if kept.is_empty() {
             return Accel {
                 bvh: Bvh2::default(),
@@ -127,6 +134,7 @@ impl Accel {
                 depth: 0,
                 wide: Bvh4::default(),
                 plane_normals,
+                unit_normals,
             };
         }
         let shapes: Vec<obvhs::triangle::Triangle> = kept
@@ -154,6 +162,7 @@ impl Accel {
             depth,
             wide,
             plane_normals,
+            unit_normals,
         }
     }
 
@@ -162,6 +171,12 @@ impl Accel {
     #[inline]
     pub fn plane_normal(&self, triangle: u32) -> Vec3 {
         self.plane_normals[triangle as usize]
+    }
+
+    /// Input triangle `triangle`'s `area_vector().normalize()`, as computed once at build.
+    #[inline]
+    pub fn unit_normal(&self, triangle: u32) -> Vec3 {
+        self.unit_normals[triangle as usize]
     }
 
     /// The closest hit in `(0, ray.t_max)`, by our robust traversal. Ties in `t` go to the lower
@@ -289,6 +304,18 @@ impl Closest {
         let Some(h) = sheared.intersect(p, self.t_max()) else {
             return false;
         };
+        self.keep(h, triangle)
+    }
+
+    /// [`Closest::offer`] for a hit already computed, up to the triangle test's final
+    /// `t <= t_max` check, which is made here against the same `t_max` that `offer` passes.
+    #[inline(always)]
+    pub(super) fn offer_hit(&mut self, h: TriangleHit, triangle: u32) -> bool {
+        h.t <= self.t_max() && self.keep(h, triangle)
+    }
+
+    #[inline(always)]
+    fn keep(&mut self, h: TriangleHit, triangle: u32) -> bool {
         let better = match self.best {
             // The sum rounds monotonically and t_max is a float: it stays >= t_max if the
             // exact sum is.

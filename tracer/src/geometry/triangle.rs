@@ -73,10 +73,10 @@ pub(crate) struct ShearedRay {
     /// The ray origin and direction, permuted.
     pub(super) origin: Vec3,
     dir: Vec3,
-    /// The shear of x and y by z.
+    /// The shear of x and y by z, and the scale of z.
     pub(super) sx: f32,
     pub(super) sy: f32,
-    sz: f32,
+    pub(super) sz: f32,
 }
 
 impl ShearedRay {

@@ -348,12 +348,18 @@ impl Accel {
         let first = first as usize;
         let mut found = false;
         for quad in &self.wide.quads[first..first + groups] {
-            let mut candidates = quad_ray.candidates(quad);
+            let quad_hits = quad_ray.intersect(quad);
+            let mut candidates = quad_hits.candidates;
             while candidates != 0 {
                 let lane = candidates.trailing_zeros();
                 candidates &= candidates - 1;
                 let k = (quad.entry + lane) as usize;
-                if closest.offer(sheared, &self.vertices[k], self.original[k]) {
+                let kept = if quad_hits.exact & (1 << lane) != 0 {
+                    closest.offer_hit(quad_hits.hit(lane as usize), self.original[k])
+                } else {
+                    closest.offer(sheared, &self.vertices[k], self.original[k])
+                };
+                if kept {
                     found = true;
                     if ANY_HIT {
                         stats.triangles += u64::from(lane + 1);
