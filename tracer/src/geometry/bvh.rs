@@ -105,12 +105,10 @@ pub struct Accel {
     pub(super) depth: usize,
     /// The same tree collapsed into 4-wide nodes, over the same leaves: what `Robust` walks.
     pub(super) wide: Bvh4,
-    /// The [`plane_normal`] of every input triangle, degenerate ones included, by input index:
-    /// computed once here rather than at every hit (see [`Accel::plane_normal`]).
-    plane_normals: Vec<Vec3>,
-    /// Every input triangle's `(p1 - p0) x (p2 - p0)` normalised in f32 (NaN without area),
-    /// by input index: the shading side of a hit, also computed once here.
-    unit_normals: Vec<Vec3>,
+    /// For every input triangle, degenerate ones included, by input index: its [`plane_normal`]
+    /// (f64) and its `area_vector().normalize()` (f32, NaN without area), computed once here
+    /// rather than at every hit, side by side so that a hit reads one cache line for both.
+    normals: Vec<[Vec3; 2]>,
 }
 
 impl Accel {
@@ -121,10 +119,9 @@ impl Accel {
             .filter(|&i| !is_degenerate(&triangles[i].p))
             .map(|i| u32::try_from(i).expect("fewer than 2^32 triangles: Hit::triangle is a u32"))
             .collect();
-        let plane_normals = triangles.iter().map(|t| plane_normal(&t.p)).collect();
-        let unit_normals = triangles
+        let normals = triangles
             .iter()
-            .map(|t| t.area_vector().normalize())
+            .map(|t| [plane_normal(&t.p), t.area_vector().normalize()])
             .collect();
         if kept.is_empty() {
             return Accel {
@@ -133,8 +130,7 @@ impl Accel {
                 original: Vec::new(),
                 depth: 0,
                 wide: Bvh4::default(),
-                plane_normals,
-                unit_normals,
+                normals,
             };
         }
         let shapes: Vec<obvhs::triangle::Triangle> = kept
@@ -161,8 +157,7 @@ impl Accel {
             original,
             depth,
             wide,
-            plane_normals,
-            unit_normals,
+            normals,
         }
     }
 
@@ -170,13 +165,13 @@ impl Accel {
     /// [`crate::geometry::SurfacePoint::on_triangle_with_normal`].
     #[inline]
     pub fn plane_normal(&self, triangle: u32) -> Vec3 {
-        self.plane_normals[triangle as usize]
+        self.normals[triangle as usize][0]
     }
 
     /// Input triangle `triangle`'s `area_vector().normalize()`, as computed once at build.
     #[inline]
     pub fn unit_normal(&self, triangle: u32) -> Vec3 {
-        self.unit_normals[triangle as usize]
+        self.normals[triangle as usize][1]
     }
 
     /// The closest hit in `(0, ray.t_max)`, by our robust traversal. Ties in `t` go to the lower

@@ -40,8 +40,10 @@ pub(super) struct Quad {
     p: [[f32x4; 3]; 3],
     /// The leaf entry (index into `Accel::vertices` and `Accel::original`) of lane 0.
     pub(super) entry: u32,
-    /// Bit `i` set when lane `i` holds a triangle of the leaf.
+    /// Bit `i` set when lane `i` holds a triangle of the leaf; triangles fill the lowest lanes.
     pub(super) valid: u32,
+    /// The number of triangles in the group (stored: counting bits is slow without `popcnt`).
+    pub(super) len: u32,
 }
 
 impl Quad {
@@ -55,6 +57,7 @@ impl Quad {
                 p: [0, 1, 2].map(|v| [0, 1, 2].map(|axis| coordinate(v, axis))),
                 entry: first_entry + (g * LANES) as u32,
                 valid: (1 << chunk.len()) - 1,
+                len: chunk.len() as u32,
             }
         })
     }

@@ -33,7 +33,7 @@ use wide::{CmpGt, CmpLe, CmpLt, f32x4};
 /// Children per node: SSE's four f32 lanes.
 const WIDTH: usize = 4;
 
-/// A node of up to four children. 128 bytes: two cache lines, aligned to 16 by `f32x4`.
+/// A node of up to four children. 128 bytes, two cache lines, aligned to 16 by `f32x4`.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Node4 {
     /// The children's boxes, one lane per child: min x, y, z, then max x, y, z. Lanes past
@@ -42,10 +42,14 @@ pub(super) struct Node4 {
     /// Per child: an inner node's index in [`Bvh4::nodes`], or a leaf's first group in
     /// [`Bvh4::quads`].
     index: [u32; WIDTH],
-    /// Per child: the leaf's number of triangles, or 0 for an inner node.
-    count: [u32; WIDTH],
-    /// Bit `i` set when lane `i` holds a child.
-    valid: u32,
+    /// Per child: the leaf's number of triangles (obvhs's leaves hold at most 255), or 0 for
+    /// an inner node.
+    count: [u8; WIDTH],
+    /// Bit `i` set when lane `i` holds a child; children fill the lowest lanes.
+    valid: u8,
+    /// The number of children, which the stats count as boxes tested (a stored count, since
+    /// counting bits is a dozen instructions on x86-64 without `popcnt`).
+    children: u8,
 }
 
 /// The collapsed tree. Node 0 is the root; an empty tree has no nodes.
@@ -105,11 +109,13 @@ impl Bvh4 {
                 let aabb = child.aabb();
                 node.set_bounds(lane, aabb.min.to_array(), aabb.max.to_array());
                 node.valid |= 1 << lane;
+                node.children += 1;
                 if child.is_leaf() {
                     let first = child.first_index as usize;
                     node.index[lane] =
                         u32::try_from(quads.len()).expect("fewer groups than leaf entries");
-                    node.count[lane] = child.prim_count;
+                    node.count[lane] = u8::try_from(child.prim_count)
+                        .expect("build.rs clamps leaves to 255 triangles");
                     let leaf = &vertices[first..first + child.prim_count as usize];
                     quads.extend(Quad::pack(leaf, child.first_index));
                 } else {
@@ -131,6 +137,8 @@ impl Bvh4 {
     }
 }
 
+const _: () = assert!(std::mem::size_of::<Node4>() == 128, "two cache lines");
+
 impl Node4 {
     const EMPTY: Node4 = Node4 {
         bounds: [
@@ -144,6 +152,7 @@ impl Node4 {
         index: [0; WIDTH],
         count: [0; WIDTH],
         valid: 0,
+        children: 0,
     };
 
     fn set_bounds(&mut self, lane: usize, min: [f32; 3], max: [f32; 3]) {
@@ -200,7 +209,7 @@ impl WideRay {
             t0 = t0.fast_max(near.cmp_gt(zero).blend(near, zero));
             t1 = t1.fast_min(far.cmp_lt(end).blend(far, end));
         }
-        let entered = t0.cmp_le(t1).move_mask() as u32 & node.valid;
+        let entered = t0.cmp_le(t1).move_mask() as u32 & u32::from(node.valid);
         (entered, t0.to_array())
     }
 }
@@ -255,7 +264,7 @@ impl Accel {
         let mut node = &nodes[0];
         let mut len = 0usize;
         loop {
-            stats.nodes += u64::from(node.valid.count_ones());
+            stats.nodes += u64::from(node.children);
             let (mut entered, t_near) = wide.enter(node, cull(&closest));
             // The entered children, nearest first for closest-hit queries; an any-hit query
             // stops at any hit, so it skips the sort.
@@ -280,7 +289,7 @@ impl Accel {
             let mut postponed = [(0u32, 0f32); WIDTH];
             let mut p = 0;
             for &(lane, t) in &order[..n] {
-                let count = node.count[lane];
+                let count = u32::from(node.count[lane]);
                 if count > 0 {
                     // A nearer leaf may have moved the closest hit in front of this one.
                     if t <= cull(&closest)
@@ -367,7 +376,7 @@ impl Accel {
                     }
                 }
             }
-            stats.triangles += u64::from(quad.valid.count_ones());
+            stats.triangles += u64::from(quad.len);
         }
         found
     }
@@ -410,6 +419,7 @@ mod tests {
             let mut seen = vec![0u32; accel.leaf_entries()];
             for node in &wide.nodes {
                 assert!(node.valid != 0 && node.valid.count_ones() as usize <= WIDTH);
+                assert_eq!(u32::from(node.children), node.valid.count_ones());
                 for lane in (0..WIDTH).filter(|&l| node.valid & (1 << l) != 0) {
                     if node.count[lane] == 0 {
                         continue;
