@@ -3,7 +3,7 @@
 //!
 //! Why 4 wide: on x86-64 without `target-cpu` flags (which would make images depend on the
 //! machine that built the binary) the SIMD width is SSE's four f32 lanes, so a node's four boxes
-//! cost about what one box cost in the binary tree, and a ray opens about half as many nodes.
+//! cost about what one box cost in the binary tree, and a ray visits fewer, shallower nodes.
 //! Why the `wide` crate rather than `std::arch`: it is safe, works on stable Rust, compiles to
 //! SSE2 on x86-64 and to plain scalar code elsewhere, and its lane operations are the IEEE
 //! operations themselves (no fused multiply-add unless one asks for it).
@@ -18,7 +18,9 @@
 //! whether a shadow ray is blocked) is the one brute force finds, whatever the order. Tests
 //! render the same images through both trees, bit for bit.
 //!
-//! Leaves are the binary tree's leaves, unchanged: the same runs of `Accel::vertices`.
+//! Leaves are the binary tree's leaves, the same runs of `Accel::vertices`, packed four triangles
+//! to a group for the SIMD triangle test of `quad.rs`; `Accel::vertices` stays for the scalar
+//! test, which settles what the SIMD one leaves.
 
 use super::bvh::{Accel, Closest};
 use super::quad::{LANES, Quad, QuadRay};
