@@ -26,6 +26,7 @@ Usage (from the repository root, after `cargo build --release`):
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -98,7 +99,8 @@ def main():
                 row["comparison"] = compare(args.tessera, our["image"], theirs["exr"], args.tolerance)
             rows.append(row)
     report = {
-        "settings": {"size": args.size, "spp": args.spp, "segments": args.segments, "tessera_max_depth": args.segments - 1},
+        "settings": {"size": args.size, "spp": args.spp, "segments": args.segments, "tessera_max_depth": args.segments - 1,
+                     "tolerance": args.tolerance},
         "mtl_mapping": MTL_MAPPING,
         "cores": os.cpu_count(),
         "load_before": load_before,
@@ -203,10 +205,11 @@ def markdown(report):
         c = row["comparison"]
         diff = " / ".join(f"{d * 100:+.2f}%" for d in c["relative_difference"])
         verdict = "within" if c["within_tolerance"] else "OUTSIDE"
+        tolerance = f"{s['tolerance'] * 100:g}%"
         lines.append(
             f"| {row['scene']} | | Mitsuba {row['variant']} | {m['cpu_seconds']:.2f} "
             f"({m['load_cpu_seconds']:.2f} + {m['render_cpu_seconds']:.2f}) | {m['wall_seconds']:.2f} | "
-            f"{fmt_means(c['mean_mitsuba'])} | {diff} ({verdict} 1%; RMSE {c['rmse']:.4f}) |"
+            f"{fmt_means(c['mean_mitsuba'])} | {diff} ({verdict} {tolerance}; RMSE {c['rmse']:.4f}) |"
         )
     lines += ["", "MTL mapping: " + report["mtl_mapping"] + ".", ""]
     return "\n".join(lines)
@@ -268,10 +271,15 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
         },
         **shapes,
     }
+    # Resident memory (KiB) before Mitsuba builds its scene, which holds this script's own
+    # Python lists of the OBJ's vertices and faces, and after the scene and the render: the
+    # growth is about what Mitsuba's scene (meshes and BVH) and render took.
+    rss_before_scene = resident_kib()
     cpu, wall = time.process_time(), time.perf_counter()
     scene = mi.load_dict(description)
     dr.eval(scene)
     dr.sync_thread()
+    rss_after_scene = resident_kib()
     load_cpu, load_wall = time.process_time() - cpu, time.perf_counter() - wall
     cpu, wall = time.process_time(), time.perf_counter()
     image = mi.render(scene, spp=spp)
@@ -289,8 +297,24 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
         "load_seconds": load_wall,
         "render_seconds": render_wall,
         "wall_seconds": load_wall + render_wall,
+        "rss_before_scene_kib": rss_before_scene,
+        "rss_after_scene_kib": rss_after_scene,
+        "rss_after_render_kib": resident_kib(),
+        "peak_rss_kib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
         "exr": str(exr),
     }
+
+
+def resident_kib():
+    """This process's resident memory now, in KiB (Linux's /proc; None elsewhere)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1])
+    except OSError:
+        return None
+    return None
 
 
 def read_obj(path):

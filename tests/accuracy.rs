@@ -301,7 +301,16 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             count("offset"),
             count("environment")
         ],
-        [3, 6, 6, 5, 2, 2, 3]
+        [3, 6, 6, 5, 3, 2, 3]
+    );
+    // The binary tree opens other nodes than the 4-wide one, never another hit.
+    let binary = rows
+        .iter()
+        .find(|r| r["knob"] == "traversal" && r["setting"] == "robustbinary")
+        .expect("a row for the binary traversal");
+    assert!(
+        binary["note"].starts_with("bit-identical"),
+        "the binary traversal changed the image: {binary:?}"
     );
     // The furnace has no environment: how it would be sampled changes no bit.
     for row in rows.iter().filter(|r| r["knob"] == "environment").skip(1) {

@@ -282,7 +282,8 @@ impl<'a> Bench<'a> {
         rows
     }
 
-    /// Our robust traversal and obvhs's own, at `spp`.
+    /// Our robust traversal (4-wide, what renders use), the same tests over the binary tree,
+    /// and obvhs's own, at `spp`; each image is compared with the first's.
     pub fn traversal_ladder(&mut self, spp: u32) -> Vec<Row> {
         let settings = RenderSettings {
             samples_per_pixel: spp,
@@ -290,7 +291,7 @@ impl<'a> Bench<'a> {
         };
         let mut rows = Vec::new();
         let mut robust_image = None;
-        for traversal in [Traversal::Robust, Traversal::Obvhs] {
+        for traversal in Traversal::ALL {
             self.world.traversal = traversal;
             let (mut row, image) = self.measure(
                 Knob::Traversal,

@@ -158,12 +158,9 @@ impl World {
                 let weight = if last_delta {
                     1.0
                 } else {
-                    let light_pdf = self.lights.triangle_pdf(
-                        &self.scene,
-                        hit.triangle,
-                        last_point,
-                        surface.at.p,
-                    );
+                    let light_pdf =
+                        self.lights
+                            .triangle_pdf(hit.triangle, last_point, surface.at.p);
                     power_heuristic(last_pdf, light_pdf)
                 };
                 radiance += beta * material.emission * weight;
@@ -284,11 +281,16 @@ impl World {
     /// The local geometry at a hit.
     fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
         let triangle = &self.scene.triangles[hit.triangle as usize];
-        let at = hit.surface_point(&triangle.p);
+        let at = SurfacePoint::on_triangle_with_normal(
+            &triangle.p,
+            hit.b1,
+            hit.b2,
+            self.accel.plane_normal(hit.triangle),
+        );
         // Normals keep the winding's orientation: the side a ray arrives from is what tells a
         // dielectric whether it is entering or leaving, and an emitter whether it is seen from
         // the front. Reflection-only BSDFs are two-sided by themselves.
-        let geometric = triangle.area_vector().normalize();
+        let geometric = self.accel.unit_normal(hit.triangle);
         let front_facing = ray.dir.dot(geometric) < 0.0;
         let b0 = 1.0 - hit.b1 - hit.b2;
         let shading_normal = match triangle.n {

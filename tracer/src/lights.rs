@@ -16,7 +16,7 @@
 
 use crate::effects::Effects;
 use crate::environment::{Environment, MapSampler};
-use crate::geometry::SurfacePoint;
+use crate::geometry::{SurfacePoint, plane_normal};
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -96,6 +96,33 @@ pub struct Lights {
     /// The map's importance sampler, when the environment is a map sampled by importance.
     map_sampler: Option<MapSampler>,
     scene_radius: f32,
+    /// For each light, its triangle's shape when it is a triangle (default otherwise): what
+    /// [`Lights::sample`] and [`Lights::triangle_pdf`] would otherwise recompute per sample.
+    shapes: Vec<TriangleShape>,
+}
+
+/// The per-triangle values light sampling needs, computed once, by the same expressions the
+/// sampling used to evaluate each time, so they are the same bits.
+#[derive(Clone, Copy, Debug, Default)]
+struct TriangleShape {
+    /// Half the length of `(p1 - p0) x (p2 - p0)`.
+    area: f32,
+    /// That cross product normalised in f32, zero without area.
+    normal: Vec3,
+    /// The f64 plane normal that spawning shadow rays off the light uses
+    /// ([`crate::geometry::plane_normal`]).
+    plane_normal: Vec3,
+}
+
+impl TriangleShape {
+    fn of(triangle: &crate::scene::Triangle) -> Self {
+        let area_vector = triangle.area_vector();
+        TriangleShape {
+            area: 0.5 * area_vector.length(),
+            normal: area_vector.normalize_or_zero(),
+            plane_normal: plane_normal(&triangle.p),
+        }
+    }
 }
 
 impl Lights {
@@ -163,7 +190,15 @@ impl Lights {
                 Light::Point { .. } => {}
             }
         }
+        let shapes = lights
+            .iter()
+            .map(|light| match light {
+                Light::Triangle(t) => TriangleShape::of(&scene.triangles[*t as usize]),
+                _ => TriangleShape::default(),
+            })
+            .collect();
         let mut result = Self {
+            shapes,
             lights,
             cdf,
             triangle_light,
@@ -210,12 +245,12 @@ impl Lights {
         match self.lights[index] {
             Light::Triangle(t) => {
                 let triangle = &scene.triangles[t as usize];
+                let shape = &self.shapes[index];
                 let su = u.x.sqrt();
                 let (b1, b2) = (su * (1.0 - u.y), su * u.y);
-                let at = SurfacePoint::on_triangle(&triangle.p, b1, b2);
-                let area_vector = triangle.area_vector();
-                let area = 0.5 * area_vector.length();
-                let normal = area_vector.normalize_or_zero();
+                let at =
+                    SurfacePoint::on_triangle_with_normal(&triangle.p, b1, b2, shape.plane_normal);
+                let (area, normal) = (shape.area, shape.normal);
                 let to_light = at.p - p;
                 let distance_squared = to_light.length_squared();
                 if distance_squared == 0.0 || area == 0.0 {
@@ -289,22 +324,18 @@ impl Lights {
 
     /// The density with which `sample` would have produced the hit of emissive triangle `t` from
     /// `p`, for multiple importance sampling; zero if the triangle is not a sampled light.
-    pub fn triangle_pdf(&self, scene: &Scene, t: u32, p: Vec3, hit_point: Vec3) -> f32 {
+    pub fn triangle_pdf(&self, t: u32, p: Vec3, hit_point: Vec3) -> f32 {
         let Some(&index) = self.triangle_light.get(t as usize) else {
             return 0.0;
         };
         if index == u32::MAX {
             return 0.0;
         }
-        let triangle = &scene.triangles[t as usize];
-        let area_vector = triangle.area_vector();
-        let area = 0.5 * area_vector.length();
+        let shape = &self.shapes[index as usize];
+        let area = shape.area;
         let to_light = hit_point - p;
         let distance_squared = to_light.length_squared();
-        let cos_light = (to_light
-            .normalize_or_zero()
-            .dot(area_vector.normalize_or_zero()))
-        .abs();
+        let cos_light = (to_light.normalize_or_zero().dot(shape.normal)).abs();
         if cos_light == 0.0 || area == 0.0 {
             return 0.0;
         }

@@ -13,7 +13,9 @@
 //! The tree is deterministic: the same triangles and quality give the same tree (see `build.rs`).
 
 use super::build::{build_bvh2, tree_depth};
-use super::triangle::{ShearedRay, is_degenerate};
+use super::offset::plane_normal;
+use super::triangle::{ShearedRay, TriangleHit, is_degenerate};
+use super::wide::Bvh4;
 use super::{Hit, Ray, TraversalStats};
 use crate::scene::Triangle;
 use glam::{Vec3, Vec3A};
@@ -70,14 +72,23 @@ impl BuildQuality {
 /// Which code walks the tree and tests triangles.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Traversal {
-    /// Ours: conservative slab test (Ize 2013, pbrt-v4) and the watertight triangle test.
+    /// Ours: conservative slab test (Ize 2013, pbrt-v4) and the watertight triangle test, over
+    /// the binary tree collapsed into 4-wide nodes whose boxes are tested together (`wide.rs`).
     /// What the renderer uses.
     #[default]
     Robust,
+    /// The same tests over obvhs's binary tree, two boxes per node: the traversal `Robust`
+    /// replaced, kept to show that the 4-wide one finds the same hits, bit for bit, and what
+    /// it saves.
+    RobustBinary,
     /// obvhs's `Bvh2` traversal with its `Ray` and Moller-Trumbore `Triangle::intersect`, for
     /// accuracy and speed comparisons. Its `TraversalStats::nodes` counts only the leaves obvhs
     /// hands back (it does not expose its inner-node tests), so compare triangle counts only.
     Obvhs,
+}
+
+impl Traversal {
+    pub const ALL: [Traversal; 3] = [Traversal::Robust, Traversal::RobustBinary, Traversal::Obvhs];
 }
 
 /// A BVH over a scene's triangles, with the triangles' vertices copied in leaf order.
@@ -92,6 +103,12 @@ pub struct Accel {
     pub(super) original: Vec<u32>,
     /// Number of levels of the tree (a lone leaf is 1); bounds the traversal stack.
     pub(super) depth: usize,
+    /// The same tree collapsed into 4-wide nodes, over the same leaves: what `Robust` walks.
+    pub(super) wide: Bvh4,
+    /// For every input triangle, degenerate ones included, by input index: its [`plane_normal`]
+    /// (f64) and its `area_vector().normalize()` (f32, NaN without area), computed once here
+    /// rather than at every hit, side by side so that a hit reads one cache line for both.
+    normals: Vec<[Vec3; 2]>,
 }
 
 impl Accel {
@@ -102,12 +119,18 @@ impl Accel {
             .filter(|&i| !is_degenerate(&triangles[i].p))
             .map(|i| u32::try_from(i).expect("fewer than 2^32 triangles: Hit::triangle is a u32"))
             .collect();
+        let normals = triangles
+            .iter()
+            .map(|t| [plane_normal(&t.p), t.area_vector().normalize()])
+            .collect();
         if kept.is_empty() {
             return Accel {
                 bvh: Bvh2::default(),
                 vertices: Vec::new(),
                 original: Vec::new(),
                 depth: 0,
+                wide: Bvh4::default(),
+                normals,
             };
         }
         let shapes: Vec<obvhs::triangle::Triangle> = kept
@@ -126,13 +149,29 @@ impl Accel {
             .iter()
             .map(|&k| kept[k as usize])
             .collect();
-        let vertices = original.iter().map(|&i| triangles[i as usize].p).collect();
+        let vertices: Vec<[Vec3; 3]> = original.iter().map(|&i| triangles[i as usize].p).collect();
+        let wide = Bvh4::collapse(&bvh, &vertices);
         Accel {
             bvh,
             vertices,
             original,
             depth,
+            wide,
+            normals,
         }
+    }
+
+    /// The unit plane normal of input triangle `triangle`, as [`plane_normal`] computes it, for
+    /// [`crate::geometry::SurfacePoint::on_triangle_with_normal`].
+    #[inline]
+    pub fn plane_normal(&self, triangle: u32) -> Vec3 {
+        self.normals[triangle as usize][0]
+    }
+
+    /// Input triangle `triangle`'s `area_vector().normalize()`, as computed once at build.
+    #[inline]
+    pub fn unit_normal(&self, triangle: u32) -> Vec3 {
+        self.normals[triangle as usize][1]
     }
 
     /// The closest hit in `(0, ray.t_max)`, by our robust traversal. Ties in `t` go to the lower
@@ -157,7 +196,8 @@ impl Accel {
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
         match traversal {
-            Traversal::Robust => self.traverse_robust::<false>(ray, stats),
+            Traversal::Robust => self.traverse_wide::<false>(ray, stats),
+            Traversal::RobustBinary => self.traverse_robust::<false>(ray, stats),
             Traversal::Obvhs => self.traverse_obvhs::<false>(ray, stats),
         }
     }
@@ -170,7 +210,8 @@ impl Accel {
         stats: &mut TraversalStats,
     ) -> bool {
         match traversal {
-            Traversal::Robust => self.traverse_robust::<true>(ray, stats).is_some(),
+            Traversal::Robust => self.traverse_wide::<true>(ray, stats).is_some(),
+            Traversal::RobustBinary => self.traverse_robust::<true>(ray, stats).is_some(),
             Traversal::Obvhs => self.traverse_obvhs::<true>(ray, stats).is_some(),
         }
     }
@@ -258,6 +299,18 @@ impl Closest {
         let Some(h) = sheared.intersect(p, self.t_max()) else {
             return false;
         };
+        self.keep(h, triangle)
+    }
+
+    /// [`Closest::offer`] for a hit already computed, up to the triangle test's final
+    /// `t <= t_max` check, which is made here against the same `t_max` that `offer` passes.
+    #[inline(always)]
+    pub(super) fn offer_hit(&mut self, h: TriangleHit, triangle: u32) -> bool {
+        h.t <= self.t_max() && self.keep(h, triangle)
+    }
+
+    #[inline(always)]
+    fn keep(&mut self, h: TriangleHit, triangle: u32) -> bool {
         let better = match self.best {
             // The sum rounds monotonically and t_max is a float: it stays >= t_max if the
             // exact sum is.
@@ -320,7 +373,7 @@ mod tests {
         for triangles in [Vec::new(), degenerate] {
             let accel = Accel::build(&triangles, BuildQuality::Medium);
             let mut stats = TraversalStats::default();
-            for traversal in [Traversal::Robust, Traversal::Obvhs] {
+            for traversal in Traversal::ALL {
                 assert_eq!(
                     accel.intersect_with(&down(0.5, 0.0), traversal, &mut stats),
                     None

@@ -10,17 +10,24 @@
 //!   start ([`spawn_ray`], [`OffsetMethod`]).
 //! - `bvh`: the [`Accel`] API, and brute force for tests.
 //! - `build`: building the tree with obvhs, deterministically and without cracks.
-//! - `traverse`: our robust traversal, and obvhs's for comparison ([`Traversal`]).
+//! - `wide`: the tree collapsed into 4-wide nodes, and our robust traversal of it with four
+//!   boxes tested per SIMD step: what renders use.
+//! - `quad`: leaves packed four triangles to a group, and the SIMD filter that rejects four at
+//!   a time what the watertight test would reject at its first step.
+//! - `traverse`: the same robust traversal over the binary tree, and obvhs's own, for
+//!   comparison ([`Traversal`]).
 
 mod build;
 mod bvh;
 mod offset;
+mod quad;
 mod traverse;
 mod triangle;
+mod wide;
 
 pub use bvh::{Accel, BuildQuality, Traversal, intersect_brute_force, occluded_brute_force};
 pub use offset::{
-    OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, spawn_ray, spawn_ray_to,
+    OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, plane_normal, spawn_ray, spawn_ray_to,
 };
 pub use triangle::{TriangleHit, intersect_triangle, is_degenerate};
 

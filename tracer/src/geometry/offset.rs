@@ -96,13 +96,21 @@ impl SurfacePoint {
     /// half an ULP, a unit sphere rounded to a grid of 1/8 (2e6 from the origin) leaked 19 of
     /// 3,000 bounces in `tests/offsets.rs`; with this bound, none.
     pub fn on_triangle(v: &[Vec3; 3], b1: f32, b2: f32) -> Self {
+        Self::on_triangle_with_normal(v, b1, b2, plane_normal(v))
+    }
+
+    /// [`SurfacePoint::on_triangle`] with the triangle's [`plane_normal`] computed beforehand.
+    /// Renderers cache the normal per triangle: its f64 cross product and square root cost about
+    /// as much as the rest of the point, and the cached value is the same bits.
+    #[inline]
+    pub fn on_triangle_with_normal(v: &[Vec3; 3], b1: f32, b2: f32, normal: Vec3) -> Self {
         let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
         let p = hit_point(v, b1, b2);
         let along = (b1 * e1).abs() + (b2 * e2).abs();
         SurfacePoint {
             p,
             error: gamma(2) * p.abs() + gamma(4) * along,
-            normal: plane_normal(v),
+            normal,
         }
     }
 }
@@ -181,7 +189,7 @@ pub fn spawn_ray_to(from: &SurfacePoint, to: &SurfacePoint, method: OffsetMethod
 
 /// The unit normal of the plane of `v`, from the cross product of its edges in f64 (see the
 /// module's comment); zero for a triangle without area.
-fn plane_normal(v: &[Vec3; 3]) -> Vec3 {
+pub fn plane_normal(v: &[Vec3; 3]) -> Vec3 {
     let [a, b, c] = v.map(|v| v.as_dvec3());
     let n: DVec3 = (b - a).cross(c - a);
     n.normalize_or_zero().as_vec3()

@@ -27,7 +27,7 @@ use obvhs::bvh2::node::Bvh2Node;
 use obvhs::ray::RayHit;
 
 /// Widening of far slab distances (and of the culling distance) for rounding: `1 + 2 gamma(3)`.
-const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
+pub(super) const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
 const _: () = assert!(
     FAR_SCALE > 1.0 && FAR_SCALE < 1.0 + 1e-6,
     "a few ULPs of widening"

@@ -69,13 +69,14 @@ pub(crate) const fn gamma(n: u32) -> f32 {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ShearedRay {
     /// The axis that becomes z; x and y follow cyclically (`kx = kz + 1`, `ky = kz + 2`).
-    kz: usize,
+    pub(super) kz: usize,
     /// The ray origin and direction, permuted.
-    origin: Vec3,
+    pub(super) origin: Vec3,
     dir: Vec3,
-    sx: f32,
-    sy: f32,
-    sz: f32,
+    /// The shear of x and y by z, and the scale of z.
+    pub(super) sx: f32,
+    pub(super) sy: f32,
+    pub(super) sz: f32,
 }
 
 impl ShearedRay {

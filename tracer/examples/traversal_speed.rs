@@ -1,0 +1,99 @@
+//! The 4-wide traversal against the binary one on a real scene: the same image (hashed, bit for
+//! bit), and the CPU time per ray of each, the best of several interleaved rounds.
+//!
+//! `cargo run --release -p tracer --example traversal_speed -- SCENE.toml [SIZE] [SPP] [ROUNDS]`
+//!
+//! Why thread CPU time and the best round: on a machine shared with other work a wall clock
+//! counts the other work too, and interference only ever adds time. The render runs on this one
+//! thread (no rayon), so the thread's CPU time (Linux's `/proc/thread-self/schedstat`) is the
+//! render's. Depth is Mitsuba's comparison setting, 7 bounces.
+
+use std::path::Path;
+use tracer::geometry::Traversal;
+use tracer::{Rect, World, render_tile};
+
+/// This thread's CPU time in seconds, from the first field of `schedstat` (nanoseconds on CPU).
+fn thread_cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/thread-self/schedstat")
+        .expect("Linux's /proc/thread-self/schedstat: this example measures with it");
+    let nanos: f64 = stat
+        .split_whitespace()
+        .next()
+        .and_then(|n| n.parse().ok())
+        .expect("schedstat starts with the nanoseconds on CPU");
+    nanos / 1e9
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let Some(path) = args.get(1) else {
+        eprintln!("usage: traversal_speed SCENE.toml [SIZE] [SPP] [ROUNDS]");
+        std::process::exit(2);
+    };
+    let number = |i: usize, default: u32| {
+        args.get(i)
+            .map_or(default, |s| s.parse().expect("a number"))
+    };
+    let (size, spp, rounds) = (number(2, 96), number(3, 8), number(4, 3));
+    let mut scene = match tracer::scene::load(Path::new(path)) {
+        Ok(scene) => scene,
+        Err(e) => {
+            eprintln!("{path}: {e}");
+            std::process::exit(1);
+        }
+    };
+    scene.settings.samples_per_pixel = spp;
+    scene.settings.max_depth = Some(7);
+    scene.settings.width = size;
+    scene.settings.height = size;
+    let mut world = World::prepare(scene, None);
+    println!("{path}: {size}x{size}, {spp} spp, {:?}", world.accel);
+    let traversals = [Traversal::RobustBinary, Traversal::Robust];
+    let mut best = [f64::INFINITY; 2];
+    let mut hashes = Vec::new();
+    for _ in 0..rounds {
+        for (i, traversal) in traversals.into_iter().enumerate() {
+            world.traversal = traversal;
+            let start = thread_cpu_seconds();
+            let out = render_tile(
+                &world,
+                0,
+                Rect {
+                    x: 0,
+                    y: 0,
+                    w: size,
+                    h: size,
+                },
+            );
+            let seconds = thread_cpu_seconds() - start;
+            let s = out.stats;
+            let rays = (s.rays + s.shadow_rays) as f64;
+            best[i] = best[i].min(seconds * 1e9 / rays);
+            // FNV-1a over every channel's bits.
+            let hash = out
+                .pixels
+                .iter()
+                .flatten()
+                .fold(0xcbf2_9ce4_8422_2325u64, |h, c| {
+                    (h ^ u64::from(c.to_bits())).wrapping_mul(0x0100_0000_01b3)
+                });
+            hashes.push(hash);
+            println!(
+                "  {traversal:?}: {seconds:.3} CPU-s, {:.0} ns per ray, {:.2} boxes and {:.2} triangles per ray, image {hash:016x}",
+                seconds * 1e9 / rays,
+                s.traversal.nodes as f64 / rays,
+                s.traversal.triangles as f64 / rays,
+            );
+        }
+    }
+    println!(
+        "best: binary {:.0} ns per ray, 4-wide {:.0} ({:.2}x)",
+        best[0],
+        best[1],
+        best[0] / best[1]
+    );
+    if hashes.iter().any(|&h| h != hashes[0]) {
+        eprintln!("the traversals rendered different images");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,269 @@
+//! Leaves packed four triangles to a group, and the watertight test run on the four at once,
+//! one SIMD lane per triangle, as far as it goes in f32.
+//!
+//! Most triangle tests of a traversal fail the watertight test's inside test (the ray's origin
+//! is outside the triangle as projected along the ray), and those that pass mostly end in f32
+//! arithmetic: both are the same few subtractions, products and comparisons for every triangle,
+//! so four triangles' worth fit in SSE lanes.
+//!
+//! **Exactness.** Each lane of [`QuadRay::intersect`] computes, for its triangle, exactly the f32
+//! values of the scalar test (`ShearedRay::intersect` in `triangle.rs`): the same permutation of
+//! axes (by choosing coordinate arrays, which moves no value), translation, shear, edge
+//! functions, determinant, scaled distance, division and error bound, with the IEEE operations
+//! in the same order and no fused multiply-add. Where the scalar test leaves f32 (an edge
+//! function exactly zero, recomputed in f64; a distance its error bound cannot call positive,
+//! settled from the plane equation in f64), the lane is handed to the scalar test itself.
+//! Otherwise:
+//! - a lane with two nonzero edge functions of opposite signs is rejected; the scalar test
+//!   recomputes only zero ones, so it rejects it too, at the same step;
+//! - a lane without a zero edge function that has a zero determinant or a distance behind the
+//!   origin is rejected, as the scalar test rejects it;
+//! - a lane whose distance passes the error bound gets the scalar test's very hit (`t`, bound,
+//!   barycentrics); only the final `t <= t_max` is left, made by `Closest::offer_hit` against
+//!   the `t_max` the scalar call would have been given.
+//! The maxima in the error bound are the one place where SIMD and scalar could disagree (on
+//! NaN); a NaN in any of their inputs makes the lane's `t` NaN, which goes to the scalar test.
+//! So no hit changes: tests compare every lane with the scalar test.
+
+use super::triangle::{ShearedRay, TriangleHit, gamma};
+use glam::Vec3;
+use wide::{CmpEq, CmpGe, CmpGt, CmpLe, CmpLt, f32x4};
+
+/// Triangles per group: SSE's four f32 lanes.
+pub(super) const LANES: usize = 4;
+
+/// Four triangles of one leaf, coordinates in lanes.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Quad {
+    /// `p[vertex][axis]`: lane `i` holds triangle `entry + i`'s vertex. Unused lanes repeat
+    /// the group's first triangle and are masked out by `valid`.
+    p: [[f32x4; 3]; 3],
+    /// The leaf entry (index into `Accel::vertices` and `Accel::original`) of lane 0.
+    pub(super) entry: u32,
+    /// Bit `i` set when lane `i` holds a triangle of the leaf; triangles fill the lowest lanes.
+    pub(super) valid: u32,
+    /// The number of triangles in the group (stored: counting bits is slow without `popcnt`).
+    pub(super) len: u32,
+}
+
+impl Quad {
+    /// The groups of the leaf whose triangles are `vertices`, in order.
+    pub(super) fn pack(vertices: &[[Vec3; 3]], first_entry: u32) -> impl Iterator<Item = Quad> {
+        vertices.chunks(LANES).enumerate().map(move |(g, chunk)| {
+            let lane = |i: usize| chunk.get(i).unwrap_or(&chunk[0]);
+            let coordinate =
+                |v: usize, axis: usize| f32x4::new([0, 1, 2, 3].map(|i| lane(i)[v][axis]));
+            Quad {
+                p: [0, 1, 2].map(|v| [0, 1, 2].map(|axis| coordinate(v, axis))),
+                entry: first_entry + (g * LANES) as u32,
+                valid: (1 << chunk.len()) - 1,
+                len: chunk.len() as u32,
+            }
+        })
+    }
+}
+
+/// The per-ray part of the test: the scalar test's permutation, origin and shear, splatted.
+pub(super) struct QuadRay {
+    /// Which input axes become x, y and z.
+    axes: [usize; 3],
+    origin: [f32x4; 3],
+    sx: f32x4,
+    sy: f32x4,
+    sz: f32x4,
+}
+
+impl QuadRay {
+    pub(super) fn new(sheared: &ShearedRay) -> Self {
+        let kz = sheared.kz;
+        let o = sheared.origin;
+        QuadRay {
+            axes: [(kz + 1) % 3, (kz + 2) % 3, kz],
+            origin: [o.x, o.y, o.z].map(f32x4::splat),
+            sx: f32x4::splat(sheared.sx),
+            sy: f32x4::splat(sheared.sy),
+            sz: f32x4::splat(sheared.sz),
+        }
+    }
+
+    /// The watertight test on the four triangles of `quad`, lane by lane, as far as it can be
+    /// taken without the scalar test's f64 steps (see the module's comment).
+    #[inline(always)]
+    pub(super) fn intersect(&self, quad: &Quad) -> QuadHits {
+        let [kx, ky, kz] = self.axes;
+        // The scalar `transform` of each permuted vertex: `v = p - origin`, then
+        // `(v.x + sx * v.z, v.y + sy * v.z, v.z)`.
+        let sheared = |v: usize| {
+            let x = quad.p[v][kx] - self.origin[0];
+            let y = quad.p[v][ky] - self.origin[1];
+            let z = quad.p[v][kz] - self.origin[2];
+            (x + self.sx * z, y + self.sy * z, z)
+        };
+        let (p0, p1, p2) = (sheared(0), sheared(1), sheared(2));
+        // The scalar `edge_function(a, b)` in f32: `a.x * b.y - a.y * b.x`.
+        let edge = |a: (f32x4, f32x4, f32x4), b: (f32x4, f32x4, f32x4)| a.0 * b.1 - a.1 * b.0;
+        let (e0, e1, e2) = (edge(p1, p2), edge(p2, p0), edge(p0, p1));
+        let zero = f32x4::ZERO;
+        let negative = e0.cmp_lt(zero) | e1.cmp_lt(zero) | e2.cmp_lt(zero);
+        let positive = e0.cmp_gt(zero) | e1.cmp_gt(zero) | e2.cmp_gt(zero);
+        let outside = negative & positive;
+        // Where an edge function is exactly zero the scalar test recomputes it in f64: those
+        // lanes, unless already outside, are the scalar test's to decide.
+        let zero_edge = e0.cmp_eq(zero) | e1.cmp_eq(zero) | e2.cmp_eq(zero);
+
+        let det = e0 + e1 + e2;
+        let z0 = p0.2 * self.sz;
+        let z1 = p1.2 * self.sz;
+        let z2 = p2.2 * self.sz;
+        let t_scaled = e0 * z0 + e1 * z1 + e2 * z2;
+        let behind =
+            (det.cmp_lt(zero) & t_scaled.cmp_ge(zero)) | (det.cmp_gt(zero) & t_scaled.cmp_le(zero));
+        let missed = outside | ((det.cmp_eq(zero) | behind) & !zero_edge);
+        let inv_det = f32x4::ONE / det;
+        let t = t_scaled * inv_det;
+
+        // The scalar error bound of t (pbrt-v4, section 6.8.4), term for term. Its maxima see
+        // NaN only in lanes where t is NaN too, and those are never `bounded`.
+        let max3 = |a: f32x4, b: f32x4, c: f32x4| a.abs().fast_max(b.abs()).fast_max(c.abs());
+        let max_zt = max3(z0, z1, z2);
+        let delta_z = f32x4::splat(gamma(3)) * max_zt;
+        let max_xt = max3(p0.0, p1.0, p2.0);
+        let max_yt = max3(p0.1, p1.1, p2.1);
+        let delta_x = f32x4::splat(gamma(5)) * (max_xt + max_zt);
+        let delta_y = f32x4::splat(gamma(5)) * (max_yt + max_zt);
+        let delta_e = f32x4::splat(2.0)
+            * (f32x4::splat(gamma(2)) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
+        let max_e = max3(e0, e1, e2);
+        let delta_t = f32x4::splat(3.0)
+            * (f32x4::splat(gamma(3)) * max_e * max_zt + delta_e * max_zt + delta_z * max_e)
+            * inv_det.abs();
+        let bounded = t.cmp_gt(delta_t) & t.abs().cmp_lt(f32x4::splat(f32::INFINITY));
+        let candidates = !(missed.move_mask() as u32) & quad.valid;
+        let exact = (bounded & !zero_edge).move_mask() as u32 & candidates;
+        QuadHits {
+            candidates,
+            exact,
+            t: t.to_array(),
+            t_error: delta_t.to_array(),
+            b: [e0 * inv_det, e1 * inv_det, e2 * inv_det].map(f32x4::to_array),
+        }
+    }
+}
+
+/// What [`QuadRay::intersect`] found out about four triangles.
+pub(super) struct QuadHits {
+    /// Lanes the scalar test would not reject: bit `i` clear only when it certainly would.
+    pub(super) candidates: u32,
+    /// Of those, the lanes whose hit below is the scalar test's own result, up to its final
+    /// `t <= t_max`; the other candidates need the scalar test.
+    pub(super) exact: u32,
+    t: [f32; LANES],
+    t_error: [f32; LANES],
+    b: [[f32; LANES]; 3],
+}
+
+impl QuadHits {
+    /// Lane `lane`'s hit, valid when its bit of `exact` is set.
+    #[inline(always)]
+    pub(super) fn hit(&self, lane: usize) -> TriangleHit {
+        TriangleHit {
+            t: self.t[lane],
+            t_error: self.t_error[lane],
+            b0: self.b[0][lane],
+            b1: self.b[1][lane],
+            b2: self.b[2][lane],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Ray;
+
+    /// A splitmix64 step mapped to [-1, 1), for test cases.
+    fn next(state: &mut u64) -> f32 {
+        *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = *state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+    }
+
+    #[test]
+    fn simd_lanes_reject_only_misses_and_their_hits_are_the_scalar_ones() {
+        let mut state = 7;
+        let point = |s: &mut u64| Vec3::new(next(s), next(s), next(s));
+        let (mut hits, mut kept, mut rejected, mut exact) = (0, 0, 0, 0);
+        for _ in 0..20_000 {
+            // Triangles around the origin, some sharing a vertex with the ray's aim point so
+            // that edge functions round to zero or nearly.
+            let aim = point(&mut state) * 0.5;
+            let triangles: Vec<[Vec3; 3]> = (0..LANES)
+                .map(|i| {
+                    let a = if i % 2 == 0 { aim } else { point(&mut state) };
+                    [a, point(&mut state), point(&mut state)]
+                })
+                .collect();
+            let origin = point(&mut state) * 4.0;
+            let dir = match state % 5 {
+                0 => Vec3::new(0.0, -0.0, 1.0) * origin.z.signum() * -1.0,
+                _ => aim - origin,
+            };
+            let ray = Ray {
+                origin,
+                dir,
+                t_max: f32::INFINITY,
+            };
+            let sheared = ShearedRay::new(&ray);
+            let quad = Quad::pack(&triangles, 0)
+                .next()
+                .expect("four triangles, one group");
+            let found = QuadRay::new(&sheared).intersect(&quad);
+            let mask = found.candidates;
+            for (i, p) in triangles.iter().enumerate() {
+                let scalar = sheared.intersect(p, f32::INFINITY);
+                let hit = scalar.is_some();
+                let candidate = mask & (1 << i) != 0;
+                assert!(!hit || candidate, "lane {i} of {triangles:?} by {ray:?}");
+                if found.exact & (1 << i) != 0 {
+                    assert_eq!(
+                        scalar,
+                        Some(found.hit(i)),
+                        "lane {i}: the SIMD hit is the scalar one"
+                    );
+                    exact += 1;
+                }
+                hits += hit as u32;
+                kept += candidate as u32;
+                rejected += !candidate as u32;
+            }
+        }
+        assert!(
+            hits > 10_000,
+            "{hits} hits: the rays rarely meet the triangles"
+        );
+        assert!(rejected > 20_000, "only {rejected} rejected ({kept} kept)");
+        // Half the triangles have a vertex exactly where the ray aims, so their edge functions
+        // are zero and the scalar test settles them; the SIMD hits must still be many.
+        assert!(exact > hits / 8, "{exact} of {hits} hits settled in SIMD");
+    }
+
+    #[test]
+    fn a_short_leaf_masks_its_unused_lanes() {
+        let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let quads: Vec<Quad> = Quad::pack(&[t; 6], 10).collect();
+        assert_eq!(quads.len(), 2);
+        assert_eq!((quads[0].entry, quads[0].valid), (10, 0b1111));
+        assert_eq!((quads[1].entry, quads[1].valid), (14, 0b0011));
+        let ray = Ray {
+            origin: Vec3::new(0.25, 0.25, 1.0),
+            dir: -Vec3::Z,
+            t_max: f32::INFINITY,
+        };
+        let quad_ray = QuadRay::new(&ShearedRay::new(&ray));
+        let found = quad_ray.intersect(&quads[1]);
+        assert_eq!(found.candidates, 0b0011, "the padding is never a candidate");
+        assert_eq!(found.exact, 0b0011);
+    }
+}
