@@ -46,7 +46,7 @@ def main():
     args.out.mkdir(parents=True, exist_ok=True)
     certs = args.out / "certs"
     if not (certs / "ca.pem").exists():
-        subprocess.run([args.tessera, "keygen", "--out", str(certs), "--peers", "3"], check=True, capture_output=True)
+        subprocess.run([args.tessera, "keygen", "--out", str(certs), "--peers", "4"], check=True, capture_output=True)
     reference = args.out / "reference"
     if not (reference / "frame-0003.exr").exists():
         subprocess.run([args.tessera, "render", args.scene, *SIZE, "--peers", "1", "--threads", "1", "--out", str(reference)],

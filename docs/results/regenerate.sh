@@ -16,9 +16,12 @@ PEERS=1,2,4,8,16,32,64,128,256,512,1024
 # Every run: links of 0.1 ms one way (a LAN), one rendering slot per peer, the renderer's
 # measured per-tile overhead (30 us), the default work rate (1.17e8 units/s per slot).
 NET="--latency 0.1 --tile-overhead 0.03"
-# Sections 1 to 4 deal each peer one contiguous run of tiles, as the claims were first studied;
-# section 6 deals interleaved, the default since.
-RUNS="--deal contiguous"
+# Sections 1 to 6 study the seed's two mechanisms, the PBT and stealing, as they were first
+# studied: every tile rendered and moved whole, no backups of stragglers (UNCUT). Section 7
+# measures what cutting tiles and backups add. Sections 1 to 4 deal each peer one contiguous
+# run of tiles; section 6 deals interleaved, the default since.
+UNCUT="--render-pieces off --split-on-steal false --backups false"
+RUNS="--deal contiguous $UNCUT"
 
 # The shipped uneven scene's cost trace is committed: counted work is deterministic, so
 # recording it again gives the same file. To re-record it (about a minute):
@@ -59,14 +62,33 @@ $T simulate $GLASS $NET $RUNS --bandwidth 1000 --peers $PEERS --tiles 4096 \
 # 5. The classic static baseline: a regular grid dealt round-robin, blind to predicted cost
 #    (every other run deals contiguous runs of equal predicted cost, which is already a use
 #    of the PBT's predictor).
-$T simulate $GLASS $NET --deal round-robin --policy regular,regular+steal --peers $PEERS \
+$T simulate $GLASS $NET $UNCUT --deal round-robin --policy regular,regular+steal --peers $PEERS \
     --tiles 1024,4096 --charts peers --out $R/glass-round-robin
-$T simulate synthetic $NET --deal round-robin --policy regular,regular+steal \
+$T simulate synthetic $NET $UNCUT --deal round-robin --policy regular,regular+steal \
     --peers $PEERS --tiles 4096 --charts peers --out $R/synthetic-round-robin
 
 # 6. Dealing interleaved (the default): each tile to the peer with the least predicted work,
 #    so that every peer's share is spread over the image.
-$T simulate $GLASS $NET --deal interleaved --peers $PEERS --tiles 1024,4096,16384 \
+$T simulate $GLASS $NET $UNCUT --deal interleaved --peers $PEERS --tiles 1024,4096,16384 \
     --charts peers --gantt 16:pbt+steal:1024:12 --out $R/glass-interleaved
-$T simulate synthetic $NET --deal interleaved --peers $PEERS --tiles 4096,16384 \
+$T simulate synthetic $NET $UNCUT --deal interleaved --peers $PEERS --tiles 4096,16384 \
     --charts peers --gantt 64:pbt+steal:4096:10 --out $R/synthetic-interleaved
+
+# 7. The end of a frame (the defaults since): tiles rendered half by half above twice the mean
+#    tile area, halved for thieves, stragglers backed up; each mechanism off in turn, both off
+#    (UNCUT), and pieces of a quarter of the mean tile area. The tail issue's four set-ups.
+for variant in "all:" "no-render-pieces:--render-pieces off" "no-steal-split:--split-on-steal false" \
+    "uncut:$UNCUT" "quarter-pieces:--render-pieces 0.25"; do
+    name=${variant%%:*}
+    flags=${variant#*:}
+    $T simulate synthetic $NET $flags --policy pbt+steal --peers 64,256,1024 --tiles 4096 \
+        --charts peers --out $R/tails/synthetic-$name
+    $T simulate synthetic $NET $flags --policy pbt+steal --peers 1024 --tiles 16384 \
+        --charts peers --out $R/tails/synthetic-16384-$name
+    $T simulate synthetic:1024x1024:20 $NET $flags --policy pbt+steal --peers 256 --tiles 4096 \
+        --charts peers --gantt 256:pbt+steal:4096:12 --out $R/tails/fast-orbit-$name
+    $T simulate $GLASS $NET $flags --policy pbt+steal --peers 64 --tiles 1024 \
+        --charts peers --gantt 64:pbt+steal:1024:12 --out $R/tails/glass-$name
+done
+# The synthetic runs' default Gantt charts (a thousand peers' bars, megabytes each) are not kept.
+rm -f $R/tails/synthetic-*/gantt.svg
