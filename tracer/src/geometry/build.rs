@@ -102,12 +102,12 @@ pub(super) fn tree_depth(bvh: &Bvh2) -> usize {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use glam::DVec3;
 
-    /// A splitmix64 step, for test scenes.
-    fn next(state: &mut u64) -> f32 {
+    /// A splitmix64 step mapped to [0, 1), for test scenes (and `quad.rs`'s tests).
+    pub(crate) fn next(state: &mut u64) -> f32 {
         *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = *state;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);

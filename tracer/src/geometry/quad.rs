@@ -181,13 +181,10 @@ mod tests {
     use super::*;
     use crate::geometry::Ray;
 
-    /// A splitmix64 step mapped to [-1, 1), for test cases.
+    /// The build tests' splitmix64 step mapped to [-1, 1) (doubling and the subtraction are
+    /// exact, so the draws are the same as before it was shared).
     fn next(state: &mut u64) -> f32 {
-        *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = *state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+        2.0 * crate::geometry::build::tests::next(state) - 1.0
     }
 
     #[test]
