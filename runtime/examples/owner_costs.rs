@@ -49,7 +49,7 @@ fn started(partitioner: Partitioner) -> (Core, director::Deal) {
         deal.assignments.clone(),
         deal.render_pixels,
     )
-        .expect("the core starts it");
+    .expect("the core starts it");
     while core.poll_transmit().is_some() {}
     (core, deal)
 }

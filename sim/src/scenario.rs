@@ -465,8 +465,8 @@ fn frame_report(frame: u64, plan: &Plan, world: &SimWorld, scenario: &Scenario) 
     let makespan = elapsed.as_secs_f64();
     // A tile that can be cut on the way (rendered in pieces, or halved for a thief) no longer
     // bounds its frame: then the fair share alone does.
-    let cuttable =
-        scenario.render_piece_factor.is_some() || (scenario.core.steal && scenario.core.split_on_steal);
+    let cuttable = scenario.render_piece_factor.is_some()
+        || (scenario.core.steal && scenario.core.split_on_steal);
     let fair_share = plan.work / plan.capacity;
     let lower_bound = if cuttable {
         fair_share

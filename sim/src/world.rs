@@ -12,9 +12,9 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use balancer::CostMap;
-use runtime_core::peer::{Audit, Event};
 use runtime_core::peer::WorkItem;
 use runtime_core::peer::testing::{Rendered, Seen, Transit, World};
+use runtime_core::peer::{Audit, Event};
 use runtime_core::wire::{self, Message, PeerId, TileId, TileResult};
 
 use crate::network::Links;
@@ -291,9 +291,10 @@ impl SimWorld {
                 let sorted = ids.is_sorted();
                 ids.dedup();
                 let area: u64 = results.iter().map(|r| r.rect.area()).sum();
-                let image = self.maps.first().map_or(0, |m| {
-                    u64::from(m.width()) * u64::from(m.height())
-                });
+                let image = self
+                    .maps
+                    .first()
+                    .map_or(0, |m| u64::from(m.width()) * u64::from(m.height()));
                 tally.results_ok = sorted
                     && ids.iter().copied().eq((0..tally.tiles as u32).map(TileId))
                     && area == image

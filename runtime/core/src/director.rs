@@ -234,9 +234,9 @@ impl Director {
         self.unreported = participants.iter().copied().collect();
         let area: u64 = tiles.iter().map(|tile| tile.rect.area()).sum();
         let render_pixels = match self.config.render_piece_factor {
-            Some(factor) if !tiles.is_empty() => {
-                ((area as f64 / tiles.len() as f64) * factor).ceil().max(1.0) as u64
-            }
+            Some(factor) if !tiles.is_empty() => ((area as f64 / tiles.len() as f64) * factor)
+                .ceil()
+                .max(1.0) as u64,
             _ => u64::MAX,
         };
         let deal = Deal {

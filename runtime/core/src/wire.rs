@@ -242,7 +242,11 @@ impl Piece {
         let mut rect = tile;
         for level in (0..depth).rev() {
             let (first, second) = rect.halves()?;
-            rect = if (self.0 >> level) & 1 == 0 { first } else { second };
+            rect = if (self.0 >> level) & 1 == 0 {
+                first
+            } else {
+                second
+            };
         }
         Some(rect)
     }

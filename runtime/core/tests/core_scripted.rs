@@ -423,8 +423,9 @@ fn bad_inputs_are_refused_with_errors() {
         Err(ProtocolError::NotOwner { .. })
     ));
 
-    let start =
-        |core: &mut Core, assignments| core.start_frame(Duration::ZERO, FrameId(1), assignments, u64::MAX);
+    let start = |core: &mut Core, assignments| {
+        core.start_frame(Duration::ZERO, FrameId(1), assignments, u64::MAX)
+    };
     let one = tiles(0, &[1.0]);
     let stranger = BTreeMap::from([(PeerId(9), one.clone())]);
     assert!(matches!(

@@ -97,9 +97,12 @@ impl Owner {
         while !director.is_finished() {
             let now = self.session.now();
             while let Some(deal) = director.poll_deal(now)? {
-                self.session
-                    .core
-                    .start_frame(now, deal.frame, deal.assignments, deal.render_pixels)?;
+                self.session.core.start_frame(
+                    now,
+                    deal.frame,
+                    deal.assignments,
+                    deal.render_pixels,
+                )?;
                 self.session.flush();
             }
             while let Some(event) = director.poll_event() {

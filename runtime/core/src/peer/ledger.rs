@@ -441,7 +441,12 @@ impl Ledger {
             if entry.complete || entry.speculated {
                 continue;
             }
-            let predicted: f64 = entry.pieces.missing(&entry.spec).iter().map(|p| p.predicted).sum();
+            let predicted: f64 = entry
+                .pieces
+                .missing(&entry.spec)
+                .iter()
+                .map(|p| p.predicted)
+                .sum();
             let patience = Duration::try_from_secs_f64(speculation.factor * predicted / pace)
                 .unwrap_or(Duration::MAX)
                 .max(speculation.min_wait);
@@ -450,7 +455,9 @@ impl Ledger {
                 .iter()
                 .filter_map(|holder| self.peers.get(holder))
                 .filter(|view| view.alive && !view.idle());
-            let Some(due) = busy.map(|view| view.last_progress.saturating_add(patience)).min()
+            let Some(due) = busy
+                .map(|view| view.last_progress.saturating_add(patience))
+                .min()
             else {
                 continue;
             };

@@ -15,7 +15,7 @@ use std::collections::BTreeMap;
 
 use balancer::Rect;
 
-use crate::wire::{BYTES_PER_PIXEL, Piece, PeerId, TileResult, TileSpec};
+use crate::wire::{BYTES_PER_PIXEL, PeerId, Piece, TileResult, TileSpec};
 
 /// The results received for one tile, by piece, with who sent each.
 #[derive(Default)]
@@ -131,7 +131,12 @@ fn intersection(a: Rect, b: Rect) -> Option<Rect> {
     let bottom = a.bottom().min(b.bottom());
     (u64::from(x) < right && u64::from(y) < bottom).then(|| {
         // Both ends lie within a u32 rectangle, so the differences fit.
-        Rect::new(x, y, (right - u64::from(x)) as u32, (bottom - u64::from(y)) as u32)
+        Rect::new(
+            x,
+            y,
+            (right - u64::from(x)) as u32,
+            (bottom - u64::from(y)) as u32,
+        )
     })
 }
 
@@ -178,7 +183,10 @@ mod tests {
             let area: u64 = rects.iter().map(Rect::area).sum();
             assert_eq!(area, TILE.area(), "depth {depth}");
             for (i, a) in rects.iter().enumerate() {
-                assert!(rects[i + 1..].iter().all(|b| !a.overlaps(b)), "depth {depth}");
+                assert!(
+                    rects[i + 1..].iter().all(|b| !a.overlaps(b)),
+                    "depth {depth}"
+                );
             }
         }
     }

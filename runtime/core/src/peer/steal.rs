@@ -269,7 +269,12 @@ impl Worker {
     /// the halves stay above `min_piece_pixels`. A first piece larger than half the difference
     /// that cannot be cut is still given if it is smaller than the whole difference: the pair
     /// then finishes sooner, and it cannot come back (the thief would hold the lesser share).
-    fn take_grant(&mut self, config: &Config, now: Duration, thief_remaining: f64) -> Vec<TileSpec> {
+    fn take_grant(
+        &mut self,
+        config: &Config,
+        now: Duration,
+        thief_remaining: f64,
+    ) -> Vec<TileSpec> {
         let difference = self.remaining_work(now) - thief_remaining;
         let Some(state) = self.frame.as_mut() else {
             return Vec::new();
@@ -294,7 +299,10 @@ impl Worker {
             }
             let cuttable = config.split_on_steal
                 && tile.rect.area() >= 2 * config.min_piece_pixels.max(1)
-                && tile.piece.depth().is_some_and(|d| d < crate::wire::Piece::MAX_DEPTH);
+                && tile
+                    .piece
+                    .depth()
+                    .is_some_and(|d| d < crate::wire::Piece::MAX_DEPTH);
             if cuttable && let Some((near, far)) = tile.halves() {
                 state.queue.pop_back();
                 state.queue.push_back(near);

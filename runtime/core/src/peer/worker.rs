@@ -256,7 +256,8 @@ impl Worker {
                 started: now,
                 accounted_from: now,
             };
-            self.in_flight.insert((state.id, tile.id, tile.piece), flight);
+            self.in_flight
+                .insert((state.id, tile.id, tile.piece), flight);
             self.ready.push_back(WorkItem {
                 frame: state.id,
                 tile,

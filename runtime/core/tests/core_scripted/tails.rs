@@ -174,7 +174,13 @@ fn a_frozen_peer_is_backed_up_long_before_its_timeout_and_welcomed_back() {
         cluster.freeze(PeerId(2));
         cluster.run(Duration::from_secs(2));
         let done = cluster.events().any(|(_, event)| {
-            matches!(event, Event::FrameComplete { frame: FrameId(1), .. })
+            matches!(
+                event,
+                Event::FrameComplete {
+                    frame: FrameId(1),
+                    ..
+                }
+            )
         });
         assert_eq!(done, speculation.is_some(), "{speculation:?}");
         cluster.thaw(PeerId(2));
@@ -188,7 +194,10 @@ fn a_frozen_peer_is_backed_up_long_before_its_timeout_and_welcomed_back() {
             // 300 ms of work over two peers, plus the wait before backing up.
             Some(_) => {
                 assert!(elapsed < Duration::from_millis(400), "{elapsed:?}");
-                assert!(!failed, "a peer stalled for under its timeout is not failed");
+                assert!(
+                    !failed,
+                    "a peer stalled for under its timeout is not failed"
+                );
             }
             None => assert!(elapsed >= Duration::from_secs(2), "{elapsed:?}"),
         }
@@ -208,5 +217,8 @@ fn backups_wait_for_an_idle_peer_and_a_real_delay() {
     let (elapsed, _) = completion(&cluster, FrameId(1));
     assert!(elapsed < Duration::from_millis(410), "{elapsed:?}");
     let renders = renders(&cluster);
-    assert!(renders.values().all(|peers| peers.len() == 1), "{renders:?}");
+    assert!(
+        renders.values().all(|peers| peers.len() == 1),
+        "{renders:?}"
+    );
 }
