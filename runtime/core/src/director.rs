@@ -23,7 +23,7 @@ use std::time::Duration;
 use balancer::{CostMap, Partitioner, Update};
 
 use crate::peer::{Audit, Event as CoreEvent};
-use crate::wire::{FrameId, PeerId, TileId, TileResult, TileSpec};
+use crate::wire::{self, FrameId, PeerId, TileId, TileResult, TileSpec};
 
 /// The director's policy knobs.
 #[derive(Clone, Debug, PartialEq)]
@@ -282,7 +282,7 @@ impl Director {
                         // A piece's prediction is its tile's, shared out by area as the
                         // worker that cut it shared it.
                         let predicted = deal.tiles.get(index).map_or(0.0, |tile| {
-                            tile.predicted * result.rect.area() as f64 / tile.rect.area() as f64
+                            wire::predicted_share(tile.predicted, tile.rect, result.rect)
                         });
                         Piece {
                             initial: deal.initial.get(index).copied().unwrap_or(peer),

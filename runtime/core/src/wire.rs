@@ -278,8 +278,7 @@ impl TileSpec {
     pub fn halves(&self) -> Option<(TileSpec, TileSpec)> {
         let (first_rect, second_rect) = self.rect.halves()?;
         let (first_piece, second_piece) = self.piece.halves();
-        let share = first_rect.area() as f64 / self.rect.area() as f64;
-        let first_cost = self.predicted * share;
+        let first_cost = predicted_share(self.predicted, self.rect, first_rect);
         let first = TileSpec {
             id: self.id,
             piece: first_piece,
@@ -294,6 +293,12 @@ impl TileSpec {
         };
         Some((first, second))
     }
+}
+
+/// The part of a tile's `predicted` cost a piece of rectangle `part` carries: its share of the
+/// tile's area. The one rule by which a prediction is shared out, wherever a tile is cut.
+pub fn predicted_share(predicted: f64, whole: Rect, part: Rect) -> f64 {
+    predicted * (part.area() as f64 / whole.area() as f64)
 }
 
 /// A rendered tile: its pixels (see [`BYTES_PER_PIXEL`]) and its measured block cost map, both

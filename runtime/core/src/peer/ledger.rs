@@ -189,8 +189,8 @@ impl Ledger {
         if entry.complete {
             return None;
         }
-        let share = result.rect.area() as f64 / entry.spec.rect.area() as f64;
-        self.predicted_received += entry.spec.predicted * share;
+        self.predicted_received +=
+            wire::predicted_share(entry.spec.predicted, entry.spec.rect, result.rect);
         entry.pieces.insert(from, result);
         if entry.pieces.complete() {
             entry.complete = true;
@@ -441,6 +441,15 @@ impl Ledger {
             if entry.complete || entry.speculated {
                 continue;
             }
+            // Only tiles some busy holder has are candidates: the rest cost no walk of pieces.
+            let busy = entry
+                .holders
+                .iter()
+                .filter_map(|holder| self.peers.get(holder))
+                .filter(|view| view.alive && !view.idle());
+            let Some(last_progress) = busy.map(|view| view.last_progress).min() else {
+                continue;
+            };
             let predicted: f64 = entry
                 .pieces
                 .missing(&entry.spec)
@@ -450,17 +459,7 @@ impl Ledger {
             let patience = Duration::try_from_secs_f64(speculation.factor * predicted / pace)
                 .unwrap_or(Duration::MAX)
                 .max(speculation.min_wait);
-            let busy = entry
-                .holders
-                .iter()
-                .filter_map(|holder| self.peers.get(holder))
-                .filter(|view| view.alive && !view.idle());
-            let Some(due) = busy
-                .map(|view| view.last_progress.saturating_add(patience))
-                .min()
-            else {
-                continue;
-            };
+            let due = last_progress.saturating_add(patience);
             if now >= due {
                 entry.speculated = true;
                 backups.push(*id);
