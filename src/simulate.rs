@@ -93,6 +93,24 @@ pub struct SimulateArgs {
     /// Whether the owner backs up an overdue peer's work on idle peers (speculation).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub backups: bool,
+    /// Frames dealt before the last is measured, at most: 1 puts a barrier between frames; 2
+    /// deals the next frame when the running one wanes.
+    #[arg(long, default_value_t = runtime_core::director::Config::default().frames_in_flight as u64,
+          value_parser = clap::value_parser!(u64).range(1..=64))]
+    pub frames_in_flight: u64,
+    /// How far a frame's tiles may miss their predicted costs (relative, summed) before the
+    /// director doubts the prediction: the next frame is then not overlapped and renders in
+    /// small pieces.
+    #[arg(long, default_value_t = runtime_core::director::Config::default().doubt_error)]
+    pub doubt_error: f64,
+    /// While the prediction is doubted, peers render pieces of at most this many times the
+    /// frame's mean tile area; `off` uses `--render-pieces`.
+    #[arg(long, default_value = "0.125", value_parser = parse_render_pieces)]
+    pub doubtful_pieces: RenderPieces,
+    /// The share of a frame's predicted cost still missing when the next frame is dealt (if
+    /// frames may overlap; also dealt when the first peer runs out of work).
+    #[arg(long, default_value_t = runtime_core::peer::Config::default().waning)]
+    pub waning: f64,
     /// Seed of victim choice, jitter, link latencies and loss.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -323,6 +341,13 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
         scenario.core.speculation = None;
     }
     scenario.render_piece_factor = args.render_pieces.0;
+    scenario.frames_in_flight = args.frames_in_flight as usize;
+    scenario.doubt_error = args.doubt_error;
+    scenario.doubtful_piece_factor = args.doubtful_pieces.0;
+    if !(0.0..=1.0).contains(&args.waning) {
+        anyhow::bail!("--waning {}: give a share from 0 to 1", args.waning);
+    }
+    scenario.core.waning = args.waning;
     Ok(scenario)
 }
 

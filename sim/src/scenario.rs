@@ -76,6 +76,13 @@ pub struct Scenario {
     /// The director's bound on the pieces peers render at once, as a multiple of the frame's
     /// mean tile area (`runtime_core::director::Config::render_piece_factor`).
     pub render_piece_factor: Option<f64>,
+    /// Frames dealt before the last is measured, at most
+    /// (`runtime_core::director::Config::frames_in_flight`): 1 puts a barrier between frames.
+    pub frames_in_flight: usize,
+    /// When the director doubts its prediction (`director::Config::doubt_error`).
+    pub doubt_error: f64,
+    /// Pieces while the prediction is doubted (`director::Config::doubtful_piece_factor`).
+    pub doubtful_piece_factor: Option<f64>,
 }
 
 /// What the frame owner's control loop spends on each tile, one thing at a time, besides
@@ -176,6 +183,9 @@ impl Default for Scenario {
             gantt_frame: None,
             keep_assignments: false,
             render_piece_factor: director::Config::default().render_piece_factor,
+            frames_in_flight: director::Config::default().frames_in_flight,
+            doubt_error: director::Config::default().doubt_error,
+            doubtful_piece_factor: director::Config::default().doubtful_piece_factor,
         }
     }
 }
@@ -294,7 +304,7 @@ pub fn run(
     crashes.sort();
     let mut crashes = VecDeque::from(crashes);
     let mut crashed: BTreeMap<PeerId, Duration> = BTreeMap::new();
-    let mut plans = Vec::new();
+    let mut plans: BTreeMap<u64, Plan> = BTreeMap::new();
     let mut assignments = Vec::new();
     let mut steps = 0u64;
     let policy = Policy::of(&partitioner, &scenario.core);
@@ -303,13 +313,19 @@ pub fn run(
     let config = director::Config {
         frames,
         render_piece_factor: scenario.render_piece_factor,
+        frames_in_flight: scenario.frames_in_flight,
+        doubt_error: scenario.doubt_error,
+        doubtful_piece_factor: scenario.doubtful_piece_factor,
         ..director::Config::default()
     };
     let mut director = Director::new(OWNER, partitioner, config);
     for &(peer, _) in &peers {
         director.handle_peer_joined(Duration::ZERO, peer);
     }
-    for frame in 0..frames {
+    // One loop over the cluster's events: the director deals a frame whenever it is ready
+    // (the first at once, each next one when the running frame wanes or is measured), and
+    // measures each frame as it is handed over, in order.
+    while !director.is_finished() {
         let now = cluster.now();
         // The owner deals to the peers it is connected to: a crashed peer until its
         // connection times out.
@@ -318,106 +334,107 @@ pub fn run(
                 director.handle_peer_left(now, peer);
             }
         }
-        let deal = director
-            .poll_deal(now)?
-            .expect("invariant: the director deals each frame once the last is measured");
-        let map = cluster.world().map(frame);
-        let speed = |p: PeerId| speeds[p.0 as usize];
-        let mut plan = Plan {
-            capacity: deal.participants().map(speed).sum::<f64>() * scenario.slots as f64,
-            fastest: deal.participants().map(speed).fold(0.0, f64::max),
-            participants: deal.participants().count(),
-            work: map.total() * seconds_per_unit,
-            largest: deal
-                .tiles
-                .iter()
-                .map(|t| map.cost(t.rect))
-                .fold(0.0, f64::max)
-                * seconds_per_unit,
-            splits: 0,
-            merges: 0,
-            results: deal.tiles.iter().map(|t| result_bytes(t.rect, block)).sum(),
-            owner_time: deal
-                .tiles
-                .iter()
-                .map(|t| {
-                    (scenario.owner.result(t.rect.area()) + scenario.owner.per_dealt_tile)
-                        .as_secs_f64()
-                })
-                .sum(),
-        };
-        if scenario.keep_assignments {
-            let dealt = deal
-                .tiles
-                .iter()
-                .zip(&deal.initial)
-                .map(|(t, p)| (t.rect, p.0));
-            assignments.push(dealt.collect());
+        while let Some(deal) = director.poll_deal(now)? {
+            let frame = deal.frame.0;
+            plans.insert(
+                frame,
+                plan(&deal, cluster.world().map(frame), &speeds, scenario, block),
+            );
+            if scenario.keep_assignments {
+                let dealt = deal
+                    .tiles
+                    .iter()
+                    .zip(&deal.initial)
+                    .map(|(t, p)| (t.rect, p.0));
+                assignments.push(dealt.collect());
+            }
+            cluster
+                .world_mut()
+                .begin_frame(frame, now, deal.initial.clone());
+            cluster.start_frame_in_pieces(
+                OWNER,
+                deal.frame,
+                deal.assignments,
+                deal.render_pixels,
+            )?;
         }
-        cluster
-            .world_mut()
-            .begin_frame(frame, now, deal.initial.clone());
-        cluster.start_frame_in_pieces(OWNER, deal.frame, deal.assignments, deal.render_pixels)?;
-        while !cluster.world().is_complete(frame) {
-            let due = cluster.next_due();
-            if let Some(&(at, peer)) = crashes.front().filter(|c| due.is_none_or(|d| c.0 <= d)) {
-                crashes.pop_front();
-                cluster.run(at);
+        feed(&mut director, &mut cluster)?;
+        let mut handed = false;
+        while let Some(event) = director.poll_event() {
+            if let director::Event::FrameComplete { frame: done, .. } = event {
+                let update = director.handle_measured(now, done, cluster.world().map(done.0))?;
+                let plan = plans
+                    .get_mut(&done.0)
+                    .expect("invariant: every completed frame was planned when dealt");
+                (plan.splits, plan.merges) = (update.splits, update.merges);
+                handed = true;
+            }
+        }
+        if handed || director.is_finished() {
+            // A measured frame may let the next be dealt at this same instant.
+            continue;
+        }
+        let due = cluster.next_due();
+        if let Some(&(at, peer)) = crashes.front().filter(|c| due.is_none_or(|d| c.0 <= d)) {
+            crashes.pop_front();
+            cluster.run(at);
+            if let Entry::Vacant(entry) = crashed.entry(PeerId(peer)) {
+                cluster.kill(*entry.key(), false);
+                entry.insert(cluster.now());
+            }
+            continue;
+        }
+        let grace = director.poll_timeout();
+        if due.is_none() || grace.is_some_and(|g| due.is_some_and(|d| g < d)) {
+            if let Some(deadline) = grace {
+                // Only statistics are awaited: the grace period decides.
+                cluster.run(deadline.max(cluster.now()));
+                director.handle_timeout(deadline.max(cluster.now()));
+                continue;
+            }
+            return Err(stalled(&cluster));
+        }
+        cluster.advance();
+        steps += 1;
+        if !on_start.is_empty() {
+            let started = &cluster.world().starts;
+            let (due, waiting) = on_start
+                .iter()
+                .partition(|(peer, tile)| started[*peer as usize] >= *tile);
+            on_start = waiting;
+            for (peer, _) in due {
                 if let Entry::Vacant(entry) = crashed.entry(PeerId(peer)) {
                     cluster.kill(*entry.key(), false);
                     entry.insert(cluster.now());
                 }
-                continue;
             }
-            if cluster.advance().is_none() {
-                let tally = &cluster.world().frames[&frame];
-                return Err(Error::Stalled {
-                    frame,
-                    at: cluster.now(),
-                    missing: tally.tiles.saturating_sub(tally.renders),
-                });
-            }
-            steps += 1;
-            if !on_start.is_empty() {
-                let started = &cluster.world().starts;
-                let (due, waiting) = on_start
-                    .iter()
-                    .partition(|(peer, tile)| started[*peer as usize] >= *tile);
-                on_start = waiting;
-                for (peer, _) in due {
-                    if let Entry::Vacant(entry) = crashed.entry(PeerId(peer)) {
-                        cluster.kill(*entry.key(), false);
-                        entry.insert(cluster.now());
-                    }
-                }
-            }
-            feed(&mut director, &mut cluster)?;
         }
         feed(&mut director, &mut cluster)?;
-        let now = cluster.now();
-        while let Some(event) = director.poll_event() {
-            if let director::Event::FrameComplete { frame: done, .. } = event {
-                let update = director.handle_measured(now, done, cluster.world().map(done.0))?;
-                (plan.splits, plan.merges) = (update.splits, update.merges);
-            }
-        }
-        plans.push(plan);
     }
-    // Let the last frame's `FrameDone`s and statistics travel, for its message counts; the
-    // director finishes when every statistic is in.
+    // Let the last messages travel, for the message counts.
     while cluster.advance().is_some() {
         steps += 1;
         feed(&mut director, &mut cluster)?;
     }
-    if let Some(deadline) = director.poll_timeout() {
-        director.handle_timeout(deadline.max(cluster.now()));
-    }
-    debug_assert!(director.is_finished(), "every frame was measured");
+    let plans: Vec<Plan> = plans.into_values().collect();
     let world = cluster.into_world();
+    // Frames overlap, so a frame's time is its interval: from when the frame before it was
+    // handed over (or from its own start, if later) to its own hand-over, frames being handed
+    // over in order. The intervals add up to the run, each moment counted once.
+    let mut handed_over = Duration::ZERO;
     let frame_reports = plans
         .iter()
         .enumerate()
-        .map(|(frame, plan)| frame_report(frame as u64, plan, &world, scenario))
+        .map(|(frame, plan)| {
+            let tally = &world.frames[&(frame as u64)];
+            let (completed, _) = tally
+                .completed
+                .expect("invariant: the run loop waits for every frame to complete");
+            let from = handed_over.max(tally.started);
+            handed_over = handed_over.max(completed);
+            let interval = handed_over.saturating_sub(from);
+            frame_report(frame as u64, plan, interval, &world, scenario)
+        })
         .collect();
     let mut report = RunReport::new(
         policy,
@@ -431,6 +448,55 @@ pub fn run(
     );
     report.assignments = assignments;
     Ok(report)
+}
+
+/// What the owner plans for the frame of `deal`, costed by `map`.
+fn plan(
+    deal: &director::Deal,
+    map: &balancer::CostMap,
+    speeds: &[f64],
+    scenario: &Scenario,
+    block: u32,
+) -> Plan {
+    let seconds_per_unit = 1.0 / scenario.work_per_second;
+    let speed = |p: PeerId| speeds[p.0 as usize];
+    Plan {
+        capacity: deal.participants().map(speed).sum::<f64>() * scenario.slots as f64,
+        fastest: deal.participants().map(speed).fold(0.0, f64::max),
+        participants: deal.participants().count(),
+        work: map.total() * seconds_per_unit,
+        largest: deal
+            .tiles
+            .iter()
+            .map(|t| map.cost(t.rect))
+            .fold(0.0, f64::max)
+            * seconds_per_unit,
+        splits: 0,
+        merges: 0,
+        results: deal.tiles.iter().map(|t| result_bytes(t.rect, block)).sum(),
+        owner_time: deal
+            .tiles
+            .iter()
+            .map(|t| {
+                (scenario.owner.result(t.rect.area()) + scenario.owner.per_dealt_tile).as_secs_f64()
+            })
+            .sum(),
+    }
+}
+
+/// The error of a run with nothing left to happen: the oldest incomplete frame stalled.
+fn stalled(cluster: &Cluster<SimWorld>) -> Error {
+    let world = cluster.world();
+    let (frame, tally) = world
+        .frames
+        .iter()
+        .find(|(_, tally)| tally.completed.is_none())
+        .map_or((0, None), |(frame, tally)| (*frame, Some(tally)));
+    Error::Stalled {
+        frame,
+        at: cluster.now(),
+        missing: tally.map_or(0, |t| t.tiles.saturating_sub(t.renders)),
+    }
 }
 
 /// The encoded size of a tile result covering `rect`, with its pixels and a cost map of `block`
@@ -456,13 +522,16 @@ fn feed(director: &mut Director, cluster: &mut Cluster<SimWorld>) -> Result<(), 
     Ok(())
 }
 
-fn frame_report(frame: u64, plan: &Plan, world: &SimWorld, scenario: &Scenario) -> FrameReport {
+fn frame_report(
+    frame: u64,
+    plan: &Plan,
+    interval: Duration,
+    world: &SimWorld,
+    scenario: &Scenario,
+) -> FrameReport {
     let slots = scenario.slots;
     let tally = &world.frames[&frame];
-    let (_, elapsed) = tally
-        .completed
-        .expect("invariant: the run loop waits for every frame to complete");
-    let makespan = elapsed.as_secs_f64();
+    let makespan = interval.as_secs_f64();
     // A tile that can be cut on the way (rendered in pieces, or halved for a thief) no longer
     // bounds its frame: then the fair share alone does.
     let cuttable = scenario.render_piece_factor.is_some()

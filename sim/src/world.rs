@@ -121,12 +121,6 @@ impl SimWorld {
         self.frames.insert(frame, tally);
     }
 
-    pub(crate) fn is_complete(&self, frame: u64) -> bool {
-        self.frames
-            .get(&frame)
-            .is_some_and(|tally| tally.completed.is_some())
-    }
-
     /// The owner core's events since the last call, in order, for the director.
     pub(crate) fn take_owner_events(&mut self) -> Vec<Event> {
         std::mem::take(&mut self.owner_events)
@@ -303,6 +297,8 @@ impl SimWorld {
                 tally.audit = *audit;
                 tally.completed = Some((at, *elapsed));
             }
+            // The director's cue to deal: what it changes shows in the messages that follow.
+            Event::FrameWaning { .. } => {}
             Event::PeerStats { frame, peer, stats } => {
                 print.words(&[11, frame.0, u64::from(peer.0), stats.busy.as_nanos() as u64]);
             }

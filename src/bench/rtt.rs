@@ -113,7 +113,7 @@ async fn exchange(exchanges: usize) -> anyhow::Result<StealRtt> {
     for i in 0..WARM_UP + exchanges {
         let request = wire::encode(&Message::StealRequest {
             frame: FrameId(i as u64),
-            remaining: 0.0,
+            remaining: vec![(FrameId(i as u64), 0.0)],
         });
         request_bytes = request.len();
         let started = Instant::now();

@@ -2,14 +2,23 @@
 //!
 //! For each frame the director asks the balancer for its tiles, deals them to the participants
 //! it knows (the owner included), and hands the driver a [`Deal`] to start in the owner's
-//! [`Core`](crate::peer::Core). It follows the owner core's events; when the core reports the
+//! [`Core`](crate::peer::Core). It follows the owner core's events; when the core reports a
 //! frame complete, the director hands the driver the frame's pieces (each result with who
-//! rendered it, whose share it started in, and what it was predicted to cost). The driver
-//! measures them into a cost map (the node from the tiles' counted work, assembled with the
-//! pixels; the simulator from its trace) and gives it back with
-//! [`Director::handle_measured`], which re-cuts the partition for the next frame. After the
+//! rendered it, whose share it started in, and what it was predicted to cost), frames always
+//! in order. The driver measures them into a cost map (the node from the tiles' counted work,
+//! assembled with the pixels; the simulator from its trace) and gives it back with
+//! [`Director::handle_measured`], which re-cuts the partition for the frames after. After the
 //! last frame it waits for every participant's statistics, or for the participant to leave,
 //! or for [`Config::stats_grace`] at most, then reports [`Event::Finished`].
+//!
+//! Frames overlap: up to [`Config::frames_in_flight`] frames are dealt and not yet measured.
+//! The next frame is dealt when the newest running one wanes (the owner's core reports
+//! [`FrameWaning`](crate::peer::Event::FrameWaning): a participant ran out of its work, or
+//! little of the frame is missing), so that peers finishing their part of a frame start on the
+//! next instead of waiting for the frame's last tile, its measurement and a round trip. Every
+//! peer renders the oldest frame's work first, and thieves take older work first, so the older
+//! frame still ends first. A frame dealt early is cut from the costs measured last: those of
+//! the frame two back rather than one.
 //!
 //! Why the director does not decode cost maps itself: a tile's block costs are the tracer's
 //! encoding (opaque bytes to the scheduling code), and the simulator's costs come from a trace,
@@ -48,6 +57,26 @@ pub struct Config {
     /// predicts cheap pixels, which is exactly where a misprediction leaves one peer with a
     /// long tile. `None` renders every tile whole.
     pub render_piece_factor: Option<f64>,
+    /// Frames dealt and not yet measured, at most. 1 deals each frame once the last is
+    /// measured (a barrier between frames); 2, the default, deals the next frame when the
+    /// running one wanes. From 1 to [`wire::MAX_FRAMES_IN_FLIGHT`]. Frames overlap only while
+    /// the prediction is trusted (see `doubt_error`): a frame dealt early is cut from costs one
+    /// frame older, which pays only when costs move slowly.
+    pub frames_in_flight: usize,
+    /// The prediction is doubted before any frame is measured (tiles cut by area alone: the
+    /// first frame, or a resumed render's first), and when the last measured frame's tiles
+    /// missed their predicted costs by more than this share of the frame's cost (the sum over
+    /// tiles of |predicted - measured|, over the sum measured; 0 is a perfect prediction, 2
+    /// the worst). A frame dealt while the prediction is doubted is not overlapped with the
+    /// next, and renders in pieces of `doubtful_piece_factor`. Default 0.5: above the error of a
+    /// prediction two frames old where costs move slowly (the synthetic orbit's 0.34), below
+    /// that of one whose costs move by more than their size each frame (the fast orbit's 0.78).
+    pub doubt_error: f64,
+    /// A frame dealt while the prediction is doubted renders in pieces of at most this many
+    /// times its mean tile area, instead of `render_piece_factor`: nothing then bounds what one
+    /// tile costs, and smaller pieces let thieves share out a costly region the prediction did
+    /// not see. `None` uses `render_piece_factor`.
+    pub doubtful_piece_factor: Option<f64>,
 }
 
 impl Default for Config {
@@ -58,6 +87,9 @@ impl Default for Config {
             stats_grace: Duration::from_secs(1),
             fault_allowance: 8,
             render_piece_factor: Some(2.0),
+            frames_in_flight: 2,
+            doubt_error: 0.5,
+            doubtful_piece_factor: Some(0.125),
         }
     }
 }
@@ -124,6 +156,8 @@ pub enum DirectorError {
     Faulty { frame: FrameId, faults: usize },
     #[error("{frame} was measured, but it is not the frame waiting for its measurement")]
     NotWaiting { frame: FrameId },
+    #[error("{frame} was dealt twice")]
+    DealtTwice { frame: FrameId },
 }
 
 /// The frame owner's state machine. See the module documentation.
@@ -133,32 +167,43 @@ pub struct Director {
     partitioner: Partitioner,
     /// Remote participants the owner deals to (connected, scene loaded).
     peers: BTreeSet<PeerId>,
+    /// The next frame to deal.
     next: u64,
-    state: State,
+    /// Frames dealt and running in the owner's core, oldest first.
+    running: BTreeMap<FrameId, Running>,
+    /// Frames complete but not yet handed to the driver, because an older one is still
+    /// running: frames are handed over in order.
+    complete: BTreeMap<FrameId, (Event, Dealt)>,
+    /// Frames handed to the driver and waiting for their measured cost maps, oldest first,
+    /// with the tiles they were dealt (to tell how well they were predicted).
+    measuring: VecDeque<(FrameId, Dealt)>,
+    /// How far the last measured frame's tiles missed their predicted costs (see
+    /// [`Config::doubt_error`]); `None` before any frame is measured.
+    last_error: Option<f64>,
+    /// Every frame is measured; waiting until this instant at most for the last statistics.
+    closing: Option<Duration>,
+    finished: bool,
     /// The participants of the frame dealt last that have not yet sent their statistics for it
     /// (statistics may arrive before the frame's measurement does).
     unreported: BTreeSet<PeerId>,
     events: VecDeque<Event>,
 }
 
-enum State {
-    /// Ready to deal frame `next`.
-    Idle,
-    /// `deal` is running in the owner's core since `started`.
-    Running {
-        deal: Deal,
-        started: Duration,
-        faults: usize,
-    },
-    /// `frame` is complete and waits for its measured cost map.
-    Measuring {
-        frame: FrameId,
-    },
-    /// Every frame is measured; waiting until `deadline` at most for the last statistics.
-    Closing {
-        deadline: Duration,
-    },
-    Finished,
+/// What a frame was dealt, kept until it is measured.
+struct Dealt {
+    tiles: Vec<balancer::Tile>,
+    /// Whether it was cut before any frame was measured.
+    blind: bool,
+}
+
+/// A frame running in the owner's core.
+struct Running {
+    deal: Deal,
+    started: Duration,
+    faults: usize,
+    blind: bool,
+    /// Whether the core reported it waning: then the next frame may be dealt.
+    waned: bool,
 }
 
 impl Director {
@@ -169,7 +214,12 @@ impl Director {
             partitioner,
             peers: BTreeSet::new(),
             next: config.first,
-            state: State::Idle,
+            running: BTreeMap::new(),
+            complete: BTreeMap::new(),
+            measuring: VecDeque::new(),
+            last_error: None,
+            closing: None,
+            finished: false,
             unreported: BTreeSet::new(),
             events: VecDeque::new(),
             config,
@@ -204,10 +254,12 @@ impl Director {
         self.settle();
     }
 
-    /// The next frame to start, if the director is ready for one. The driver starts it with
+    /// The next frame to start, if the director is ready for one: no frame is running, or the
+    /// newest running frame has waned, and fewer than [`Config::frames_in_flight`] frames are
+    /// dealt and not measured. The driver starts it with
     /// `core.start_frame(now, deal.frame, deal.assignments, deal.render_pixels)`.
     pub fn poll_deal(&mut self, now: Duration) -> Result<Option<Deal>, DirectorError> {
-        if !matches!(self.state, State::Idle) {
+        if !self.ready_to_deal() {
             return Ok(None);
         }
         let tiles = self.partitioner.tiles();
@@ -233,47 +285,90 @@ impl Director {
         }
         self.unreported = participants.iter().copied().collect();
         let area: u64 = tiles.iter().map(|tile| tile.rect.area()).sum();
-        let render_pixels = match self.config.render_piece_factor {
+        let factor = match self.doubtful() {
+            false => self.config.render_piece_factor,
+            true => self
+                .config
+                .doubtful_piece_factor
+                .or(self.config.render_piece_factor),
+        };
+        let render_pixels = match factor {
             Some(factor) if !tiles.is_empty() => ((area as f64 / tiles.len() as f64) * factor)
                 .ceil()
                 .max(1.0) as u64,
             _ => u64::MAX,
         };
+        let frame = FrameId(self.next);
         let deal = Deal {
-            frame: FrameId(self.next),
+            frame,
             tiles,
             initial,
             assignments,
             render_pixels,
         };
         self.next += 1;
-        self.state = State::Running {
+        let running = Running {
             deal: deal.clone(),
             started: now,
             faults: 0,
+            blind: self.last_error.is_none(),
+            waned: false,
         };
+        if self.running.insert(frame, running).is_some() {
+            return Err(DirectorError::DealtTwice { frame });
+        }
         Ok(Some(deal))
     }
 
-    /// An event of the owner's core. The director takes a completion of the running frame
-    /// (its results become the pieces of [`Event::FrameComplete`]) and returns every other
-    /// event, having noted faults and statistics, for the driver to log or keep.
+    /// Whether the next frame's prediction is doubted (see [`Config::doubt_error`]).
+    fn doubtful(&self) -> bool {
+        self.last_error
+            .is_none_or(|error| !(error <= self.config.doubt_error))
+    }
+
+    fn ready_to_deal(&self) -> bool {
+        let unmeasured = self.running.len() + self.complete.len() + self.measuring.len();
+        let in_flight = match self.doubtful() {
+            false => self
+                .config
+                .frames_in_flight
+                .clamp(1, wire::MAX_FRAMES_IN_FLIGHT),
+            true => 1,
+        };
+        let newest_waned = self
+            .running
+            .values()
+            .next_back()
+            .is_none_or(|running| running.waned);
+        !self.finished && self.next < self.config.frames && unmeasured < in_flight && newest_waned
+    }
+
+    /// An event of the owner's core. The director takes a completion of a running frame
+    /// (its results become the pieces of [`Event::FrameComplete`]) and a frame's waning, and
+    /// returns every other event, having noted faults and statistics, for the driver to log or
+    /// keep.
     pub fn handle_core_event(
         &mut self,
         now: Duration,
         event: CoreEvent,
     ) -> Result<Option<CoreEvent>, DirectorError> {
-        match (event, &mut self.state) {
-            (
-                CoreEvent::FrameComplete {
-                    frame,
-                    results,
-                    rendered_by,
-                    audit,
+        match event {
+            CoreEvent::FrameComplete {
+                frame,
+                results,
+                rendered_by,
+                audit,
+                ..
+            } if self.running.contains_key(&frame) => {
+                let Running {
+                    deal,
+                    started,
+                    blind,
                     ..
-                },
-                State::Running { deal, started, .. },
-            ) if frame == deal.frame => {
+                } = self
+                    .running
+                    .remove(&frame)
+                    .expect("invariant: checked just above");
                 let pieces = results
                     .into_iter()
                     .zip(rendered_by)
@@ -292,31 +387,43 @@ impl Director {
                         }
                     })
                     .collect();
-                self.events.push_back(Event::FrameComplete {
+                let complete = Event::FrameComplete {
                     frame,
-                    elapsed: now.saturating_sub(*started),
+                    elapsed: now.saturating_sub(started),
                     pieces,
                     audit,
-                });
-                self.state = State::Measuring { frame };
+                };
+                let dealt = Dealt {
+                    tiles: deal.tiles,
+                    blind,
+                };
+                self.complete.insert(frame, (complete, dealt));
+                self.hand_over_in_order();
                 Ok(None)
             }
-            (event @ CoreEvent::FaultyPeer { .. }, State::Running { deal, faults, .. }) => {
+            CoreEvent::FrameWaning { frame } => {
+                if let Some(running) = self.running.get_mut(&frame) {
+                    running.waned = true;
+                }
+                Ok(None)
+            }
+            event @ CoreEvent::FaultyPeer { .. } => {
                 let CoreEvent::FaultyPeer { frame, .. } = event else {
                     unreachable!("matched just above")
                 };
-                if frame == deal.frame {
-                    *faults += 1;
-                    if *faults > 2 * deal.tiles.len() + self.config.fault_allowance {
+                if let Some(running) = self.running.get_mut(&frame) {
+                    running.faults += 1;
+                    let allowed = 2 * running.deal.tiles.len() + self.config.fault_allowance;
+                    if running.faults > allowed {
                         return Err(DirectorError::Faulty {
                             frame,
-                            faults: *faults,
+                            faults: running.faults,
                         });
                     }
                 }
                 Ok(Some(event))
             }
-            (event @ CoreEvent::PeerStats { .. }, _) => {
+            event @ CoreEvent::PeerStats { .. } => {
                 if let CoreEvent::PeerStats { frame, peer, .. } = &event
                     && frame.0 + 1 == self.next
                 {
@@ -325,48 +432,71 @@ impl Director {
                 }
                 Ok(Some(event))
             }
-            (event, _) => Ok(Some(event)),
+            event => Ok(Some(event)),
         }
     }
 
-    /// The measured cost map of the frame that waits for it: the balancer learns from it and
-    /// the next frame may be dealt.
+    /// Hands completed frames to the driver, oldest first, as long as no older frame runs.
+    fn hand_over_in_order(&mut self) {
+        while let Some(entry) = self.complete.first_entry() {
+            let frame = *entry.key();
+            if self
+                .running
+                .keys()
+                .next()
+                .is_some_and(|&older| older < frame)
+            {
+                break;
+            }
+            let (event, dealt) = entry.remove();
+            self.events.push_back(event);
+            self.measuring.push_back((frame, dealt));
+        }
+    }
+
+    /// The measured cost map of the oldest frame that waits for it: the balancer learns from
+    /// it, and the frames after may be dealt.
     pub fn handle_measured(
         &mut self,
         now: Duration,
         frame: FrameId,
         map: &CostMap,
     ) -> Result<Update, DirectorError> {
-        if !matches!(self.state, State::Measuring { frame: waiting } if waiting == frame) {
+        if self.measuring.front().map(|(waiting, _)| *waiting) != Some(frame) {
             return Err(DirectorError::NotWaiting { frame });
         }
         let update = self.partitioner.observe(map)?;
-        self.state = if self.next < self.config.frames {
-            State::Idle
-        } else {
-            State::Closing {
-                deadline: now + self.config.stats_grace,
-            }
+        let (_, dealt) = self
+            .measuring
+            .pop_front()
+            .expect("invariant: checked just above");
+        // A frame cut blind missed by its cut's nature, which says nothing of the predictor
+        // that now has its measurement: the next frame is trusted until measured itself.
+        let error = match dealt.blind {
+            true => 0.0,
+            false => prediction_error(&dealt.tiles, map),
         };
+        tracing::debug!(%frame, error, "how far the frame's tiles missed their predicted costs");
+        self.last_error = Some(error);
+        let all_measured =
+            self.running.is_empty() && self.complete.is_empty() && self.measuring.is_empty();
+        if self.next >= self.config.frames && all_measured {
+            self.closing = Some(now + self.config.stats_grace);
+        }
         self.settle();
         Ok(update)
     }
 
     /// Call when `now` reaches [`Director::poll_timeout`].
     pub fn handle_timeout(&mut self, now: Duration) {
-        if let State::Closing { deadline, .. } = self.state
-            && now >= deadline
-        {
+        if self.closing.is_some_and(|deadline| now >= deadline) {
             self.finish();
         }
     }
 
     /// When to call [`Director::handle_timeout`], if ever.
     pub fn poll_timeout(&self) -> Option<Duration> {
-        match self.state {
-            State::Closing { deadline, .. } => Some(deadline),
-            _ => None,
-        }
+        self.closing.filter(|_| !self.finished)
     }
 
     pub fn poll_event(&mut self) -> Option<Event> {
@@ -374,20 +504,34 @@ impl Director {
     }
 
     pub fn is_finished(&self) -> bool {
-        matches!(self.state, State::Finished)
+        self.finished
     }
 
     fn settle(&mut self) {
-        if matches!(self.state, State::Closing { .. }) && self.unreported.is_empty() {
+        if self.closing.is_some() && self.unreported.is_empty() {
             self.finish();
         }
     }
 
     fn finish(&mut self) {
-        if !self.is_finished() {
-            self.state = State::Finished;
+        if !self.finished {
+            self.finished = true;
             self.events.push_back(Event::Finished);
         }
+    }
+}
+
+/// How far `tiles` missed their predicted costs on the measured `map`: the sum of
+/// |predicted - measured| over the sum measured (0 for a frame that cost nothing).
+fn prediction_error(tiles: &[balancer::Tile], map: &CostMap) -> f64 {
+    let (missed, measured) = tiles.iter().fold((0.0, 0.0), |(missed, measured), tile| {
+        let cost = map.cost(tile.rect);
+        (missed + (tile.predicted - cost).abs(), measured + cost)
+    });
+    if measured > 0.0 {
+        missed / measured
+    } else {
+        0.0
     }
 }
 

@@ -27,7 +27,11 @@ use crate::peer::PeerStats;
 mod tests;
 
 /// The version of this protocol. Bump it on any change to [`Message`]'s layout.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
+
+/// The most frames a render may have in flight at once (dealt and not yet measured), and so
+/// the most a steal request names.
+pub const MAX_FRAMES_IN_FLIGHT: usize = 64;
 
 /// Pixels travel as linear RGB `f32` triples, little-endian: 12 bytes per pixel.
 pub const BYTES_PER_PIXEL: u64 = 12;
@@ -86,8 +90,13 @@ pub enum Message {
         tiles: Vec<TileSpec>,
         render_pixels: u64,
     },
-    /// A thief asks for work; `remaining` is the predicted work it still holds.
-    StealRequest { frame: FrameId, remaining: f64 },
+    /// A thief asks for work of frames up to `frame`, the newest it works on; `remaining` is
+    /// the predicted work it still holds of each frame it works on, oldest first (at most
+    /// [`MAX_FRAMES_IN_FLIGHT`]), so that a victim can even out the oldest frame first.
+    StealRequest {
+        frame: FrameId,
+        remaining: Vec<(FrameId, f64)>,
+    },
     /// The victim's answer: tiles from the far end of its queue.
     StealGrant {
         frame: FrameId,
@@ -469,7 +478,10 @@ fn validate(message: &Message, limits: &Limits) -> Result<(), WireError> {
             bound("peers", peers.len(), limits.max_peers)?;
             check_tiles(tiles, limits)
         }
-        Message::StealRequest { remaining, .. } => check_cost(*remaining),
+        Message::StealRequest { remaining, .. } => {
+            bound("frames", remaining.len(), MAX_FRAMES_IN_FLIGHT)?;
+            remaining.iter().try_for_each(|(_, work)| check_cost(*work))
+        }
         Message::StealGrant { tiles, .. } => check_tiles(tiles, limits),
         Message::StealNotice { tiles, .. } => {
             bound("tiles", tiles.len(), limits.max_tiles_per_message)?;

@@ -124,8 +124,24 @@ fn cluster(peers: u32) -> Cluster {
 }
 
 fn director(partitioner: Partitioner, peers: u32, frames: u64) -> Director {
+    director_in_flight(
+        partitioner,
+        peers,
+        frames,
+        Config::default().frames_in_flight,
+    )
+}
+
+/// A director dealing up to `in_flight` frames before they are measured.
+fn director_in_flight(
+    partitioner: Partitioner,
+    peers: u32,
+    frames: u64,
+    in_flight: usize,
+) -> Director {
     let config = Config {
         frames,
+        frames_in_flight: in_flight,
         ..Config::default()
     };
     let mut director = Director::new(OWNER, partitioner, config);
@@ -189,29 +205,37 @@ fn every_frame_deals_each_tile_once_and_completes_with_one_piece_per_tile() {
 
 #[test]
 fn the_next_frame_is_cut_from_the_measured_map() {
-    let mut cluster = cluster(3);
-    let mut director = director(pbt(16), 3, 2);
-    let (deals, _) = drive(&mut director, &mut cluster, &|_| halves(15));
-    // Frame 0 knows nothing: equal leaves. Frame 1 is cut from a map whose left half costs 15
-    // times the right: its leaves are smaller on the left, and all predicted nearly equal.
+    // Frame 0 knows nothing: equal leaves. A frame cut from a map whose left half costs 15
+    // times the right has smaller leaves on the left, and all predicted nearly equal. Frame 1
+    // waits for frame 0's measurement even with two frames in flight: dealt earlier, it would
+    // be cut blind as well.
     let left = |deal: &Deal| {
         deal.tiles
             .iter()
             .filter(|t| t.rect.right() <= u64::from(SIDE / 2))
             .count()
     };
-    assert_eq!(left(&deals[0]) * 2, deals[0].tiles.len());
-    assert!(
-        left(&deals[1]) > deals[1].tiles.len() * 3 / 4,
-        "{} of {} leaves on the costly half",
-        left(&deals[1]),
-        deals[1].tiles.len()
-    );
+    for (in_flight, first_measured) in [(1, 1), (2, 1)] {
+        let mut cluster = cluster(3);
+        let mut director = director_in_flight(pbt(16), 3, 3, in_flight);
+        let (deals, _) = drive(&mut director, &mut cluster, &|_| halves(15));
+        for deal in &deals[..first_measured] {
+            assert_eq!(left(deal) * 2, deal.tiles.len(), "{in_flight} in flight");
+        }
+        for deal in &deals[first_measured..] {
+            assert!(
+                left(deal) > deal.tiles.len() * 3 / 4,
+                "{in_flight} in flight: {} of {} leaves on the costly half",
+                left(deal),
+                deal.tiles.len()
+            );
+        }
+    }
 }
 
 #[test]
-fn nothing_is_dealt_while_a_frame_runs_or_waits_for_its_measure() {
-    let mut director = director(grid(2, 2), 1, 2);
+fn with_one_frame_in_flight_nothing_is_dealt_while_a_frame_runs_or_waits_for_its_measure() {
+    let mut director = director_in_flight(grid(2, 2), 1, 2, 1);
     let deal = director
         .poll_deal(Duration::ZERO)
         .unwrap()
@@ -239,6 +263,107 @@ fn nothing_is_dealt_while_a_frame_runs_or_waits_for_its_measure() {
         .unwrap()
         .expect("frame 1");
     assert_eq!(next.frame, FrameId(1));
+}
+
+/// The owner core's completion of `frame`, without results (for the director alone).
+fn completion(frame: u64) -> crate::peer::Event {
+    match empty_completion() {
+        crate::peer::Event::FrameComplete {
+            elapsed,
+            results,
+            rendered_by,
+            audit,
+            ..
+        } => crate::peer::Event::FrameComplete {
+            frame: FrameId(frame),
+            elapsed,
+            results,
+            rendered_by,
+            audit,
+        },
+        _ => unreachable!("empty_completion is a completion"),
+    }
+}
+
+/// With two frames in flight: the first frame runs alone (it is cut blind), then the next
+/// frame is dealt when the running one wanes, never more than two are dealt and unmeasured,
+/// and frames reach the driver in order even when a later one completes first. Blind frames
+/// render in smaller pieces.
+#[test]
+fn the_next_frame_is_dealt_when_the_running_one_wanes_and_frames_are_handed_over_in_order() {
+    let t = Duration::ZERO;
+    let mut director = director_in_flight(grid(2, 2), 1, 5, 2);
+    let wane = |frame| crate::peer::Event::FrameWaning {
+        frame: FrameId(frame),
+    };
+    let frame_of = |deal: Option<Deal>| deal.map(|deal| deal.frame.0);
+    let blind = director.poll_deal(t).unwrap().expect("frame 0");
+    director.handle_core_event(t, wane(0)).unwrap();
+    assert!(director.poll_deal(t).unwrap().is_none(), "frame 0 is blind");
+    director.handle_core_event(t, completion(0)).unwrap();
+    assert!(matches!(
+        director.poll_event(),
+        Some(Event::FrameComplete { .. })
+    ));
+    director.handle_measured(t, FrameId(0), &halves(1)).unwrap();
+    let seen = director.poll_deal(t).unwrap().expect("frame 1");
+    assert_eq!(seen.frame, FrameId(1));
+    assert_eq!(
+        blind.render_pixels * 8,
+        seen.render_pixels,
+        "a quarter of twice"
+    );
+    assert_eq!(
+        frame_of(director.poll_deal(t).unwrap()),
+        None,
+        "frame 1 has not waned"
+    );
+    assert!(director.handle_core_event(t, wane(1)).unwrap().is_none());
+    assert_eq!(frame_of(director.poll_deal(t).unwrap()), Some(2));
+    // Frame 2 wanes too, but two frames are already unmeasured.
+    director.handle_core_event(t, wane(2)).unwrap();
+    assert_eq!(
+        frame_of(director.poll_deal(t).unwrap()),
+        None,
+        "two in flight"
+    );
+    // Frame 2 completes first: it is held until frame 1 is in.
+    director.handle_core_event(t, completion(2)).unwrap();
+    assert!(director.poll_event().is_none());
+    assert_eq!(frame_of(director.poll_deal(t).unwrap()), None);
+    director.handle_core_event(t, completion(1)).unwrap();
+    let handed: Vec<u64> = std::iter::from_fn(|| director.poll_event())
+        .map(|event| match event {
+            Event::FrameComplete { frame, .. } => frame.0,
+            Event::Finished => u64::MAX,
+        })
+        .collect();
+    assert_eq!(handed, [1, 2]);
+    assert!(matches!(
+        director.handle_measured(t, FrameId(2), &halves(1)),
+        Err(DirectorError::NotWaiting { .. })
+    ));
+    director.handle_measured(t, FrameId(1), &halves(1)).unwrap();
+    // Frame 2 is complete but unmeasured, and nothing runs: frame 3 may go.
+    assert_eq!(frame_of(director.poll_deal(t).unwrap()), Some(3));
+    assert_eq!(
+        frame_of(director.poll_deal(t).unwrap()),
+        None,
+        "two in flight"
+    );
+    director.handle_measured(t, FrameId(2), &halves(1)).unwrap();
+    assert_eq!(
+        frame_of(director.poll_deal(t).unwrap()),
+        None,
+        "frame 3 has not waned"
+    );
+    director.handle_core_event(t, wane(3)).unwrap();
+    assert_eq!(frame_of(director.poll_deal(t).unwrap()), Some(4));
+    assert_eq!(
+        frame_of(director.poll_deal(t).unwrap()),
+        None,
+        "the last frame is dealt"
+    );
 }
 
 /// The end of a render waits for every participant's statistics, for a participant that

@@ -65,6 +65,12 @@ pub struct Config {
     /// (Owner) When to render again, elsewhere, work that is overdue on a peer; `None`: never
     /// (a peer that stops answering then costs `peer_timeout`).
     pub speculation: Option<Speculation>,
+    /// (Owner) The share of a frame's predicted cost still missing at which its ledger reports
+    /// it waning ([`Event::FrameWaning`](crate::peer::Event::FrameWaning)), the director's cue
+    /// to deal the next frame; it also reports it when the first participant runs out of work.
+    /// Earlier hides more of the frame's end behind the next frame's work; the next frame is
+    /// then predicted from older costs. Default 0.5.
+    pub waning: f64,
 }
 
 /// When the owner gives copies of a straggler's work to idle peers, as MapReduce's backup tasks
@@ -126,6 +132,7 @@ impl Default for Config {
             split_on_steal: true,
             min_piece_pixels: 64,
             speculation: Some(Speculation::default()),
+            waning: 0.5,
         }
     }
 }

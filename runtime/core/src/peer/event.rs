@@ -21,6 +21,10 @@ pub enum Event {
         /// How the frame's duplicate results compared with the first.
         audit: Audit,
     },
+    /// (Owner) `frame` is near its end: a participant has run out of its work, or at most
+    /// [`Config::waning`](crate::peer::Config::waning) of its predicted cost is still missing.
+    /// Reported once per frame, the director's cue to deal the next frame early.
+    FrameWaning { frame: FrameId },
     /// (Owner) a participant's statistics for `frame`, its own included.
     PeerStats {
         frame: FrameId,
@@ -80,11 +84,13 @@ pub enum Fault {
 }
 
 /// One peer's account of one frame. Times are slot-time: a peer with 4 slots busy for 1 s
-/// reports 4 s busy. Counts cover the frame, from its `Assign` to its `FrameDone`.
+/// reports 4 s busy. Frames may overlap, so the counts cover the time since the peer's previous
+/// report (or since its first `Assign` after a time without frames) up to the frame's
+/// `FrameDone`: a peer's reports add up to its whole run, each moment counted once.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PeerStats {
     pub slots: u32,
-    /// From the peer's first `Assign` of the frame to its `FrameDone`.
+    /// From the peer's previous report (or first `Assign`) to the frame's `FrameDone`.
     pub wall: Duration,
     /// Slot-time spent rendering.
     pub busy: Duration,

@@ -31,6 +31,12 @@ pub(super) struct Ledger {
     speculation: Option<Speculation>,
     /// Predicted cost of the results accepted this frame: the frame's pace, for speculation.
     predicted_received: f64,
+    /// The predicted cost of all the frame's tiles.
+    predicted_total: f64,
+    /// The missing share at which the frame is reported waning (`Config::waning`), and
+    /// whether it has been.
+    waning: f64,
+    waned: bool,
     audit: Audit,
     /// No participant can have been silent too long before this instant: deadlines only move
     /// later as peers are heard from, so the owner scans for silent peers only when it passes.
@@ -86,6 +92,9 @@ impl Ledger {
             render_pixels,
             speculation: config.speculation,
             predicted_received: 0.0,
+            predicted_total: 0.0,
+            waning: config.waning,
+            waned: false,
             audit: Audit::default(),
             next_check: Some(now + config.peer_timeout),
             next_speculation: None,
@@ -104,15 +113,12 @@ impl Ledger {
             }
         }
         ledger.missing = ledger.tiles.len();
+        ledger.predicted_total = ledger.tiles.values().map(|e| e.spec.predicted).sum();
         let participants = ledger.live_peers();
         for (peer, tiles) in assignments {
             ledger.send_assign(now, peer, participants.clone(), tiles, out);
         }
         ledger
-    }
-
-    pub(super) fn frame(&self) -> FrameId {
-        self.frame
     }
 
     pub(super) fn is_complete(&self) -> bool {
@@ -192,6 +198,9 @@ impl Ledger {
         self.predicted_received +=
             wire::predicted_share(entry.spec.predicted, entry.spec.rect, result.rect);
         entry.pieces.insert(from, result);
+        if self.predicted_received >= (1.0 - self.waning) * self.predicted_total {
+            wane(self.frame, &mut self.waned, out);
+        }
         if entry.pieces.complete() {
             entry.complete = true;
             entry.holders.clear();
@@ -266,6 +275,7 @@ impl Ledger {
             view.idle_report = Some(newest);
         }
         if view.idle() {
+            wane(self.frame, &mut self.waned, out);
             self.arm_speculation(now);
             self.reissue_if_all_idle(now, out);
         }
@@ -527,6 +537,14 @@ impl Ledger {
         for peer in self.live_peers() {
             out.send(peer, Message::FrameDone { frame: self.frame });
         }
+    }
+}
+
+/// Reports `frame` waning, once.
+fn wane(frame: FrameId, waned: &mut bool, out: &mut Outbox) {
+    if !*waned {
+        *waned = true;
+        out.events.push_back(Event::FrameWaning { frame });
     }
 }
 

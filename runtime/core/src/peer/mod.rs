@@ -52,8 +52,6 @@ pub enum ProtocolError {
 /// Why the owner could not start a frame.
 #[derive(Debug, thiserror::Error)]
 pub enum FrameError {
-    #[error("{0} is still running")]
-    Busy(FrameId),
     #[error("{frame} is not newer than {newest}, which this peer has already seen")]
     NotNewer { frame: FrameId, newest: FrameId },
     #[error("{0} is not connected")]
@@ -71,8 +69,10 @@ pub struct Core {
     config: Config,
     connected: BTreeSet<PeerId>,
     worker: Worker,
-    ledger: Option<Ledger>,
-    last_owned: Option<FrameId>,
+    /// The ledgers of the frames this peer owns that are still running, oldest first.
+    ledgers: BTreeMap<FrameId, Ledger>,
+    /// The newest frame this peer has started as owner, running or complete.
+    newest_owned: Option<FrameId>,
     out: Outbox,
 }
 
@@ -85,8 +85,8 @@ impl Core {
             config,
             connected: BTreeSet::new(),
             worker: Worker::new(me, slots, estimates),
-            ledger: None,
-            last_owned: None,
+            ledgers: BTreeMap::new(),
+            newest_owned: None,
             out: Outbox::new(me),
         }
     }
@@ -99,9 +99,14 @@ impl Core {
         &self.config
     }
 
-    /// The frame this peer is working on, if any.
+    /// The oldest frame this peer is working on, if any.
     pub fn frame(&self) -> Option<FrameId> {
-        self.worker.frame.as_ref().map(|state| state.id)
+        self.worker.oldest()
+    }
+
+    /// (Owner) the frames this peer started that have not completed yet, oldest first.
+    pub fn running_frames(&self) -> impl Iterator<Item = FrameId> + '_ {
+        self.ledgers.keys().copied()
     }
 
     /// Tiles handed to the renderer (or ready to be) and not yet returned.
@@ -112,7 +117,8 @@ impl Core {
     /// (Owner) starts `frame`: `assignments` maps each participant (this peer included, if it
     /// renders) to its initial tiles, typically a contiguous run of partition leaves in order.
     /// Every participant hands its renderer pieces of at most `render_pixels` pixels (larger
-    /// tiles half by half); `u64::MAX` renders tiles whole.
+    /// tiles half by half); `u64::MAX` renders tiles whole. Earlier frames may still be running:
+    /// every peer renders the oldest frame's work first.
     pub fn start_frame(
         &mut self,
         now: Duration,
@@ -120,10 +126,7 @@ impl Core {
         assignments: BTreeMap<PeerId, Vec<TileSpec>>,
         render_pixels: u64,
     ) -> Result<(), FrameError> {
-        if let Some(ledger) = &self.ledger {
-            return Err(FrameError::Busy(ledger.frame()));
-        }
-        let newest = self.worker.newest().max(self.last_owned);
+        let newest = self.worker.newest().max(self.newest_owned);
         if let Some(newest) = newest.filter(|&newest| frame <= newest) {
             return Err(FrameError::NotNewer { frame, newest });
         }
@@ -151,7 +154,7 @@ impl Core {
         if seen.is_empty() {
             return Err(FrameError::NoTiles);
         }
-        self.ledger = Some(Ledger::start(
+        let ledger = Ledger::start(
             now,
             self.id(),
             frame,
@@ -159,7 +162,9 @@ impl Core {
             render_pixels.max(1),
             &self.config,
             &mut self.out,
-        ));
+        );
+        self.ledgers.insert(frame, ledger);
+        self.newest_owned = Some(frame);
         self.settle(now);
         Ok(())
     }
@@ -173,7 +178,7 @@ impl Core {
         message: Message,
     ) -> Result<(), ProtocolError> {
         self.worker.stats.messages_received += 1;
-        if let Some(ledger) = &mut self.ledger {
+        for ledger in self.ledgers.values_mut() {
             ledger.heard(now, from);
         }
         let result = self.dispatch(now, from, message);
@@ -193,7 +198,7 @@ impl Core {
         let (worker, mut cx) = self.split(now);
         worker.thief_timeout(&mut cx);
         worker.heartbeat(&mut cx);
-        if let Some(ledger) = &mut self.ledger {
+        for ledger in self.ledgers.values_mut() {
             ledger.on_timeout(now, &mut self.out);
         }
         self.settle(now);
@@ -214,7 +219,7 @@ impl Core {
         }
         let (worker, mut cx) = self.split(now);
         worker.on_peer_lost(&mut cx, peer);
-        if let Some(ledger) = &mut self.ledger {
+        for ledger in self.ledgers.values_mut() {
             ledger.on_peer_lost(now, peer, Failure::Lost, &mut self.out);
         }
         self.settle(now);
@@ -251,7 +256,7 @@ impl Core {
     pub fn poll_timeout(&self) -> Option<Duration> {
         let thief = self.worker.thief_deadline(&self.config);
         let heartbeat = self.worker.heartbeat_due(self.config.heartbeat_interval);
-        let owner = self.ledger.as_ref().and_then(Ledger::poll_timeout);
+        let owner = self.ledgers.values().filter_map(Ledger::poll_timeout).min();
         [thief, heartbeat, owner].into_iter().flatten().min()
     }
 
@@ -290,7 +295,7 @@ impl Core {
                 render_pixels,
             } => worker.on_assign(&mut cx, from, frame, peers, tiles, render_pixels),
             Message::StealRequest { frame, remaining } => {
-                worker.on_steal_request(&mut cx, from, frame, remaining)
+                worker.on_steal_request(&mut cx, from, frame, &remaining)
             }
             Message::StealGrant { frame, tiles } => worker.on_grant(&mut cx, from, frame, tiles),
             Message::StealRefuse { frame } => worker.on_refuse(&mut cx, from, frame),
@@ -301,7 +306,8 @@ impl Core {
                 tiles,
                 stolen,
             } => {
-                if let Some(ledger) = ledger_for(&mut self.ledger, self.last_owned, frame, kind)? {
+                if let Some(ledger) = ledger_for(&mut self.ledgers, self.newest_owned, frame, kind)?
+                {
                     ledger.on_notice(now, from, victim, &tiles, stolen, &mut self.out);
                 }
             }
@@ -312,19 +318,20 @@ impl Core {
                 stolen,
                 done,
             } => {
-                if let Some(ledger) = ledger_for(&mut self.ledger, self.last_owned, frame, kind)? {
+                if let Some(ledger) = ledger_for(&mut self.ledgers, self.newest_owned, frame, kind)?
+                {
                     ledger.on_status(now, from, idle, [assigned, stolen, done], &mut self.out);
                 }
             }
             Message::TileDone(result) => {
                 if let Some(ledger) =
-                    ledger_for(&mut self.ledger, self.last_owned, result.frame, kind)?
+                    ledger_for(&mut self.ledgers, self.newest_owned, result.frame, kind)?
                 {
                     ledger.on_result(now, from, result, &mut self.out);
                 }
             }
             Message::FrameStats { frame, stats } => {
-                ledger_for(&mut self.ledger, self.last_owned, frame, kind)?;
+                ledger_for(&mut self.ledgers, self.newest_owned, frame, kind)?;
                 self.out.events.push_back(Event::PeerStats {
                     frame,
                     peer: from,
@@ -346,9 +353,7 @@ impl Core {
                     tracing::error!(%error, "a message to oneself was refused");
                 }
             }
-            if let Some(ledger) = self.ledger.take_if(|ledger| ledger.is_complete()) {
-                self.last_owned = Some(ledger.frame());
-            }
+            self.ledgers.retain(|_, ledger| !ledger.is_complete());
             self.worker.fill_slots(now, self.config.prefetch_depth);
             let (worker, mut cx) = self.split(now);
             worker.maybe_steal(&mut cx);
@@ -361,17 +366,18 @@ impl Core {
 }
 
 /// The ledger of `frame` if it is running here; `None` for a frame this peer owned and
-/// finished (late messages are expected); an error for a frame it never owned.
+/// finished (late messages are expected); an error for a frame it never owned. Frames are
+/// started in order, so every frame up to the newest started that has no ledger is finished.
 fn ledger_for<'a>(
-    ledger: &'a mut Option<Ledger>,
-    last_owned: Option<FrameId>,
+    ledgers: &'a mut BTreeMap<FrameId, Ledger>,
+    newest_owned: Option<FrameId>,
     frame: FrameId,
     kind: &'static str,
 ) -> Result<Option<&'a mut Ledger>, ProtocolError> {
-    match ledger {
-        Some(ledger) if ledger.frame() == frame => Ok(Some(ledger)),
-        _ if last_owned.is_some_and(|last| frame <= last) => Ok(None),
-        _ => Err(ProtocolError::NotOwner { kind, frame }),
+    match ledgers.get_mut(&frame) {
+        Some(ledger) => Ok(Some(ledger)),
+        None if newest_owned.is_some_and(|newest| frame <= newest) => Ok(None),
+        None => Err(ProtocolError::NotOwner { kind, frame }),
     }
 }
 

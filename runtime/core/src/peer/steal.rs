@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use super::Ctx;
 use super::config::{Config, VictimOrder};
-use super::worker::{FrameState, Worker, shrink};
+use super::worker::{Worker, shrink};
 use crate::rng::SplitMix;
 use crate::wire::{FrameId, Message, PeerId, TileSpec};
 
@@ -46,20 +46,26 @@ enum Pick {
 /// The next victim of the running round, starting a round if none runs. Costs `O(log P)` per
 /// request in a large cluster (no list of candidates is built), so that the simulator's
 /// thousands of peers stay cheap.
-fn pick_victim(state: &mut FrameState, me: PeerId, rng: &mut SplitMix, cx: &Ctx) -> Pick {
+fn pick_victim(
+    round: &mut Option<Round>,
+    peers: &[PeerId],
+    me: PeerId,
+    rng: &mut SplitMix,
+    cx: &Ctx,
+) -> Pick {
     let eligible = |peer: &PeerId| *peer != me && cx.connected.contains(peer);
     let limit = cx.config.victims_per_round.max(1);
-    let few = state.peers.len() <= limit + 1;
+    let few = peers.len() <= limit + 1;
     match cx.config.victims {
         // The live peers after this one by id, wrapping around: all of them when few, the
         // nearest `limit` when many.
         VictimOrder::Ring => {
-            let round = *state.round.get_or_insert(Round { start: 0, tried: 0 });
+            let round = *round.get_or_insert(Round { start: 0, tried: 0 });
             if round.tried >= limit {
                 return Pick::RoundOver;
             }
-            let after = state.peers.partition_point(|p| *p <= me);
-            let ring = state.peers[after..].iter().chain(&state.peers[..after]);
+            let after = peers.partition_point(|p| *p <= me);
+            let ring = peers[after..].iter().chain(&peers[..after]);
             match ring.filter(|p| eligible(p)).nth(round.tried) {
                 Some(&peer) => Pick::Victim(peer),
                 None if round.tried == 0 => Pick::Nobody,
@@ -68,11 +74,11 @@ fn pick_victim(state: &mut FrameState, me: PeerId, rng: &mut SplitMix, cx: &Ctx)
         }
         // Few enough to ask every one, each once, from a random first.
         VictimOrder::RandomStart if few => {
-            let victims: Vec<PeerId> = state.peers.iter().copied().filter(eligible).collect();
+            let victims: Vec<PeerId> = peers.iter().copied().filter(eligible).collect();
             if victims.is_empty() {
                 return Pick::Nobody;
             }
-            let round = *state.round.get_or_insert_with(|| Round {
+            let round = *round.get_or_insert_with(|| Round {
                 start: rng.below(victims.len()),
                 tried: 0,
             });
@@ -84,17 +90,17 @@ fn pick_victim(state: &mut FrameState, me: PeerId, rng: &mut SplitMix, cx: &Ctx)
         // Many: `limit` draws. Nearly every participant is a candidate, so a few draws find one;
         // the scan behind them only runs when most have been lost.
         VictimOrder::RandomStart => {
-            let round = *state.round.get_or_insert(Round { start: 0, tried: 0 });
+            let round = *round.get_or_insert(Round { start: 0, tried: 0 });
             if round.tried >= limit {
                 return Pick::RoundOver;
             }
             for _ in 0..32 {
-                let peer = state.peers[rng.below(state.peers.len())];
+                let peer = peers[rng.below(peers.len())];
                 if eligible(&peer) {
                     return Pick::Victim(peer);
                 }
             }
-            let victims: Vec<PeerId> = state.peers.iter().copied().filter(eligible).collect();
+            let victims: Vec<PeerId> = peers.iter().copied().filter(eligible).collect();
             match victims.len() {
                 0 => Pick::Nobody,
                 n => Pick::Victim(victims[rng.below(n)]),
@@ -159,25 +165,50 @@ impl Estimates {
 }
 
 impl Worker {
-    /// Predicted work this peer still holds in `frame`: its queues plus what is left of the
-    /// tiles in its renderer (assuming they progress at the measured rate).
+    /// Predicted work this peer still holds over all its frames: its queues plus what is left
+    /// of the tiles in its renderer (assuming they progress at the measured rate).
     pub(super) fn remaining_work(&self, now: Duration) -> f64 {
-        let Some(state) = &self.frame else { return 0.0 };
+        self.remaining_by_frame(now).map(|(_, work)| work).sum()
+    }
+
+    /// The predicted work this peer still holds of each frame it works on, oldest first.
+    pub(super) fn remaining_by_frame(
+        &self,
+        now: Duration,
+    ) -> impl Iterator<Item = (FrameId, f64)> + '_ {
         let rate = self.estimates.slot_rate.unwrap_or(0.0);
-        let in_flight: f64 = self
-            .frame_in_flight(state.id)
-            .map(|f| (f.predicted - now.saturating_sub(f.started).as_secs_f64() * rate).max(0.0))
-            .sum();
-        state.queue_work + state.prefetch_work + in_flight
+        self.frames.values().map(move |state| {
+            let in_flight: f64 = self
+                .frame_in_flight(state.id)
+                .map(|f| {
+                    (f.predicted - now.saturating_sub(f.started).as_secs_f64() * rate).max(0.0)
+                })
+                .sum();
+            (state.id, state.queue_work + state.prefetch_work + in_flight)
+        })
     }
 
     /// Whether this peer is below its low-water mark.
     fn wants_work(&self, config: &Config, now: Duration) -> bool {
-        let Some(state) = &self.frame else {
+        if self.frames.is_empty() {
             return false;
-        };
-        let waiting = state.queue.len() + state.prefetch.len();
+        }
+        let waiting: usize = self
+            .frames
+            .values()
+            .map(|state| state.queue.len() + state.prefetch.len())
+            .sum();
         if (waiting == 0 && self.in_flight.len() < self.slots) || waiting < config.prefetch_depth {
+            return true;
+        }
+        // Out of work of its oldest frame while newer frames keep it busy: that frame's end
+        // is still being rendered by others, and taking part of their share ends it sooner.
+        if self.frames.len() > 1
+            && let Some(oldest) = self.frames.values().next()
+            && oldest.queue.is_empty()
+            && oldest.prefetch.is_empty()
+            && self.frame_in_flight(oldest.id).next().is_none()
+        {
             return true;
         }
         let low_water = config.low_water_rtts * self.estimates.rtt.as_secs_f64();
@@ -186,46 +217,52 @@ impl Worker {
             .is_some_and(|seconds| seconds < low_water)
     }
 
-    /// Sends a steal request if this peer wants work and may ask.
+    /// Sends a steal request if this peer wants work and may ask. The request names the newest
+    /// frame this peer works on: a victim gives from its oldest frame up to that one, so the
+    /// older frame's work moves first and a thief is never given a frame it has not been
+    /// dealt.
     pub(super) fn maybe_steal(&mut self, cx: &mut Ctx) {
-        let Some(state) = &mut self.frame else { return };
-        match state.thief {
+        let Some(newest) = self.frames.keys().next_back().copied() else {
+            return;
+        };
+        match self.thief {
             Thief::Asking { .. } => return,
             Thief::Backoff { until } if cx.now < until => return,
-            Thief::Backoff { .. } | Thief::Ready => state.thief = Thief::Ready,
+            Thief::Backoff { .. } | Thief::Ready => self.thief = Thief::Ready,
         }
         if !cx.config.steal || !self.wants_work(cx.config, cx.now) {
             return;
         }
-        let Self {
-            me,
-            frame,
-            estimates,
-            ..
-        } = self;
-        let Some(state) = frame else { return };
-        let victim = match pick_victim(state, *me, &mut estimates.rng, cx) {
+        let victim = match pick_victim(
+            &mut self.round,
+            &self.peers,
+            self.me,
+            &mut self.estimates.rng,
+            cx,
+        ) {
             Pick::Victim(victim) => victim,
             Pick::Nobody => return,
             Pick::RoundOver => {
                 // Each fruitless round in a row doubles the wait, up to the cap.
-                let doublings = state.fruitless_rounds.min(16);
+                let doublings = self.fruitless_rounds.min(16);
                 let backoff = cx
                     .config
                     .steal_backoff
                     .saturating_mul(1 << doublings)
                     .min(cx.config.steal_backoff_max.max(cx.config.steal_backoff));
-                state.fruitless_rounds += 1;
-                state.thief = Thief::Backoff {
+                self.fruitless_rounds += 1;
+                self.thief = Thief::Backoff {
                     until: cx.now + backoff,
                 };
-                state.round = None;
+                self.round = None;
                 return;
             }
         };
-        let remaining = self.remaining_work(cx.now);
-        let state = self.frame.as_mut().expect("invariant: matched Some above");
-        state.thief = Thief::Asking {
+        let remaining: Vec<(FrameId, f64)> = self
+            .remaining_by_frame(cx.now)
+            .take(crate::wire::MAX_FRAMES_IN_FLIGHT)
+            .collect();
+        self.thief = Thief::Asking {
             victim,
             sent: cx.now,
         };
@@ -233,50 +270,69 @@ impl Worker {
         cx.out.send(
             victim,
             Message::StealRequest {
-                frame: state.id,
+                frame: newest,
                 remaining,
             },
         );
     }
 
-    /// Answers a thief: a grant from the far end of the queue, or a refusal.
+    /// Answers a thief working on frames up to `frame`: a grant from the far end of the queue
+    /// of the oldest of those frames that has something to give, or a refusal. What a frame
+    /// `g` may give is judged by the work the two peers hold of frames up to `g`, which each
+    /// renders before it reaches `g`'s end: so a thief that has finished its share of the
+    /// oldest frame takes part of the victim's, however much newer work it holds.
     pub(super) fn on_steal_request(
         &mut self,
         cx: &mut Ctx,
         thief: PeerId,
         frame: FrameId,
-        thief_remaining: f64,
+        thief_remaining: &[(FrameId, f64)],
     ) {
         self.stats.steal_requests_received += 1;
-        let running = self.frame.as_ref().is_some_and(|state| state.id == frame);
-        let tiles = if cx.config.steal && running {
-            self.take_grant(cx.config, cx.now, thief_remaining)
-        } else {
-            Vec::new()
-        };
-        if tiles.is_empty() {
+        let mut grant = None;
+        if cx.config.steal {
+            let mine: Vec<(FrameId, f64)> = self
+                .remaining_by_frame(cx.now)
+                .take_while(|(id, _)| *id <= frame)
+                .collect();
+            let mut victim_before = 0.0;
+            for (id, work) in mine {
+                victim_before += work;
+                let thief_before: f64 = thief_remaining
+                    .iter()
+                    .filter(|(theirs, _)| *theirs <= id)
+                    .map(|(_, work)| work)
+                    .sum();
+                let tiles = self.take_grant(cx.config, id, victim_before - thief_before);
+                if !tiles.is_empty() {
+                    grant = Some((id, tiles));
+                    break;
+                }
+            }
+        }
+        let Some((granted, tiles)) = grant else {
             cx.out.send(thief, Message::StealRefuse { frame });
             return;
-        }
+        };
         self.stats.tiles_given += tiles.len() as u32;
-        cx.out.send(thief, Message::StealGrant { frame, tiles });
+        cx.out.send(
+            thief,
+            Message::StealGrant {
+                frame: granted,
+                tiles,
+            },
+        );
     }
 
-    /// Takes from the back of the queue what to give a thief holding `thief_remaining`: as
-    /// much as fits in half the difference between the two peers' work (at most half the
-    /// queue's pieces), or nothing when that is worth less than the transfer. A piece too large
+    /// Takes from the back of `frame`'s queue what to give a thief holding `difference` less
+    /// work than this peer: as much as fits in half the difference (at most half the queue's
+    /// pieces), or nothing when that is worth less than the transfer. A piece too large
     /// to fit is cut in half, and its far half considered, while `split_on_steal` allows and
     /// the halves stay above `min_piece_pixels`. A first piece larger than half the difference
     /// that cannot be cut is still given if it is smaller than the whole difference: the pair
     /// then finishes sooner, and it cannot come back (the thief would hold the lesser share).
-    fn take_grant(
-        &mut self,
-        config: &Config,
-        now: Duration,
-        thief_remaining: f64,
-    ) -> Vec<TileSpec> {
-        let difference = self.remaining_work(now) - thief_remaining;
-        let Some(state) = self.frame.as_mut() else {
+    fn take_grant(&mut self, config: &Config, frame: FrameId, difference: f64) -> Vec<TileSpec> {
+        let Some(state) = self.frames.get_mut(&frame) else {
             return Vec::new();
         };
         let mut taken: Vec<TileSpec> = Vec::new();
@@ -322,7 +378,10 @@ impl Worker {
             .is_none_or(|seconds| {
                 seconds >= config.min_grant_rtts * self.estimates.rtt.as_secs_f64()
             });
-        let state = self.frame.as_mut().expect("invariant: matched Some above");
+        let state = self
+            .frames
+            .get_mut(&frame)
+            .expect("invariant: matched Some above");
         // Back to front as taken; the queue's order is front to back.
         taken.reverse();
         if given > 0.0 && given >= config.min_steal_cost && worth_time {
@@ -335,6 +394,8 @@ impl Worker {
     }
 
     /// Keeps granted tiles, however late they come: the victim has already let go of them.
+    /// A grant is of a frame this peer was dealt (the victim gives none newer than the request
+    /// named); it is dropped only if that frame has ended here.
     pub(super) fn on_grant(
         &mut self,
         cx: &mut Ctx,
@@ -342,33 +403,32 @@ impl Worker {
         frame: FrameId,
         tiles: Vec<TileSpec>,
     ) {
-        let Some(state) = self.frame.as_mut().filter(|state| state.id == frame) else {
-            tracing::debug!(%frame, %victim, "grant for a finished frame: dropped");
-            return;
-        };
         if let Thief::Asking {
             victim: asked,
             sent,
-        } = state.thief
+        } = self.thief
             && asked == victim
         {
             self.estimates.sample_rtt(cx.now.saturating_sub(sent));
             if tiles.is_empty() {
                 self.stats.steal_requests_refused += 1;
-                state.give_up_on_victim();
+                self.give_up_on_victim();
                 return;
             }
-            state.thief = Thief::Ready;
-            state.round = None;
+            self.thief = Thief::Ready;
+            self.round = None;
         }
         if tiles.is_empty() {
             return;
         }
-        state.fruitless_rounds = 0;
+        let Some(state) = self.frames.get_mut(&frame) else {
+            tracing::debug!(%frame, %victim, "grant for a finished frame: dropped");
+            return;
+        };
         state.stolen += 1;
-        self.stats.tiles_stolen += tiles.len() as u32;
         state.queue_work += tiles.iter().map(|tile| tile.predicted).sum::<f64>();
         let ids = tiles.iter().map(|tile| (tile.id, tile.piece)).collect();
+        let count = tiles.len() as u32;
         state.queue.extend(tiles);
         let notice = Message::StealNotice {
             frame,
@@ -376,28 +436,31 @@ impl Worker {
             tiles: ids,
             stolen: state.stolen,
         };
-        state.send_to_owner(cx, notice);
+        let owner = state.owner;
+        self.fruitless_rounds = 0;
+        self.stats.tiles_stolen += count;
+        self.send_to_owner(cx, owner, notice);
     }
 
-    pub(super) fn on_refuse(&mut self, cx: &mut Ctx, victim: PeerId, frame: FrameId) {
-        let Some(state) = self.frame.as_mut().filter(|state| state.id == frame) else {
-            return;
-        };
+    pub(super) fn on_refuse(&mut self, cx: &mut Ctx, victim: PeerId, _frame: FrameId) {
         if let Thief::Asking {
             victim: asked,
             sent,
-        } = state.thief
+        } = self.thief
             && asked == victim
         {
             self.estimates.sample_rtt(cx.now.saturating_sub(sent));
             self.stats.steal_requests_refused += 1;
-            state.give_up_on_victim();
+            self.give_up_on_victim();
         }
     }
 
     /// When the pending request times out, or the backoff ends.
     pub(super) fn thief_deadline(&self, config: &Config) -> Option<Duration> {
-        match self.frame.as_ref()?.thief {
+        if self.frames.is_empty() {
+            return None;
+        }
+        match self.thief {
             Thief::Ready => None,
             Thief::Asking { sent, .. } => Some(sent + self.estimates.steal_timeout(config)),
             Thief::Backoff { until } => Some(until),
@@ -407,17 +470,14 @@ impl Worker {
     /// Counts an unanswered request as refused. A backoff needs no action here: the next
     /// `maybe_steal` sees that it is over.
     pub(super) fn thief_timeout(&mut self, cx: &mut Ctx) {
-        let Some(state) = &mut self.frame else { return };
-        if let Thief::Asking { sent, .. } = state.thief
+        if let Thief::Asking { sent, .. } = self.thief
             && cx.now >= sent + self.estimates.steal_timeout(cx.config)
         {
             self.stats.steal_requests_refused += 1;
-            state.give_up_on_victim();
+            self.give_up_on_victim();
         }
     }
-}
 
-impl FrameState {
     /// Moves on to the round's next victim.
     pub(super) fn give_up_on_victim(&mut self) {
         self.thief = Thief::Ready;

@@ -1,14 +1,19 @@
-//! The peer's side of a frame: its queues, its renderer's slots, and what it owes the owner.
+//! The peer's side of the frames it works on: its queues, its renderer's slots, and what it
+//! owes each frame's owner.
 //!
-//! Every peer, the owner included, runs one worker. Its tiles wait in two queues. `queue` holds
-//! the tiles the owner gave it, in partition order, and those it stole after them; it is rendered
-//! from the front and given to thieves from the back, so stolen work can move on again to
-//! whoever needs it most, as in rayon. `prefetch` holds the next `prefetch_depth` tiles, taken
-//! from the front of `queue` and committed to this peer's renderer: never given away, so that a
-//! victim cannot be robbed of the work that keeps its renderer busy during its own next steal.
-//! Stealing itself lives in `steal.rs`.
+//! Every peer, the owner included, runs one worker. Several frames may be in flight at once
+//! (the owner deals the next frame before the last has completed, so that no peer waits at the
+//! end of a frame); each has its own queues, and the worker always renders the oldest frame's
+//! work first, so frames still finish in order as far as it is concerned. Within a frame, tiles
+//! wait in two queues. `queue` holds the tiles the owner gave it, in partition order, and those
+//! it stole after them; it is rendered from the front and given to thieves from the back, so
+//! stolen work can move on again to whoever needs it most, as in rayon. `prefetch` holds the
+//! next tiles taken from the front of `queue` and committed to this peer's renderer (at most
+//! `prefetch_depth` over all frames): never given away, so that a victim cannot be robbed of the
+//! work that keeps its renderer busy during its own next steal. Stealing itself lives in
+//! `steal.rs`; a peer has one thief, not one per frame.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::Duration;
 
 use super::steal::{Estimates, Round, Thief};
@@ -22,42 +27,50 @@ pub(super) type FlightKey = (FrameId, TileId, Piece);
 pub(super) struct Worker {
     pub(super) me: PeerId,
     pub(super) slots: usize,
-    pub(super) frame: Option<FrameState>,
-    /// The newest frame this peer has been assigned, running or finished.
+    /// The frames this peer works on, oldest first.
+    pub(super) frames: BTreeMap<FrameId, FrameState>,
+    /// Frames that ended here (their `FrameDone` came, or their owner was lost): their late
+    /// `Assign`s and grants are dropped. Frames are few (one per image), so this stays small.
+    finished: BTreeSet<FrameId>,
+    /// The newest frame this peer has been assigned or told of, running or finished.
     newest: Option<FrameId>,
+    /// The live participants of the newest frame, sorted: this peer steals only from them.
+    pub(super) peers: Vec<PeerId>,
     /// Tiles handed to the renderer (or waiting in `ready` for the driver to hand over), of any
     /// frame: a tile of a finished frame still occupies its slot until the renderer returns it.
     pub(super) in_flight: BTreeMap<FlightKey, InFlight>,
     ready: VecDeque<WorkItem>,
     pub(super) estimates: Estimates,
+    pub(super) thief: Thief,
+    pub(super) round: Option<Round>,
+    /// Rounds in a row in which every victim refused: the next backoff doubles with each.
+    pub(super) fruitless_rounds: u32,
+    /// When this peer last sent a frame's owner anything (all frames of a render have one
+    /// owner, and any message tells it the peer is alive).
+    last_to_owner: Duration,
     /// Counts since the last `FrameStats`, reported and reset when a frame ends.
     pub(super) stats: PeerStats,
+    /// Since when `stats` count: the last `FrameStats`, or the first `Assign` after a time with
+    /// no frame.
+    stats_since: Duration,
 }
 
 pub(super) struct FrameState {
     pub(super) id: FrameId,
     pub(super) owner: PeerId,
-    /// The frame's live participants, sorted; this peer steals only from them.
-    pub(super) peers: Vec<PeerId>,
     pub(super) queue: VecDeque<TileSpec>,
     pub(super) queue_work: f64,
     pub(super) prefetch: VecDeque<TileSpec>,
     pub(super) prefetch_work: f64,
     /// The largest piece handed to the renderer at once, as the owner's newest `Assign` said.
     render_pixels: u64,
-    started: Duration,
     /// `Assign`s and grants received and `TileDone`s sent this frame: the owner compares them
     /// with what it knows of, to tell a stale idle report from a current one.
     assigned: u32,
     pub(super) stolen: u32,
     done: u32,
-    pub(super) thief: Thief,
-    pub(super) round: Option<Round>,
-    /// Rounds in a row in which every victim refused: the next backoff doubles with each.
-    pub(super) fruitless_rounds: u32,
     /// The counts of the last idle report, so that it is sent once.
     idle_reported: Option<[u32; 3]>,
-    last_to_owner: Duration,
 }
 
 pub(super) struct InFlight {
@@ -76,18 +89,30 @@ impl Worker {
         Self {
             me,
             slots,
-            frame: None,
+            frames: BTreeMap::new(),
+            finished: BTreeSet::new(),
             newest: None,
+            peers: Vec::new(),
             in_flight: BTreeMap::new(),
             ready: VecDeque::new(),
             estimates,
+            thief: Thief::Ready,
+            round: None,
+            fruitless_rounds: 0,
+            last_to_owner: Duration::ZERO,
             stats,
+            stats_since: Duration::ZERO,
         }
     }
 
     /// The newest frame this peer has been assigned; the owner never starts an older one.
     pub(super) fn newest(&self) -> Option<FrameId> {
         self.newest
+    }
+
+    /// The oldest frame this peer works on.
+    pub(super) fn oldest(&self) -> Option<FrameId> {
+        self.frames.keys().next().copied()
     }
 
     pub(super) fn poll_work(&mut self) -> Option<WorkItem> {
@@ -103,86 +128,94 @@ impl Worker {
         tiles: Vec<TileSpec>,
         render_pixels: u64,
     ) {
-        if self.newest.is_some_and(|newest| frame < newest)
-            || (self.newest == Some(frame) && self.frame.is_none())
-        {
+        if self.finished.contains(&frame) {
             tracing::debug!(%frame, %from, "tiles of a finished frame: dropped");
             return;
         }
-        let running = self
-            .frame
-            .as_ref()
-            .map(|running| (running.id, running.owner));
-        if running.is_some_and(|(id, owner)| id == frame && owner != from) {
+        if self
+            .frames
+            .get(&frame)
+            .is_some_and(|state| state.owner != from)
+        {
             tracing::warn!(%frame, %from, "tiles from a peer that does not own the frame: dropped");
             return;
         }
-        if running.is_some_and(|(id, _)| id < frame) {
-            // The owner started a new frame, so the old one is complete even though its
-            // `FrameDone` has not arrived (or was lost with a connection).
-            self.finish_frame(cx);
-        }
-        peers.sort_unstable();
-        peers.dedup();
         let now = cx.now;
-        let state = self.frame.get_or_insert_with(|| {
+        if self.frames.is_empty() {
+            // Work after a time with none: the statistics and the busy time count from now.
+            self.stats_since = now;
+            self.last_to_owner = now;
+            self.thief = Thief::Ready;
+            self.round = None;
             for flight in self.in_flight.values_mut() {
                 flight.accounted_from = flight.accounted_from.max(now);
             }
-            FrameState::new(frame, from, now)
-        });
-        state.peers = peers;
+        }
+        if self.newest.is_none_or(|newest| frame >= newest) {
+            peers.sort_unstable();
+            peers.dedup();
+            self.peers = peers;
+            self.newest = Some(frame);
+        }
+        let state = self
+            .frames
+            .entry(frame)
+            .or_insert_with(|| FrameState::new(frame, from));
         state.render_pixels = render_pixels.max(1);
         state.queue_work += tiles.iter().map(|tile| tile.predicted).sum::<f64>();
         state.queue.extend(tiles);
         state.assigned += 1;
-        // New work ends a backoff: the thief is not idle any more.
-        if matches!(state.thief, Thief::Backoff { .. }) {
-            state.thief = Thief::Ready;
-            state.round = None;
+        self.new_work();
+    }
+
+    /// New work ends a backoff: the thief is not idle any more.
+    pub(super) fn new_work(&mut self) {
+        if matches!(self.thief, Thief::Backoff { .. }) {
+            self.thief = Thief::Ready;
+            self.round = None;
         }
-        state.fruitless_rounds = 0;
-        self.newest = Some(frame);
+        self.fruitless_rounds = 0;
     }
 
     pub(super) fn on_frame_done(&mut self, cx: &mut Ctx, from: PeerId, frame: FrameId) {
-        let running = self.frame.as_ref().map(|state| (state.id, state.owner));
-        match running {
-            Some((id, owner)) if id == frame && owner == from => self.finish_frame(cx),
-            // A later frame is done, so this one is too; its own `FrameDone` was lost.
-            Some((id, _)) if id < frame => self.finish_frame(cx),
-            _ => {}
-        }
-        if self.newest.is_none_or(|newest| frame > newest) {
+        if self
+            .frames
+            .get(&frame)
+            .is_some_and(|state| state.owner == from)
+        {
+            self.finish_frame(cx, frame);
+        } else if !self.frames.contains_key(&frame) {
             // Messages may arrive in any order: this `FrameDone` overtook our `Assign`, which
             // must now be dropped when it comes.
+            self.finished.insert(frame);
+        }
+        if self.newest.is_none_or(|newest| frame > newest) {
             self.newest = Some(frame);
         }
     }
 
-    /// Ends the running frame: reports its statistics to its owner and drops its leftovers.
-    fn finish_frame(&mut self, cx: &mut Ctx) {
-        let Some(state) = self.frame.take() else {
+    /// Ends `frame`: reports the statistics since the last report to its owner and drops its
+    /// leftovers.
+    fn finish_frame(&mut self, cx: &mut Ctx, frame: FrameId) {
+        let Some(state) = self.frames.remove(&frame) else {
             return;
         };
+        self.finished.insert(frame);
         let now = cx.now;
         for flight in self.in_flight.values_mut() {
             self.stats.busy += now.saturating_sub(flight.accounted_from);
             flight.accounted_from = now;
         }
-        self.drop_unstarted(state.id);
+        self.drop_unstarted(frame);
         let mut stats = std::mem::take(&mut self.stats);
         stats.slots = self.slots as u32;
-        stats.wall = now.saturating_sub(state.started);
+        stats.wall = now.saturating_sub(self.stats_since);
         stats.idle = (stats.wall * stats.slots).saturating_sub(stats.busy);
         self.stats.slots = self.slots as u32;
-        cx.out.send(
-            state.owner,
-            Message::FrameStats {
-                frame: state.id,
-                stats,
-            },
-        );
+        self.stats_since = now;
+        self.last_to_owner = now;
+        cx.out
+            .send(state.owner, Message::FrameStats { frame, stats });
     }
 
     /// Forgets tiles of `frame` the driver has not yet taken with `poll_work`.
@@ -210,46 +243,59 @@ impl Worker {
         self.stats.tiles_rendered += 1;
         self.estimates
             .sample_rate(flight.predicted, now.saturating_sub(flight.started));
-        match &mut self.frame {
-            Some(state) if state.id == result.frame => {
+        match self.frames.get_mut(&result.frame) {
+            Some(state) => {
                 state.done += 1;
-                state.send_to_owner(cx, Message::TileDone(result));
+                let owner = state.owner;
+                self.send_to_owner(cx, owner, Message::TileDone(result));
             }
-            _ => {
+            None => {
                 tracing::debug!(frame = %result.frame, tile = %result.tile, "result of a finished frame: dropped")
             }
         }
     }
 
-    /// Drops the running frame if `peer` owned it, else stops stealing from `peer`.
+    /// Drops the frames `peer` owned, else stops stealing from `peer`.
     pub(super) fn on_peer_lost(&mut self, cx: &mut Ctx, peer: PeerId) {
-        let Some(state) = &mut self.frame else { return };
-        if state.owner == peer {
-            let frame = state.id;
-            self.frame = None;
+        let orphaned: Vec<FrameId> = self
+            .frames
+            .values()
+            .filter(|state| state.owner == peer)
+            .map(|state| state.id)
+            .collect();
+        for frame in orphaned {
+            self.frames.remove(&frame);
+            self.finished.insert(frame);
             self.drop_unstarted(frame);
             cx.out.events.push_back(Event::OwnerLost { frame });
-            return;
         }
-        state.peers.retain(|&other| other != peer);
-        if matches!(state.thief, Thief::Asking { victim, .. } if victim == peer) {
-            state.give_up_on_victim();
+        self.peers.retain(|&other| other != peer);
+        if matches!(self.thief, Thief::Asking { victim, .. } if victim == peer) {
+            self.give_up_on_victim();
         }
     }
 
-    /// Hands tiles to free renderer slots (from `prefetch`, then `queue`), then tops `prefetch`
-    /// up to `depth` from the front of `queue`.
+    /// Hands tiles to free renderer slots (from the oldest frame with work waiting: its
+    /// `prefetch`, then its `queue`), then tops the frames' prefetches up to `depth` tiles in
+    /// all, again from the oldest frame's queue first.
     pub(super) fn fill_slots(&mut self, now: Duration, depth: usize) {
-        let Some(state) = &mut self.frame else { return };
         while self.in_flight.len() < self.slots {
-            let tile = if let Some(tile) = state.prefetch.pop_front() {
-                let empty = state.prefetch.is_empty();
-                state.prefetch_work = shrink(state.prefetch_work, tile.predicted, empty);
-                tile
-            } else if let Some(tile) = state.pop_queue() {
-                tile
-            } else {
+            let Some(state) = self
+                .frames
+                .values_mut()
+                .find(|state| !state.prefetch.is_empty() || !state.queue.is_empty())
+            else {
                 break;
+            };
+            let tile = match state.prefetch.pop_front() {
+                Some(tile) => {
+                    let empty = state.prefetch.is_empty();
+                    state.prefetch_work = shrink(state.prefetch_work, tile.predicted, empty);
+                    tile
+                }
+                None => state
+                    .pop_queue()
+                    .expect("invariant: the frame was chosen for waiting work"),
             };
             let flight = InFlight {
                 predicted: tile.predicted,
@@ -263,36 +309,59 @@ impl Worker {
                 tile,
             });
         }
-        while state.prefetch.len() < depth
-            && let Some(tile) = state.pop_queue()
-        {
+        let mut prefetched: usize = self.frames.values().map(|s| s.prefetch.len()).sum();
+        while prefetched < depth {
+            let Some(state) = self
+                .frames
+                .values_mut()
+                .find(|state| !state.queue.is_empty())
+            else {
+                break;
+            };
+            let tile = state
+                .pop_queue()
+                .expect("invariant: the frame was chosen for its queue");
             state.prefetch_work += tile.predicted;
             state.prefetch.push_back(tile);
+            prefetched += 1;
         }
     }
 
-    /// Tiles of the running frame in the renderer.
+    /// Tiles of `frame` in the renderer.
     pub(super) fn frame_in_flight(&self, frame: FrameId) -> impl Iterator<Item = &InFlight> {
         self.in_flight
             .range((frame, TileId(0), Piece(0))..=(frame, TileId(u32::MAX), Piece(u64::MAX)))
             .map(|(_, f)| f)
     }
 
-    /// Tells the owner, once per change, that this peer holds no work of the frame.
+    /// Tells each frame's owner, once per change, that this peer holds no work of that frame.
+    /// A peer busy with a newer frame is idle in an older one it has finished its part of: the
+    /// older frame's owner may then give it backups and re-issues, which it renders first.
     pub(super) fn report_idle(&mut self, cx: &mut Ctx) {
-        let Some(state) = &self.frame else { return };
-        let holds_work = !state.queue.is_empty()
-            || !state.prefetch.is_empty()
-            || self.frame_in_flight(state.id).next().is_some()
-            || matches!(state.thief, Thief::Asking { .. });
-        let counts = state.counts();
-        if holds_work || state.idle_reported == Some(counts) {
+        if matches!(self.thief, Thief::Asking { .. }) {
+            // A grant on its way may hold work of any frame.
             return;
         }
-        let state = self.frame.as_mut().expect("invariant: checked just above");
-        state.idle_reported = Some(counts);
-        let status = state.status(true);
-        state.send_to_owner(cx, status);
+        let idle: Vec<FrameId> = self
+            .frames
+            .values()
+            .filter(|state| {
+                state.queue.is_empty()
+                    && state.prefetch.is_empty()
+                    && state.idle_reported != Some(state.counts())
+            })
+            .map(|state| state.id)
+            .filter(|&frame| self.frame_in_flight(frame).next().is_none())
+            .collect();
+        for frame in idle {
+            let state = self
+                .frames
+                .get_mut(&frame)
+                .expect("invariant: chosen from the frames just above");
+            state.idle_reported = Some(state.counts());
+            let (owner, status) = (state.owner, state.status(true));
+            self.send_to_owner(cx, owner, status);
+        }
     }
 
     /// Sends a heartbeat if the owner has heard nothing from this peer for a while.
@@ -302,41 +371,46 @@ impl Worker {
         };
         if cx.now >= due {
             let state = self
-                .frame
-                .as_mut()
-                .expect("invariant: a heartbeat is due only in a frame");
-            let status = state.status(false);
-            state.send_to_owner(cx, status);
+                .busy_frame()
+                .expect("invariant: a heartbeat is due only while some frame holds work");
+            let (owner, status) = (state.owner, state.status(false));
+            self.send_to_owner(cx, owner, status);
         }
     }
 
     pub(super) fn heartbeat_due(&self, interval: Duration) -> Option<Duration> {
-        let state = self.frame.as_ref()?;
-        let idle = state.idle_reported == Some(state.counts());
-        (state.owner != self.me && !idle).then(|| state.last_to_owner + interval)
+        self.busy_frame()
+            .filter(|state| state.owner != self.me)
+            .map(|_| self.last_to_owner + interval)
+    }
+
+    /// The oldest frame this peer has not told its owner it is idle in.
+    fn busy_frame(&self) -> Option<&FrameState> {
+        self.frames
+            .values()
+            .find(|state| state.idle_reported != Some(state.counts()))
+    }
+
+    pub(super) fn send_to_owner(&mut self, cx: &mut Ctx, owner: PeerId, message: Message) {
+        self.last_to_owner = cx.now;
+        cx.out.send(owner, message);
     }
 }
 
 impl FrameState {
-    fn new(id: FrameId, owner: PeerId, now: Duration) -> Self {
+    fn new(id: FrameId, owner: PeerId) -> Self {
         Self {
             id,
             owner,
-            peers: Vec::new(),
             queue: VecDeque::new(),
             queue_work: 0.0,
             prefetch: VecDeque::new(),
             prefetch_work: 0.0,
             render_pixels: u64::MAX,
-            started: now,
             assigned: 0,
             stolen: 0,
             done: 0,
-            thief: Thief::Ready,
-            round: None,
-            fruitless_rounds: 0,
             idle_reported: None,
-            last_to_owner: now,
         }
     }
 
@@ -355,11 +429,6 @@ impl FrameState {
         }
         self.queue_work = shrink(self.queue_work, tile.predicted, self.queue.is_empty());
         Some(tile)
-    }
-
-    pub(super) fn send_to_owner(&mut self, cx: &mut Ctx, message: Message) {
-        self.last_to_owner = cx.now;
-        cx.out.send(self.owner, message);
     }
 
     fn counts(&self) -> [u32; 3] {

@@ -70,8 +70,8 @@ fn samples() -> Vec<Message> {
             render_pixels: 64,
         },
         Message::StealRequest {
-            frame: FrameId(1),
-            remaining: 0.25,
+            frame: FrameId(2),
+            remaining: vec![(FrameId(1), 0.25), (FrameId(2), 4.0)],
         },
         Message::StealGrant {
             frame: FrameId(1),
@@ -215,7 +215,11 @@ fn hostile_values_are_refused() {
     }
     assert!(refused(Message::StealRequest {
         frame: FrameId(1),
-        remaining: f64::NAN
+        remaining: vec![(FrameId(1), f64::NAN)]
+    }));
+    assert!(refused(Message::StealRequest {
+        frame: FrameId(1),
+        remaining: vec![(FrameId(1), 1.0); crate::wire::MAX_FRAMES_IN_FLIGHT + 1]
     }));
     let empty = TileSpec {
         rect: Rect::new(0, 0, 0, 4),
