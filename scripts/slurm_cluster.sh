@@ -2,7 +2,9 @@
 # A real SLURM cluster of three nodes on this one machine, everything under one folder, for the
 # tests in tests/slurm_real.rs and for trying `tessera slurm` by hand (docs/cluster.md).
 #
-#   scripts/slurm_cluster.sh start DIR [BASE_PORT]   # slurmctld on BASE_PORT (17000), nodes on +1..+3
+#   scripts/slurm_cluster.sh start DIR [BASE_PORT [FIRST_JOB_ID]]
+#       slurmctld on BASE_PORT (17000), the nodes on BASE_PORT+1 .. +3; job ids from FIRST_JOB_ID
+#       (1), which fixes the port `tessera slurm` derives for the first job's steps
 #   scripts/slurm_cluster.sh stop DIR                # stops every daemon that start began
 #   SLURM_CONF=DIR/slurm.conf srun -N3 -n3 hostname  # once started
 #
@@ -19,7 +21,7 @@
 set -euo pipefail
 
 usage() {
-    echo "usage: $0 start DIR [BASE_PORT] | stop DIR" >&2
+    echo "usage: $0 start DIR [BASE_PORT [FIRST_JOB_ID]] | stop DIR" >&2
     exit 2
 }
 
@@ -80,7 +82,7 @@ fail() {
 }
 
 start() {
-    local base=${1:-17000}
+    local base=${1:-17000} first_job=${2:-1}
     [ "$(id -u)" = 0 ] || fail "needs root (the daemons run as root, munged as the munge user)"
     local tool
     for tool in munged mungekey slurmctld slurmd srun sinfo runuser; do
@@ -88,6 +90,14 @@ start() {
             fail "$tool is not installed (apt-get install slurmd slurmctld slurm-client munge)"
     done
     getent passwd munge >/dev/null || fail "no munge user (the munge package makes one)"
+    local file
+    for file in $(pid_files); do
+        # Not `fail`, which would stop the cluster that is running there.
+        if [ -s "$file" ] && kill -0 "$(cat "$file")" 2>/dev/null; then
+            echo "slurm_cluster: a cluster is running in $dir already ($file); stop it first" >&2
+            exit 1
+        fi
+    done
     getent ahostsv4 n1 | grep -q '^127\.' ||
         fail "the node name n1 does not resolve to a loopback address: add \`127.0.0.1 n1 n2 n3\` to /etc/hosts (.ci/run does)"
 
@@ -112,7 +122,7 @@ start() {
         --seed-file="$dir/munge/munged.seed" ||
         fail "munged did not start" "$dir/munge/munged.log"
 
-    write_conf "$base" >"$dir/slurm.conf"
+    write_conf "$base" "$first_job" >"$dir/slurm.conf"
     export SLURM_CONF="$dir/slurm.conf"
     slurmctld -f "$SLURM_CONF" || fail "slurmctld did not start" "$dir/log/slurmctld.log"
     local node
@@ -137,11 +147,12 @@ start() {
 # database or a second machine: linuxproc tracks a step's processes by their parents, task/none
 # binds nothing, and accounting is off.
 write_conf() {
-    local base=$1
+    local base=$1 first_job=$2
     cat <<EOF
 ClusterName=tessera-test
 SlurmctldHost=localhost
 SlurmctldPort=$base
+FirstJobId=$first_job
 SlurmUser=root
 SlurmdUser=root
 AuthType=auth/munge
@@ -169,7 +180,7 @@ EOF
 }
 
 case $action in
-start) start "${3:-}" ;;
+start) start "${3:-}" "${4:-}" ;;
 stop) stop ;;
 *) usage ;;
 esac

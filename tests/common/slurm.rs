@@ -6,6 +6,7 @@
 //! `.ci/run` sets) or `CI` set, as CI services do, it fails with the reason instead.
 
 use super::repo;
+use runtime::slurm::default_port;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -20,6 +21,7 @@ pub struct Cluster {
     // Fields drop in order after `drop` has stopped the daemons: the folder goes last.
     _turn: MutexGuard<'static, ()>,
     dir: tempfile::TempDir,
+    first_job: u64,
 }
 
 /// Whether this run must not skip the SLURM tests.
@@ -36,14 +38,20 @@ impl Cluster {
         let turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
         let dir = tempfile::tempdir().expect("a temporary folder");
         let base = free_base_port();
+        let first_job = job_with_free_ports();
         let output = Command::new(script())
             .arg("start")
             .arg(dir.path())
             .arg(base.to_string())
+            .arg(first_job.to_string())
             .output();
         let why = match output {
             Ok(output) if output.status.success() => {
-                return Some(Cluster { _turn: turn, dir });
+                return Some(Cluster {
+                    _turn: turn,
+                    dir,
+                    first_job,
+                });
             }
             Ok(output) => String::from_utf8_lossy(&output.stderr).trim().to_owned(),
             Err(error) => format!("cannot run {}: {error}", script().display()),
@@ -64,6 +72,12 @@ impl Cluster {
     /// The cluster's folder; tests put their certificates and outputs in it too.
     pub fn dir(&self) -> &Path {
         self.dir.path()
+    }
+
+    /// The id of the cluster's first job (the first `srun` or `salloc`), whose first two steps'
+    /// ports were free when it started.
+    pub fn first_job(&self) -> u64 {
+        self.first_job
     }
 
     /// `program` (srun, salloc, ...) talking to this cluster. Every SLURM variable of the
@@ -91,6 +105,18 @@ impl Drop for Cluster {
             );
         }
     }
+}
+
+/// A job id whose steps 0 and 1 derive ports (`runtime::slurm::default_port`) free for UDP now,
+/// so that a test's tessera owner does not find its port taken by another program. The ids
+/// tried start at one that depends on this process, so that two test runs at once rarely try
+/// the same.
+fn job_with_free_ports() -> u64 {
+    let free = |port| std::net::UdpSocket::bind(("0.0.0.0", port)).is_ok();
+    let start = 1 + std::process::id() as u64 % 2000;
+    (start..start + 2000)
+        .find(|&job| free(default_port(job, 0)) && free(default_port(job, 1)))
+        .expect("some job's ports in 20000..40000 are free")
 }
 
 fn script() -> PathBuf {
