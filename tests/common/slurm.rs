@@ -18,7 +18,8 @@ static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// A started cluster; dropping it stops every daemon and the steps still running.
 pub struct Cluster {
-    // Fields drop in order after `drop` has stopped the daemons: the folder goes last.
+    // Fields drop in declaration order once `drop` has stopped the daemons: the next test's
+    // turn, then the folder with the cluster's logs.
     _turn: MutexGuard<'static, ()>,
     dir: tempfile::TempDir,
     first_job: u64,
