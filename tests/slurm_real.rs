@@ -9,7 +9,7 @@ mod common;
 
 use common::slurm::Cluster;
 use common::{frames, keygen, repo, run_ok, spawn_reading, tessera, wait_for};
-use runtime::slurm::default_port;
+use runtime::slurm::{Env, Overrides, Role, Step, default_port};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -186,6 +186,86 @@ fn two_steps_of_one_job_at_once_get_ports_of_their_own() {
             "no owner listened on {port}\n{log}"
         );
     }
+}
+
+/// What `runtime::slurm` assumes of srun, checked on the environments srun really gives its
+/// tasks: under each layout (block, cyclic, plane; two tasks per node, so that block and cyclic
+/// differ) task 0 runs on the step's first node and owns, every task reads the same owner `n1`
+/// and the same port, and `--cpus-per-task` sizes the rendering pool.
+#[test]
+fn real_step_environments_read_as_runtime_slurm_expects() {
+    let Some(cluster) =
+        Cluster::start_or_skip("real_step_environments_read_as_runtime_slurm_expects")
+    else {
+        return;
+    };
+    let layouts = [
+        ("block", ["n1", "n1", "n2", "n2", "n3", "n3"]),
+        ("cyclic", ["n1", "n2", "n3", "n1", "n2", "n3"]),
+        // Planes of two tasks per node, two tasks per node: laid out as block.
+        ("plane=2", ["n1", "n1", "n2", "n2", "n3", "n3"]),
+    ];
+    for (layout, expected) in layouts {
+        let layout_flag = format!("--distribution={layout}");
+        let steps = step_environments(&cluster, layout, &["-N3", "-n6", &layout_flag]);
+        let nodes: Vec<&str> = steps
+            .iter()
+            .map(|(env, _)| env["SLURMD_NODENAME"].as_str())
+            .collect();
+        assert_eq!(nodes, expected, "{layout}");
+        let (env0, step0) = &steps[0];
+        assert_eq!(step0.role(), Role::Owner { peers: 5 }, "{layout}");
+        let job: u64 = env0["SLURM_JOB_ID"].parse().unwrap();
+        assert_eq!(step0.port, default_port(job, 0), "{layout}");
+        for (rank, (_, step)) in steps.iter().enumerate() {
+            if rank > 0 {
+                let index = rank as u32;
+                assert_eq!(step.role(), Role::Peer { index }, "{layout}");
+            }
+            assert_eq!(step.owner, "n1", "{layout}, task {rank}");
+            assert_eq!(step.port, step0.port, "{layout}, task {rank}");
+            assert_eq!(step.nodes, ["n1", "n2", "n3"], "{layout}, task {rank}");
+            assert_eq!(step.cpus_per_task, None, "{layout}: no --cpus-per-task");
+        }
+    }
+    // SLURM_CPUS_PER_TASK, set only with -c, becomes the pool's size in every task.
+    let steps = step_environments(&cluster, "cpus", &["-N3", "-n3", "-c2"]);
+    for (rank, (_, step)) in steps.iter().enumerate() {
+        assert_eq!(step.cpus_per_task, Some(2), "task {rank}");
+    }
+}
+
+/// Runs `srun FLAGS` of a task that saves its environment, and reads each task's back with the
+/// step `runtime::slurm` makes of it, in rank order; `name` names the step's folder.
+fn step_environments(cluster: &Cluster, name: &str, flags: &[&str]) -> Vec<(Env, Step)> {
+    let dir = cluster.dir().join("envs").join(name);
+    std::fs::create_dir_all(&dir).unwrap();
+    let dump = format!(r#"env -0 > "{}/$SLURM_PROCID""#, dir.display());
+    let output = cluster
+        .command("srun")
+        .args(flags)
+        .args(["sh", "-c", &dump])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{name}: {stderr}");
+    let tasks = std::fs::read_dir(&dir).unwrap().count();
+    (0..tasks)
+        .map(|rank| {
+            let bytes = std::fs::read(dir.join(rank.to_string())).unwrap();
+            // `env -0` ends each NAME=value with a NUL; values may hold newlines.
+            let env: Env = bytes
+                .split(|&b| b == 0)
+                .filter_map(|entry| {
+                    let (name, value) = std::str::from_utf8(entry).ok()?.split_once('=')?;
+                    Some((name.to_owned(), value.to_owned()))
+                })
+                .collect();
+            let step = Step::from_env(&env, &Overrides::default())
+                .unwrap_or_else(|e| panic!("{name}, task {rank}: {e}"));
+            (env, step)
+        })
+        .collect()
 }
 
 /// One render's certificates and the command its tasks run, on one cluster.

@@ -2,7 +2,9 @@
 //! there are, which host owns the frames and on which port. Pure: the environment comes in as a
 //! map, so tests script any step and the binary passes its own variables.
 //!
-//! What this relies on (srun(1), "OUTPUT ENVIRONMENT VARIABLES" and `--distribution`):
+//! What this relies on (srun(1), "OUTPUT ENVIRONMENT VARIABLES" and `--distribution`; the
+//! test `real_step_environments_read_as_runtime_slurm_expects` in `tests/slurm_real.rs` reads
+//! the environments a real srun gives its tasks, under the block, cyclic and plane layouts):
 //! - `SLURM_PROCID` is the task's global rank, 0 .. tasks; rank 0 owns the frames and rank K
 //!   joins as peer K, so `tessera keygen --peers N` names every task's certificate.
 //! - `SLURM_STEP_NUM_TASKS` (set by srun for its step) is the task count; `SLURM_NTASKS` (the
