@@ -1,6 +1,7 @@
 //! `tessera slurm` as srun would run it: one process per task, each told its place by the
-//! SLURM_* variables srun sets, here scripted, on loopback. No SLURM is installed; what is
-//! tested is everything after srun has started the tasks.
+//! SLURM_* variables srun sets, here scripted, on loopback. No SLURM is needed; what is tested
+//! is everything after srun has started the tasks, on any machine. `tests/slurm_real.rs` runs
+//! the same command under a real srun where SLURM can be set up.
 
 mod common;
 
