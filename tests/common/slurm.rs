@@ -12,8 +12,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, MutexGuard};
 
-/// One cluster at a time in a test binary: the tests measure nothing, but three tessera tasks
-/// per step on a small machine are enough, and each cluster wants four TCP ports.
+/// One cluster at a time in a test binary: one step's three tasks already fill a small machine,
+/// and clusters side by side would only make the moments the tests rely on (a task killed in
+/// the middle of a frame) less certain.
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// A started cluster; dropping it stops every daemon and the steps still running.

@@ -124,9 +124,10 @@ pub const STEPS_PER_JOB: u64 = 10;
 /// running at once (`srun ... & srun ... & wait` in one batch script), which a port from the
 /// job id alone could not tell apart.
 pub fn default_port(job_id: u64, step_id: u64) -> u16 {
+    const FIRST: u16 = 20000;
     const PORTS: u64 = 20000;
     let block = job_id % (PORTS / STEPS_PER_JOB) * STEPS_PER_JOB;
-    20000 + (block + step_id % STEPS_PER_JOB) as u16
+    FIRST + (block + step_id % STEPS_PER_JOB) as u16
 }
 
 impl Step {
