@@ -90,7 +90,8 @@ pub struct SlurmArgs {
     /// every task (`--peers` at least the task count): task K uses `peer-K`.
     #[arg(long)]
     pub certs: PathBuf,
-    /// The owner's port (default: 20000 + job id mod 20000, the same in every task).
+    /// The owner's port (default: 20000 + 10 * (job id mod 2000) + step id mod 10, the same in
+    /// every task of the step; see docs/cluster.md).
     #[arg(long)]
     pub port: Option<u16>,
     /// The owner's host name, where task 0 is not on the step's first node (e.g. with

@@ -1,10 +1,12 @@
 //! `tessera slurm` as srun would run it: one process per task, each told its place by the
-//! SLURM_* variables srun sets, here scripted, on loopback. No SLURM is installed; what is
-//! tested is everything after srun has started the tasks.
+//! SLURM_* variables srun sets, here scripted, on loopback. No SLURM is needed; what is tested
+//! is everything after srun has started the tasks, on any machine. `tests/slurm_real.rs` runs
+//! the same command under a real srun where SLURM can be set up.
 
 mod common;
 
 use common::{frames, keygen, repo, run_ok, spawn_reading, tessera, wait_for, wait_success};
+use runtime::slurm::default_port;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -17,14 +19,14 @@ const SIZE: [&str; 8] = [
 /// The step's node list: task 0's node first (the block layout), then two that are never dialed.
 const NODES: &str = "localhost,node-b[1-2]";
 
-/// A job id whose derived port (20000 + id mod 20000) is free for UDP right now.
+/// A job id whose derived port for step 0 (the tasks set no SLURM_STEP_ID) is free for UDP
+/// right now; the job ids tried start at one that depends on this process, so that two test
+/// runs at once rarely try the same.
 fn job_with_free_port() -> u64 {
-    let start = std::process::id() as u64 % 20000;
-    (0..20000)
-        .map(|i| (start + i) % 20000)
-        .find(|offset| std::net::UdpSocket::bind(("0.0.0.0", 20000 + *offset as u16)).is_ok())
-        .map(|offset| 1_000_000 + offset) // 1_000_000 is a multiple of 20000.
-        .expect("some port in 20000..40000 is free")
+    let start = 1_000_000 + std::process::id() as u64 % 2000;
+    (start..start + 2000)
+        .find(|&job| std::net::UdpSocket::bind(("0.0.0.0", default_port(job, 0))).is_ok())
+        .expect("some port of step 0 in 20000..40000 is free")
 }
 
 /// `tessera slurm` as task `rank` of a `tasks`-task step of job `job`, with every SLURM

@@ -1,6 +1,9 @@
-//! Helpers shared by the end-to-end tests: run the real binary, read its EXR output.
+//! Helpers shared by the end-to-end tests: run the real binary, read its EXR output; `slurm`
+//! starts a real SLURM cluster on this machine.
 
 #![allow(dead_code)]
+
+pub mod slurm;
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

@@ -2,7 +2,9 @@
 //! there are, which host owns the frames and on which port. Pure: the environment comes in as a
 //! map, so tests script any step and the binary passes its own variables.
 //!
-//! What this relies on (srun(1), "OUTPUT ENVIRONMENT VARIABLES" and `--distribution`):
+//! What this relies on (srun(1), "OUTPUT ENVIRONMENT VARIABLES" and `--distribution`; the
+//! test `real_step_environments_read_as_runtime_slurm_expects` in `tests/slurm_real.rs` reads
+//! the environments a real srun gives its tasks, under the block, cyclic and plane layouts):
 //! - `SLURM_PROCID` is the task's global rank, 0 .. tasks; rank 0 owns the frames and rank K
 //!   joins as peer K, so `tessera keygen --peers N` names every task's certificate.
 //! - `SLURM_STEP_NUM_TASKS` (set by srun for its step) is the task count; `SLURM_NTASKS` (the
@@ -20,8 +22,9 @@
 //! - Peers dial the owner by its SLURM node name, so that name must resolve to the node (true
 //!   where `NodeName` is the host name, the common setup); elsewhere, name the owner.
 //! - `SLURM_CPUS_PER_TASK` is set only when `--cpus-per-task` was given; it sizes the
-//!   rendering pool. `SLURM_JOB_ID` (`SLURM_JOBID` on old releases) picks the default port, so
-//!   that two jobs sharing a node do not collide.
+//!   rendering pool. `SLURM_JOB_ID` (`SLURM_JOBID` on old releases) and `SLURM_STEP_ID`
+//!   (`SLURM_STEPID`; absent, as in a batch script, counts as step 0) pick the default port, so
+//!   that two jobs sharing a node do not collide, nor two steps of one job running at once.
 
 pub mod hostlist;
 
@@ -111,10 +114,20 @@ fn missing_list(names: &[&'static str]) -> String {
     format!("{} {verb}", names.join(", "))
 }
 
-/// The owner's port for a job: 20000 .. 39999, so that jobs sharing a node rarely collide and
-/// every task of one job computes the same port without talking.
-pub fn default_port(job_id: u64) -> u16 {
-    20000 + (job_id % 20000) as u16
+/// How many consecutive steps of one job get ports of their own: the job's block of ports.
+pub const STEPS_PER_JOB: u64 = 10;
+
+/// The owner's port for a step: 20000 .. 39999, the same in every task of the step without
+/// talking. Each job has a block of [`STEPS_PER_JOB`] ports, `20000 + 10 * (job mod 2000)`
+/// onwards, and step S takes the block's port `S mod 10`. So jobs whose ids are less than
+/// 2000 apart never collide, whatever their steps, and neither do up to ten steps of one job
+/// running at once (`srun ... & srun ... & wait` in one batch script), which a port from the
+/// job id alone could not tell apart.
+pub fn default_port(job_id: u64, step_id: u64) -> u16 {
+    const FIRST: u16 = 20000;
+    const PORTS: u64 = 20000;
+    let block = job_id % (PORTS / STEPS_PER_JOB) * STEPS_PER_JOB;
+    FIRST + (block + step_id % STEPS_PER_JOB) as u16
 }
 
 impl Step {
@@ -167,7 +180,13 @@ impl Step {
         };
         let port = match (overrides.port, job) {
             (Some(port), _) => port,
-            (None, Some((name, job))) => default_port(parse(name, job, "not a job id")?),
+            (None, Some((name, job))) => {
+                let step = match first_of(&["SLURM_STEP_ID", "SLURM_STEPID"]) {
+                    Some((name, step)) => parse(name, step, "not a step id")?,
+                    None => 0,
+                };
+                default_port(parse(name, job, "not a job id")?, step)
+            }
             (None, None) => unreachable!("a missing job id without --port was reported above"),
         };
         let (nodes, owner) = match (&overrides.owner, nodes) {

@@ -37,7 +37,8 @@ fn rank_zero_owns_and_waits_for_the_others() {
     assert_eq!(owner.role(), Role::Owner { peers: 3 });
     assert_eq!(owner.owner, "n01");
     assert_eq!(owner.nodes, ["n01", "n02", "n03", "n04"]);
-    assert_eq!(owner.port, 23456); // 20000 + 123456 mod 20000
+    // 20000 + 10 * (123456 mod 2000) + step 0: no SLURM_STEP_ID is step 0.
+    assert_eq!(owner.port, 34560);
     assert_eq!(owner.cpus_per_task, None);
 }
 
@@ -84,7 +85,7 @@ fn cpus_per_task_and_old_job_id_names_are_read() {
     let env = with(step_env(1, 2, "a,b"), "SLURM_CPUS_PER_TASK", "12");
     assert_eq!(step(&env).cpus_per_task, Some(12));
     let env = with(without(env, "SLURM_JOB_ID"), "SLURM_JOBID", "7");
-    assert_eq!(step(&env).port, 20007);
+    assert_eq!(step(&env).port, 20070);
     let env = with(env, "SLURM_CPUS_PER_TASK", "0");
     assert!(matches!(
         Step::from_env(&env, &Overrides::default()),
@@ -97,11 +98,74 @@ fn cpus_per_task_and_old_job_id_names_are_read() {
 
 #[test]
 fn default_ports_stay_in_their_range() {
-    for job in [0, 1, 19_999, 20_000, 39_999, 1 << 40, u64::MAX] {
-        let port = default_port(job);
-        assert!((20000..40000).contains(&port), "{job} -> {port}");
+    for job in [
+        0,
+        1,
+        1_999,
+        2_000,
+        19_999,
+        20_000,
+        39_999,
+        1 << 40,
+        u64::MAX,
+    ] {
+        for step in [0, 1, 9, 10, 4_294_967_290, u64::MAX] {
+            let port = default_port(job, step);
+            assert!((20000..40000).contains(&port), "{job}.{step} -> {port}");
+        }
     }
-    assert_ne!(default_port(41), default_port(42));
+    assert_eq!(default_port(0, 0), 20000);
+    assert_eq!(default_port(1_999, 9), 39999);
+}
+
+#[test]
+fn steps_of_one_job_and_nearby_jobs_get_ports_of_their_own() {
+    // Every step 0..10 of every job in a window of 2000 consecutive ids: all distinct.
+    let mut seen = std::collections::BTreeMap::new();
+    for job in 123_000..125_000 {
+        for step in 0..STEPS_PER_JOB {
+            let port = default_port(job, step);
+            if let Some(other) = seen.insert(port, (job, step)) {
+                panic!("{job}.{step} and {other:?} share port {port}");
+            }
+        }
+    }
+    assert_eq!(seen.len(), 20000);
+    // The eleventh step of a job reuses the first's port: the block is ten wide.
+    assert_eq!(default_port(7, 10), default_port(7, 0));
+    assert_eq!(default_port(7, 0) + 3, default_port(7, 3));
+}
+
+#[test]
+fn the_step_id_picks_the_port_within_the_job_block() {
+    let env = with(step_env(1, 2, "n[1-2]"), "SLURM_STEP_ID", "3");
+    assert_eq!(step(&env).port, default_port(123456, 3));
+    assert_eq!(step(&env).port, 34563);
+    // The old name is read where the new one is absent.
+    let env = with(without(env, "SLURM_STEP_ID"), "SLURM_STEPID", "2");
+    assert_eq!(step(&env).port, 34562);
+    // Every task of a step agrees: the id is the step's, not the task's.
+    let env = |rank| with(step_env(rank, 3, "n[1-3]"), "SLURM_STEP_ID", "1");
+    assert_eq!(step(&env(1)).port, step(&env(2)).port);
+    let error = Step::from_env(
+        &with(step_env(1, 2, "n[1-2]"), "SLURM_STEP_ID", "batch"),
+        &Overrides::default(),
+    )
+    .unwrap_err();
+    assert!(matches!(
+        error,
+        SlurmError::Invalid {
+            name: "SLURM_STEP_ID",
+            ..
+        }
+    ));
+    // --port wins over both ids.
+    let overrides = Overrides {
+        owner: None,
+        port: Some(4433),
+    };
+    let env = with(step_env(1, 2, "n[1-2]"), "SLURM_STEP_ID", "1");
+    assert_eq!(Step::from_env(&env, &overrides).unwrap().port, 4433);
 }
 
 #[test]

@@ -1,0 +1,443 @@
+//! `tessera slurm` under a real SLURM: steps of three tasks on a one-machine cluster of three
+//! nodes (`scripts/slurm_cluster.sh`, started by `common::slurm`), every frame compared bit for
+//! bit with a one-peer render. `tests/slurm.rs` scripts SLURM's variables to test what each task
+//! concludes from them; here SLURM itself sets them, places the tasks, and kills them.
+//!
+//! Each test skips, saying why, where no cluster can be set up, and fails instead in CI.
+
+mod common;
+
+use common::slurm::Cluster;
+use common::{frames, keygen, repo, run_ok, spawn_reading, tessera, wait_for};
+use runtime::slurm::{Env, Overrides, Role, Step, default_port};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{OnceLock, mpsc};
+use std::time::{Duration, Instant};
+
+const SCENE: &str = "scenes/glass-cluster-pan/glass-cluster-pan.toml";
+/// Frames of a few tenths of a second on three tasks: a task killed once frame 0 is done dies
+/// in the middle of frame 1, not after the render, and a whole step still takes seconds.
+const SIZE: [&str; 8] = [
+    "--width", "96", "--height", "80", "--spp", "32", "--frames", "6",
+];
+const FRAMES: usize = 6;
+/// srun as docs/cluster.md launches it: a task that dies neither takes the step down
+/// (`--kill-on-bad-exit=0`) nor starts a clock on the others (`--wait=0`).
+const SRUN: [&str; 4] = ["-N3", "-n3", "--kill-on-bad-exit=0", "--wait=0"];
+/// How long a whole step may take before the test gives up on it.
+const STEP_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// A plain step: SLURM puts one task on each node, task 0 on the first, and the frames are the
+/// bytes one peer alone renders.
+#[test]
+fn a_three_node_step_renders_what_one_peer_renders() {
+    let Some(cluster) = Cluster::start_or_skip("a_three_node_step_renders_what_one_peer_renders")
+    else {
+        return;
+    };
+    let job = Job::new(&cluster);
+    let out = cluster.dir().join("plain");
+    let (status, log) = finish(spawn(job.srun(&SRUN, &out, "")));
+    assert!(status.success(), "srun failed: {status}\n{log}");
+    assert_frames_match_reference(&out);
+    let tasks: Vec<Task> = (0..3).map(|rank| job.task(0, rank)).collect();
+    let nodes: Vec<&str> = tasks.iter().map(|t| t.node.as_str()).collect();
+    assert_eq!(nodes, ["n1", "n2", "n3"], "srun's block layout");
+    assert_eq!(tasks[0].job, cluster.first_job());
+    let port = default_port(tasks[0].job, 0);
+    assert!(
+        log.contains(&format!("owning the frames on n1, port {port}"))
+            && log.contains(&format!("joining n1 (127.0.0.1:{port})")),
+        "{log}"
+    );
+    for peer in 0..3 {
+        assert!(
+            tiles_of(&out, peer).iter().any(|&n| n > 0),
+            "task {peer} rendered no tile"
+        );
+    }
+}
+
+/// Task 2 killed with SIGKILL in the middle of frame 1: the owner gives its tiles to the
+/// others, the step goes on without it, and every frame is still the one-peer render's.
+#[test]
+fn a_task_killed_mid_frame_costs_time_not_frames() {
+    let Some(cluster) = Cluster::start_or_skip("a_task_killed_mid_frame_costs_time_not_frames")
+    else {
+        return;
+    };
+    let job = Job::new(&cluster);
+    let out = cluster.dir().join("killed");
+    let (child, lines) = spawn(job.srun(&SRUN, &out, ""));
+    assert!(
+        wait_for(&lines, "frame 0 done", STEP_TIMEOUT),
+        "the step never finished frame 0"
+    );
+    job.task(0, 2).kill();
+    let (status, log) = finish((child, lines));
+    // srun reports the lost task, and only that one.
+    assert!(!status.success(), "srun hid the killed task\n{log}");
+    assert!(log.contains("task 2: Killed"), "{log}");
+    assert!(
+        !log.contains("task 0:") && !log.contains("task 1:"),
+        "{log}"
+    );
+    assert!(log.contains(&format!("rendered {FRAMES} frames")), "{log}");
+    assert_frames_match_reference(&out);
+    let tiles = tiles_of(&out, 2);
+    assert!(tiles[0] > 0, "task 2 rendered nothing before it died");
+    assert_eq!(tiles[FRAMES - 1], 0, "task 2 rendered after it was killed");
+}
+
+/// What docs/cluster.md warns of: with `srun -K` (`--kill-on-bad-exit`) one task killed
+/// ends the whole step, the owner with it, and the render stops short.
+#[test]
+fn with_kill_on_bad_exit_one_killed_task_ends_the_step() {
+    let Some(cluster) =
+        Cluster::start_or_skip("with_kill_on_bad_exit_one_killed_task_ends_the_step")
+    else {
+        return;
+    };
+    let job = Job::new(&cluster);
+    let out = cluster.dir().join("kill-on-bad-exit");
+    let (child, lines) = spawn(job.srun(&["-N3", "-n3", "--kill-on-bad-exit=1"], &out, ""));
+    assert!(
+        wait_for(&lines, "frame 0 done", STEP_TIMEOUT),
+        "the step never finished frame 0"
+    );
+    job.task(0, 2).kill();
+    let (status, log) = finish((child, lines));
+    assert!(!status.success(), "{log}");
+    assert!(
+        log.contains("task 0: Terminated") || log.contains("task 0: Killed"),
+        "srun did not end the owner\n{log}"
+    );
+    let written = frames(&out).len();
+    assert!(
+        written < FRAMES,
+        "the owner wrote all {written} frames: srun did not end the step"
+    );
+}
+
+/// A task that starts three seconds after the others (a slow node) is waited for: the owner
+/// starts frame 0 only once every task of the step has joined, so task 2 renders in it.
+///
+/// This is not elastic membership: a task that joins once the render has started is not
+/// used (docs/cluster.md, "Not done yet").
+#[test]
+fn a_task_that_starts_late_is_waited_for() {
+    let Some(cluster) = Cluster::start_or_skip("a_task_that_starts_late_is_waited_for") else {
+        return;
+    };
+    let job = Job::new(&cluster);
+    let out = cluster.dir().join("late");
+    let started = Instant::now();
+    let late = r#"[ "$SLURM_PROCID" != 2 ] || sleep 3"#;
+    let (status, log) = finish(spawn(job.srun(&SRUN, &out, late)));
+    assert!(status.success(), "srun failed: {status}\n{log}");
+    assert!(started.elapsed() >= Duration::from_secs(3));
+    assert_frames_match_reference(&out);
+    assert!(tiles_of(&out, 2)[0] > 0, "frame 0 started without task 2");
+}
+
+/// Two steps of one job at once (`srun ... & srun ... & wait` in an allocation) listen on
+/// ports of their own, derived from the job and step ids, and both render the right frames.
+/// With a port from the job id alone the second owner could not bind it.
+#[test]
+fn two_steps_of_one_job_at_once_get_ports_of_their_own() {
+    let Some(cluster) =
+        Cluster::start_or_skip("two_steps_of_one_job_at_once_get_ports_of_their_own")
+    else {
+        return;
+    };
+    let job = Job::new(&cluster);
+    let outs = [cluster.dir().join("step-0"), cluster.dir().join("step-1")];
+    // `--exact`: each step takes only the CPU per task it asks for, so both fit at once in
+    // an allocation of two CPUs on each node.
+    let steps: Vec<String> = outs
+        .iter()
+        .map(|out| shell_line(&job.srun(&["--exact", "-N3", "-n3"], out, "")))
+        .collect();
+    let script = cluster.dir().join("two-steps.sh");
+    // The script fails if either step does (a bare `wait` would succeed whatever they did).
+    let both = format!(
+        "{} &\nfirst=$!\n{} &\nsecond=$!\nwait $first; a=$?\nwait $second; b=$?\n\
+         [ $a = 0 ] && [ $b = 0 ]\n",
+        steps[0], steps[1]
+    );
+    std::fs::write(&script, both).unwrap();
+    let mut salloc = cluster.command("salloc");
+    salloc
+        .args(["-N3", "-n6", "sh"])
+        .arg(&script)
+        .env("NO_COLOR", "1");
+    let (status, log) = finish(spawn(salloc));
+    assert!(status.success(), "salloc failed: {status}\n{log}");
+    for out in &outs {
+        assert_frames_match_reference(out);
+    }
+    let (first, second) = (job.task(0, 0), job.task(1, 0));
+    assert_eq!(first.job, second.job, "the steps belong to one job");
+    for port in [default_port(first.job, 0), default_port(first.job, 1)] {
+        assert!(
+            log.contains(&format!("listening on 0.0.0.0:{port};")),
+            "no owner listened on {port}\n{log}"
+        );
+    }
+}
+
+/// What `runtime::slurm` assumes of srun, checked on the environments srun really gives its
+/// tasks: under each layout (block, cyclic, plane; two tasks per node, so that block and cyclic
+/// differ) task 0 runs on the step's first node and owns, every task reads the same owner `n1`
+/// and the same port, and `--cpus-per-task` sizes the rendering pool.
+#[test]
+fn real_step_environments_read_as_runtime_slurm_expects() {
+    let Some(cluster) =
+        Cluster::start_or_skip("real_step_environments_read_as_runtime_slurm_expects")
+    else {
+        return;
+    };
+    let layouts = [
+        ("block", ["n1", "n1", "n2", "n2", "n3", "n3"]),
+        ("cyclic", ["n1", "n2", "n3", "n1", "n2", "n3"]),
+        // Planes of two tasks per node, two tasks per node: laid out as block.
+        ("plane=2", ["n1", "n1", "n2", "n2", "n3", "n3"]),
+    ];
+    for (layout, expected) in layouts {
+        let layout_flag = format!("--distribution={layout}");
+        let steps = step_environments(&cluster, layout, &["-N3", "-n6", &layout_flag]);
+        let nodes: Vec<&str> = steps
+            .iter()
+            .map(|(env, _)| env["SLURMD_NODENAME"].as_str())
+            .collect();
+        assert_eq!(nodes, expected, "{layout}");
+        let (env0, step0) = &steps[0];
+        assert_eq!(step0.role(), Role::Owner { peers: 5 }, "{layout}");
+        let job: u64 = env0["SLURM_JOB_ID"].parse().unwrap();
+        assert_eq!(step0.port, default_port(job, 0), "{layout}");
+        for (rank, (_, step)) in steps.iter().enumerate() {
+            if rank > 0 {
+                let index = rank as u32;
+                assert_eq!(step.role(), Role::Peer { index }, "{layout}");
+            }
+            assert_eq!(step.owner, "n1", "{layout}, task {rank}");
+            assert_eq!(step.port, step0.port, "{layout}, task {rank}");
+            assert_eq!(step.nodes, ["n1", "n2", "n3"], "{layout}, task {rank}");
+            assert_eq!(step.cpus_per_task, None, "{layout}: no --cpus-per-task");
+        }
+    }
+    // SLURM_CPUS_PER_TASK, set only with -c, becomes the pool's size in every task.
+    let steps = step_environments(&cluster, "cpus", &["-N3", "-n3", "-c2"]);
+    for (rank, (_, step)) in steps.iter().enumerate() {
+        assert_eq!(step.cpus_per_task, Some(2), "task {rank}");
+    }
+}
+
+/// Runs `srun FLAGS` of a task that saves its environment, and reads each task's back with the
+/// step `runtime::slurm` makes of it, in rank order; `name` names the step's folder.
+fn step_environments(cluster: &Cluster, name: &str, flags: &[&str]) -> Vec<(Env, Step)> {
+    let dir = cluster.dir().join("envs").join(name);
+    std::fs::create_dir_all(&dir).unwrap();
+    let dump = format!(r#"env -0 > "{}/$SLURM_PROCID""#, dir.display());
+    let output = cluster
+        .command("srun")
+        .args(flags)
+        .args(["sh", "-c", &dump])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{name}: {stderr}");
+    let tasks = std::fs::read_dir(&dir).unwrap().count();
+    (0..tasks)
+        .map(|rank| {
+            let bytes = std::fs::read(dir.join(rank.to_string())).unwrap();
+            // `env -0` ends each NAME=value with a NUL; values may hold newlines.
+            let env: Env = bytes
+                .split(|&b| b == 0)
+                .filter_map(|entry| {
+                    let (name, value) = std::str::from_utf8(entry).ok()?.split_once('=')?;
+                    Some((name.to_owned(), value.to_owned()))
+                })
+                .collect();
+            let step = Step::from_env(&env, &Overrides::default())
+                .unwrap_or_else(|e| panic!("{name}, task {rank}: {e}"));
+            (env, step)
+        })
+        .collect()
+}
+
+/// One render's certificates and the command its tasks run, on one cluster.
+struct Job<'a> {
+    cluster: &'a Cluster,
+    certs: PathBuf,
+    tasks: PathBuf,
+}
+
+/// Where one task ran, as it wrote it before starting tessera.
+struct Task {
+    pid: u32,
+    node: String,
+    job: u64,
+}
+
+impl Job<'_> {
+    fn new(cluster: &Cluster) -> Job<'_> {
+        let certs = cluster.dir().join("certs");
+        keygen(&certs, 3);
+        let tasks = cluster.dir().join("tasks");
+        std::fs::create_dir_all(&tasks).unwrap();
+        Job {
+            cluster,
+            certs,
+            tasks,
+        }
+    }
+
+    /// `srun FLAGS` of `tessera slurm` rendering into `out`. Each task first writes its pid,
+    /// node and job id to `tasks/STEP.RANK`, then runs `before` (a shell command), then
+    /// becomes tessera with the same pid: srun starts tasks under SLURM's daemons, not as
+    /// children of the test, and this is how a test finds one to kill.
+    fn srun(&self, flags: &[&str], out: &Path, before: &str) -> Command {
+        let record = format!(
+            r#"echo "$$ $SLURMD_NODENAME $SLURM_JOB_ID" > "{}/$SLURM_STEP_ID.$SLURM_PROCID"; {before}
+exec "$0" "$@""#,
+            self.tasks.display()
+        );
+        let mut command = self.cluster.command("srun");
+        command.args(flags).args(["sh", "-c", &record]);
+        command.arg(env!("CARGO_BIN_EXE_tessera")).arg("slurm");
+        command.arg(repo(SCENE)).args(SIZE);
+        command.args(["--threads", "1", "--tiles", "64", "--peer-timeout", "2"]);
+        command
+            .arg("--certs")
+            .arg(&self.certs)
+            .arg("--out")
+            .arg(out);
+        command.env("NO_COLOR", "1");
+        command
+    }
+
+    /// What task `rank` of step `step` wrote.
+    fn task(&self, step: u32, rank: u32) -> Task {
+        let path = self.tasks.join(format!("{step}.{rank}"));
+        let text =
+            std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let fields: Vec<&str> = text.split_whitespace().collect();
+        let [pid, node, job] = fields[..] else {
+            panic!("{}: {text:?}", path.display());
+        };
+        Task {
+            pid: pid.parse().unwrap(),
+            node: node.to_owned(),
+            job: job.parse().unwrap(),
+        }
+    }
+}
+
+impl Task {
+    /// SIGKILL: no goodbye, no connection closed, as when a node dies.
+    fn kill(&self) {
+        let status = Command::new("kill")
+            .args(["-KILL", &self.pid.to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success(), "kill -KILL {} failed", self.pid);
+    }
+}
+
+/// Starts `command` (srun or salloc); its stderr lines, where srun forwards every task's log,
+/// arrive on the channel.
+fn spawn(mut command: Command) -> (Child, mpsc::Receiver<String>) {
+    spawn_reading(command.stdout(Stdio::piped()))
+}
+
+/// Waits for a spawned srun or salloc to end; its status, and its stdout and the stderr lines
+/// not yet read, as one text for assertions and failure messages.
+fn finish((mut child, lines): (Child, mpsc::Receiver<String>)) -> (ExitStatus, String) {
+    let deadline = Instant::now() + STEP_TIMEOUT;
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if Instant::now() > deadline {
+            child.kill().ok();
+            panic!("the step did not end within {STEP_TIMEOUT:?}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut log = String::new();
+    child
+        .stdout
+        .take()
+        .expect("spawn pipes stdout")
+        .read_to_string(&mut log)
+        .unwrap();
+    // The reader thread ends when srun's stderr closes, which it has.
+    for line in lines.iter() {
+        log.push('\n');
+        log.push_str(&line);
+    }
+    (status, log)
+}
+
+/// A command as one line of `sh`, every word quoted.
+fn shell_line(command: &Command) -> String {
+    let quote =
+        |word: &std::ffi::OsStr| format!("'{}'", word.to_string_lossy().replace('\'', r"'\''"));
+    std::iter::once(command.get_program())
+        .chain(command.get_args())
+        .map(quote)
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The frames of one peer alone, rendered once per test binary.
+fn reference() -> &'static [(String, Vec<u8>)] {
+    static REFERENCE: OnceLock<Vec<(String, Vec<u8>)>> = OnceLock::new();
+    REFERENCE.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        run_ok(
+            tessera()
+                .arg("render")
+                .arg(repo(SCENE))
+                .args(SIZE)
+                .args(["--peers", "1", "--threads", "1", "--tiles", "64", "--out"])
+                .arg(dir.path()),
+        );
+        frames(dir.path())
+    })
+}
+
+fn assert_frames_match_reference(out: &Path) {
+    let (got, expected) = (frames(out), reference());
+    assert_eq!(got.len(), FRAMES, "{}", out.display());
+    assert_eq!(expected.len(), FRAMES);
+    for ((name, a), (_, b)) in got.iter().zip(expected) {
+        assert!(
+            a == b,
+            "{name} in {} differs from the one-peer render",
+            out.display()
+        );
+    }
+}
+
+/// How many tiles peer `peer` rendered in each frame, from the owner's stats.json.
+fn tiles_of(out: &Path, peer: u64) -> Vec<usize> {
+    let stats: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    stats["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|frame| {
+            frame["tiles"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter(|tile| tile["peer"] == peer)
+                .count()
+        })
+        .collect()
+}
