@@ -115,6 +115,7 @@ fn the_render_leaves_stats_tile_maps_and_a_gantt_chart() {
         serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
     let frames = stats["frames"].as_array().unwrap();
     assert_eq!(frames.len(), 3);
+    let mut rendered = 0;
     for frame in frames {
         let tiles = frame["tiles"].as_array().unwrap();
         assert_eq!(tiles.len(), 16);
@@ -123,17 +124,19 @@ fn the_render_leaves_stats_tile_maps_and_a_gantt_chart() {
             .map(|t| t["rect"][2].as_u64().unwrap() * t["rect"][3].as_u64().unwrap())
             .sum();
         assert_eq!(area, 48 * 40, "tiles cover the image");
-        let rendered: u64 = frame["peers"]
+        rendered += frame["peers"]
             .as_array()
             .unwrap()
             .iter()
             .map(|p| p["tiles_rendered"].as_u64().unwrap())
-            .sum();
-        assert!(
-            rendered >= 16,
-            "peers report at least every tile rendered once"
-        );
+            .sum::<u64>();
     }
+    // Frames overlap, and a peer's report covers the time since its previous one, so only the
+    // run's sum is bound to count every tile.
+    assert!(
+        rendered >= 3 * 16,
+        "peers report at least every tile rendered once"
+    );
 }
 
 #[test]

@@ -20,7 +20,9 @@ NET="--latency 0.1 --tile-overhead 0.03"
 # studied: every tile rendered and moved whole, no backups of stragglers (UNCUT). Section 7
 # measures what cutting tiles and backups add. Sections 1 to 4 deal each peer one contiguous
 # run of tiles; section 6 deals interleaved, the default since.
-UNCUT="--render-pieces off --split-on-steal false --backups false"
+# BARRIER: one frame at a time, every frame cut and rendered alike (before frames in flight).
+BARRIER="--frames-in-flight 1 --doubtful-pieces off"
+UNCUT="--render-pieces off --split-on-steal false --backups false $BARRIER"
 RUNS="--deal contiguous $UNCUT"
 
 # The shipped uneven scene's cost trace is committed: counted work is deterministic, so
@@ -77,8 +79,9 @@ $T simulate synthetic $NET $UNCUT --deal interleaved --peers $PEERS --tiles 4096
 # 7. The end of a frame (the defaults since): tiles rendered half by half above twice the mean
 #    tile area, halved for thieves, stragglers backed up; each mechanism off in turn, both off
 #    (UNCUT), and pieces of a quarter of the mean tile area. The tail issue's four set-ups.
-for variant in "all:" "no-render-pieces:--render-pieces off" "no-steal-split:--split-on-steal false" \
-    "uncut:$UNCUT" "quarter-pieces:--render-pieces 0.25"; do
+for variant in "all:$BARRIER" "no-render-pieces:--render-pieces off $BARRIER" \
+    "no-steal-split:--split-on-steal false $BARRIER" "uncut:$UNCUT" \
+    "quarter-pieces:--render-pieces 0.25 $BARRIER"; do
     name=${variant%%:*}
     flags=${variant#*:}
     $T simulate synthetic $NET $flags --policy pbt+steal --peers 64,256,1024 --tiles 4096 \
@@ -92,3 +95,19 @@ for variant in "all:" "no-render-pieces:--render-pieces off" "no-steal-split:--s
 done
 # The synthetic runs' default Gantt charts (a thousand peers' bars, megabytes each) are not kept.
 rm -f $R/tails/synthetic-*/gantt.svg
+
+# 8. Frames in flight (the defaults since): the next frame dealt when the running one wanes,
+#    the prediction doubted (no overlap, pieces of 1/8 mean area) where it missed by more than
+#    half; against one frame at a time (section 7's defaults), no doubting, three in flight.
+for variant in "in-flight:" "barrier:$BARRIER" "never-doubt:--doubt-error 2 --doubtful-pieces off" \
+    "three:--frames-in-flight 3"; do
+    name=${variant%%:*}
+    flags=${variant#*:}
+    $T simulate synthetic $NET $flags --policy pbt+steal --peers 64,256,1024 --tiles 4096 \
+        --charts peers --out $R/frames/synthetic-$name
+    $T simulate synthetic:1024x1024:20 $NET $flags --policy pbt+steal --peers 256 --tiles 4096 \
+        --charts peers --gantt 256:pbt+steal:4096:12 --out $R/frames/fast-orbit-$name
+    $T simulate $GLASS $NET $flags --policy pbt+steal --peers 64 --tiles 1024 \
+        --charts peers --gantt 64:pbt+steal:1024:12 --out $R/frames/glass-$name
+done
+rm -f $R/frames/synthetic-*/gantt.svg

@@ -2,7 +2,12 @@
 //!
 //! Definitions (times in virtual seconds; "work" is counted work converted to the time one slot
 //! of a speed-1 peer needs for it):
-//! - **makespan**: from the owner starting the frame to its core reporting every tile in.
+//! - **makespan**: the frame's interval, from when the frame before it was handed over (or from
+//!   its own start, if later) to its own hand-over; frames are handed over in order. Without
+//!   frames in flight that is from the owner starting the frame to its core reporting every
+//!   tile in; with them, frames overlap and the intervals add up to the run, each moment once,
+//!   so a frame whose work was partly done in the interval before can show an efficiency
+//!   above 1.
 //! - **capacity**: the frame's participants' speed factors times their slots (`P` for equal
 //!   peers with one slot each).
 //! - **efficiency** = work / (capacity x makespan): 1 when every slot renders from the first
@@ -13,7 +18,9 @@
 //!   fair share work / capacity alone. **bound efficiency** is the efficiency a run
 //!   achieving it would have, so efficiency <= bound efficiency <= 1 always.
 //! - **idle fraction** = 1 - busy slot time / (participant slots x makespan): slot time spent
-//!   not rendering (waiting for work, for the network, or for the frame's last tile).
+//!   not rendering (waiting for work, for the network, or for the frame's last tile). The busy
+//!   time is that of the frame's own tiles, wherever it fell, so with frames in flight it is a
+//!   frame's share rather than its interval's (clamped at 0).
 //!
 //! A run's totals add frames up: efficiency = total work / sum of (capacity x makespan).
 

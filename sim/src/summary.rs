@@ -45,7 +45,8 @@ pub fn markdown(title: &str, sweep: &Sweep, runs: &[RunReport]) -> String {
     let _ = writeln!(
         out,
         "Efficiency = work / (capacity x makespan) over all frames; in brackets, the efficiency a \
-         schedule reaching the lower bound max(work / capacity, largest tile) would have.\n"
+         schedule reaching the lower bound would have: work / capacity where tiles can be cut \
+         on the way, else max(work / capacity, largest tile).\n"
     );
 
     let predicted = runs.iter().all(|r| r.frames.len() > 1);

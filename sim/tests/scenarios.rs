@@ -127,8 +127,14 @@ fn every_tile_completes_exactly_once_under_every_policy_and_fault() {
                 }
             }
             if name == "crashing" {
+                // Each crash is noticed by the ledger of every frame it held work of: once,
+                // or twice when two frames were in flight.
                 let failures: u64 = report.frames.iter().map(|f| f.failures).sum();
-                assert_eq!(failures, 3, "{policy}: every crash must be noticed");
+                let in_flight = scenario.frames_in_flight as u64;
+                assert!(
+                    (3..=3 * in_flight).contains(&failures),
+                    "{policy}: every crash must be noticed, {failures} failures"
+                );
                 let last = report.frames.last().unwrap();
                 assert_eq!(last.participants, 5, "crashed peers get no more tiles");
             }
@@ -140,14 +146,22 @@ fn every_tile_completes_exactly_once_under_every_policy_and_fault() {
 fn efficiency_stays_within_its_bounds() {
     let trace = hot_spot(3, true);
     for policy in Policy::ALL {
-        for peers in [1, 3, 16] {
+        for (peers, in_flight) in [1, 3, 16].into_iter().flat_map(|p| [(p, 1), (p, 2)]) {
             let scenario = Scenario {
                 peers,
                 work_per_second: rate(&trace, peers),
+                frames_in_flight: in_flight,
                 ..noisy(&trace, 1)
             };
             let report = run(&trace, policy, 32, &scenario);
-            for f in &report.frames {
+            // Overlapping frames share their intervals' time (a frame's interval may hold
+            // work of the next), so only the run as a whole is bound then.
+            let frames = if in_flight == 1 {
+                &report.frames[..]
+            } else {
+                &[]
+            };
+            for f in frames {
                 assert!(
                     f.makespan >= f.lower_bound * (1.0 - 1e-9),
                     "{policy}, {peers}: {f:?}"
@@ -232,9 +246,12 @@ fn two_equal_tiles_on_two_peers_take_one_tile_time() {
 #[test]
 fn tile_overhead_costs_time_but_is_not_work() {
     let (trace, config) = two_blocks();
+    // Tiles rendered whole, also in the first frame (which the director would otherwise
+    // render in small pieces, having no prediction to trust).
     let scenario = Scenario {
         work_per_second: 1000.0,
         tile_overhead: Duration::from_millis(500),
+        doubtful_piece_factor: None,
         ..Scenario::default()
     };
     let partitioner = Partitioner::new(16, 8, &config).unwrap();
@@ -323,6 +340,8 @@ fn the_owner_loop_bounds_a_frame_and_its_limits_are_reported() {
             bandwidth: Some(1e9),
             ..Network::default()
         },
+        // One result per tile in the first frame too.
+        doubtful_piece_factor: None,
         ..Scenario::default()
     };
     let per_result = Duration::from_millis(50);

@@ -173,10 +173,10 @@ pub struct Director {
     running: BTreeMap<FrameId, Running>,
     /// Frames complete but not yet handed to the driver, because an older one is still
     /// running: frames are handed over in order.
-    complete: BTreeMap<FrameId, (Event, Dealt)>,
+    complete: BTreeMap<FrameId, (Event, Vec<balancer::Tile>)>,
     /// Frames handed to the driver and waiting for their measured cost maps, oldest first,
     /// with the tiles they were dealt (to tell how well they were predicted).
-    measuring: VecDeque<(FrameId, Dealt)>,
+    measuring: VecDeque<(FrameId, Vec<balancer::Tile>)>,
     /// How far the last measured frame's tiles missed their predicted costs (see
     /// [`Config::doubt_error`]); `None` before any frame is measured.
     last_error: Option<f64>,
@@ -189,19 +189,11 @@ pub struct Director {
     events: VecDeque<Event>,
 }
 
-/// What a frame was dealt, kept until it is measured.
-struct Dealt {
-    tiles: Vec<balancer::Tile>,
-    /// Whether it was cut before any frame was measured.
-    blind: bool,
-}
-
 /// A frame running in the owner's core.
 struct Running {
     deal: Deal,
     started: Duration,
     faults: usize,
-    blind: bool,
     /// Whether the core reported it waning: then the next frame may be dealt.
     waned: bool,
 }
@@ -311,7 +303,6 @@ impl Director {
             deal: deal.clone(),
             started: now,
             faults: 0,
-            blind: self.last_error.is_none(),
             waned: false,
         };
         if self.running.insert(frame, running).is_some() {
@@ -360,12 +351,7 @@ impl Director {
                 audit,
                 ..
             } if self.running.contains_key(&frame) => {
-                let Running {
-                    deal,
-                    started,
-                    blind,
-                    ..
-                } = self
+                let Running { deal, started, .. } = self
                     .running
                     .remove(&frame)
                     .expect("invariant: checked just above");
@@ -393,11 +379,7 @@ impl Director {
                     pieces,
                     audit,
                 };
-                let dealt = Dealt {
-                    tiles: deal.tiles,
-                    blind,
-                };
-                self.complete.insert(frame, (complete, dealt));
+                self.complete.insert(frame, (complete, deal.tiles));
                 self.hand_over_in_order();
                 Ok(None)
             }
@@ -448,9 +430,9 @@ impl Director {
             {
                 break;
             }
-            let (event, dealt) = entry.remove();
+            let (event, tiles) = entry.remove();
             self.events.push_back(event);
-            self.measuring.push_back((frame, dealt));
+            self.measuring.push_back((frame, tiles));
         }
     }
 
@@ -466,16 +448,14 @@ impl Director {
             return Err(DirectorError::NotWaiting { frame });
         }
         let update = self.partitioner.observe(map)?;
-        let (_, dealt) = self
+        let (_, tiles) = self
             .measuring
             .pop_front()
             .expect("invariant: checked just above");
-        // A frame cut blind missed by its cut's nature, which says nothing of the predictor
-        // that now has its measurement: the next frame is trusted until measured itself.
-        let error = match dealt.blind {
-            true => 0.0,
-            false => prediction_error(&dealt.tiles, map),
-        };
+        // A frame cut blind misses by nearly 1, so the frame after it is doubted too: the PBT
+        // moves a bounded number of leaves per frame and is still far from the costs after
+        // one measurement (on the fast orbit, trusting it loses a tenth of the efficiency).
+        let error = prediction_error(&tiles, map);
         tracing::debug!(%frame, error, "how far the frame's tiles missed their predicted costs");
         self.last_error = Some(error);
         let all_measured =

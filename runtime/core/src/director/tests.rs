@@ -285,84 +285,121 @@ fn completion(frame: u64) -> crate::peer::Event {
     }
 }
 
-/// With two frames in flight: the first frame runs alone (it is cut blind), then the next
-/// frame is dealt when the running one wanes, never more than two are dealt and unmeasured,
-/// and frames reach the driver in order even when a later one completes first. Blind frames
-/// render in smaller pieces.
+/// With two frames in flight: while the prediction is doubted (no frame measured, or the last
+/// measured missed) a frame runs alone in small pieces; once trusted, the next frame is dealt
+/// when the running one wanes, never more than two are dealt and unmeasured, and frames reach
+/// the driver in order even when a later one completes first.
 #[test]
 fn the_next_frame_is_dealt_when_the_running_one_wanes_and_frames_are_handed_over_in_order() {
     let t = Duration::ZERO;
-    let mut director = director_in_flight(grid(2, 2), 1, 5, 2);
+    let mut director = director_in_flight(grid(2, 2), 1, 7, 2);
     let wane = |frame| crate::peer::Event::FrameWaning {
         frame: FrameId(frame),
     };
     let frame_of = |deal: Option<Deal>| deal.map(|deal| deal.frame.0);
-    let blind = director.poll_deal(t).unwrap().expect("frame 0");
-    director.handle_core_event(t, wane(0)).unwrap();
-    assert!(director.poll_deal(t).unwrap().is_none(), "frame 0 is blind");
-    director.handle_core_event(t, completion(0)).unwrap();
-    assert!(matches!(
-        director.poll_event(),
-        Some(Event::FrameComplete { .. })
-    ));
-    director.handle_measured(t, FrameId(0), &halves(1)).unwrap();
-    let seen = director.poll_deal(t).unwrap().expect("frame 1");
-    assert_eq!(seen.frame, FrameId(1));
-    assert_eq!(
-        blind.render_pixels * 8,
-        seen.render_pixels,
-        "a quarter of twice"
-    );
+    let config = Config::default();
+    let mean_area = 32.0 * 32.0 / 4.0;
+    let pieces = |factor: Option<f64>| (factor.expect("pieces by default") * mean_area) as u64;
+    // Frames 0 and 1 are doubted: frame 0 is cut by area alone, and its tiles miss the
+    // measured costs, which frame 1 is then cut from; frame 1 meets them exactly.
+    for frame in 0..2 {
+        let deal = director.poll_deal(t).unwrap().expect("a doubted frame");
+        assert_eq!(deal.frame, FrameId(frame));
+        assert_eq!(deal.render_pixels, pieces(config.doubtful_piece_factor));
+        director.handle_core_event(t, wane(frame)).unwrap();
+        assert!(
+            director.poll_deal(t).unwrap().is_none(),
+            "frame {frame} is doubted"
+        );
+        director.handle_core_event(t, completion(frame)).unwrap();
+        assert!(matches!(
+            director.poll_event(),
+            Some(Event::FrameComplete { .. })
+        ));
+        director
+            .handle_measured(t, FrameId(frame), &halves(3))
+            .unwrap();
+    }
+    let trusted = director.poll_deal(t).unwrap().expect("frame 2");
+    assert_eq!(trusted.frame, FrameId(2));
+    assert_eq!(trusted.render_pixels, pieces(config.render_piece_factor));
     assert_eq!(
         frame_of(director.poll_deal(t).unwrap()),
         None,
-        "frame 1 has not waned"
+        "frame 2 has not waned"
     );
-    assert!(director.handle_core_event(t, wane(1)).unwrap().is_none());
-    assert_eq!(frame_of(director.poll_deal(t).unwrap()), Some(2));
-    // Frame 2 wanes too, but two frames are already unmeasured.
-    director.handle_core_event(t, wane(2)).unwrap();
+    assert!(director.handle_core_event(t, wane(2)).unwrap().is_none());
+    assert_eq!(frame_of(director.poll_deal(t).unwrap()), Some(3));
+    // Frame 3 wanes too, but two frames are already unmeasured.
+    director.handle_core_event(t, wane(3)).unwrap();
     assert_eq!(
         frame_of(director.poll_deal(t).unwrap()),
         None,
         "two in flight"
     );
-    // Frame 2 completes first: it is held until frame 1 is in.
-    director.handle_core_event(t, completion(2)).unwrap();
+    // Frame 3 completes first: it is held until frame 2 is in.
+    director.handle_core_event(t, completion(3)).unwrap();
     assert!(director.poll_event().is_none());
     assert_eq!(frame_of(director.poll_deal(t).unwrap()), None);
-    director.handle_core_event(t, completion(1)).unwrap();
+    director.handle_core_event(t, completion(2)).unwrap();
     let handed: Vec<u64> = std::iter::from_fn(|| director.poll_event())
         .map(|event| match event {
             Event::FrameComplete { frame, .. } => frame.0,
             Event::Finished => u64::MAX,
         })
         .collect();
-    assert_eq!(handed, [1, 2]);
+    assert_eq!(handed, [2, 3]);
     assert!(matches!(
-        director.handle_measured(t, FrameId(2), &halves(1)),
+        director.handle_measured(t, FrameId(3), &halves(3)),
         Err(DirectorError::NotWaiting { .. })
     ));
-    director.handle_measured(t, FrameId(1), &halves(1)).unwrap();
-    // Frame 2 is complete but unmeasured, and nothing runs: frame 3 may go.
-    assert_eq!(frame_of(director.poll_deal(t).unwrap()), Some(3));
+    director.handle_measured(t, FrameId(2), &halves(3)).unwrap();
+    // Frame 3 is complete but unmeasured, and nothing runs: frame 4 may go.
+    assert_eq!(frame_of(director.poll_deal(t).unwrap()), Some(4));
     assert_eq!(
         frame_of(director.poll_deal(t).unwrap()),
         None,
         "two in flight"
     );
-    director.handle_measured(t, FrameId(2), &halves(1)).unwrap();
+    // Frame 3 missed: its costs moved (the costly half is now the right one).
+    let moved = {
+        let blocks = SIDE / 8;
+        let counts: Vec<u64> = (0..blocks * blocks)
+            .map(|i| if i % blocks < blocks / 2 { 1 } else { 3 })
+            .collect();
+        CostMap::from_counts(SIDE, SIDE, 8, &counts).expect("a valid map")
+    };
+    director.handle_measured(t, FrameId(3), &moved).unwrap();
+    // So frame 5 waits for frame 4's measurement, however early frame 4 wanes.
+    director.handle_core_event(t, wane(4)).unwrap();
     assert_eq!(
         frame_of(director.poll_deal(t).unwrap()),
         None,
-        "frame 3 has not waned"
+        "the prediction is doubted"
     );
-    director.handle_core_event(t, wane(3)).unwrap();
-    assert_eq!(frame_of(director.poll_deal(t).unwrap()), Some(4));
+    director.handle_core_event(t, completion(4)).unwrap();
+    assert!(matches!(
+        director.poll_event(),
+        Some(Event::FrameComplete { .. })
+    ));
+    // Frame 4 was cut before frame 3's costs were known: it missed as well.
+    director.handle_measured(t, FrameId(4), &moved).unwrap();
+    let doubted = director.poll_deal(t).unwrap().expect("frame 5");
+    assert_eq!(doubted.render_pixels, pieces(config.doubtful_piece_factor));
+    director.handle_core_event(t, wane(5)).unwrap();
     assert_eq!(
         frame_of(director.poll_deal(t).unwrap()),
         None,
-        "the last frame is dealt"
+        "frame 5 runs alone"
+    );
+    director.handle_core_event(t, completion(5)).unwrap();
+    assert!(director.poll_event().is_some());
+    director.handle_measured(t, FrameId(5), &moved).unwrap();
+    let next = director.poll_deal(t).unwrap().expect("frame 6");
+    assert_eq!(
+        next.render_pixels,
+        pieces(config.render_piece_factor),
+        "trusted again"
     );
 }
 
