@@ -13,8 +13,9 @@ each, on loopback with mutual TLS; the Cornell box, 4 frames of 160x120 at 256 s
   kill     peer 3 gets SIGKILL during frame 1 (as soon as the owner prints that frame 0 is done)
   stop     peer 3 gets SIGSTOP during frame 1, and SIGCONT 6 s later
 
-For each run the script prints the per-frame seconds from stats.json (first tile handed out to
-last tile received), the slowest frame over the median, and whether every frame is bit-identical
+For each run the script prints each frame's seconds from stats.json (what it added to the render:
+from the frame before it completing to its own completion, the first frame from being dealt),
+the slowest frame over the median, and whether every frame is bit-identical
 to a 1-peer render of the same frames (the EXR files compared byte for byte).
 
 Usage (from the repository root, after `cargo build --release`):
@@ -99,7 +100,13 @@ def run(name, out, certs, reference, args):
         except subprocess.TimeoutExpired:
             peer.kill()
     stats = json.loads((out / "stats.json").read_text())
-    seconds = [frame["seconds"] for frame in stats["frames"]]
+    # Frames overlap (the next is dealt before the last ends), so what a frame adds to the
+    # render is the time from the frame before it completing to its own completion; the first
+    # frame's is its own time from being dealt.
+    frames = stats["frames"]
+    seconds = [frames[0]["seconds"]] + [
+        b["completed_at"] - a["completed_at"] for a, b in zip(frames, frames[1:])
+    ]
     identical = all((out / f.name).read_bytes() == f.read_bytes() for f in sorted(reference.glob("frame-*.exr")))
     return seconds, identical
 

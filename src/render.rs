@@ -330,6 +330,7 @@ impl FrameSink for Sink<'_> {
         let mut frame = FrameStats {
             frame: done.frame,
             seconds: done.seconds,
+            completed_at: done.completed_at,
             rays: done.rays,
             work: done.tiles.iter().map(|t| t.measured).sum(),
             tiles: TileStats::per_tile(&done.tiles),

@@ -89,6 +89,9 @@ pub struct FrameStats {
     pub frame: u32,
     /// Wall time from the first tile handed out to the last tile received, in seconds.
     pub seconds: f64,
+    /// When the frame was complete, in seconds since the render started (0 in older files).
+    /// Frames overlap, so the difference between two frames' is what each added to the render.
+    pub completed_at: f64,
     pub rays: u64,
     /// Counted work of the whole frame (the tracer's deterministic cost unit).
     pub work: u64,

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{frames, keygen, repo, run_ok, spawn_reading, tessera, wait_for, wait_success};
+use common::{frames, keygen, render_alone, repo, spawn_reading, tessera, wait_for, wait_success};
 use runtime::slurm::default_port;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
@@ -93,14 +93,7 @@ fn a_three_task_step_renders_what_one_peer_renders() {
     wait_success(second, "task 2", Duration::from_secs(30));
 
     let reference = dir.path().join("reference");
-    run_ok(
-        tessera()
-            .arg("render")
-            .arg(repo(SCENE))
-            .args(SIZE)
-            .args(["--peers", "1", "--threads", "1", "--tiles", "64", "--out"])
-            .arg(&reference),
-    );
+    render_alone(SCENE, &SIZE, &reference);
     let (got, expected) = (frames(&out), frames(&reference));
     assert_eq!(got.len(), 6);
     assert_eq!(got.len(), expected.len());

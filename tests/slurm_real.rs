@@ -8,7 +8,7 @@
 mod common;
 
 use common::slurm::Cluster;
-use common::{frames, keygen, repo, run_ok, spawn_reading, tessera, wait_for};
+use common::{frames, keygen, render_alone, repo, spawn_reading, wait_for};
 use runtime::slurm::{Env, Overrides, Role, Step, default_port};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -398,14 +398,7 @@ fn reference() -> &'static [(String, Vec<u8>)] {
     static REFERENCE: OnceLock<Vec<(String, Vec<u8>)>> = OnceLock::new();
     REFERENCE.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
-        run_ok(
-            tessera()
-                .arg("render")
-                .arg(repo(SCENE))
-                .args(SIZE)
-                .args(["--peers", "1", "--threads", "1", "--tiles", "64", "--out"])
-                .arg(dir.path()),
-        );
+        render_alone(SCENE, &SIZE, dir.path());
         frames(dir.path())
     })
 }

@@ -31,6 +31,19 @@ pub fn run_ok(command: &mut Command) -> Output {
 }
 
 /// The bytes of every `frame-NNNN.exr` in `dir`, in frame order.
+/// Renders `scene` with `size` flags on one peer and one thread into `out`, 64 tiles: the
+/// reference every distributed render of these tests is compared with, bit for bit.
+pub fn render_alone(scene: &str, size: &[&str], out: &Path) {
+    run_ok(
+        tessera()
+            .arg("render")
+            .arg(repo(scene))
+            .args(size)
+            .args(["--peers", "1", "--threads", "1", "--tiles", "64", "--out"])
+            .arg(out),
+    );
+}
+
 pub fn frames(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut names: Vec<String> = std::fs::read_dir(dir)
         .unwrap()

@@ -73,7 +73,8 @@ pub struct Config {
     /// that of one whose costs move by more than their size each frame (the fast orbit's 0.78).
     pub doubt_error: f64,
     /// A frame dealt while the prediction is doubted renders in pieces of at most this many
-    /// times its mean tile area, instead of `render_piece_factor`: nothing then bounds what one
+    /// times its mean tile area (never below [`wire::MIN_PIECE_PIXELS`]), instead of
+    /// `render_piece_factor`: nothing then bounds what one
     /// tile costs, and smaller pieces let thieves share out a costly region the prediction did
     /// not see. `None` uses `render_piece_factor`.
     pub doubtful_piece_factor: Option<f64>,
@@ -287,7 +288,8 @@ impl Director {
         let render_pixels = match factor {
             Some(factor) if !tiles.is_empty() => ((area as f64 / tiles.len() as f64) * factor)
                 .ceil()
-                .max(1.0) as u64,
+                .max(wire::MIN_PIECE_PIXELS as f64)
+                as u64,
             _ => u64::MAX,
         };
         let frame = FrameId(self.next);

@@ -29,6 +29,10 @@ mod tests;
 /// The version of this protocol. Bump it on any change to [`Message`]'s layout.
 pub const PROTOCOL_VERSION: u32 = 3;
 
+/// The smallest piece worth cutting a tile into, in pixels: one 8x8 block, the unit the tracer
+/// measures cost in. Below it a piece's transfer and per-piece overhead cost more than its work.
+pub const MIN_PIECE_PIXELS: u64 = 64;
+
 /// The most frames a render may have in flight at once (dealt and not yet measured), and so
 /// the most a steal request names.
 pub const MAX_FRAMES_IN_FLIGHT: usize = 64;

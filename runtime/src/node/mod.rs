@@ -96,6 +96,9 @@ pub struct CompletedFrame {
     pub tiles: Vec<TileRecord>,
     /// From starting the frame to its last tile, in seconds.
     pub seconds: f64,
+    /// When the frame was handed over, in seconds since the owner started: frames overlap, so
+    /// the time between two frames' hand-overs is what each adds to the render.
+    pub completed_at: f64,
     pub rays: u64,
     /// How duplicate results (backups of stragglers, re-issued tiles) compared with the first.
     pub audit: runtime_core::peer::Audit,

@@ -113,7 +113,8 @@ impl Owner {
                     audit,
                 } = event
                 {
-                    let (mut completed, map) = assemble(frame, pieces, &job.world, elapsed)?;
+                    let (mut completed, map) =
+                        assemble(frame, pieces, &job.world, elapsed, self.session.now())?;
                     completed.audit = audit;
                     director.handle_measured(self.session.now(), frame, &map)?;
                     sink.frame(completed).map_err(NodeError::Sink)?;
@@ -251,6 +252,7 @@ fn assemble(
     pieces: Vec<Piece>,
     world: &World,
     elapsed: Duration,
+    now: Duration,
 ) -> Result<(CompletedFrame, balancer::CostMap), NodeError> {
     let settings = &world.scene.settings;
     let mut film = Film::new(settings.width, settings.height);
@@ -289,6 +291,7 @@ fn assemble(
         film,
         tiles: records,
         seconds: elapsed.as_secs_f64(),
+        completed_at: now.as_secs_f64(),
         rays,
         audit: runtime_core::peer::Audit::default(),
     };

@@ -299,7 +299,9 @@ fn the_next_frame_is_dealt_when_the_running_one_wanes_and_frames_are_handed_over
     let frame_of = |deal: Option<Deal>| deal.map(|deal| deal.frame.0);
     let config = Config::default();
     let mean_area = 32.0 * 32.0 / 4.0;
-    let pieces = |factor: Option<f64>| (factor.expect("pieces by default") * mean_area) as u64;
+    let pieces = |factor: Option<f64>| {
+        ((factor.expect("pieces by default") * mean_area) as u64).max(wire::MIN_PIECE_PIXELS)
+    };
     // Frames 0 and 1 are doubted: frame 0 is cut by area alone, and its tiles miss the
     // measured costs, which frame 1 is then cut from; frame 1 meets them exactly.
     for frame in 0..2 {

@@ -130,7 +130,7 @@ impl Default for Config {
             heartbeat_interval: Duration::from_secs(1),
             peer_timeout: Duration::from_secs(10),
             split_on_steal: true,
-            min_piece_pixels: 64,
+            min_piece_pixels: crate::wire::MIN_PIECE_PIXELS,
             speculation: Some(Speculation::default()),
             waning: 0.5,
         }
