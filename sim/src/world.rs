@@ -299,6 +299,9 @@ impl SimWorld {
             }
             // The director's cue to deal: what it changes shows in the messages that follow.
             Event::FrameWaning { .. } => {}
+            Event::PeerOverdue { frame, peer } => {
+                print.words(&[16, frame.0, u64::from(peer.0)]);
+            }
             Event::PeerStats { frame, peer, stats } => {
                 print.words(&[11, frame.0, u64::from(peer.0), stats.busy.as_nanos() as u64]);
             }

@@ -168,6 +168,10 @@ pub struct Director {
     partitioner: Partitioner,
     /// Remote participants the owner deals to (connected, scene loaded).
     peers: BTreeSet<PeerId>,
+    /// Participants whose work was backed up as overdue and that have not been heard of since
+    /// (by their statistics): a frozen peer would hold up every frame dealt to it, so it is
+    /// dealt nothing until it shows it is alive.
+    overdue: BTreeSet<PeerId>,
     /// The next frame to deal.
     next: u64,
     /// Frames dealt and running in the owner's core, oldest first.
@@ -206,6 +210,7 @@ impl Director {
             me,
             partitioner,
             peers: BTreeSet::new(),
+            overdue: BTreeSet::new(),
             next: config.first,
             running: BTreeMap::new(),
             complete: BTreeMap::new(),
@@ -243,6 +248,7 @@ impl Director {
     /// nothing more and stops waiting for its statistics.
     pub fn handle_peer_left(&mut self, _now: Duration, peer: PeerId) {
         self.peers.remove(&peer);
+        self.overdue.remove(&peer);
         self.unreported.remove(&peer);
         self.settle();
     }
@@ -256,7 +262,7 @@ impl Director {
             return Ok(None);
         }
         let tiles = self.partitioner.tiles();
-        let mut participants: Vec<PeerId> = self.peers.iter().copied().collect();
+        let mut participants: Vec<PeerId> = self.peers.difference(&self.overdue).copied().collect();
         participants.push(self.me);
         participants.sort_unstable();
         let assignment = self.partitioner.assign(participants.len(), None)?;
@@ -385,6 +391,12 @@ impl Director {
                 self.hand_over_in_order();
                 Ok(None)
             }
+            CoreEvent::PeerOverdue { peer, .. } => {
+                if peer != self.me {
+                    self.overdue.insert(peer);
+                }
+                Ok(None)
+            }
             CoreEvent::FrameWaning { frame } => {
                 if let Some(running) = self.running.get_mut(&frame) {
                     running.waned = true;
@@ -408,6 +420,10 @@ impl Director {
                 Ok(Some(event))
             }
             event @ CoreEvent::PeerStats { .. } => {
+                if let CoreEvent::PeerStats { peer, .. } = &event {
+                    // Statistics come once the peer has handled a frame's end: it is alive.
+                    self.overdue.remove(peer);
+                }
                 if let CoreEvent::PeerStats { frame, peer, .. } = &event
                     && frame.0 + 1 == self.next
                 {

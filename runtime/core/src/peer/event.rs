@@ -25,6 +25,10 @@ pub enum Event {
     /// [`Config::waning`](crate::peer::Config::waning) of its predicted cost is still missing.
     /// Reported once per frame, the director's cue to deal the next frame early.
     FrameWaning { frame: FrameId },
+    /// (Owner) `peer` made no progress on its work of `frame` for long past its prediction,
+    /// and that work was backed up on idle peers. It is not declared failed (it may resume),
+    /// but the director deals it nothing more until it is heard of again.
+    PeerOverdue { frame: FrameId, peer: PeerId },
     /// (Owner) a participant's statistics for `frame`, its own included.
     PeerStats {
         frame: FrameId,

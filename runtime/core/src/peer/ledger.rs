@@ -31,6 +31,9 @@ pub(super) struct Ledger {
     speculation: Option<Speculation>,
     /// Predicted cost of the results accepted this frame: the frame's pace, for speculation.
     predicted_received: f64,
+    /// When the first result was accepted: the pace counts from then, since a frame dealt
+    /// while an older one runs is rendered only once peers are done with the older one.
+    first_result: Option<Duration>,
     /// The predicted cost of all the frame's tiles.
     predicted_total: f64,
     /// The missing share at which the frame is reported waning (`Config::waning`), and
@@ -92,6 +95,7 @@ impl Ledger {
             render_pixels,
             speculation: config.speculation,
             predicted_received: 0.0,
+            first_result: None,
             predicted_total: 0.0,
             waning: config.waning,
             waned: false,
@@ -197,6 +201,7 @@ impl Ledger {
         }
         self.predicted_received +=
             wire::predicted_share(entry.spec.predicted, entry.spec.rect, result.rect);
+        self.first_result.get_or_insert(now);
         entry.pieces.insert(from, result);
         if self.predicted_received >= (1.0 - self.waning) * self.predicted_total {
             wane(self.frame, &mut self.waned, out);
@@ -438,7 +443,8 @@ impl Ledger {
             return;
         }
         let participants = self.peers.values().filter(|view| view.alive).count().max(1);
-        let elapsed = now.saturating_sub(self.started).as_secs_f64();
+        let since = self.first_result.unwrap_or(self.started);
+        let elapsed = now.saturating_sub(since).as_secs_f64();
         let pace = self.predicted_received / (elapsed * participants as f64);
         if !(pace > 0.0 && pace.is_finite()) {
             // Nothing measured yet: look again once results have set the pace.
@@ -447,6 +453,7 @@ impl Ledger {
         }
         let mut backups = Vec::new();
         let mut next: Option<Duration> = None;
+        let mut overdue = std::collections::BTreeSet::new();
         for (id, entry) in &mut self.tiles {
             if entry.complete || entry.speculated {
                 continue;
@@ -473,6 +480,12 @@ impl Ledger {
             if now >= due {
                 entry.speculated = true;
                 backups.push(*id);
+                let stalled = entry.holders.iter().filter(|holder| {
+                    self.peers.get(holder).is_some_and(|view| {
+                        view.alive && !view.idle() && now >= view.last_progress + patience
+                    })
+                });
+                overdue.extend(stalled);
             } else {
                 next = Some(next.map_or(due, |n| n.min(due)));
             }
@@ -480,6 +493,12 @@ impl Ledger {
         if !backups.is_empty() {
             tracing::info!(frame = %self.frame, tiles = backups.len(), "backing up overdue tiles on idle peers");
             self.reissue(now, backups, out);
+        }
+        for peer in overdue {
+            out.events.push_back(Event::PeerOverdue {
+                frame: self.frame,
+                peer,
+            });
         }
         self.next_speculation = next.map(|due| due.max(now + speculation.min_wait));
     }
