@@ -453,11 +453,13 @@ mod tests {
             assert!(seen.iter().all(|&c| c == 1), "n = {n}: {seen:?}");
             assert!(wide.depth <= accel.depth());
             if n == 40 {
-                // A full 8-wide node replaces seven binary inner nodes; leaves in the way of
-                // the collapse leave some with fewer children, but not most.
+                // A full 8-wide node replaces seven binary inner nodes. Near the leaves the
+                // binary tree has too few levels left to fill one (a node above two leaf pairs
+                // gets four children), so on this grid each replaces about 2.8 (a full 4-wide
+                // node, three).
                 let inner = accel.node_count() / 2;
                 assert!(
-                    wide.nodes.len() * 7 < inner * 2,
+                    wide.nodes.len() * 5 < inner * 2,
                     "{} wide nodes for {inner} binary inner ones",
                     wide.nodes.len(),
                 );
