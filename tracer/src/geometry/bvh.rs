@@ -13,6 +13,7 @@
 //! The tree is deterministic: the same triangles and quality give the same tree (see `build.rs`).
 
 use super::build::{build_bvh2, tree_depth};
+use super::memory::on_huge_pages;
 use super::offset::plane_normal;
 use super::triangle::{ShearedRay, TriangleHit, is_degenerate};
 use super::wide::{BoxSimd, Bvh8};
@@ -150,14 +151,17 @@ impl Accel {
             .map(|&k| kept[k as usize])
             .collect();
         let vertices: Vec<[Vec3; 3]> = original.iter().map(|&i| triangles[i as usize].p).collect();
-        let wide = Bvh8::collapse(&bvh, &vertices);
+        let mut wide = Bvh8::collapse(&bvh, &vertices);
+        // What the renderer's traversal and hits read, at random on large meshes.
+        wide.nodes = on_huge_pages(wide.nodes);
+        wide.quads = on_huge_pages(wide.quads);
         Accel {
             bvh,
-            vertices,
-            original,
+            vertices: on_huge_pages(vertices),
+            original: on_huge_pages(original),
             depth,
             wide,
-            normals,
+            normals: on_huge_pages(normals),
         }
     }
 

@@ -12,6 +12,7 @@
 //! - `build`: building the tree with obvhs, deterministically and without cracks.
 //! - `wide`: the tree collapsed into 8-wide nodes, and our robust traversal of it: what renders
 //!   use.
+//! - `memory`: the BVH's large arrays on transparent huge pages, where Linux offers them.
 //! - `node8`: the 8-wide node and its box test, in AVX where the processor has it and in SSE
 //!   where not, with the same results bit for bit ([`BoxSimd`]).
 //! - `quad`: leaves packed four triangles to a group, and the SIMD filter that rejects four at
@@ -21,6 +22,7 @@
 
 mod build;
 mod bvh;
+mod memory;
 mod node8;
 mod offset;
 mod quad;
@@ -29,6 +31,7 @@ mod triangle;
 mod wide;
 
 pub use bvh::{Accel, BuildQuality, Traversal, intersect_brute_force, occluded_brute_force};
+pub(crate) use memory::on_huge_pages;
 pub use offset::{
     OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, plane_normal, spawn_ray, spawn_ray_to,
 };

@@ -125,7 +125,7 @@ impl BoxTest for Portable {
         let mut t_near = [0.0; WIDTH];
         t_near[..4].copy_from_slice(&t_low);
         t_near[4..].copy_from_slice(&t_high);
-        ((low | high << 4) & u32::from(node.valid), t_near)
+        ((low | (high << 4)) & u32::from(node.valid), t_near)
     }
 }
 
