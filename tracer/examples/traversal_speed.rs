@@ -1,7 +1,10 @@
-//! The 4-wide traversal against the binary one on a real scene: the same image (hashed, bit for
+//! The 8-wide traversal against the binary one on a real scene: the same image (hashed, bit for
 //! bit), and the CPU time per ray of each, the best of several interleaved rounds.
 //!
-//! `cargo run --release -p tracer --example traversal_speed -- SCENE.toml [SIZE] [SPP] [ROUNDS]`
+//! `cargo run --release -p tracer --example traversal_speed -- SCENE.toml [SIZE] [SPP] [ROUNDS] [wide]`
+//!
+//! With `wide` last, only the 8-wide traversal runs: for comparing two builds of it, binary
+//! against binary, where the binary traversal's rounds would only add time.
 //!
 //! Why thread CPU time and the best round: on a machine shared with other work a wall clock
 //! counts the other work too, and interference only ever adds time. The render runs on this one
@@ -27,7 +30,7 @@ fn thread_cpu_seconds() -> f64 {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let Some(path) = args.get(1) else {
-        eprintln!("usage: traversal_speed SCENE.toml [SIZE] [SPP] [ROUNDS]");
+        eprintln!("usage: traversal_speed SCENE.toml [SIZE] [SPP] [ROUNDS] [wide]");
         std::process::exit(2);
     };
     let number = |i: usize, default: u32| {
@@ -48,11 +51,16 @@ fn main() {
     scene.settings.height = size;
     let mut world = World::prepare(scene, None);
     println!("{path}: {size}x{size}, {spp} spp, {:?}", world.accel);
-    let traversals = [Traversal::RobustBinary, Traversal::Robust];
+    let wide_only = args.get(5).is_some_and(|a| a == "wide");
+    let traversals: &[Traversal] = if wide_only {
+        &[Traversal::Robust]
+    } else {
+        &[Traversal::RobustBinary, Traversal::Robust]
+    };
     let mut best = [f64::INFINITY; 2];
     let mut hashes = Vec::new();
     for _ in 0..rounds {
-        for (i, traversal) in traversals.into_iter().enumerate() {
+        for (i, &traversal) in traversals.iter().enumerate() {
             world.traversal = traversal;
             let start = thread_cpu_seconds();
             let out = render_tile(
@@ -86,12 +94,16 @@ fn main() {
             );
         }
     }
-    println!(
-        "best: binary {:.0} ns per ray, 4-wide {:.0} ({:.2}x)",
-        best[0],
-        best[1],
-        best[0] / best[1]
-    );
+    if wide_only {
+        println!("best: 8-wide {:.0} ns per ray", best[0]);
+    } else {
+        println!(
+            "best: binary {:.0} ns per ray, 8-wide {:.0} ({:.2}x)",
+            best[0],
+            best[1],
+            best[0] / best[1]
+        );
+    }
     if hashes.iter().any(|&h| h != hashes[0]) {
         eprintln!("the traversals rendered different images");
         std::process::exit(1);

@@ -14,7 +14,8 @@
 
 use crate::effects::Effects;
 use crate::geometry::{
-    Accel, Hit, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats, spawn_ray, spawn_ray_to,
+    Accel, Hit, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats, on_huge_pages,
+    spawn_ray, spawn_ray_to,
 };
 use crate::lights::{EnvironmentSampling, Lights};
 use crate::material::{Bsdf, Frame};
@@ -89,7 +90,10 @@ impl PathStats {
 }
 
 impl World {
-    pub fn new(scene: Scene, accel: Accel, effects: Effects) -> Self {
+    pub fn new(mut scene: Scene, accel: Accel, effects: Effects) -> Self {
+        // Every hit reads its triangle, at random on large meshes: huge pages spare most of
+        // those reads a page-table walk (`geometry/memory.rs`).
+        scene.triangles = on_huge_pages(scene.triangles);
         let lights = Lights::new(&scene, &effects);
         Self {
             scene,

@@ -13,9 +13,10 @@
 //! The tree is deterministic: the same triangles and quality give the same tree (see `build.rs`).
 
 use super::build::{build_bvh2, tree_depth};
+use super::memory::on_huge_pages;
 use super::offset::plane_normal;
 use super::triangle::{ShearedRay, TriangleHit, is_degenerate};
-use super::wide::Bvh4;
+use super::wide::{BoxSimd, Bvh8};
 use super::{Hit, Ray, TraversalStats};
 use crate::scene::Triangle;
 use glam::{Vec3, Vec3A};
@@ -73,12 +74,12 @@ impl BuildQuality {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Traversal {
     /// Ours: conservative slab test (Ize 2013, pbrt-v4) and the watertight triangle test, over
-    /// the binary tree collapsed into 4-wide nodes whose boxes are tested together (`wide.rs`).
+    /// the binary tree collapsed into 8-wide nodes whose boxes are tested together (`wide.rs`).
     /// What the renderer uses.
     #[default]
     Robust,
     /// The same tests over obvhs's binary tree, two boxes per node: the traversal `Robust`
-    /// replaced, kept to show that the 4-wide one finds the same hits, bit for bit, and what
+    /// replaced, kept to show that the wide one finds the same hits, bit for bit, and what
     /// it saves.
     RobustBinary,
     /// obvhs's `Bvh2` traversal with its `Ray` and Moller-Trumbore `Triangle::intersect`, for
@@ -103,8 +104,8 @@ pub struct Accel {
     pub(super) original: Vec<u32>,
     /// Number of levels of the tree (a lone leaf is 1); bounds the traversal stack.
     pub(super) depth: usize,
-    /// The same tree collapsed into 4-wide nodes, over the same leaves: what `Robust` walks.
-    pub(super) wide: Bvh4,
+    /// The same tree collapsed into 8-wide nodes, over the same leaves: what `Robust` walks.
+    pub(super) wide: Bvh8,
     /// For every input triangle, degenerate ones included, by input index: its [`plane_normal`]
     /// (f64) and its `area_vector().normalize()` (f32, NaN without area), computed once here
     /// rather than at every hit, side by side so that a hit reads one cache line for both.
@@ -129,7 +130,7 @@ impl Accel {
                 vertices: Vec::new(),
                 original: Vec::new(),
                 depth: 0,
-                wide: Bvh4::default(),
+                wide: Bvh8::default(),
                 normals,
             };
         }
@@ -150,14 +151,17 @@ impl Accel {
             .map(|&k| kept[k as usize])
             .collect();
         let vertices: Vec<[Vec3; 3]> = original.iter().map(|&i| triangles[i as usize].p).collect();
-        let wide = Bvh4::collapse(&bvh, &vertices);
+        let mut wide = Bvh8::collapse(&bvh, &vertices);
+        // What the renderer's traversal and hits read, at random on large meshes.
+        wide.nodes = on_huge_pages(wide.nodes);
+        wide.quads = on_huge_pages(wide.quads);
         Accel {
             bvh,
-            vertices,
-            original,
+            vertices: on_huge_pages(vertices),
+            original: on_huge_pages(original),
             depth,
             wide,
-            normals,
+            normals: on_huge_pages(normals),
         }
     }
 
@@ -214,6 +218,25 @@ impl Accel {
             Traversal::RobustBinary => self.traverse_robust::<true>(ray, stats).is_some(),
             Traversal::Obvhs => self.traverse_obvhs::<true>(ray, stats).is_some(),
         }
+    }
+
+    /// The instructions the wide traversal tests boxes with: AVX where this processor has it.
+    pub fn box_simd(&self) -> BoxSimd {
+        self.wide.simd
+    }
+
+    /// Makes the wide traversal test boxes with `simd`, if this processor runs it (returns
+    /// whether it does; if not, nothing changes). Every choice finds the same hits, bit for bit,
+    /// and counts the same work: a knob for tests and speed comparisons, not for images.
+    pub fn set_box_simd(&mut self, simd: BoxSimd) -> bool {
+        let runs = match simd {
+            BoxSimd::Sse => true,
+            BoxSimd::Avx => super::node8::avx_available(),
+        };
+        if runs {
+            self.wide.simd = simd;
+        }
+        runs
     }
 
     /// Number of tree nodes (inner nodes and leaves).

@@ -10,8 +10,11 @@
 //!   start ([`spawn_ray`], [`OffsetMethod`]).
 //! - `bvh`: the [`Accel`] API, and brute force for tests.
 //! - `build`: building the tree with obvhs, deterministically and without cracks.
-//! - `wide`: the tree collapsed into 4-wide nodes, and our robust traversal of it with four
-//!   boxes tested per SIMD step: what renders use.
+//! - `wide`: the tree collapsed into 8-wide nodes, and our robust traversal of it: what renders
+//!   use.
+//! - `memory`: the BVH's large arrays on transparent huge pages, where Linux offers them.
+//! - `node8`: the 8-wide node and its box test, in AVX where the processor has it and in SSE
+//!   where not, with the same results bit for bit ([`BoxSimd`]).
 //! - `quad`: leaves packed four triangles to a group, and the SIMD filter that rejects four at
 //!   a time what the watertight test would reject at its first step.
 //! - `traverse`: the same robust traversal over the binary tree, and obvhs's own, for
@@ -19,6 +22,8 @@
 
 mod build;
 mod bvh;
+mod memory;
+mod node8;
 mod offset;
 mod quad;
 mod traverse;
@@ -26,10 +31,12 @@ mod triangle;
 mod wide;
 
 pub use bvh::{Accel, BuildQuality, Traversal, intersect_brute_force, occluded_brute_force};
+pub(crate) use memory::on_huge_pages;
 pub use offset::{
     OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, plane_normal, spawn_ray, spawn_ray_to,
 };
 pub use triangle::{TriangleHit, intersect_triangle, is_degenerate};
+pub use wide::BoxSimd;
 
 use glam::Vec3;
 

@@ -21,6 +21,7 @@
 //! - a lane whose distance passes the error bound gets the scalar test's very hit (`t`, bound,
 //!   barycentrics); only the final `t <= t_max` is left, made by `Closest::offer_hit` against
 //!   the `t_max` the scalar call would have been given.
+//!
 //! The maxima in the error bound are the one place where SIMD and scalar could disagree (on
 //! NaN); a NaN in any of their inputs makes the lane's `t` NaN, which goes to the scalar test.
 //! So no hit changes: tests compare every lane with the scalar test.

@@ -1,0 +1,214 @@
+//! The 8-wide node and the test of a ray against its eight boxes, written twice: with AVX's
+//! eight f32 lanes, chosen at run time where the processor has them, and as two SSE steps of
+//! four lanes (the `wide` crate: SSE2 on x86-64, plain code elsewhere) where it has not.
+//!
+//! Why both, and why at run time: building with `target-cpu` flags would make the binary's
+//! instructions, and with them possibly its images, depend on the machine that built it. Here
+//! every machine runs the same IEEE operations on the same values; only how many lanes one
+//! instruction holds differs.
+//!
+//! **Exactness.** Each lane of either test evaluates exactly the expressions of the binary
+//! traversal's slab test (`SlabRay::enter` in `traverse.rs`) for its box: the same subtraction,
+//! the same multiplications by the same reciprocal and by `FAR_SCALE`, the same NaN-dropping
+//! selects, then a running maximum and minimum over the axes, in the same order, with the same
+//! operand order (x86's `max`/`min` return their second operand on NaN and on equal zeros, so
+//! SSE and AVX agree on every input, and what reaches them is NaN-free and never `-0.0` anyway),
+//! and the same ordered comparison at the end. AVX's `vblendvps` picks by the mask's sign bit,
+//! SSE2's select by the whole mask; the masks are all ones or all zeros, so they pick the same
+//! value. The two paths therefore enter the same boxes at the same distances, bit for bit, and a
+//! traversal takes the same steps and counts the same work on every machine.
+//! `tracer/tests/wide_traversal.rs` renders through both and compares.
+
+use super::Ray;
+use super::traverse::FAR_SCALE;
+use wide::{CmpGt, CmpLe, CmpLt, f32x4};
+
+/// Children per node: AVX's eight f32 lanes.
+pub(super) const WIDTH: usize = 8;
+
+/// A node of up to eight children: 256 bytes, four cache lines, aligned to them.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub(super) struct Node8 {
+    /// The children's boxes, one lane per child: min x, y, z, then max x, y, z. Lanes past
+    /// `children` hold an empty box (min +inf, max -inf) and are masked out anyway.
+    pub(super) bounds: [[f32; WIDTH]; 6],
+    /// Per child: an inner node's index in `Bvh8::nodes`, or a leaf's first group in
+    /// `Bvh8::quads`.
+    pub(super) index: [u32; WIDTH],
+    /// Per child: the leaf's number of triangles (obvhs's leaves hold at most 255), or 0 for
+    /// an inner node.
+    pub(super) count: [u8; WIDTH],
+    /// Bit `i` set when lane `i` holds a child; children fill the lowest lanes.
+    pub(super) valid: u8,
+    /// The number of children, which the stats count as boxes tested (a stored count, since
+    /// counting bits is a dozen instructions on x86-64 without `popcnt`).
+    pub(super) children: u8,
+}
+
+const _: () = assert!(std::mem::size_of::<Node8>() == 256, "four cache lines");
+
+impl Node8 {
+    pub(super) const EMPTY: Node8 = Node8 {
+        bounds: [
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+        ],
+        index: [0; WIDTH],
+        count: [0; WIDTH],
+        valid: 0,
+        children: 0,
+    };
+
+    pub(super) fn set_bounds(&mut self, lane: usize, min: [f32; 3], max: [f32; 3]) {
+        for axis in 0..3 {
+            self.bounds[axis][lane] = min[axis];
+            self.bounds[3 + axis][lane] = max[axis];
+        }
+    }
+}
+
+/// A ray prepared for 8-wide slab tests: the binary test's origin and reciprocal direction,
+/// and for each axis which of a box's planes is near.
+pub(super) struct WideRay {
+    origin: [f32; 3],
+    inv_dir: [f32; 3],
+    /// Per axis, the index in [`Node8::bounds`] of the near plane and of the far plane: the max
+    /// when the reciprocal direction is negative (including -0.0's -inf), else the min.
+    near: [usize; 3],
+    far: [usize; 3],
+}
+
+/// Which instructions test a node's boxes. The traversal is written once, generic over this,
+/// and compiled once per implementation.
+pub(super) trait BoxTest {
+    /// For each child of `node`, whether the ray enters its box within `(0, t_max]` (bit `i`)
+    /// and the entry distance: lane by lane, the binary traversal's `SlabRay::enter`.
+    fn enter(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDTH]);
+}
+
+/// Two SSE steps of four lanes (plain code off x86-64): every machine can run it.
+pub(super) struct Portable;
+
+impl BoxTest for Portable {
+    #[inline(always)]
+    fn enter(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDTH]) {
+        let half = |h: usize| {
+            let zero = f32x4::ZERO;
+            let end = f32x4::splat(t_max);
+            let scale = f32x4::splat(FAR_SCALE);
+            let plane = |row: usize| {
+                let lanes: &[f32; 4] = node.bounds[row][4 * h..4 * h + 4]
+                    .try_into()
+                    .expect("a half of eight lanes is four");
+                f32x4::new(*lanes)
+            };
+            let mut t0 = zero;
+            let mut t1 = end;
+            for axis in 0..3 {
+                let origin = f32x4::splat(ray.origin[axis]);
+                let inv_dir = f32x4::splat(ray.inv_dir[axis]);
+                let near = (plane(ray.near[axis]) - origin) * inv_dir;
+                let far = (plane(ray.far[axis]) - origin) * inv_dir * scale;
+                // `a > b ? a : b` drops a NaN `a`, as in the binary test.
+                t0 = t0.fast_max(near.cmp_gt(zero).blend(near, zero));
+                t1 = t1.fast_min(far.cmp_lt(end).blend(far, end));
+            }
+            (t0.cmp_le(t1).move_mask() as u32, t0.to_array())
+        };
+        let (low, t_low) = half(0);
+        let (high, t_high) = half(1);
+        let mut t_near = [0.0; WIDTH];
+        t_near[..4].copy_from_slice(&t_low);
+        t_near[4..].copy_from_slice(&t_high);
+        ((low | (high << 4)) & u32::from(node.valid), t_near)
+    }
+}
+
+/// AVX's eight lanes. Only ever used where the processor was found to have AVX.
+#[cfg(target_arch = "x86_64")]
+pub(super) struct Avx;
+
+#[cfg(target_arch = "x86_64")]
+impl BoxTest for Avx {
+    #[inline(always)]
+    fn enter(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDTH]) {
+        // SAFETY: `Avx` is only used by `Accel::traverse_avx`, which runs only where
+        // `is_x86_feature_detected!("avx")` said yes.
+        unsafe { enter_avx(ray, node, t_max) }
+    }
+}
+
+/// [`Portable::enter`] in one step of eight lanes, with the same operations in the same order.
+///
+/// # Safety
+/// The processor must support AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn enter_avx(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDTH]) {
+    use std::arch::x86_64::*;
+    let zero = _mm256_setzero_ps();
+    let end = _mm256_set1_ps(t_max);
+    let scale = _mm256_set1_ps(FAR_SCALE);
+    let mut t0 = zero;
+    let mut t1 = end;
+    for axis in 0..3 {
+        let origin = _mm256_set1_ps(ray.origin[axis]);
+        let inv_dir = _mm256_set1_ps(ray.inv_dir[axis]);
+        // SAFETY: each row is eight f32 in bounds of `node`, 32-byte aligned (the node is
+        // 64-byte aligned and rows are 32 bytes).
+        let (near_plane, far_plane) = unsafe {
+            (
+                _mm256_load_ps(node.bounds[ray.near[axis]].as_ptr()),
+                _mm256_load_ps(node.bounds[ray.far[axis]].as_ptr()),
+            )
+        };
+        let near = _mm256_mul_ps(_mm256_sub_ps(near_plane, origin), inv_dir);
+        let far = _mm256_mul_ps(
+            _mm256_mul_ps(_mm256_sub_ps(far_plane, origin), inv_dir),
+            scale,
+        );
+        // The portable `blend(t, f)` is `vblendvps(f, t, mask)`; `max`/`min` keep the portable
+        // operand order (the running value first).
+        let near_kept = _mm256_blendv_ps(zero, near, _mm256_cmp_ps::<_CMP_GT_OQ>(near, zero));
+        let far_kept = _mm256_blendv_ps(end, far, _mm256_cmp_ps::<_CMP_LT_OQ>(far, end));
+        t0 = _mm256_max_ps(t0, near_kept);
+        t1 = _mm256_min_ps(t1, far_kept);
+    }
+    let entered = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
+    let mut t_near = [0.0f32; WIDTH];
+    // SAFETY: `t_near` holds eight f32; the store is unaligned.
+    unsafe { _mm256_storeu_ps(t_near.as_mut_ptr(), t0) };
+    (entered & u32::from(node.valid), t_near)
+}
+
+impl WideRay {
+    pub(super) fn new(ray: &Ray) -> Self {
+        let inv = [1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z];
+        let negative = |axis: usize| inv[axis] < 0.0;
+        WideRay {
+            origin: ray.origin.to_array(),
+            inv_dir: inv,
+            near: [0, 1, 2].map(|a| if negative(a) { 3 + a } else { a }),
+            far: [0, 1, 2].map(|a| if negative(a) { a } else { 3 + a }),
+        }
+    }
+}
+
+/// Whether this processor runs the AVX box test. Asked once per tree (`Bvh8::collapse`); the
+/// answer changes speed only, never a result (see the module's comment).
+pub(super) fn avx_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
