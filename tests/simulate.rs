@@ -129,13 +129,13 @@ fn network_effects_and_crashes_reach_the_runs() {
     assert_eq!(slow["bandwidth_bytes_per_second"].as_f64(), Some(125_000.0));
     for crash in ["2@0.01", "3@tile:5"] {
         let crashed = run(&["--crash", crash]);
-        let failures: u64 = crashed["frames"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|f| f["failures"].as_u64().unwrap())
-            .sum();
-        assert_eq!(failures, 1, "--crash {crash}");
+        let frames = crashed["frames"].as_array().unwrap();
+        let failures: u64 = frames.iter().map(|f| f["failures"].as_u64().unwrap()).sum();
+        // The crash reaches the run: the crashed peer is dealt nothing more, whether the owner
+        // noticed it as lost (a failure) or first backed up its overdue work and excluded it.
+        assert!(failures <= 1, "--crash {crash}: {failures} failures");
+        let last = frames.last().unwrap();
+        assert_eq!(last["participants"].as_u64(), Some(3), "--crash {crash}");
     }
 }
 
