@@ -15,7 +15,7 @@
 //! they compare network time with render time.
 
 use std::collections::btree_map::Entry;
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::{Duration, Instant};
 
 use balancer::Partitioner;
@@ -304,6 +304,8 @@ pub fn run(
     crashes.sort();
     let mut crashes = VecDeque::from(crashes);
     let mut crashed: BTreeMap<PeerId, Duration> = BTreeMap::new();
+    // The crashed peers the director has been told have left.
+    let mut left: BTreeSet<PeerId> = BTreeSet::new();
     let mut plans: BTreeMap<u64, Plan> = BTreeMap::new();
     let mut assignments = Vec::new();
     let mut steps = 0u64;
@@ -328,9 +330,9 @@ pub fn run(
     while !director.is_finished() {
         let now = cluster.now();
         // The owner deals to the peers it is connected to: a crashed peer until its
-        // connection times out.
+        // connection times out. Each is reported once (this loop runs at every happening).
         for (&peer, &at) in &crashed {
-            if now >= at + network.loss_detection {
+            if now >= at + network.loss_detection && left.insert(peer) {
                 director.handle_peer_left(now, peer);
             }
         }

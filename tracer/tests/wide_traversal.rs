@@ -29,6 +29,27 @@ fn triangle(p: [Vec3; 3]) -> Triangle {
 /// Triangles of many sizes in a 10-wide cube, with an exact copy of some (a tie in `t` that
 /// only the triangle index breaks) and a shared edge between pairs (where watertightness
 /// matters).
+/// Ray `i` of a probe: from a random point of the soup's box, in a random direction or, when
+/// `axes` are given, along one of them; every third ray ends at a random distance. The draws
+/// are made in one order, so a seed gives the same rays.
+fn probe_ray(rng: &mut Rng, i: usize, axes: Option<[Vec3; 3]>) -> Ray {
+    let origin = Vec3::new(
+        rng.range(-7.0, 7.0),
+        rng.range(-7.0, 7.0),
+        rng.range(-7.0, 7.0),
+    );
+    let mut dir = rng.direction();
+    if let Some(axes) = axes {
+        dir = axes[rng.index(3)];
+    }
+    let t_max = if i % 3 == 0 {
+        rng.range(0.5, 12.0)
+    } else {
+        f32::INFINITY
+    };
+    Ray { origin, dir, t_max }
+}
+
 fn soup(rng: &mut Rng, n: usize) -> Vec<Triangle> {
     let mut out = Vec::new();
     for _ in 0..n {
@@ -60,22 +81,9 @@ fn wide_binary_and_brute_force_agree_on_every_ray_at_every_build_quality() {
             (TraversalStats::default(), TraversalStats::default());
         let mut hits = 0;
         for i in 0..4000 {
-            let origin = Vec3::new(
-                rng.range(-7.0, 7.0),
-                rng.range(-7.0, 7.0),
-                rng.range(-7.0, 7.0),
-            );
-            let mut dir = rng.direction();
             // Axis-aligned directions, zeros of both signs included: the slab test's NaN cases.
-            if i % 7 == 0 {
-                dir = [Vec3::X, -Vec3::Y, Vec3::new(-0.0, 0.0, 1.0)][rng.index(3)];
-            }
-            let t_max = if i % 3 == 0 {
-                rng.range(0.5, 12.0)
-            } else {
-                f32::INFINITY
-            };
-            let ray = Ray { origin, dir, t_max };
+            let axes = [Vec3::X, -Vec3::Y, Vec3::new(-0.0, 0.0, 1.0)];
+            let ray = probe_ray(&mut rng, i, (i % 7 == 0).then_some(axes));
             let expected = intersect_brute_force(&triangles, &ray);
             let wide = accel.intersect_with(&ray, Traversal::Robust, &mut wide_stats);
             let binary = accel.intersect_with(&ray, Traversal::RobustBinary, &mut binary_stats);
@@ -207,23 +215,10 @@ fn the_avx_and_sse_box_tests_find_the_same_hits_with_the_same_work() {
     let (mut avx_stats, mut sse_stats) = (TraversalStats::default(), TraversalStats::default());
     let mut hits = 0;
     for i in 0..4000 {
-        let origin = Vec3::new(
-            rng.range(-7.0, 7.0),
-            rng.range(-7.0, 7.0),
-            rng.range(-7.0, 7.0),
-        );
-        let mut dir = rng.direction();
         // Axis-aligned directions, zeros of both signs included: the slab test's NaN cases,
         // where the two instruction sets' NaN rules would show if the code leaned on them.
-        if i % 5 == 0 {
-            dir = [Vec3::X, -Vec3::Z, Vec3::new(0.0, -0.0, 1.0)][rng.index(3)];
-        }
-        let t_max = if i % 3 == 0 {
-            rng.range(0.5, 12.0)
-        } else {
-            f32::INFINITY
-        };
-        let ray = Ray { origin, dir, t_max };
+        let axes = [Vec3::X, -Vec3::Z, Vec3::new(0.0, -0.0, 1.0)];
+        let ray = probe_ray(&mut rng, i, (i % 5 == 0).then_some(axes));
         let a = avx.intersect(&ray, &mut avx_stats);
         assert_eq!(a, sse.intersect(&ray, &mut sse_stats), "{ray:?}");
         assert_eq!(

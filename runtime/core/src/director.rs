@@ -419,15 +419,11 @@ impl Director {
                 }
                 Ok(Some(event))
             }
-            event @ CoreEvent::PeerStats { .. } => {
-                if let CoreEvent::PeerStats { peer, .. } = &event {
-                    // Statistics come once the peer has handled a frame's end: it is alive.
-                    self.overdue.remove(peer);
-                }
-                if let CoreEvent::PeerStats { frame, peer, .. } = &event
-                    && frame.0 + 1 == self.next
-                {
-                    self.unreported.remove(peer);
+            CoreEvent::PeerStats { frame, peer, .. } => {
+                // Statistics come once the peer has handled a frame's end: it is alive.
+                self.overdue.remove(&peer);
+                if frame.0 + 1 == self.next {
+                    self.unreported.remove(&peer);
                     self.settle();
                 }
                 Ok(Some(event))
