@@ -153,8 +153,10 @@ pub struct FrameArgs {
     /// Turn work stealing between peers off (each renders its initial set only).
     #[arg(long)]
     pub no_steal: bool,
-    /// Where to write the Gantt chart (SVG; default: OUT/gantt.svg): one row per peer over
-    /// time, each tile a bar coloured by whether it was the peer's own or taken from another.
+    /// Where to write the run's chart (SVG; default: OUT/gantt.svg): frames' spans, one
+    /// utilisation strip per peer, the cluster's busy share. Beside it, in a folder of the
+    /// same name (OUT/gantt/), one chart per frame: every tile or piece a bar, coloured by
+    /// whether it was the peer's own, taken over, a piece of a cut tile, or a duplicate.
     #[arg(long)]
     pub gantt: Option<PathBuf>,
     /// Seed of the pixel sampler (default: the scene's).

@@ -214,6 +214,7 @@ fn execute(
             )?),
             None => None,
         },
+        accepted: report::Accepted::new(),
     };
     let job = Job {
         world,
@@ -259,9 +260,9 @@ fn execute(
         .gantt
         .clone()
         .unwrap_or_else(|| args.out.join("gantt.svg"));
-    report::write_gantt(&gantt_path, &stats, &run.timelines)?;
+    let charts = report::write_gantt(&gantt_path, &stats, &run.timelines, &sink.accepted)?;
     println!(
-        "rendered {} frames of {}x{} with {} peers in {:.2} s ({:.2} s in all): {:.2} Mrays/s; frames, stats.json and gantt.svg in {}",
+        "rendered {} frames of {}x{} with {} peers in {:.2} s ({:.2} s in all): {:.2} Mrays/s; frames, stats.json and gantt.svg (per-frame charts in {}) in {}",
         settings.frames - first,
         settings.width,
         settings.height,
@@ -269,6 +270,7 @@ fn execute(
         render_seconds,
         started.elapsed().as_secs_f64(),
         sink.rays as f64 / render_seconds / 1e6,
+        charts.display(),
         args.out.display(),
     );
     Ok(())
@@ -315,6 +317,8 @@ struct Sink<'a> {
     rays: u64,
     /// Every frame's block costs, when `--trace` asks for them.
     trace: Option<sim::trace::Trace>,
+    /// The results the owner kept, telling the Gantt charts which renders were duplicates.
+    accepted: report::Accepted,
 }
 
 impl FrameSink for Sink<'_> {
@@ -327,6 +331,11 @@ impl FrameSink for Sink<'_> {
                 .map_err(|e| e.to_string())?;
         }
         self.progress.frame_done(done.frame, done.seconds);
+        for t in &done.tiles {
+            let rect = [t.rect.x, t.rect.y, t.rect.w, t.rect.h];
+            self.accepted
+                .insert((u64::from(done.frame), t.peer.0, rect));
+        }
         let mut frame = FrameStats {
             frame: done.frame,
             seconds: done.seconds,

@@ -282,37 +282,74 @@ pub fn write_tile_map(
     Ok(())
 }
 
-/// Draws the `--gantt` chart: one row per peer, each tile a bar, orange where the tile came
-/// from another peer's initial set.
+/// Results the owner kept, by (frame, peer, rectangle `[x, y, w, h]`): a render not among them
+/// was a duplicate of one that arrived first.
+pub type Accepted = std::collections::HashSet<(u64, u32, [u32; 4])>;
+
+/// Draws the `--gantt` pictures: at `path` the whole run (frame spans, one utilisation strip
+/// per peer, the cluster's busy share), and beside it, in a folder named after the file
+/// (`gantt/` for `gantt.svg`), one chart per frame with every piece a bar. Returns the folder.
 pub fn write_gantt(
     path: &Path,
     stats: &StatsFile,
     timelines: &[(runtime_core::wire::PeerId, Vec<runtime::node::LocalTile>)],
-) -> anyhow::Result<()> {
+    accepted: &Accepted,
+) -> anyhow::Result<std::path::PathBuf> {
+    use sim::plot::{BarKind, FrameSpan, GanttBar};
     let mut bars = Vec::new();
     for (peer, tiles) in timelines {
         for t in tiles {
-            let stolen = stats
+            let rect = [t.rect.x, t.rect.y, t.rect.w, t.rect.h];
+            let taken = stats
                 .frames
                 .iter()
                 // By number, not position: a resumed render's entries start at its first frame.
                 .find(|f| u64::from(f.frame) == t.frame)
                 .and_then(|f| f.tiles.iter().find(|r| r.tile == t.tile))
                 .is_some_and(|r| r.initial_peer != peer.0);
-            bars.push(sim::plot::GanttBar {
+            let kind = if !accepted.contains(&(t.frame, peer.0, rect)) {
+                BarKind::Duplicate
+            } else if t.piece {
+                BarKind::Piece
+            } else if taken {
+                BarKind::Taken
+            } else {
+                BarKind::Own
+            };
+            bars.push(GanttBar {
                 row: peer.0,
                 start: t.start.as_secs_f64(),
                 end: t.end.as_secs_f64(),
-                stolen,
+                frame: t.frame,
+                kind,
             });
         }
     }
+    let spans: Vec<FrameSpan> = stats
+        .frames
+        .iter()
+        .map(|f| FrameSpan {
+            frame: u64::from(f.frame),
+            start: (f.completed_at - f.seconds).max(0.0),
+            end: f.completed_at,
+        })
+        .collect();
     let rows = timelines.iter().map(|(p, _)| p.0 + 1).max().unwrap_or(1);
-    sim::plot::gantt_svg(
-        path,
-        &format!("{} ({} peers)", stats.scene, stats.peers),
-        rows,
-        &bars,
-    )?;
-    Ok(())
+    // Threads per peer, as the peers reported them.
+    let mut slots = vec![1u32; rows as usize];
+    for peer in stats.frames.iter().flat_map(|f| &f.peers) {
+        if let Some(s) = slots.get_mut(peer.peer as usize) {
+            *s = (*s).max(peer.threads);
+        }
+    }
+    let title = format!("{} ({} peers)", stats.scene, stats.peers);
+    sim::plot::utilisation_svg(path, &title, &slots, &bars, &spans)?;
+    let folder = path.with_extension("");
+    std::fs::create_dir_all(&folder).map_err(|e| anyhow::anyhow!("{}: {e}", folder.display()))?;
+    for span in &spans {
+        let chart = folder.join(format!("frame-{:04}.svg", span.frame));
+        let title = format!("{}: frame {}", stats.scene, span.frame);
+        sim::plot::gantt_svg(&chart, &title, rows, &bars, span.frame)?;
+    }
+    Ok(folder)
 }

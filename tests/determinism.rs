@@ -111,6 +111,23 @@ fn the_render_leaves_stats_tile_maps_and_a_gantt_chart() {
     ] {
         assert!(out.join(name).is_file(), "{name} missing");
     }
+    // One chart per frame beside the run's, each drawing that frame's tiles in full.
+    for frame in 0..3 {
+        let chart = out.join(format!("gantt/frame-{frame:04}.svg"));
+        let svg =
+            std::fs::read_to_string(&chart).unwrap_or_else(|e| panic!("{}: {e}", chart.display()));
+        assert!(
+            svg.contains(&format!("frame {frame}")),
+            "{}",
+            chart.display()
+        );
+        assert!(svg.matches("<rect").count() >= 16, "fewer bars than tiles");
+    }
+    let overview = std::fs::read_to_string(out.join("gantt.svg")).unwrap();
+    assert!(
+        overview.contains("busy share"),
+        "the run's chart lacks its utilisation"
+    );
     let stats: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
     let frames = stats["frames"].as_array().unwrap();

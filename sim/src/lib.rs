@@ -21,8 +21,9 @@
 //! - [`sweep`]: many runs (peers x policies x tile counts), in parallel, and everything they
 //!   write: tables, charts, summary.
 //! - [`summary`]: the summary of a sweep in Markdown, organised by the seed's three claims.
-//! - [`plot`]: SVG charts: efficiency against peers and against tiles, and Gantt charts
-//!   shared with real renders (`tessera render --gantt`).
+//! - [`plot`]: SVG charts: efficiency against peers and against tiles, and (`plot::gantt`)
+//!   the pictures of who rendered what when, shared with real renders (`tessera render
+//!   --gantt`): one frame in full, and a whole run's utilisation.
 
 pub mod network;
 pub mod plot;

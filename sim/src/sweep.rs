@@ -326,15 +326,13 @@ pub fn write_outputs(
         }
     }
     if let Some(run) = runs.iter().find(|r| !r.gantt.is_empty()) {
+        let frame = run.gantt_frame.unwrap_or(0);
         let caption = format!(
-            "{name_of}: frame {}, {} peers, {}, {} tiles (blue: own, orange: taken over)",
-            run.gantt_frame.unwrap_or(0),
-            run.peers,
-            run.policy,
-            run.tiles
+            "{name_of}: frame {frame}, {} peers, {}, {} tiles",
+            run.peers, run.policy, run.tiles
         );
         let rows = run.peers as u32;
-        plot::gantt_svg(&dir.join("gantt.svg"), &caption, rows, &run.gantt)?;
+        plot::gantt_svg(&dir.join("gantt.svg"), &caption, rows, &run.gantt, frame)?;
         written.push("gantt.svg".into());
     }
     Ok(written)

@@ -18,7 +18,7 @@ use runtime_core::peer::{Audit, Event};
 use runtime_core::wire::{self, Message, PeerId, TileId, TileResult};
 
 use crate::network::Links;
-use crate::plot::GanttBar;
+use crate::plot::{BarKind, GanttBar};
 use crate::scenario::{OWNER, OwnerCosts};
 
 /// What the simulator knows and counts of one frame while it runs.
@@ -65,9 +65,13 @@ pub(crate) struct SimWorld {
     pub(crate) frames: BTreeMap<u64, Tally>,
     /// Tiles each peer has started over the run, indexed by peer id (for crashes on an event).
     pub(crate) starts: Vec<u64>,
-    /// The frame whose renders become Gantt bars.
+    /// The frame whose renders become Gantt bars, with its neighbours' (drawn in grey where
+    /// they overlap it).
     gantt_frame: Option<u64>,
     pub(crate) gantt: Vec<GanttBar>,
+    /// Pixels begun by some peer, per charted frame: a render of pixels all begun already is a
+    /// duplicate on the chart.
+    begun: BTreeMap<u64, Vec<bool>>,
     pub(crate) fingerprint: Fingerprint,
     /// The owner core's events not yet handed to the director.
     owner_events: Vec<Event>,
@@ -98,6 +102,7 @@ impl SimWorld {
             starts: vec![0; peers],
             gantt_frame,
             gantt: Vec::new(),
+            begun: BTreeMap::new(),
             fingerprint: Fingerprint::default(),
             owner_events: Vec::new(),
             owner_costs: OwnerCosts::NONE,
@@ -144,14 +149,29 @@ impl World for SimWorld {
         if let Some(tally) = self.frames.get_mut(&frame) {
             tally.renders += 1;
             tally.busy += duration.as_secs_f64();
-            if self.gantt_frame == Some(frame) {
-                let initial = tally.initial.get(item.tile.id.0 as usize).copied();
-                let start = (now - tally.started).as_secs_f64();
+            let charted = self
+                .gantt_frame
+                .is_some_and(|g| frame + 1 >= g && frame <= g + 1);
+            if charted {
+                let taken = tally.initial.get(item.tile.id.0 as usize).copied() != Some(peer);
+                let start = now.as_secs_f64();
+                let map = &self.maps[(frame % self.maps.len() as u64) as usize];
+                let begun = self
+                    .begun
+                    .entry(frame)
+                    .or_insert_with(|| vec![false; map.width() as usize * map.height() as usize]);
+                let kind = match mark_begun(begun, map.width(), item.tile.rect) {
+                    false => BarKind::Duplicate,
+                    true if item.tile.piece != wire::Piece::WHOLE => BarKind::Piece,
+                    true if taken => BarKind::Taken,
+                    true => BarKind::Own,
+                };
                 self.gantt.push(GanttBar {
                     row: peer.0,
                     start,
                     end: start + duration.as_secs_f64(),
-                    stolen: initial != Some(peer),
+                    frame,
+                    kind,
                 });
             }
         }
@@ -398,4 +418,17 @@ impl Fingerprint {
             self.word(u64::from_le_bytes(word));
         }
     }
+}
+
+/// Marks `rect`'s pixels begun in a frame's map of `width` columns; whether any was new.
+fn mark_begun(begun: &mut [bool], width: u32, rect: balancer::Rect) -> bool {
+    let mut new = false;
+    for y in rect.y..rect.y + rect.h {
+        let row = (y * width) as usize;
+        for pixel in &mut begun[row + rect.x as usize..row + (rect.x + rect.w) as usize] {
+            new |= !*pixel;
+            *pixel = true;
+        }
+    }
+    new
 }

@@ -322,7 +322,8 @@ impl Director {
     /// Whether the next frame's prediction is doubted (see [`Config::doubt_error`]).
     fn doubtful(&self) -> bool {
         self.last_error
-            .is_none_or(|error| !(error <= self.config.doubt_error))
+            // A NaN error (a frame of no predicted cost) is doubted too.
+            .is_none_or(|error| error.is_nan() || error > self.config.doubt_error)
     }
 
     fn ready_to_deal(&self) -> bool {

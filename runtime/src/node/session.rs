@@ -25,8 +25,11 @@ fn decoder(
     move |bytes| wire::decode(bytes, &limits).map(|message| (message, bytes.len()))
 }
 
-/// A rendered tile as the renderer posts it back: what was asked, what came out, how long it took.
-pub(crate) type Rendered = (WorkItem, tracer::TileOutput, Duration);
+/// A rendered tile as the renderer posts it back: what was asked, what came out, and when the
+/// rendering thread began and ended it (the Gantt charts' bars: the loop takes a result some
+/// time after its end, and the time between one tile's end and the next one's start is the
+/// hand-over between the threads).
+pub(crate) type Rendered = (WorkItem, tracer::TileOutput, std::ops::Range<Instant>);
 
 /// Renders tiles on a rayon pool of its own and posts the results back to the async loop.
 /// Rendering never runs on a tokio worker: a tile can take seconds.
@@ -59,7 +62,7 @@ impl Renderer {
             let frame = u32::try_from(item.frame.0).unwrap_or(u32::MAX);
             let output = tracer::render_tile(&world, frame, rect);
             // The loop may be gone at shutdown; the tile is then simply not needed.
-            let _ = done.send((item, output, started.elapsed()));
+            let _ = done.send((item, output, started..Instant::now()));
         });
     }
 }
@@ -100,11 +103,15 @@ impl Peers {
     }
 }
 
-/// One tile rendered here, for the Gantt chart.
+/// One tile or piece rendered here, for the Gantt charts.
 #[derive(Clone, Debug)]
 pub struct LocalTile {
     pub frame: u64,
     pub tile: u32,
+    /// The pixels rendered: the whole tile's, or a piece's.
+    pub rect: balancer::Rect,
+    /// Whether it was a piece of a cut tile rather than the whole tile.
+    pub piece: bool,
     pub start: Duration,
     pub end: Duration,
 }
@@ -269,8 +276,16 @@ impl Session {
                     Some(event) => if let Some(step) = self.on_net(event) { return step; },
                 },
                 Some((item, output, took)) = results => {
+                    let since_epoch = |at: Instant| at.saturating_duration_since(self.epoch);
                     let now = self.now();
-                    self.local_tiles.push(LocalTile { frame: item.frame.0, tile: item.tile.id.0, start: now.saturating_sub(took), end: now });
+                    self.local_tiles.push(LocalTile {
+                        frame: item.frame.0,
+                        tile: item.tile.id.0,
+                        rect: item.tile.rect,
+                        piece: item.tile.piece != runtime_core::wire::Piece::WHOLE,
+                        start: since_epoch(took.start),
+                        end: since_epoch(took.end),
+                    });
                     let result = bundle::tile_result(item.frame, &item.tile, &output);
                     self.core.handle_tile_rendered(now, result);
                 }
