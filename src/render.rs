@@ -165,6 +165,7 @@ fn execute(
         args.balancer,
         tiles,
         args.deal,
+        args.motion,
         settings.width,
         settings.height,
     )?;
@@ -430,6 +431,7 @@ pub fn partitioner(
     kind: BalancerKind,
     tiles: usize,
     deal: DealOrder,
+    motion: crate::cli::Motion,
     width: u32,
     height: u32,
 ) -> anyhow::Result<balancer::Partitioner> {
@@ -445,6 +447,7 @@ pub fn partitioner(
             rows: side,
         },
         order: deal.into(),
+        motion: motion.0,
         ..balancer::Config::default()
     };
     Ok(balancer::Partitioner::new(width, height, &config)?)

@@ -33,6 +33,10 @@ pub struct SimulateArgs {
     /// How tiles are dealt to peers at the start of each frame (both balancers).
     #[arg(long, value_enum, default_value_t = DealOrder::Interleaved)]
     pub deal: DealOrder,
+    /// Motion-compensated prediction: the largest shift of the cost landscape between frames
+    /// searched, in blocks per frame, or `off` (as `tessera render --motion`).
+    #[arg(long, default_value_t = crate::cli::Motion::default(), value_parser = crate::cli::parse_motion)]
+    pub motion: crate::cli::Motion,
     /// Simulate only this frame of the trace, over and over: a static scene, every frame of
     /// which after the first is predicted exactly (isolates motion from unevenness).
     #[arg(long)]
@@ -208,7 +212,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
                 balancer::Kind::Pbt => BalancerKind::Pbt,
                 balancer::Kind::Regular => BalancerKind::Regular,
             };
-            crate::render::partitioner(kind, tiles, args.deal, width, height)
+            crate::render::partitioner(kind, tiles, args.deal, args.motion, width, height)
                 .map_err(|e| sim::Error::Scenario(format!("{e:#}")))
         },
         gantt,
@@ -482,7 +486,14 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
     scenario.frames = Some(frames);
     scenario.keep_assignments = true;
     let tiles = stats.frames[0].tiles.len();
-    let partitioner = crate::render::partitioner(kind, tiles, deal, trace.width(), trace.height())?;
+    let partitioner = crate::render::partitioner(
+        kind,
+        tiles,
+        deal,
+        args.motion,
+        trace.width(),
+        trace.height(),
+    )?;
     let run = scenario::run(trace, partitioner, &scenario)?;
     let mut csv = String::from("frame,measured_s,simulated_s,ratio,tiles,same_initial_sets\n");
     println!(

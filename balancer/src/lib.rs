@@ -11,6 +11,8 @@
 //! - [`regular`]: [`Regular`], the baseline: a fixed grid of (nearly) equal tiles.
 //! - [`assign`]: dealing an ordered list of tiles into one [`Assignment`] share per peer, either
 //!   interleaved or contiguous with balanced predicted cost, or round-robin.
+//! - [`motion`]: motion-compensated prediction: the global shift of the cost landscape between
+//!   the last two measured frames, and the last one carried on by it to the frame predicted.
 //! - [`partition`]: the common surface the runtime and the simulator use: [`Partitioner`],
 //!   [`Tile`], [`Config`], and the predictor shared by every partition.
 //! - [`check`]: [`check_partition`], the O(n log n) validator of a tiling (exact cover, no
@@ -22,6 +24,7 @@
 pub mod assign;
 pub mod check;
 pub mod cost;
+pub mod motion;
 pub mod partition;
 pub mod pbt;
 pub mod rect;

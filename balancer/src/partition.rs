@@ -77,6 +77,13 @@ pub struct Config {
     /// temporal coherence of a moving scene calls for. Raise it for noisy cost measurements.
     /// The first measurement is taken as it is: there is nothing yet to blend it with.
     pub smoothing: f64,
+    /// Motion-compensated prediction ([`crate::motion`]): the largest shift of the cost
+    /// landscape searched, in blocks per frame, or `None` to predict each tile from where the
+    /// costs were. Default 16 blocks (128 pixels a frame at the tracer's 8-pixel blocks): a
+    /// camera pan or an object crossing the image is then predicted where it will be, frames
+    /// ahead when frames are dealt before the last one is measured. A still scene predicts as
+    /// without it (a shift must explain the newer frame clearly better than no motion).
+    pub motion: Option<u32>,
 }
 
 /// The closed set of balancers.
@@ -137,6 +144,7 @@ impl Default for Config {
             grid: Grid::default(),
             order: Order::Interleaved,
             smoothing: 0.0,
+            motion: Some(16),
         }
     }
 }
@@ -201,12 +209,37 @@ impl Partitioner {
         }
     }
 
-    /// Takes the measured costs of the frame just rendered: updates predictions, and re-cuts
-    /// the PBT.
+    /// Takes the measured costs of the frame just rendered: updates predictions for the next
+    /// frame, and re-cuts the PBT.
     pub fn observe(&mut self, map: &CostMap) -> Result<Update, Error> {
+        self.observe_ahead(map, 1)
+    }
+
+    /// Aims the prediction at the frame `ahead` frames after the last measured one, re-cutting
+    /// the PBT if that moved it: call before dealing a frame whose distance from the last
+    /// measurement differs from the one [`Self::observe_ahead`] assumed. A no-op without motion.
+    pub fn aim(&mut self, ahead: u32) -> Result<Update, Error> {
         match self {
-            Partitioner::Pbt(pbt) => pbt.observe(map),
-            Partitioner::Regular(regular) => regular.observe(map),
+            Partitioner::Pbt(pbt) => pbt.aim(ahead),
+            Partitioner::Regular(regular) => regular.aim(ahead),
+        }
+    }
+
+    /// The motion of the cost landscape found at the last observation, if any was.
+    pub fn motion(&self) -> Option<crate::motion::Motion> {
+        match self {
+            Partitioner::Pbt(pbt) => pbt.motion(),
+            Partitioner::Regular(regular) => regular.motion(),
+        }
+    }
+
+    /// As [`Self::observe`], predicting for the frame `ahead` frames after the measured one
+    /// (2 when the frame after it was dealt before it was measured): motion is carried on that
+    /// far.
+    pub fn observe_ahead(&mut self, map: &CostMap, ahead: u32) -> Result<Update, Error> {
+        match self {
+            Partitioner::Pbt(pbt) => pbt.observe_ahead(map, ahead),
+            Partitioner::Regular(regular) => regular.observe_ahead(map, ahead),
         }
     }
 
@@ -230,28 +263,45 @@ pub(crate) fn deal(
     assign::assign(&costs.collect::<Vec<f64>>(), order, peers, weights)
 }
 
-/// Predicts the next frame's cost of any rectangle from the frames observed so far.
+/// Predicts the cost of any rectangle in a coming frame from the frames observed so far.
 #[derive(Clone, Debug)]
 pub(crate) struct Predictor {
     width: u32,
     height: u32,
     smoothing: f64,
+    /// The largest shift searched for motion, in blocks; `None`: no motion compensation.
+    motion: Option<u32>,
     /// The predicted cost map; `None` before the first observation.
     map: Option<CostMap>,
+    /// The prediction before the last observation, which smoothing blends the new one with.
+    before: Option<CostMap>,
+    /// The last measurement as it was: what motion carries on, and what the next measurement
+    /// is compared with for motion.
+    last: Option<CostMap>,
+    /// The motions found between successive measurements, oldest first (the last three; empty
+    /// once a measurement showed none).
+    history: Vec<crate::motion::Motion>,
+    /// How many frames after the last measured one the prediction is for.
+    ahead: u32,
 }
 
 impl Predictor {
-    pub(crate) fn new(width: u32, height: u32, smoothing: f64) -> Self {
+    pub(crate) fn new(width: u32, height: u32, config: &Config) -> Self {
         Predictor {
             width,
             height,
-            smoothing,
+            smoothing: config.smoothing,
+            motion: config.motion,
             map: None,
+            before: None,
+            last: None,
+            history: Vec::new(),
+            ahead: 1,
         }
     }
 
-    /// Predicted cost of `rect`: the (smoothed) measured cost, or before any measurement its
-    /// area in pixels.
+    /// Predicted cost of `rect`: the (smoothed, motion-compensated) measured cost, or before any
+    /// measurement its area in pixels.
     pub(crate) fn estimate(&self, rect: Rect) -> f64 {
         match &self.map {
             Some(map) => map.cost(rect),
@@ -259,20 +309,68 @@ impl Predictor {
         }
     }
 
-    /// Folds in one frame's measurement. A map in a different block size than the previous
-    /// one cannot be blended block by block, so it replaces the prediction outright.
-    pub(crate) fn observe(&mut self, measured: &CostMap) -> Result<(), Error> {
+    /// The motion found between the last two measurements, if any was.
+    pub(crate) fn motion(&self) -> Option<crate::motion::Motion> {
+        self.history.last().copied()
+    }
+
+    /// Folds in one frame's measurement, predicting for `ahead` frames after it. A map in a
+    /// different block size than the previous one cannot be blended block by block, so it
+    /// replaces the prediction outright.
+    pub(crate) fn observe(&mut self, measured: &CostMap, ahead: u32) -> Result<(), Error> {
         if (measured.width(), measured.height()) != (self.width, self.height) {
             return Err(Error::MapSize {
                 expected: (self.width, self.height),
                 found: (measured.width(), measured.height()),
             });
         }
-        self.map = Some(match &self.map {
-            Some(old) if self.smoothing > 0.0 && old.block() == measured.block() => {
-                old.blend(measured, self.smoothing)
+        let found = match (self.motion, &self.last) {
+            (Some(max_shift), Some(last)) => crate::motion::estimate(last, measured, max_shift),
+            _ => None,
+        };
+        match found {
+            Some(motion) => {
+                if self.history.len() == 3 {
+                    self.history.remove(0);
+                }
+                self.history.push(motion);
             }
-            _ => measured.clone(),
+            None => self.history.clear(),
+        }
+        self.before = self.map.take();
+        self.last = Some(measured.clone());
+        self.predict(ahead.max(1))
+    }
+
+    /// Predicts for `ahead` frames after the last measured one instead; whether that changed
+    /// the prediction (it does only where motion was found).
+    pub(crate) fn aim(&mut self, ahead: u32) -> Result<bool, Error> {
+        let ahead = ahead.max(1);
+        if ahead == self.ahead || self.history.is_empty() || self.last.is_none() {
+            self.ahead = ahead;
+            return Ok(false);
+        }
+        self.predict(ahead)?;
+        Ok(true)
+    }
+
+    fn predict(&mut self, ahead: u32) -> Result<(), Error> {
+        self.ahead = ahead;
+        let Some(last) = &self.last else {
+            return Ok(());
+        };
+        let carried = match self.history.is_empty() {
+            false => {
+                let shift = crate::motion::ahead(&self.history, ahead);
+                crate::motion::extrapolate(last, shift)?
+            }
+            true => last.clone(),
+        };
+        self.map = Some(match &self.before {
+            Some(old) if self.smoothing > 0.0 && old.block() == carried.block() => {
+                old.blend(&carried, self.smoothing)
+            }
+            _ => carried,
         });
         Ok(())
     }

@@ -54,7 +54,7 @@ impl Regular {
                     .map(move |x| Rect::new(x[0], y[0], x[1] - x[0], y[1] - y[0]))
             })
             .collect();
-        let predictor = Predictor::new(width, height, config.smoothing);
+        let predictor = Predictor::new(width, height, &config);
         let predicted = rects.iter().map(|&rect| predictor.estimate(rect)).collect();
         Ok(Regular {
             width,
@@ -124,7 +124,29 @@ impl Regular {
 
     /// Takes the measured costs of the frame just rendered: new predictions, same grid.
     pub fn observe(&mut self, map: &CostMap) -> Result<Update, Error> {
-        self.predictor.observe(map)?;
+        self.observe_ahead(map, 1)
+    }
+
+    /// Aims the prediction at `ahead` frames after the last measured one (see
+    /// [`crate::Partitioner::aim`]).
+    pub fn aim(&mut self, ahead: u32) -> Result<Update, Error> {
+        if self.predictor.aim(ahead)? {
+            for (predicted, &rect) in self.predicted.iter_mut().zip(&self.rects) {
+                *predicted = self.predictor.estimate(rect);
+            }
+        }
+        Ok(Update::default())
+    }
+
+    /// The motion of the cost landscape found at the last observation, if any was.
+    pub fn motion(&self) -> Option<crate::motion::Motion> {
+        self.predictor.motion()
+    }
+
+    /// As [`Self::observe`], predicting for `ahead` frames after the measured one (see
+    /// [`crate::Partitioner::observe_ahead`]).
+    pub fn observe_ahead(&mut self, map: &CostMap, ahead: u32) -> Result<Update, Error> {
+        self.predictor.observe(map, ahead)?;
         for (predicted, &rect) in self.predicted.iter_mut().zip(&self.rects) {
             *predicted = self.predictor.estimate(rect);
         }

@@ -13,9 +13,12 @@ fn rects(pbt: &Pbt) -> Vec<Rect> {
     pbt.tiles().iter().map(|tile| tile.rect).collect()
 }
 
+/// These properties are of the re-cut, with each leaf predicted exactly as the map costs it:
+/// motion compensation, which predicts a moved map instead, is tested in `balancer::motion`.
 fn config(leaves: usize) -> Config {
     Config {
         leaves,
+        motion: None,
         ..Config::default()
     }
 }

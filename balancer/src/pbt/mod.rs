@@ -114,7 +114,7 @@ impl Pbt {
             target: config.leaves,
             order: config.order,
             tree: Tree::new(image),
-            predictor: Predictor::new(width, height, config.smoothing),
+            predictor: Predictor::new(width, height, &config),
             leaves: Vec::new(),
             scratch: greedy::Scratch::default(),
         };
@@ -157,7 +157,28 @@ impl Pbt {
     /// Takes the measured costs of the frame just rendered: every leaf's estimate becomes its
     /// predicted cost, then the tree is re-cut greedily.
     pub fn observe(&mut self, map: &CostMap) -> Result<Update, Error> {
-        self.predictor.observe(map)?;
+        self.observe_ahead(map, 1)
+    }
+
+    /// Aims the prediction at `ahead` frames after the last measured one (see
+    /// [`crate::Partitioner::aim`]).
+    pub fn aim(&mut self, ahead: u32) -> Result<Update, Error> {
+        if !self.predictor.aim(ahead)? {
+            return Ok(Update::default());
+        }
+        self.refresh_estimates();
+        Ok(self.restructure())
+    }
+
+    /// The motion of the cost landscape found at the last observation, if any was.
+    pub fn motion(&self) -> Option<crate::motion::Motion> {
+        self.predictor.motion()
+    }
+
+    /// As [`Self::observe`], predicting for `ahead` frames after the measured one (see
+    /// [`crate::Partitioner::observe_ahead`]).
+    pub fn observe_ahead(&mut self, map: &CostMap, ahead: u32) -> Result<Update, Error> {
+        self.predictor.observe(map, ahead)?;
         self.refresh_estimates();
         Ok(self.restructure())
     }

@@ -185,6 +185,8 @@ pub struct Director {
     /// How far the last measured frame's tiles missed their predicted costs (see
     /// [`Config::doubt_error`]); `None` before any frame is measured.
     last_error: Option<f64>,
+    /// The last frame whose measured costs the balancer took.
+    last_measured: Option<u64>,
     /// Every frame is measured; waiting until this instant at most for the last statistics.
     closing: Option<Duration>,
     finished: bool,
@@ -216,6 +218,7 @@ impl Director {
             complete: BTreeMap::new(),
             measuring: VecDeque::new(),
             last_error: None,
+            last_measured: None,
             closing: None,
             finished: false,
             unreported: BTreeSet::new(),
@@ -260,6 +263,12 @@ impl Director {
     pub fn poll_deal(&mut self, now: Duration) -> Result<Option<Deal>, DirectorError> {
         if !self.ready_to_deal() {
             return Ok(None);
+        }
+        // The prediction was aimed, when the last frame was measured, at the frame to be dealt
+        // next then; a frame dealt later, before another is measured, lies further ahead.
+        if let Some(measured) = self.last_measured {
+            let ahead = u32::try_from(self.next.saturating_sub(measured)).unwrap_or(u32::MAX);
+            self.partitioner.aim(ahead)?;
         }
         let tiles = self.partitioner.tiles();
         let mut participants: Vec<PeerId> = self.peers.difference(&self.overdue).copied().collect();
@@ -462,7 +471,14 @@ impl Director {
         if self.measuring.front().map(|(waiting, _)| *waiting) != Some(frame) {
             return Err(DirectorError::NotWaiting { frame });
         }
-        let update = self.partitioner.observe(map)?;
+        // The next frame dealt is the first not yet dealt: with a frame in flight it is two
+        // after the one measured, and the prediction carries motion on that far.
+        let ahead = u32::try_from(self.next.saturating_sub(frame.0)).unwrap_or(u32::MAX);
+        let update = self.partitioner.observe_ahead(map, ahead.max(1))?;
+        self.last_measured = Some(frame.0);
+        if let Some(motion) = self.partitioner.motion() {
+            tracing::debug!(%frame, ahead, dx = motion.dx, dy = motion.dy, "the costs moved");
+        }
         let (_, tiles) = self
             .measuring
             .pop_front()

@@ -555,3 +555,56 @@ fn a_resumed_render_deals_from_its_first_frame() {
     assert_eq!(done.poll_deal(Duration::ZERO).unwrap(), None);
     assert_eq!(done.poll_event(), Some(Event::Finished));
 }
+
+#[test]
+fn frames_dealt_ahead_are_predicted_where_a_moving_spot_will_be() {
+    // A spot crossing a 256-pixel image by 3 blocks a frame, on a grid of 8 x 8 tiles of 4 x 4
+    // blocks. From frame 2 on (two measurements show the motion), the tile predicted costliest
+    // is the one the spot is in at the frame dealt, whether that frame is one after the last
+    // measured (one in flight) or two (two in flight: the prediction is aimed further when the
+    // frame is dealt). Without motion compensation it lags behind.
+    const SIDE: u32 = 256;
+    let centre = |frame: u64| 4.0 + 3.0 * frame as f64;
+    let measure = |frame: FrameId| {
+        CostMap::from_fn(SIDE, SIDE, 8, |c, r| {
+            let (dx, dy) = (f64::from(c) - centre(frame.0), f64::from(r) - 16.0);
+            1.0 + 1000.0 * (-(dx * dx + dy * dy) / 4.5).exp()
+        })
+        .expect("a valid map")
+    };
+    let hottest_holds_the_spot = |motion: Option<u32>, in_flight: usize| {
+        let config = balancer::Config {
+            kind: Kind::Regular,
+            grid: Grid::Count {
+                columns: 8,
+                rows: 8,
+            },
+            motion,
+            ..balancer::Config::default()
+        };
+        let partitioner = Partitioner::new(SIDE, SIDE, &config).expect("a valid grid");
+        let mut cluster = cluster(3);
+        let mut director = director_in_flight(partitioner, 3, 7, in_flight);
+        let (deals, _) = drive(&mut director, &mut cluster, &measure);
+        assert_eq!(deals.len(), 7);
+        deals[2..].iter().all(|deal| {
+            let hottest = deal
+                .tiles
+                .iter()
+                .max_by(|a, b| a.predicted.total_cmp(&b.predicted))
+                .expect("a deal has tiles");
+            let x = (centre(deal.frame.0) * 8.0 + 4.0) as u64;
+            hottest.rect.x as u64 <= x && x < hottest.rect.right()
+        })
+    };
+    for in_flight in [1, 2] {
+        assert!(
+            hottest_holds_the_spot(Some(16), in_flight),
+            "{in_flight} in flight"
+        );
+        assert!(
+            !hottest_holds_the_spot(None, in_flight),
+            "{in_flight} in flight, no motion"
+        );
+    }
+}
