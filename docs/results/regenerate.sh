@@ -20,8 +20,11 @@ NET="--latency 0.1 --tile-overhead 0.03"
 # studied: every tile rendered and moved whole, no backups of stragglers (UNCUT). Section 7
 # measures what cutting tiles and backups add. Sections 1 to 4 deal each peer one contiguous
 # run of tiles; section 6 deals interleaved, the default since.
-# BARRIER: one frame at a time, every frame cut and rendered alike (before frames in flight).
-BARRIER="--frames-in-flight 1 --doubtful-pieces off"
+# STILL: each tile predicted from where the costs were (before motion compensation, section 9).
+STILL="--motion off"
+# BARRIER: one frame at a time, every frame cut and rendered alike (before frames in flight),
+# and predicted STILL: the defaults sections 1 to 7 were measured with.
+BARRIER="--frames-in-flight 1 --doubtful-pieces off $STILL"
 UNCUT="--render-pieces off --split-on-steal false --backups false $BARRIER"
 RUNS="--deal contiguous $UNCUT"
 
@@ -99,8 +102,9 @@ rm -f $R/tails/synthetic-*/gantt.svg
 # 8. Frames in flight (the defaults since): the next frame dealt when the running one wanes,
 #    the prediction doubted (no overlap, pieces of 1/8 mean area) where it missed by more than
 #    half; against one frame at a time (section 7's defaults), no doubting, three in flight.
-for variant in "in-flight:" "barrier:$BARRIER" "never-doubt:--doubt-error 2 --doubtful-pieces off" \
-    "three:--frames-in-flight 3"; do
+for variant in "in-flight:$STILL" "barrier:$BARRIER" \
+    "never-doubt:--doubt-error 2 --doubtful-pieces off $STILL" \
+    "three:--frames-in-flight 3 $STILL"; do
     name=${variant%%:*}
     flags=${variant#*:}
     $T simulate synthetic $NET $flags --policy pbt+steal --peers 64,256,1024 --tiles 4096 \
@@ -111,3 +115,20 @@ for variant in "in-flight:" "barrier:$BARRIER" "never-doubt:--doubt-error 2 --do
         --charts peers --gantt 64:pbt+steal:1024:12 --out $R/frames/glass-$name
 done
 rm -f $R/frames/synthetic-*/gantt.svg
+
+# 9. Motion-compensated prediction (the default since): the cost landscape's shift between the
+#    last two measured frames carried on to the frame dealt; with frames in flight (all the
+#    defaults) and with one frame at a time. Section 8's in-flight runs are the same without it.
+for variant in "in-flight:" "barrier:--frames-in-flight 1 --doubtful-pieces off"; do
+    name=${variant%%:*}
+    flags=${variant#*:}
+    $T simulate synthetic $NET $flags --policy pbt+steal --peers 64,256,1024 --tiles 4096 \
+        --charts peers --out $R/motion/synthetic-$name
+    $T simulate synthetic $NET $flags --policy pbt+steal --peers 1024 --tiles 16384 \
+        --charts peers --out $R/motion/synthetic-16384-$name
+    $T simulate synthetic:1024x1024:20 $NET $flags --policy pbt+steal --peers 256 --tiles 4096 \
+        --charts peers --gantt 256:pbt+steal:4096:12 --out $R/motion/fast-orbit-$name
+    $T simulate $GLASS $NET $flags --policy pbt+steal --peers 64 --tiles 1024 \
+        --charts peers --gantt 64:pbt+steal:1024:12 --out $R/motion/glass-$name
+done
+rm -f $R/motion/synthetic-*/gantt.svg
