@@ -9,7 +9,8 @@
 use super::Texture;
 use super::error::{SceneError, line_of};
 use super::files::FileLog;
-use super::format::{MaterialKind, MaterialSpec};
+use super::format::{MaterialKind, MaterialSpec, MediumSpec};
+use super::media::MediumTable;
 use super::mtl::MtlMaterial;
 use crate::material::{Bsdf, Material};
 use glam::Vec3;
@@ -27,6 +28,8 @@ pub(crate) struct MaterialTable<'a> {
     pub textures: Vec<Texture>,
     /// Decoded textures by path relative to the scene's folder.
     texture_ids: BTreeMap<String, u32>,
+    /// The media that materials (and the camera) bind.
+    pub media: MediumTable<'a>,
 }
 
 /// Materials are shared by identity: a TOML material by name, an MTL material by file and name.
@@ -41,8 +44,10 @@ impl<'a> MaterialTable<'a> {
         toml: &'a str,
         text: &'a str,
         defined: &'a BTreeMap<Spanned<String>, MaterialSpec>,
+        media: &'a BTreeMap<Spanned<String>, MediumSpec>,
     ) -> Self {
         MaterialTable {
+            media: MediumTable::new(toml, text, media),
             toml,
             text,
             defined,
@@ -139,15 +144,16 @@ impl<'a> MaterialTable<'a> {
         };
         let Some(kind) = spec.kind else {
             return Err(err(
-                "needs `type` (diffuse, mirror, glass, metal or emissive)",
+                "needs `type` (diffuse, mirror, glass, metal, emissive or interface)",
             ));
         };
         let (type_name, allowed): (&str, &[&str]) = match kind {
-            MaterialKind::Diffuse => ("diffuse", &["albedo", "texture"]),
-            MaterialKind::Mirror => ("mirror", &["reflectance"]),
-            MaterialKind::Glass => ("glass", &["ior", "tint"]),
-            MaterialKind::Metal => ("metal", &["reflectance", "roughness"]),
-            MaterialKind::Emissive => ("emissive", &["albedo"]),
+            MaterialKind::Diffuse => ("diffuse", &["albedo", "texture", "emission"]),
+            MaterialKind::Mirror => ("mirror", &["reflectance", "emission"]),
+            MaterialKind::Glass => ("glass", &["ior", "tint", "medium", "emission"]),
+            MaterialKind::Metal => ("metal", &["reflectance", "roughness", "emission"]),
+            MaterialKind::Emissive => ("emissive", &["albedo", "emission"]),
+            MaterialKind::Interface => ("interface", &["medium"]),
         };
         let given = [
             ("albedo", spec.albedo.is_some()),
@@ -156,6 +162,8 @@ impl<'a> MaterialTable<'a> {
             ("ior", spec.ior.is_some()),
             ("tint", spec.tint.is_some()),
             ("roughness", spec.roughness.is_some()),
+            ("medium", spec.medium.is_some()),
+            ("emission", spec.emission.is_some()),
         ];
         if let Some((key, _)) = given
             .iter()
@@ -198,11 +206,20 @@ impl<'a> MaterialTable<'a> {
                 albedo: spec.albedo.map_or(Vec3::ZERO, |a| a.0),
                 texture: None,
             },
+            MaterialKind::Interface => Bsdf::Interface,
+        };
+        let interior = match &spec.medium {
+            Some(medium) => {
+                let key = format!("[materials.{}] `medium`", name.get_ref());
+                Some(self.media.medium(&key, medium)?)
+            }
+            None => None,
         };
         Ok(Material {
             name: name.get_ref().clone(),
             bsdf,
             emission,
+            interior,
         })
     }
 
