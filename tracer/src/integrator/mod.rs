@@ -19,9 +19,9 @@ use crate::geometry::{
 };
 use crate::lights::{EnvironmentSampling, LightSample, Lights};
 use crate::material::{Bsdf, Frame};
-use crate::medium::{Flight, sample_henyey_greenstein};
+use crate::medium::{Flight, hero_channel, mean_ratio, sample_henyey_greenstein};
 use crate::sampler::PixelSampler;
-use crate::scene::{RenderSettings, Scene};
+use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use scatter::{BounceNumbers, Phase, Scatterer, SurfaceScatter};
 
@@ -151,6 +151,11 @@ impl World {
         // Without interfaces it is `depth`, as before media existed.
         let mut segment = 0u32;
         let mut medium = self.scene.camera_medium;
+        // Spectral MIS through media (`crate::medium`): the channel that samples every flight,
+        // picked at the path's first, and each channel's path density over the hero's. Without
+        // media the ratios stay exactly 1, and dividing by their mean (1) moves no bit.
+        let mut hero = None;
+        let mut ratio = Vec3::ONE;
         loop {
             sampler.start_bounce(segment);
             segment += 1;
@@ -163,11 +168,23 @@ impl World {
                 let length = ray.dir.length();
                 let t_end = found.map_or(f32::INFINITY, |h| h.t * length);
                 let u = sampler.medium();
-                let in_medium = self.medium(medium);
-                match in_medium.sample_flight(t_end, u.x, u.y) {
-                    Flight::Pass { weight } => beta *= weight,
-                    Flight::Scatter { distance, weight } => {
+                let hero = *hero.get_or_insert_with(|| hero_channel(u.x));
+                let in_medium = self.flight_medium(medium, found.is_none());
+                match in_medium.sample_flight(t_end, hero, u.y) {
+                    Flight::Pass {
+                        weight,
+                        ratio: flight_ratio,
+                    } => {
                         beta *= weight;
+                        ratio *= flight_ratio;
+                    }
+                    Flight::Scatter {
+                        distance,
+                        weight,
+                        ratio: flight_ratio,
+                    } => {
+                        beta *= weight;
+                        ratio *= flight_ratio;
                         stats.medium_scatters += 1;
                         if settings.max_depth.is_some_and(|max| depth >= max) {
                             break;
@@ -179,7 +196,7 @@ impl World {
                         };
                         let u = BounceNumbers::draw(sampler);
                         if effects.has_lights() {
-                            radiance += beta
+                            radiance += self.weighed(beta, ratio)
                                 * self.direct_light(
                                     &phase,
                                     &at,
@@ -194,7 +211,7 @@ impl World {
                         last_delta = false;
                         last_point = at.p;
                         depth += 1;
-                        if !roulette(settings, depth, u.roulette, &mut beta) {
+                        if !self.roulette(depth, u.roulette, ratio, &mut beta) {
                             break;
                         }
                         ray = spawn_ray(&at, wi, self.offset);
@@ -216,7 +233,7 @@ impl World {
                         let light_pdf = self.lights.environment_pdf(&self.scene, ray.dir);
                         power_heuristic(last_pdf, light_pdf)
                     };
-                    radiance += beta * environment.radiance(ray.dir) * weight;
+                    radiance += self.weighed(beta, ratio) * environment.radiance(ray.dir) * weight;
                 }
                 break;
             };
@@ -240,7 +257,7 @@ impl World {
                             .triangle_pdf(hit.triangle, last_point, surface.at.p);
                     power_heuristic(last_pdf, light_pdf)
                 };
-                radiance += beta * material.emission * weight;
+                radiance += self.weighed(beta, ratio) * material.emission * weight;
             }
             if settings.max_depth.is_some_and(|max| depth >= max) {
                 break;
@@ -257,7 +274,7 @@ impl World {
                     frame: &frame,
                     wo,
                 };
-                radiance += beta
+                radiance += self.weighed(beta, ratio)
                     * self.direct_light(
                         &scatter,
                         &surface.at,
@@ -286,7 +303,7 @@ impl World {
             last_delta = sample.delta;
             last_point = surface.at.p;
             depth += 1;
-            if !roulette(settings, depth, u.roulette, &mut beta) {
+            if !self.roulette(depth, u.roulette, ratio, &mut beta) {
                 break;
             }
             ray = spawn_ray(&surface.at, wi, self.offset);
@@ -338,6 +355,34 @@ impl World {
             power_heuristic(light.pdf, scatter.pdf(light.wi))
         };
         f * light.radiance * (weight / light.pdf) * transmittance
+    }
+
+    /// What a path of throughput `beta` and spectral ratios `ratio` contributes per unit of
+    /// what it finds: `beta` over the mean ratio where media are tracked (the balance
+    /// heuristic over hero channels, `crate::medium`), `beta` itself elsewhere, with no
+    /// arithmetic, so that paths without media compute what they computed before media.
+    fn weighed(&self, beta: Vec3, ratio: Vec3) -> Vec3 {
+        if self.effects.media {
+            beta / mean_ratio(ratio)
+        } else {
+            beta
+        }
+    }
+
+    /// Russian roulette at `depth`: whether the path survives `u`, with `beta` raised to make
+    /// up for the paths ended. Paths survive unconditionally before the settings' start depth.
+    /// The survival probability follows what the path would contribute ([`World::weighed`]).
+    fn roulette(&self, depth: u32, u: f32, ratio: Vec3, beta: &mut Vec3) -> bool {
+        if let Some(start) = self.scene.settings.russian_roulette_depth
+            && depth >= start
+        {
+            let survive = self.weighed(*beta, ratio).max_element().min(0.95);
+            if u >= survive {
+                return false;
+            }
+            *beta /= survive;
+        }
+        true
     }
 
     /// The shadow ray from `at` towards the sampled light: to its point, or along its direction
@@ -416,21 +461,6 @@ struct Surface {
     uv: Option<Vec2>,
     material: u32,
     front_facing: bool,
-}
-
-/// Russian roulette at `depth`: whether the path survives `u`, with `beta` raised to make up
-/// for the paths ended. Paths survive unconditionally before the settings' start depth.
-fn roulette(settings: &RenderSettings, depth: u32, u: f32, beta: &mut Vec3) -> bool {
-    if let Some(start) = settings.russian_roulette_depth
-        && depth >= start
-    {
-        let survive = beta.max_element().min(0.95);
-        if u >= survive {
-            return false;
-        }
-        *beta /= survive;
-    }
-    true
 }
 
 fn power_heuristic(f: f32, g: f32) -> f32 {

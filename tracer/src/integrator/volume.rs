@@ -20,6 +20,20 @@ impl World {
         medium.map_or(&Medium::VACUUM, |m| &self.scene.media[m as usize])
     }
 
+    /// The medium a ray in `medium` flies through: `medium` itself, unless the ray escapes to
+    /// infinity (`escapes`), which only the outside medium can hold. A closed object's interior
+    /// is bounded, so a ray that escapes from "inside" one has leaked: a free flight sampled a
+    /// scattering point a rounding error beyond the boundary. Left in the interior medium, such
+    /// a path would scatter forever in an unbounded copy of it; in the outside medium it meets
+    /// what any ray leaving the object would.
+    pub(super) fn flight_medium(&self, medium: Option<u32>, escapes: bool) -> &Medium {
+        self.medium(if escapes {
+            self.scene.camera_medium
+        } else {
+            medium
+        })
+    }
+
     /// The medium beyond a surface of `material` that a path crosses, entering the object when
     /// it arrived on the front side (`front_facing`).
     pub(super) fn medium_across(&self, material: &Material, front_facing: bool) -> Option<u32> {
@@ -53,7 +67,10 @@ impl World {
                 self.accel
                     .intersect_certain_with(&shadow, self.traversal, &mut stats.traversal);
             let end = blocker.map_or(shadow.t_max, |h| h.t);
-            transmittance *= self.medium(medium).transmittance(end * shadow.dir.length());
+            let escapes = end == f32::INFINITY;
+            transmittance *= self
+                .flight_medium(medium, escapes)
+                .transmittance(end * shadow.dir.length());
             let Some(hit) = blocker else {
                 return transmittance;
             };
