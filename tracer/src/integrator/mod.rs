@@ -7,6 +7,16 @@
 //! numbers from a fixed block of dimensions ([`crate::sampler::DIMENSIONS_PER_BOUNCE`]), all of
 //! them drawn whether used or not, so skipping an absent effect never shifts a later number.
 //!
+//! Participating media (`scatter.rs`, [`crate::medium`]): where the scene has them, every ray
+//! first samples a free flight through the medium it is in; a scattering there is a bounce like
+//! a surface's (next-event estimation through the phase function, then a phase-sampled
+//! direction, from the same block of random numbers), and a path crosses index-matched
+//! interfaces without counting a bounce. Contributions are divided by the mean of the path's
+//! spectral density ratios (the balance heuristic over hero channels).
+//!
+//! Module map: `scatter` (a BSDF or a phase function as next-event estimation sees it, the
+//! bounce's random numbers, which medium a path is in, and shadow-ray transmittance).
+//!
 //! Specialisation: every branch guarded by a flag of [`Effects`] is one whose work would add
 //! exactly zero when the scene lacks the effect (see [`crate::effects`] for the argument, flag by
 //! flag); the per-sample counters in [`PathStats`] let tests check that the skipped work is
@@ -26,7 +36,6 @@ use glam::{Vec2, Vec3};
 use scatter::{BounceNumbers, Phase, Scatterer, SurfaceScatter};
 
 mod scatter;
-mod volume;
 
 /// A scene prepared for rendering: its acceleration structure, lights and effect set.
 pub struct World {
@@ -333,7 +342,7 @@ impl World {
         stats.shadow_rays += 1;
         let shadow = self.shadow_ray(at, &light);
         // Without media a shadow ray is blocked or not; with them it carries what the media let
-        // through, and passes index-matched interfaces (`volume.rs`). A vacuum lets exactly 1
+        // through, and passes index-matched interfaces (`scatter.rs`). A vacuum lets exactly 1
         // through, and `x * 1` is `x`, so the product below keeps its bits either way.
         let transmittance = if self.effects.media {
             let transmittance = self.transmittance(shadow, &light, medium, stats);

@@ -11,7 +11,6 @@ mod files;
 mod format;
 mod load;
 mod materials;
-mod media;
 mod mtl;
 mod obj;
 mod shapes;
