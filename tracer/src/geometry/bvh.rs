@@ -199,11 +199,7 @@ impl Accel {
         traversal: Traversal,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
-        match traversal {
-            Traversal::Robust => self.traverse_wide::<false, false>(ray, stats),
-            Traversal::RobustBinary => self.traverse_robust::<false, false>(ray, stats),
-            Traversal::Obvhs => self.traverse_obvhs::<false>(ray, stats),
-        }
+        self.closest_with::<false>(ray, traversal, stats)
     }
 
     /// The closest hit among those a shadow ray must respect: [`Accel::intersect_with`] whose
@@ -218,9 +214,19 @@ impl Accel {
         traversal: Traversal,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
+        self.closest_with::<true>(ray, traversal, stats)
+    }
+
+    /// The closest hit by `traversal`, whose first accepted hit must be certain with `CERTAIN`.
+    fn closest_with<const CERTAIN: bool>(
+        &self,
+        ray: &Ray,
+        traversal: Traversal,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
         match traversal {
-            Traversal::Robust => self.traverse_wide::<false, true>(ray, stats),
-            Traversal::RobustBinary => self.traverse_robust::<false, true>(ray, stats),
+            Traversal::Robust => self.traverse_wide::<false, CERTAIN>(ray, stats),
+            Traversal::RobustBinary => self.traverse_robust::<false, CERTAIN>(ray, stats),
             Traversal::Obvhs => self.traverse_obvhs::<false>(ray, stats),
         }
     }

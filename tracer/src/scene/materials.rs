@@ -114,16 +114,13 @@ impl<'a> MaterialTable<'a> {
 
     /// A TOML material table that nothing used: most likely a misspelt name.
     pub(crate) fn unused_definition(&self) -> Option<SceneError> {
-        let (name, _) = self
-            .defined
-            .iter()
-            .find(|(n, _)| !self.used_defined.contains(n.get_ref()))?;
-        let line = line_of(self.text, name.span().start);
-        let detail = format!(
-            "[materials.{}] matches no MTL material and no object uses it",
-            name.get_ref()
-        );
-        Some(SceneError::at_line(self.toml, line, detail))
+        unused_table(
+            self.toml,
+            self.text,
+            self.defined,
+            &self.used_defined,
+            |name| format!("[materials.{name}] matches no MTL material and no object uses it"),
+        )
     }
 
     fn add(&mut self, key: MaterialKey, material: Material) -> u32 {
@@ -325,17 +322,24 @@ impl<'a> MediumTable<'a> {
 
     /// A `[media.NAME]` table that nothing used.
     pub(crate) fn unused_definition(&self) -> Option<SceneError> {
-        let (name, _) = self
-            .defined
-            .iter()
-            .find(|(n, _)| !self.used.contains(n.get_ref()))?;
-        let line = line_of(self.text, name.span().start);
-        let detail = format!(
-            "[media.{}] is used by no material's and not by the camera's `medium`",
-            name.get_ref()
-        );
-        Some(SceneError::at_line(self.toml, line, detail))
+        unused_table(self.toml, self.text, self.defined, &self.used, |name| {
+            format!("[media.{name}] is used by no material's and not by the camera's `medium`")
+        })
     }
+}
+
+/// The first table of `defined` whose name `used` lacks, as an error at its line saying
+/// `message(name)`: a table nothing uses is most likely a misspelt name.
+fn unused_table<T>(
+    toml: &str,
+    text: &str,
+    defined: &BTreeMap<Spanned<String>, T>,
+    used: &BTreeSet<String>,
+    message: impl Fn(&str) -> String,
+) -> Option<SceneError> {
+    let (name, _) = defined.iter().find(|(n, _)| !used.contains(n.get_ref()))?;
+    let line = line_of(text, name.span().start);
+    Some(SceneError::at_line(toml, line, message(name.get_ref())))
 }
 
 /// The medium a table describes: `sigma_a` and `sigma_s` (either may be left out, as 0), or
