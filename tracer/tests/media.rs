@@ -8,7 +8,8 @@
 //!   its MIS against phase sampling are right together.
 //! - Transmittance through a slab of medium equals `exp(-sigma_t d)` per channel, for a family
 //!   of coefficients and thicknesses: along shadow rays (deterministic, to float rounding) and
-//!   along camera rays (free-flight sampling: within Monte Carlo error).
+//!   along camera rays (free-flight sampling: within Monte Carlo error); global fog attenuates
+//!   what the camera sees the same way.
 //! - Media scenes render the same bits specialised and with every effect forced on, and a
 //!   scene without media counts no free flight unless media are forced on.
 
@@ -205,6 +206,41 @@ fn camera_rays_through_a_slab_arrive_with_exp_of_minus_sigma_t_d_on_average() {
     let clear = load(&emitter_behind_slab(1.0, "sigma_a = 0"));
     let (mean, _) = mean_and_error(&render(&clear, None, 0));
     assert_eq!(mean, Vec3::ONE, "a vacuum slab passes everything");
+}
+
+#[test]
+fn fog_attenuates_what_the_camera_sees_by_exp_of_minus_sigma_t_distance() {
+    // The camera starts in the fog; an emitter 10 away faces it; emitters only.
+    let coefficients: [(&str, [f32; 3]); 3] = [
+        ("sigma_a = 0.05", [0.05; 3]),
+        ("sigma_a = 0.1\nsigma_s = 0.1", [0.2; 3]),
+        ("sigma_a = [0.02, 0.1, 0.3]", [0.02, 0.1, 0.3]),
+    ];
+    for (medium, sigma_t) in coefficients {
+        let toml = format!(
+            r#"
+            render = {{ width = 32, height = 32, spp = 16, max_depth = 0 }}
+            camera = {{ position = [0, 0, -5], look_at = [0, 0, 0], vfov = 2, medium = "fog" }}
+            object = [{{ shape = "quad", corners = [[-3, -3, 5], [-3, 3, 5], [3, 3, 5], [3, -3, 5]], material = "lamp" }}]
+            [materials.lamp]
+            type = "emissive"
+            emission = 1
+            [media.fog]
+            {medium}
+            "#
+        );
+        let scene = load(&toml);
+        assert!(Effects::of(&scene).media);
+        let out = render(&scene, None, 0);
+        // Rays lie within 1.5 degrees of the axis: their paths are at most 1.0004 times 10.
+        let expected = Vec3::from_array(sigma_t.map(|s| (-s * 10.0).exp()));
+        assert_close(
+            &format!("fog {medium}"),
+            mean_and_error(&out),
+            expected,
+            0.002,
+        );
+    }
 }
 
 /// A diffuse room lit by a point light, with `extra` objects, materials and media.
