@@ -195,7 +195,12 @@ impl World {
                         beta *= weight;
                         ratio *= flight_ratio;
                         stats.medium_scatters += 1;
-                        if settings.max_depth.is_some_and(|max| depth >= max) {
+                        // A medium that only absorbs gives a scattering weight of zero: the
+                        // path carries nothing further.
+                        if beta == Vec3::ZERO
+                            || !beta.is_finite()
+                            || settings.max_depth.is_some_and(|max| depth >= max)
+                        {
                             break;
                         }
                         let at = SurfacePoint::exact(ray.origin + ray.dir * (distance / length));
