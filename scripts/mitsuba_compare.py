@@ -15,6 +15,10 @@ speed figure means nothing unless both renderers drew the same picture, so this 
 4. runs `tessera compare OURS.exr MITSUBA.exr --json` and checks the per-channel means;
 5. prints one table and writes OUT/compare.json and OUT/compare.md.
 
+Participating media: a scene may also hold procedural spheres (`shape = "sphere"`) whose
+material is an `interface` or `glass` with a `medium` (MEDIA_MAPPING below); such scenes are
+rendered by Mitsuba's `volpath` instead of `path`. `scenes/shared/cornell-box-smoke.toml` is one.
+
 Depth: Mitsuba's `max_depth` counts path segments (1 shows emitters only), ours counts bounces as
 pbrt does (0 shows emitters only), so Mitsuba `max_depth = 8` is our `--max-depth 7`.
 
@@ -44,6 +48,18 @@ MTL_MAPPING = (
     "Kd -> twosided(diffuse(reflectance = Kd)); Ke > 0 -> one-sided area emitter (radiance = Ke) on the "
     "same mesh; Ns/Ni/Ka/illum unused (Ks = 0 everywhere); no vertex normals in these OBJs, so "
     "both renderers shade with face normals"
+)
+
+# How the script maps tessera's media onto Mitsuba (scenes/README.md, "Participating media"): a
+# `[media.NAME]` table becomes a `homogeneous` medium with `sigma_t = sigma_a + sigma_s`,
+# `albedo = sigma_s / sigma_t` (RGB) and an `hg` phase function of the same `g` (both renderers
+# take g > 0 as forward scattering); a sphere whose material is `interface` becomes Mitsuba's
+# analytic `sphere` with a `null` BSDF and that medium as `interior`, `glass` a `dielectric`
+# (int_ior = ior, ext_ior = 1). Our sphere is an icosphere (20,480 faces at subdivisions 5,
+# 0.03 % less area than the sphere), Mitsuba's the exact sphere.
+MEDIA_MAPPING = (
+    "[media] -> homogeneous(sigma_t = sigma_a + sigma_s, albedo = sigma_s / sigma_t, phase hg(g)); "
+    "sphere with interface -> sphere(null BSDF, interior = medium); with glass -> sphere(dielectric(int_ior), interior)"
 )
 
 DEFAULT_SCENES = [
@@ -102,6 +118,7 @@ def main():
         "settings": {"size": args.size, "spp": args.spp, "segments": args.segments, "tessera_max_depth": args.segments - 1,
                      "tolerance": args.tolerance},
         "mtl_mapping": MTL_MAPPING,
+        "media_mapping": MEDIA_MAPPING,
         "cores": os.cpu_count(),
         "load_before": load_before,
         "load_after": os.getloadavg(),
@@ -115,7 +132,7 @@ def main():
 
 def scene_files_present(toml):
     scene = tomllib.loads(toml.read_text())
-    return all((toml.parent / o["obj"]).exists() for o in scene.get("object", []))
+    return all((toml.parent / o["obj"]).exists() for o in scene.get("object", []) if "obj" in o)
 
 
 def run_worker(variant, toml, exr, args):
@@ -211,7 +228,7 @@ def markdown(report):
             f"({m['load_cpu_seconds']:.2f} + {m['render_cpu_seconds']:.2f}) | {m['wall_seconds']:.2f} | "
             f"{fmt_means(c['mean_mitsuba'])} | {diff} ({verdict} {tolerance}; RMSE {c['rmse']:.4f}) |"
         )
-    lines += ["", "MTL mapping: " + report["mtl_mapping"] + ".", ""]
+    lines += ["", "MTL mapping: " + report["mtl_mapping"] + ".", "", "Media mapping: " + report["media_mapping"] + ".", ""]
     return "\n".join(lines)
 
 
@@ -234,11 +251,15 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
     scene_toml = tomllib.loads(toml.read_text())
     camera = scene_toml["camera"]
     unsupported = set(camera) - {"position", "look_at", "up", "vfov"}
-    if unsupported or scene_toml.get("materials") or scene_toml.get("lights") or scene_toml.get("environment"):
+    if unsupported or scene_toml.get("lights") or scene_toml.get("environment"):
         raise SystemExit(f"{toml}: only a fixed camera and plain OBJ objects are translated for Mitsuba")
+    media = {name: mitsuba_medium(spec) for name, spec in scene_toml.get("media", {}).items()}
     shapes = {}
     triangles = 0
     for index, obj in enumerate(scene_toml.get("object", [])):
+        if obj.get("shape") == "sphere":
+            shapes[f"shape-{index}-sphere"] = mitsuba_sphere(toml, obj, scene_toml.get("materials", {}), media)
+            continue
         if set(obj) != {"obj"}:
             raise SystemExit(f"{toml}: object {index} has keys other than obj, which this script does not translate")
         for name, (positions, faces, kd, ke) in read_obj(toml.parent / obj["obj"]).items():
@@ -257,7 +278,7 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
             shapes[f"shape-{index}-{name}"] = mesh
     description = {
         "type": "scene",
-        "integrator": {"type": "path", "max_depth": segments},
+        "integrator": {"type": "volpath" if media else "path", "max_depth": segments},
         "sensor": {
             "type": "perspective",
             "fov": camera.get("vfov", 40.0),
@@ -303,6 +324,50 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
         "peak_rss_kib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
         "exr": str(exr),
     }
+
+
+def mitsuba_medium(spec):
+    """A `[media.NAME]` table as a Mitsuba `homogeneous` medium (MEDIA_MAPPING)."""
+    rgb = lambda v: [float(v)] * 3 if isinstance(v, (int, float)) else [float(c) for c in v]
+    if "albedo" in spec:
+        albedo, sigma_t = rgb(spec["albedo"]), rgb(spec["density"])
+    else:
+        sigma_a, sigma_s = rgb(spec.get("sigma_a", 0)), rgb(spec.get("sigma_s", 0))
+        sigma_t = [a + s for a, s in zip(sigma_a, sigma_s)]
+        albedo = [s / t if t > 0 else 0.0 for s, t in zip(sigma_s, sigma_t)]
+    # Mitsuba reads an RGB `sigma_t` as a reflectance, in [0, 1]: it takes the largest channel
+    # as its `scale` and the rest relative to it.
+    scale = max(sigma_t) or 1.0
+    return {
+        "type": "homogeneous",
+        "scale": scale,
+        "sigma_t": {"type": "rgb", "value": [t / scale for t in sigma_t]},
+        "albedo": {"type": "rgb", "value": albedo},
+        "phase": {"type": "hg", "g": float(spec.get("g", 0.0))},
+    }
+
+
+def mitsuba_sphere(toml, obj, materials, media):
+    """A procedural sphere bounded by an `interface` or `glass` material with a medium."""
+    import mitsuba as mi
+
+    if set(obj) - {"shape", "center", "radius", "subdivisions", "material"}:
+        raise SystemExit(f"{toml}: a sphere with keys this script does not translate: {sorted(obj)}")
+    material = materials[obj["material"]]
+    if material.get("type") == "interface" and set(material) <= {"type", "medium"}:
+        bsdf = {"type": "null"}
+    elif material.get("type") == "glass" and set(material) <= {"type", "ior", "medium"}:
+        bsdf = {"type": "dielectric", "int_ior": float(material.get("ior", 1.5)), "ext_ior": 1.0}
+    else:
+        raise SystemExit(f"{toml}: sphere material {obj['material']} is neither a plain interface nor a plain glass")
+    sphere = {
+        "type": "sphere",
+        "to_world": mi.ScalarTransform4f().translate(obj.get("center", [0, 0, 0])).scale(float(obj.get("radius", 1.0))),
+        "bsdf": bsdf,
+    }
+    if "medium" in material:
+        sphere["interior"] = mi.load_dict(media[material["medium"]])
+    return mi.load_dict(sphere)
 
 
 def resident_kib():

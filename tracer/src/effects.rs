@@ -30,6 +30,17 @@
 //!   drawing them or not shifts no other number.
 //! - `specular_reflection`, `glossy_reflection`, `refraction`, `diffuse`: reported, and counted
 //!   per sample (refractions); the BSDF is a closed enum, so no code of an absent material runs.
+//! - `media`: a used material binds a medium that is not vacuum, the camera starts in one, or a
+//!   used material is an index-matched interface. Only then does every ray sample a free flight
+//!   through the medium it is in and every shadow ray find its closest blocker to pass
+//!   interfaces and take the transmittance ([`crate::medium`]). With media forced on in a scene
+//!   without them, every ray is in [`crate::medium::Medium::VACUUM`]: its flights pass with
+//!   weight exactly 1 (beta times 1 is beta), its transmittance is exactly 1, and the closest
+//!   certain blocker exists exactly when the any-hit query finds one
+//!   ([`crate::geometry::Accel::intersect_certain_with`]), so the bits do not move; the free
+//!   flight's two random numbers come from a stream of their own ([`crate::sampler`]). That
+//!   forced pipeline is what a renderer that always tracks media pays: a flight per ray, and
+//!   closest-hit shadow rays instead of any-hit ones.
 //!
 //! Not done, on purpose: "no shadow rays when nothing can block" beyond the case where nothing
 //! emits. A shadow ray can be skipped exactly only if the occlusion test would certainly say
@@ -75,6 +86,8 @@ pub struct Effects {
     pub textures: bool,
     /// Some triangle carries shading normals.
     pub shading_normals: bool,
+    /// Participating media (or index-matched boundaries) exist: rays are tracked through them.
+    pub media: bool,
 }
 
 impl Effects {
@@ -92,6 +105,7 @@ impl Effects {
         refraction: true,
         textures: true,
         shading_normals: true,
+        media: true,
     };
 
     /// The effects `scene` needs. Only materials that some triangle uses count.
@@ -113,6 +127,12 @@ impl Effects {
             .any(|k| k.camera.aperture_radius > 0.0);
         let diffuse = used(|b| matches!(b, Bsdf::Diffuse { albedo, .. } if *albedo != Vec3::ZERO));
         let glossy_reflection = used(|b| matches!(b, Bsdf::Conductor { .. }));
+        let not_vacuum = |m: Option<u32>| m.is_some_and(|m| !scene.media[m as usize].is_vacuum());
+        let media = not_vacuum(scene.camera_medium)
+            || scene.triangles.iter().any(|t| {
+                let material = &scene.materials[t.material as usize];
+                matches!(material.bsdf, Bsdf::Interface) || not_vacuum(material.interior)
+            });
         Effects {
             area_lights,
             point_lights,
@@ -129,6 +149,7 @@ impl Effects {
                 |b| matches!(b, Bsdf::Diffuse { albedo, texture: Some(_) } if *albedo != Vec3::ZERO),
             ),
             shading_normals: scene.triangles.iter().any(|t| t.n.is_some()),
+            media,
         }
     }
 
@@ -152,6 +173,7 @@ impl Effects {
             (self.refraction, "refraction"),
             (self.textures, "textures"),
             (self.shading_normals, "shading-normals"),
+            (self.media, "media"),
         ];
         flags
             .into_iter()

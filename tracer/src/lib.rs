@@ -6,10 +6,12 @@
 //! - [`scene`]: the in-memory scene ([`Scene`]) and its loader from TOML + OBJ/MTL files, with
 //!   validation that names file, line and problem.
 //! - [`geometry`]: rays, the watertight triangle test, the BVH (built by obvhs, collapsed into
-//!   4-wide nodes, traversed by our own robust slab test with four boxes and four triangles per
+//!   8-wide nodes, traversed by our own robust slab test with eight boxes and four triangles per
 //!   SIMD step, each lane exactly the scalar test), and the spawn-offset rule for secondary rays.
 //! - [`material`]: the closed set of materials ([`Material`]) and their BSDFs in a local frame.
 //! - [`effects`]: the light-transport effects a scene calls for, so absent ones cost nothing.
+//! - [`medium`]: homogeneous participating media (absorption, Henyey-Greenstein scattering),
+//!   their free-flight sampling (spectral MIS over the RGB channels) and transmittance.
 //! - [`lights`]: area, point and environment lights and their power-proportional sampling.
 //! - [`environment`]: the constant or lat-long map environment and the map's importance sampling,
 //!   on the piecewise-constant densities of [`distribution`].
@@ -26,6 +28,7 @@ pub mod geometry;
 pub mod integrator;
 pub mod lights;
 pub mod material;
+pub mod medium;
 pub mod output;
 pub mod sampler;
 pub mod scene;

@@ -25,6 +25,8 @@ pub const DIMENSIONS_PER_BOUNCE: u32 = 7;
 pub struct PixelSampler {
     key: u64,
     dimension: u32,
+    /// The bounce [`PixelSampler::start_bounce`] last started, which keys the medium stream.
+    bounce: u32,
 }
 
 impl PixelSampler {
@@ -33,12 +35,17 @@ impl PixelSampler {
         key = mix(key ^ u64::from(frame));
         key = mix(key ^ (u64::from(x) << 32 | u64::from(y)));
         key = mix(key ^ u64::from(sample));
-        Self { key, dimension: 0 }
+        Self {
+            key,
+            dimension: 0,
+            bounce: 0,
+        }
     }
 
     /// Moves to the first dimension of bounce `bounce` (0 is the camera ray's first hit).
     pub fn start_bounce(&mut self, bounce: u32) {
         self.dimension = CAMERA_DIMENSIONS + bounce * DIMENSIONS_PER_BOUNCE;
+        self.bounce = bounce;
     }
 
     /// The next number, uniform in [0, 1).
@@ -60,13 +67,28 @@ impl PixelSampler {
         let mut lens = PixelSampler {
             key: mix(self.key ^ LENS_STREAM),
             dimension: 0,
+            bounce: 0,
         };
         lens.next_2d()
+    }
+
+    /// The channel choice and the free-flight distance of the current bounce's segment through
+    /// a medium, in [0, 1)^2: a pair in the medium stream of this bounce, independent of every
+    /// other number and the same however often it is asked for.
+    pub fn medium(&self) -> Vec2 {
+        let mut medium = PixelSampler {
+            key: mix(mix(self.key ^ MEDIUM_STREAM) ^ u64::from(self.bounce)),
+            dimension: 0,
+            bounce: 0,
+        };
+        medium.next_2d()
     }
 }
 
 /// Tells the lens's stream from the main one (any constant that is not a small integer would do).
 const LENS_STREAM: u64 = 0x1e45_0000_0000_0001;
+/// Tells the media's streams from the others, as [`LENS_STREAM`] does.
+const MEDIUM_STREAM: u64 = 0x3ed1_0000_0000_0002;
 
 /// The SplitMix64 finaliser: a bijection on u64 with full avalanche.
 fn mix(mut z: u64) -> u64 {
@@ -131,6 +153,34 @@ mod tests {
         );
         assert!(!main.contains(&lens.x) && !main.contains(&lens.y));
         assert_ne!(PixelSampler::new(1, 0, 0, 0, 1).lens(), lens);
+    }
+
+    #[test]
+    fn medium_streams_are_per_bounce_and_apart_from_the_main_one() {
+        let mut s = PixelSampler::new(1, 0, 0, 0, 0);
+        let mut seen = Vec::new();
+        for bounce in 0..16 {
+            s.start_bounce(bounce);
+            let m = s.medium();
+            assert_eq!(s.medium(), m, "asking twice gives the same pair");
+            let main = s.next_2d();
+            assert_ne!(m, main);
+            seen.push(m);
+        }
+        seen.sort_by(|a, b| a.x.total_cmp(&b.x));
+        seen.dedup();
+        assert_eq!(seen.len(), 16, "every bounce has its own pair");
+        let mut t = PixelSampler::new(1, 0, 0, 0, 0);
+        t.start_bounce(3);
+        let before = t.next_1d();
+        let mut u = PixelSampler::new(1, 0, 0, 0, 0);
+        u.start_bounce(3);
+        let _ = u.medium();
+        assert_eq!(
+            u.next_1d(),
+            before,
+            "drawing the medium pair shifts no main number"
+        );
     }
 
     #[test]

@@ -199,9 +199,34 @@ impl Accel {
         traversal: Traversal,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
+        self.closest_with::<false>(ray, traversal, stats)
+    }
+
+    /// The closest hit among those a shadow ray must respect: [`Accel::intersect_with`] whose
+    /// first accepted hit must be *certain*, as [`Accel::occluded_with`] counts it, so that
+    /// `intersect_certain_with(..).is_some() == occluded_with(..)` to the bit. Transmittance
+    /// along shadow rays needs the closest blocker (to see whether it is a boundary the ray may
+    /// pass), where occlusion needs only any. obvhs's traversal has no certainty rule, for
+    /// either query, so it gives its plain closest hit.
+    pub fn intersect_certain_with(
+        &self,
+        ray: &Ray,
+        traversal: Traversal,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
+        self.closest_with::<true>(ray, traversal, stats)
+    }
+
+    /// The closest hit by `traversal`, whose first accepted hit must be certain with `CERTAIN`.
+    fn closest_with<const CERTAIN: bool>(
+        &self,
+        ray: &Ray,
+        traversal: Traversal,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
         match traversal {
-            Traversal::Robust => self.traverse_wide::<false>(ray, stats),
-            Traversal::RobustBinary => self.traverse_robust::<false>(ray, stats),
+            Traversal::Robust => self.traverse_wide::<false, CERTAIN>(ray, stats),
+            Traversal::RobustBinary => self.traverse_robust::<false, CERTAIN>(ray, stats),
             Traversal::Obvhs => self.traverse_obvhs::<false>(ray, stats),
         }
     }
@@ -214,8 +239,8 @@ impl Accel {
         stats: &mut TraversalStats,
     ) -> bool {
         match traversal {
-            Traversal::Robust => self.traverse_wide::<true>(ray, stats).is_some(),
-            Traversal::RobustBinary => self.traverse_robust::<true>(ray, stats).is_some(),
+            Traversal::Robust => self.traverse_wide::<true, true>(ray, stats).is_some(),
+            Traversal::RobustBinary => self.traverse_robust::<true, true>(ray, stats).is_some(),
             Traversal::Obvhs => self.traverse_obvhs::<true>(ray, stats).is_some(),
         }
     }

@@ -79,7 +79,7 @@ struct StackEntry {
 
 impl Accel {
     /// Closest hit (or, with `ANY_HIT`, the first hit found) by our robust traversal.
-    pub(super) fn traverse_robust<const ANY_HIT: bool>(
+    pub(super) fn traverse_robust<const ANY_HIT: bool, const CERTAIN: bool>(
         &self,
         ray: &Ray,
         stats: &mut TraversalStats,
@@ -89,10 +89,10 @@ impl Accel {
         }
         if self.depth <= INLINE_STACK {
             let mut stack = [StackEntry::default(); INLINE_STACK];
-            self.robust_with_stack::<ANY_HIT>(ray, stats, &mut stack)
+            self.robust_with_stack::<ANY_HIT, CERTAIN>(ray, stats, &mut stack)
         } else {
             let mut stack = vec![StackEntry::default(); self.depth];
-            self.robust_with_stack::<ANY_HIT>(ray, stats, &mut stack)
+            self.robust_with_stack::<ANY_HIT, CERTAIN>(ray, stats, &mut stack)
         }
     }
 
@@ -103,7 +103,7 @@ impl Accel {
     /// descended into later: large triangles high in the tree (walls, floors) then bound the
     /// search, or end an any-hit query, before any deeper subtree is opened.
     #[inline(always)]
-    fn robust_with_stack<const ANY_HIT: bool>(
+    fn robust_with_stack<const ANY_HIT: bool, const CERTAIN: bool>(
         &self,
         ray: &Ray,
         stats: &mut TraversalStats,
@@ -112,7 +112,7 @@ impl Accel {
         let nodes = &self.bvh.nodes;
         let slab = SlabRay::new(ray);
         let sheared = ShearedRay::new(ray);
-        let mut closest = Closest::new(ray, ANY_HIT);
+        let mut closest = Closest::new(ray, CERTAIN);
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
 
         stats.nodes += 1;

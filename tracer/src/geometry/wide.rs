@@ -164,7 +164,7 @@ const INLINE_STACK: usize = (WIDTH - 1) * 30;
 impl Accel {
     /// Closest hit (or, with `ANY_HIT`, the first certain hit found) by the wide traversal,
     /// with the box test [`Bvh8::simd`] names.
-    pub(super) fn traverse_wide<const ANY_HIT: bool>(
+    pub(super) fn traverse_wide<const ANY_HIT: bool, const CERTAIN: bool>(
         &self,
         ray: &Ray,
         stats: &mut TraversalStats,
@@ -176,9 +176,9 @@ impl Accel {
         if self.wide.simd == BoxSimd::Avx {
             // SAFETY: `simd` is `Avx` only where `is_x86_feature_detected!("avx")` said yes
             // (`best_simd`, `Accel::set_box_simd`).
-            return unsafe { self.traverse_avx::<ANY_HIT>(ray, stats) };
+            return unsafe { self.traverse_avx::<ANY_HIT, CERTAIN>(ray, stats) };
         }
-        self.traverse_with::<ANY_HIT, Portable>(ray, stats)
+        self.traverse_with::<ANY_HIT, CERTAIN, Portable>(ray, stats)
     }
 
     /// The traversal compiled with AVX enabled: its box test inlined as AVX instructions, and
@@ -190,16 +190,16 @@ impl Accel {
     /// The processor must support AVX.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    unsafe fn traverse_avx<const ANY_HIT: bool>(
+    unsafe fn traverse_avx<const ANY_HIT: bool, const CERTAIN: bool>(
         &self,
         ray: &Ray,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
-        self.traverse_with::<ANY_HIT, Avx>(ray, stats)
+        self.traverse_with::<ANY_HIT, CERTAIN, Avx>(ray, stats)
     }
 
     #[inline(always)]
-    fn traverse_with<const ANY_HIT: bool, B: BoxTest>(
+    fn traverse_with<const ANY_HIT: bool, const CERTAIN: bool, B: BoxTest>(
         &self,
         ray: &Ray,
         stats: &mut TraversalStats,
@@ -208,10 +208,10 @@ impl Accel {
         if self.wide.depth * needed <= INLINE_STACK {
             // Uninitialised: filling 210 entries per ray would cost more than a node test.
             let mut stack = [MaybeUninit::<StackEntry>::uninit(); INLINE_STACK];
-            self.wide_with_stack::<ANY_HIT, B>(ray, stats, &mut stack)
+            self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, stats, &mut stack)
         } else {
             let mut stack = vec![MaybeUninit::uninit(); self.wide.depth * needed];
-            self.wide_with_stack::<ANY_HIT, B>(ray, stats, &mut stack)
+            self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, stats, &mut stack)
         }
     }
 
@@ -219,7 +219,7 @@ impl Accel {
     /// current path leaves at most seven postponed siblings on it. Entries below `len` are
     /// always initialised: every push writes one before `len` grows past it.
     #[inline(always)]
-    fn wide_with_stack<const ANY_HIT: bool, B: BoxTest>(
+    fn wide_with_stack<const ANY_HIT: bool, const CERTAIN: bool, B: BoxTest>(
         &self,
         ray: &Ray,
         stats: &mut TraversalStats,
@@ -229,7 +229,7 @@ impl Accel {
         let wide = WideRay::new(ray);
         let sheared = ShearedRay::new(ray);
         let quad_ray = QuadRay::new(&sheared);
-        let mut closest = Closest::new(ray, ANY_HIT);
+        let mut closest = Closest::new(ray, CERTAIN);
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         let mut node = &nodes[0];
         let mut len = 0usize;

@@ -47,6 +47,11 @@ pub struct Material {
     pub bsdf: Bsdf,
     /// Emitted radiance from the front face (the winding normal's side); zero when not a light.
     pub emission: Vec3,
+    /// The medium filling the closed object this material bounds (an index into
+    /// `Scene::media`), for glass and interfaces; `None` is vacuum. A path that crosses the
+    /// surface against its normal enters this medium, and one that crosses it along the normal
+    /// returns to the scene's outside medium (`Scene::camera_medium`).
+    pub interior: Option<u32>,
 }
 
 /// The closed set of scattering models.
@@ -65,6 +70,10 @@ pub enum Bsdf {
     /// Smooth glass: Fresnel reflection and refraction with index `ior` (outside is vacuum), and a
     /// transmission `tint`.
     Dielectric { ior: f32, tint: Vec3 },
+    /// An index-matched boundary: light passes straight through, unchanged. It only marks
+    /// where a medium begins ([`Material::interior`]); the integrator crosses it without
+    /// counting a scattering event, and shadow rays pass it too.
+    Interface,
 }
 
 /// One direction drawn by [`Bsdf::sample`], in the local frame.
@@ -97,7 +106,7 @@ impl Bsdf {
                 Some((wo, wi)) => Ggx::new(f0, alpha).eval(wo, wi),
                 None => Vec3::ZERO,
             },
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } => Vec3::ZERO,
+            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Interface => Vec3::ZERO,
         }
     }
 
@@ -114,7 +123,7 @@ impl Bsdf {
                 Some((wo, wi)) => Ggx::new(f0, alpha).pdf(wo, wi),
                 None => 0.0,
             },
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } => 0.0,
+            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Interface => 0.0,
         }
     }
 
@@ -156,18 +165,28 @@ impl Bsdf {
                 })
             }
             Bsdf::Dielectric { ior, tint } => sample_dielectric(ior, tint, wo, u_choice),
+            Bsdf::Interface => Some(BsdfSample {
+                wi: -wo,
+                weight: Vec3::ONE,
+                pdf: 1.0,
+                delta: true,
+                transmission: true,
+            }),
         }
     }
 
     /// Whether every direction the BSDF scatters into comes from a delta lobe, so that `eval`
     /// and `pdf` are zero everywhere and light sampling is useless.
     pub fn is_delta(&self) -> bool {
-        matches!(self, Bsdf::Mirror { .. } | Bsdf::Dielectric { .. })
+        matches!(
+            self,
+            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Interface
+        )
     }
 
     /// Whether light can pass through the surface (the path may change sides).
     pub fn has_transmission(&self) -> bool {
-        matches!(self, Bsdf::Dielectric { .. })
+        matches!(self, Bsdf::Dielectric { .. } | Bsdf::Interface)
     }
 
     /// The texture that still has to be resolved into the albedo, if any.

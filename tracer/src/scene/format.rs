@@ -27,6 +27,8 @@ pub(crate) struct SceneSpec {
     pub materials: BTreeMap<Spanned<String>, MaterialSpec>,
     #[serde(default, rename = "light")]
     pub lights: Vec<LightSpec>,
+    #[serde(default)]
+    pub media: BTreeMap<Spanned<String>, MediumSpec>,
     pub environment: Option<Spanned<EnvironmentSpec>>,
 }
 
@@ -67,6 +69,8 @@ pub(crate) struct CameraSpec {
     pub vfov: Option<Fov>,
     pub aperture_radius: Option<NonNegative>,
     pub focus_distance: Option<Positive>,
+    /// The medium outside every object, where the camera starts: global fog.
+    pub medium: Option<Spanned<String>>,
     #[serde(default)]
     pub keys: Vec<Spanned<CameraKeySpec>>,
 }
@@ -182,6 +186,8 @@ pub(crate) struct MaterialSpec {
     pub tint: Option<Reflectance>,
     pub roughness: Option<Roughness>,
     pub emission: Option<Radiance>,
+    /// The medium inside the object (glass and interfaces only).
+    pub medium: Option<Spanned<String>>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
@@ -192,6 +198,19 @@ pub(crate) enum MaterialKind {
     Glass,
     Metal,
     Emissive,
+    Interface,
+}
+
+/// A `[media.NAME]` table: `sigma_a` and `sigma_s`, or `albedo` and `density`, and `g`. Which
+/// keys go together is checked by the loader.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct MediumSpec {
+    pub sigma_a: Option<Radiance>,
+    pub sigma_s: Option<Radiance>,
+    pub albedo: Option<Reflectance>,
+    pub density: Option<Radiance>,
+    pub g: Option<Anisotropy>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -294,6 +313,9 @@ pub(crate) struct Fov(pub f32);
 /// An index of refraction, at least 1.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Ior(pub f32);
+/// A Henyey-Greenstein asymmetry in (-1, 1).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Anisotropy(pub f32);
 /// A GGX roughness (alpha) in (0, 1].
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Roughness(pub f32);
@@ -362,6 +384,11 @@ checked_type!(Ior, f32, |v| in_range(
     v,
     |v| v >= 1.0,
     "must be at least 1"
+));
+checked_type!(Anisotropy, f32, |v| in_range(
+    v,
+    |v| v > -1.0 && v < 1.0,
+    "must be in (-1, 1): |g| = 1 is a delta, not a phase function"
 ));
 checked_type!(Roughness, f32, |v| in_range(
     v,

@@ -90,7 +90,7 @@ pub fn load_with_report(
         log,
         toml: &toml,
         text,
-        table: MaterialTable::new(&toml, text, &spec.materials),
+        table: MaterialTable::new(&toml, text, &spec.materials, &spec.media),
         triangles: Vec::new(),
         report: LoadReport::default(),
     };
@@ -101,6 +101,13 @@ pub fn load_with_report(
         return Err(SceneError::in_file(&toml, "the scene has no triangles"));
     }
     if let Some(unused) = builder.table.unused_definition() {
+        return Err(unused);
+    }
+    let camera_medium = match &spec.camera.get_ref().medium {
+        Some(name) => Some(builder.table.media.medium("[camera] `medium`", name)?),
+        None => None,
+    };
+    if let Some(unused) = builder.table.media.unused_definition() {
         return Err(unused);
     }
     let environment = environment(&mut builder.log, &toml, text, spec.environment.as_ref())?;
@@ -119,6 +126,8 @@ pub fn load_with_report(
         textures: table.textures,
         point_lights: spec.lights.iter().map(point_light).collect(),
         environment,
+        media: table.media.media,
+        camera_medium,
         files: log.into_read(),
     };
     Ok((scene, report))

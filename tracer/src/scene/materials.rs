@@ -1,4 +1,7 @@
-//! The scene's material and texture tables.
+//! The scene's material, texture and medium tables.
+//!
+//! Media (`[media.NAME]`) enter the same way, when a material's or the camera's `medium` key
+//! first names them ([`MediumTable`]), and a table that nothing uses is an error.
 //!
 //! Materials come from two places: `[materials.NAME]` tables of the TOML and `newmtl` blocks of
 //! MTL files. A TOML table replaces every MTL material of the same name, which is how a scene
@@ -9,9 +12,10 @@
 use super::Texture;
 use super::error::{SceneError, line_of};
 use super::files::FileLog;
-use super::format::{MaterialKind, MaterialSpec};
+use super::format::{MaterialKind, MaterialSpec, MediumSpec};
 use super::mtl::MtlMaterial;
 use crate::material::{Bsdf, Material};
+use crate::medium::Medium;
 use glam::Vec3;
 use std::collections::{BTreeMap, BTreeSet};
 use toml::Spanned;
@@ -27,6 +31,8 @@ pub(crate) struct MaterialTable<'a> {
     pub textures: Vec<Texture>,
     /// Decoded textures by path relative to the scene's folder.
     texture_ids: BTreeMap<String, u32>,
+    /// The media that materials (and the camera) bind.
+    pub media: MediumTable<'a>,
 }
 
 /// Materials are shared by identity: a TOML material by name, an MTL material by file and name.
@@ -41,8 +47,10 @@ impl<'a> MaterialTable<'a> {
         toml: &'a str,
         text: &'a str,
         defined: &'a BTreeMap<Spanned<String>, MaterialSpec>,
+        media: &'a BTreeMap<Spanned<String>, MediumSpec>,
     ) -> Self {
         MaterialTable {
+            media: MediumTable::new(toml, text, media),
             toml,
             text,
             defined,
@@ -106,16 +114,13 @@ impl<'a> MaterialTable<'a> {
 
     /// A TOML material table that nothing used: most likely a misspelt name.
     pub(crate) fn unused_definition(&self) -> Option<SceneError> {
-        let (name, _) = self
-            .defined
-            .iter()
-            .find(|(n, _)| !self.used_defined.contains(n.get_ref()))?;
-        let line = line_of(self.text, name.span().start);
-        let detail = format!(
-            "[materials.{}] matches no MTL material and no object uses it",
-            name.get_ref()
-        );
-        Some(SceneError::at_line(self.toml, line, detail))
+        unused_table(
+            self.toml,
+            self.text,
+            self.defined,
+            &self.used_defined,
+            |name| format!("[materials.{name}] matches no MTL material and no object uses it"),
+        )
     }
 
     fn add(&mut self, key: MaterialKey, material: Material) -> u32 {
@@ -139,15 +144,16 @@ impl<'a> MaterialTable<'a> {
         };
         let Some(kind) = spec.kind else {
             return Err(err(
-                "needs `type` (diffuse, mirror, glass, metal or emissive)",
+                "needs `type` (diffuse, mirror, glass, metal, emissive or interface)",
             ));
         };
         let (type_name, allowed): (&str, &[&str]) = match kind {
-            MaterialKind::Diffuse => ("diffuse", &["albedo", "texture"]),
-            MaterialKind::Mirror => ("mirror", &["reflectance"]),
-            MaterialKind::Glass => ("glass", &["ior", "tint"]),
-            MaterialKind::Metal => ("metal", &["reflectance", "roughness"]),
-            MaterialKind::Emissive => ("emissive", &["albedo"]),
+            MaterialKind::Diffuse => ("diffuse", &["albedo", "texture", "emission"]),
+            MaterialKind::Mirror => ("mirror", &["reflectance", "emission"]),
+            MaterialKind::Glass => ("glass", &["ior", "tint", "medium", "emission"]),
+            MaterialKind::Metal => ("metal", &["reflectance", "roughness", "emission"]),
+            MaterialKind::Emissive => ("emissive", &["albedo", "emission"]),
+            MaterialKind::Interface => ("interface", &["medium"]),
         };
         let given = [
             ("albedo", spec.albedo.is_some()),
@@ -156,6 +162,8 @@ impl<'a> MaterialTable<'a> {
             ("ior", spec.ior.is_some()),
             ("tint", spec.tint.is_some()),
             ("roughness", spec.roughness.is_some()),
+            ("medium", spec.medium.is_some()),
+            ("emission", spec.emission.is_some()),
         ];
         if let Some((key, _)) = given
             .iter()
@@ -198,11 +206,20 @@ impl<'a> MaterialTable<'a> {
                 albedo: spec.albedo.map_or(Vec3::ZERO, |a| a.0),
                 texture: None,
             },
+            MaterialKind::Interface => Bsdf::Interface,
+        };
+        let interior = match &spec.medium {
+            Some(medium) => {
+                let key = format!("[materials.{}] `medium`", name.get_ref());
+                Some(self.media.medium(&key, medium)?)
+            }
+            None => None,
         };
         Ok(Material {
             name: name.get_ref().clone(),
             bsdf,
             emission,
+            interior,
         })
     }
 
@@ -248,5 +265,117 @@ fn decode_texture(bytes: &[u8]) -> Result<Texture, image::ImageError> {
         width: image.width(),
         height: image.height(),
         texels,
+    })
+}
+
+/// The `[media.NAME]` tables, resolved by name where a `medium` key uses them; each enters
+/// `Scene::media` once, when first used, in first-use order.
+pub(crate) struct MediumTable<'a> {
+    toml: &'a str,
+    text: &'a str,
+    defined: &'a BTreeMap<Spanned<String>, MediumSpec>,
+    used: BTreeSet<String>,
+    pub media: Vec<Medium>,
+    ids: BTreeMap<String, u32>,
+}
+
+impl<'a> MediumTable<'a> {
+    pub(crate) fn new(
+        toml: &'a str,
+        text: &'a str,
+        defined: &'a BTreeMap<Spanned<String>, MediumSpec>,
+    ) -> Self {
+        MediumTable {
+            toml,
+            text,
+            defined,
+            used: BTreeSet::new(),
+            media: Vec::new(),
+            ids: BTreeMap::new(),
+        }
+    }
+
+    /// The id of the medium `name`, referenced where `name`'s span says (`key` names the
+    /// referencing key in messages).
+    pub(crate) fn medium(&mut self, key: &str, name: &Spanned<String>) -> Result<u32, SceneError> {
+        if let Some(&id) = self.ids.get(name.get_ref()) {
+            return Ok(id);
+        }
+        let Some((definition, spec)) = self.defined.get_key_value(name.get_ref().as_str()) else {
+            let line = line_of(self.text, name.span().start);
+            let name = name.get_ref();
+            let detail =
+                format!("{key}: medium `{name}` is not defined: add a [media.{name}] table");
+            return Err(SceneError::at_line(self.toml, line, detail));
+        };
+        let line = line_of(self.text, definition.span().start);
+        let medium = medium_of(spec).map_err(|detail| {
+            let detail = format!("[media.{}]: {detail}", definition.get_ref());
+            SceneError::at_line(self.toml, line, detail)
+        })?;
+        let id = self.media.len() as u32;
+        self.media.push(medium);
+        self.ids.insert(name.get_ref().clone(), id);
+        self.used.insert(name.get_ref().clone());
+        Ok(id)
+    }
+
+    /// A `[media.NAME]` table that nothing used.
+    pub(crate) fn unused_definition(&self) -> Option<SceneError> {
+        unused_table(self.toml, self.text, self.defined, &self.used, |name| {
+            format!("[media.{name}] is used by no material's and not by the camera's `medium`")
+        })
+    }
+}
+
+/// The first table of `defined` whose name `used` lacks, as an error at its line saying
+/// `message(name)`: a table nothing uses is most likely a misspelt name.
+fn unused_table<T>(
+    toml: &str,
+    text: &str,
+    defined: &BTreeMap<Spanned<String>, T>,
+    used: &BTreeSet<String>,
+    message: impl Fn(&str) -> String,
+) -> Option<SceneError> {
+    let (name, _) = defined.iter().find(|(n, _)| !used.contains(n.get_ref()))?;
+    let line = line_of(text, name.span().start);
+    Some(SceneError::at_line(toml, line, message(name.get_ref())))
+}
+
+/// The medium a table describes: `sigma_a` and `sigma_s` (either may be left out, as 0), or
+/// `albedo` and `density` (`sigma_s = albedo * density`, `sigma_a = density - sigma_s`). The
+/// value checks (no negative coefficient, albedo in [0, 1], |g| < 1) ran when parsing.
+fn medium_of(spec: &MediumSpec) -> Result<Medium, String> {
+    let coefficients = spec.sigma_a.is_some() || spec.sigma_s.is_some();
+    let albedo_form = spec.albedo.is_some() || spec.density.is_some();
+    let (sigma_a, sigma_s) = match (coefficients, albedo_form) {
+        (true, true) => {
+            return Err(
+                "give `sigma_a` and `sigma_s`, or `albedo` and `density`, not keys of both".into(),
+            );
+        }
+        (false, false) => {
+            return Err("needs `sigma_a` and `sigma_s`, or `albedo` and `density`".into());
+        }
+        (true, false) => (
+            spec.sigma_a.map_or(Vec3::ZERO, |s| s.0),
+            spec.sigma_s.map_or(Vec3::ZERO, |s| s.0),
+        ),
+        (false, true) => {
+            let (Some(albedo), Some(density)) = (spec.albedo, spec.density) else {
+                return Err("`albedo` and `density` go together: give both".into());
+            };
+            let sigma_s = albedo.0 * density.0;
+            // Clamped: rounding must not leave a negative absorption at albedo 1.
+            ((density.0 - sigma_s).max(Vec3::ZERO), sigma_s)
+        }
+    };
+    if !(sigma_a + sigma_s).is_finite() {
+        return Err("`sigma_a + sigma_s` overflows 32-bit floats".into());
+    }
+    Ok(Medium {
+        sigma_a,
+        sigma_s,
+        g: spec.g.map_or(0.0, |g| g.0),
     })
 }

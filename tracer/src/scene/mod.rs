@@ -24,6 +24,7 @@ pub use texture::Texture;
 
 use crate::environment::Environment;
 use crate::material::Material;
+use crate::medium::Medium;
 use glam::{Vec2, Vec3};
 
 /// A scene ready to render.
@@ -38,6 +39,11 @@ pub struct Scene {
     pub point_lights: Vec<PointLight>,
     /// The radiance arriving along directions that escape the scene (constant or a map), if any.
     pub environment: Option<Environment>,
+    /// The media that materials bind ([`Material::interior`]) and the camera starts in, in
+    /// first-use order.
+    pub media: Vec<Medium>,
+    /// The medium outside every object, where camera rays start (global fog); `None` is vacuum.
+    pub camera_medium: Option<u32>,
     /// Every file the scene was read from (the TOML first), relative to the TOML's folder, so a
     /// frame owner can ship the scene to peers that share no filesystem with it.
     pub files: Vec<String>,

@@ -195,6 +195,8 @@ impl MtlMaterial {
             name: self.name.clone(),
             bsdf,
             emission,
+            // MTL has no media; a TOML material of the same name can bind one.
+            interior: None,
         })
     }
 

@@ -7,6 +7,16 @@
 //! numbers from a fixed block of dimensions ([`crate::sampler::DIMENSIONS_PER_BOUNCE`]), all of
 //! them drawn whether used or not, so skipping an absent effect never shifts a later number.
 //!
+//! Participating media (`scatter.rs`, [`crate::medium`]): where the scene has them, every ray
+//! first samples a free flight through the medium it is in; a scattering there is a bounce like
+//! a surface's (next-event estimation through the phase function, then a phase-sampled
+//! direction, from the same block of random numbers), and a path crosses index-matched
+//! interfaces without counting a bounce. Contributions are divided by the mean of the path's
+//! spectral density ratios (the balance heuristic over hero channels).
+//!
+//! Module map: `scatter` (a BSDF or a phase function as next-event estimation sees it, the
+//! bounce's random numbers, which medium a path is in, and shadow-ray transmittance).
+//!
 //! Specialisation: every branch guarded by a flag of [`Effects`] is one whose work would add
 //! exactly zero when the scene lacks the effect (see [`crate::effects`] for the argument, flag by
 //! flag); the per-sample counters in [`PathStats`] let tests check that the skipped work is
@@ -17,11 +27,15 @@ use crate::geometry::{
     Accel, Hit, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats, on_huge_pages,
     spawn_ray, spawn_ray_to,
 };
-use crate::lights::{EnvironmentSampling, Lights};
+use crate::lights::{EnvironmentSampling, LightSample, Lights};
 use crate::material::{Bsdf, Frame};
+use crate::medium::{Flight, hero_channel, mean_ratio, sample_henyey_greenstein};
 use crate::sampler::PixelSampler;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
+use scatter::{BounceNumbers, Phase, Scatterer, SurfaceScatter};
+
+mod scatter;
 
 /// A scene prepared for rendering: its acceleration structure, lights and effect set.
 pub struct World {
@@ -54,6 +68,11 @@ pub struct PathStats {
     pub environment_lookups: u64,
     /// Samples whose radiance came out non-finite and were dropped (a bug if ever non-zero).
     pub invalid_samples: u64,
+    /// Free flights sampled through a medium (one per ray where media are tracked, vacuum
+    /// included).
+    pub flights: u64,
+    /// Of those, the ones that scattered in the medium (and were shaded there).
+    pub medium_scatters: u64,
 }
 
 impl PathStats {
@@ -67,11 +86,14 @@ impl PathStats {
         self.refractions += other.refractions;
         self.environment_lookups += other.environment_lookups;
         self.invalid_samples += other.invalid_samples;
+        self.flights += other.flights;
+        self.medium_scatters += other.medium_scatters;
     }
 
     /// The deterministic cost of the work counted here, in abstract units of about one BVH node
     /// visit: one per node visited and per triangle tested, 12 per ray that is shaded (a
-    /// closest-hit ray that hits a surface: BSDF sampling and light choice) and per shadow ray
+    /// closest-hit ray that hits a surface, or a scattering in a medium: BSDF or phase sampling
+    /// and light choice) and per shadow ray
     /// (light sampling and the any-hit query's set-up), 4 per ray that escapes. The weights come
     /// from timing every 16x16 tile of the shipped and shared scenes alone
     /// (`cargo run --release -p sim --example fit_work`): a single charge of 16 for every ray
@@ -84,7 +106,7 @@ impl PathStats {
         let escaped = self.rays - self.hits;
         self.traversal.nodes
             + self.traversal.triangles
-            + SHADED * (self.hits + self.shadow_rays)
+            + SHADED * (self.hits + self.shadow_rays + self.medium_scatters)
             + ESCAPED * escaped
     }
 }
@@ -133,13 +155,88 @@ impl World {
         let mut last_delta = true;
         let mut last_point = ray.origin;
         let mut depth = 0u32;
+        // The block of random numbers the next ray draws from: one per ray, so it runs ahead of
+        // `depth` only where a path crosses an index-matched interface, which scatters nothing.
+        // Without interfaces it is `depth`, as before media existed.
+        let mut segment = 0u32;
+        let mut medium = self.scene.camera_medium;
+        // Spectral MIS through media (`crate::medium`): the channel that samples every flight,
+        // picked at the path's first, and each channel's path density over the hero's. Without
+        // media the ratios stay exactly 1, and dividing by their mean (1) moves no bit.
+        let mut hero = None;
+        let mut ratio = Vec3::ONE;
         loop {
-            sampler.start_bounce(depth);
+            sampler.start_bounce(segment);
+            segment += 1;
             stats.rays += 1;
-            let Some(hit) = self
+            let found = self
                 .accel
-                .intersect_with(&ray, self.traversal, &mut stats.traversal)
-            else {
+                .intersect_with(&ray, self.traversal, &mut stats.traversal);
+            if effects.media {
+                stats.flights += 1;
+                let length = ray.dir.length();
+                let t_end = found.map_or(f32::INFINITY, |h| h.t * length);
+                let u = sampler.medium();
+                let hero = *hero.get_or_insert_with(|| hero_channel(u.x));
+                let in_medium = self.flight_medium(medium, found.is_none());
+                match in_medium.sample_flight(t_end, hero, u.y) {
+                    Flight::Pass {
+                        weight,
+                        ratio: flight_ratio,
+                    } => {
+                        beta *= weight;
+                        ratio *= flight_ratio;
+                    }
+                    Flight::Scatter {
+                        distance,
+                        weight,
+                        ratio: flight_ratio,
+                    } => {
+                        beta *= weight;
+                        ratio *= flight_ratio;
+                        stats.medium_scatters += 1;
+                        // A medium that only absorbs gives a scattering weight of zero: the
+                        // path carries nothing further.
+                        if beta == Vec3::ZERO
+                            || !beta.is_finite()
+                            || settings.max_depth.is_some_and(|max| depth >= max)
+                        {
+                            break;
+                        }
+                        let at = SurfacePoint::exact(ray.origin + ray.dir * (distance / length));
+                        let phase = Phase {
+                            wo: -ray.dir / length,
+                            g: in_medium.g,
+                        };
+                        let u = BounceNumbers::draw(sampler);
+                        if effects.has_lights() {
+                            radiance += self.weighed(beta, ratio)
+                                * self.direct_light(
+                                    &phase,
+                                    &at,
+                                    medium,
+                                    u.light_choice,
+                                    u.light,
+                                    stats,
+                                );
+                        }
+                        let (wi, pdf) = sample_henyey_greenstein(phase.wo, phase.g, u.scatter);
+                        last_pdf = pdf;
+                        last_delta = false;
+                        last_point = at.p;
+                        depth += 1;
+                        if !self.roulette(depth, u.roulette, ratio, &mut beta) {
+                            break;
+                        }
+                        ray = spawn_ray(&at, wi, self.offset);
+                        continue;
+                    }
+                }
+                if beta == Vec3::ZERO || !beta.is_finite() {
+                    break;
+                }
+            }
+            let Some(hit) = found else {
                 if effects.environment
                     && let Some(environment) = &self.scene.environment
                 {
@@ -150,13 +247,20 @@ impl World {
                         let light_pdf = self.lights.environment_pdf(&self.scene, ray.dir);
                         power_heuristic(last_pdf, light_pdf)
                     };
-                    radiance += beta * environment.radiance(ray.dir) * weight;
+                    radiance += self.weighed(beta, ratio) * environment.radiance(ray.dir) * weight;
                 }
                 break;
             };
             stats.hits += 1;
             let surface = self.surface(&ray, &hit);
             let material = &self.scene.materials[surface.material as usize];
+            if effects.media && material.bsdf == Bsdf::Interface {
+                // Straight on into the medium beyond, as if nothing were there: no scattering
+                // event, so neither the depth nor the last scattering's densities change.
+                medium = self.medium_across(material, surface.front_facing);
+                ray = spawn_ray(&surface.at, ray.dir, self.offset);
+                continue;
+            }
 
             if effects.area_lights && material.emission != Vec3::ZERO && surface.front_facing {
                 let weight = if last_delta {
@@ -167,7 +271,7 @@ impl World {
                             .triangle_pdf(hit.triangle, last_point, surface.at.p);
                     power_heuristic(last_pdf, light_pdf)
                 };
-                radiance += beta * material.emission * weight;
+                radiance += self.weighed(beta, ratio) * material.emission * weight;
             }
             if settings.max_depth.is_some_and(|max| depth >= max) {
                 break;
@@ -176,31 +280,33 @@ impl World {
             let bsdf = self.resolve(&material.bsdf, &surface);
             let frame = Frame::from_normal(surface.shading_normal);
             let wo = frame.to_local(-ray.dir);
-            // The bounce's random numbers, all drawn, in a fixed order.
-            let u_light_choice = sampler.next_1d();
-            let u_light = sampler.next_2d();
-            let u_bsdf_choice = sampler.next_1d();
-            let u_bsdf = sampler.next_2d();
-            let u_roulette = sampler.next_1d();
+            let u = BounceNumbers::draw(sampler);
 
             if effects.shadows && !bsdf.is_delta() {
-                radiance += beta
+                let scatter = SurfaceScatter {
+                    bsdf: &bsdf,
+                    frame: &frame,
+                    wo,
+                };
+                radiance += self.weighed(beta, ratio)
                     * self.direct_light(
-                        &bsdf,
-                        &frame,
-                        wo,
-                        &surface,
-                        u_light_choice,
-                        u_light,
+                        &scatter,
+                        &surface.at,
+                        medium,
+                        u.light_choice,
+                        u.light,
                         stats,
                     );
             }
 
-            let Some(sample) = bsdf.sample(wo, u_bsdf_choice, u_bsdf) else {
+            let Some(sample) = bsdf.sample(wo, u.choice, u.scatter) else {
                 break;
             };
             if sample.transmission {
                 stats.refractions += 1;
+                if effects.media {
+                    medium = self.medium_across(material, surface.front_facing);
+                }
             }
             let wi = frame.to_world(sample.wi);
             beta *= sample.weight;
@@ -211,60 +317,96 @@ impl World {
             last_delta = sample.delta;
             last_point = surface.at.p;
             depth += 1;
-
-            if let Some(start) = settings.russian_roulette_depth
-                && depth >= start
-            {
-                let survive = beta.max_element().min(0.95);
-                if u_roulette >= survive {
-                    break;
-                }
-                beta /= survive;
+            if !self.roulette(depth, u.roulette, ratio, &mut beta) {
+                break;
             }
             ray = spawn_ray(&surface.at, wi, self.offset);
         }
         radiance
     }
 
-    /// One light sample, weighted by multiple importance sampling against the BSDF.
-    #[allow(clippy::too_many_arguments)]
+    /// One light sample seen from `at` in `medium` through `scatter` (a BSDF or a phase
+    /// function), weighted by multiple importance sampling against the scatterer's own sampling.
     fn direct_light(
         &self,
-        bsdf: &Bsdf,
-        frame: &Frame,
-        wo: Vec3,
-        surface: &Surface,
+        scatter: &impl Scatterer,
+        at: &SurfacePoint,
+        medium: Option<u32>,
         u_choice: f32,
         u: Vec2,
         stats: &mut PathStats,
     ) -> Vec3 {
         stats.light_samples += 1;
-        let Some(light) = self.lights.sample(&self.scene, surface.at.p, u_choice, u) else {
+        let Some(light) = self.lights.sample(&self.scene, at.p, u_choice, u) else {
             return Vec3::ZERO;
         };
-        let wi_local = frame.to_local(light.wi);
-        let f = bsdf.eval(wo, wi_local);
+        let f = scatter.f(light.wi);
         if f == Vec3::ZERO || light.radiance == Vec3::ZERO || light.pdf <= 0.0 {
             return Vec3::ZERO;
         }
         stats.shadow_rays += 1;
-        let shadow = if light.distance.is_finite() {
-            spawn_ray_to(&surface.at, &light.at, self.offset)
-        } else {
-            spawn_ray(&surface.at, light.wi, self.offset)
-        };
-        if self
+        let shadow = self.shadow_ray(at, &light);
+        // Without media a shadow ray is blocked or not; with them it carries what the media let
+        // through, and passes index-matched interfaces (`scatter.rs`). A vacuum lets exactly 1
+        // through, and `x * 1` is `x`, so the product below keeps its bits either way.
+        let transmittance = if self.effects.media {
+            let transmittance = self.transmittance(shadow, &light, medium, stats);
+            if transmittance == Vec3::ZERO {
+                return Vec3::ZERO;
+            }
+            transmittance
+        } else if self
             .accel
             .occluded_with(&shadow, self.traversal, &mut stats.traversal)
         {
             return Vec3::ZERO;
-        }
+        } else {
+            Vec3::ONE
+        };
         let weight = if light.delta {
             1.0
         } else {
-            power_heuristic(light.pdf, bsdf.pdf(wo, wi_local))
+            power_heuristic(light.pdf, scatter.pdf(light.wi))
         };
-        f * light.radiance * (weight / light.pdf)
+        f * light.radiance * (weight / light.pdf) * transmittance
+    }
+
+    /// What a path of throughput `beta` and spectral ratios `ratio` contributes per unit of
+    /// what it finds: `beta` over the mean ratio where media are tracked (the balance
+    /// heuristic over hero channels, `crate::medium`), `beta` itself elsewhere, with no
+    /// arithmetic, so that paths without media compute what they computed before media.
+    fn weighed(&self, beta: Vec3, ratio: Vec3) -> Vec3 {
+        if self.effects.media {
+            beta / mean_ratio(ratio)
+        } else {
+            beta
+        }
+    }
+
+    /// Russian roulette at `depth`: whether the path survives `u`, with `beta` raised to make
+    /// up for the paths ended. Paths survive unconditionally before the settings' start depth.
+    /// The survival probability follows what the path would contribute ([`World::weighed`]).
+    fn roulette(&self, depth: u32, u: f32, ratio: Vec3, beta: &mut Vec3) -> bool {
+        if let Some(start) = self.scene.settings.russian_roulette_depth
+            && depth >= start
+        {
+            let survive = self.weighed(*beta, ratio).max_element().min(0.95);
+            if u >= survive {
+                return false;
+            }
+            *beta /= survive;
+        }
+        true
+    }
+
+    /// The shadow ray from `at` towards the sampled light: to its point, or along its direction
+    /// when it is infinitely far (the environment).
+    fn shadow_ray(&self, at: &SurfacePoint, light: &LightSample) -> Ray {
+        if light.distance.is_finite() {
+            spawn_ray_to(at, &light.at, self.offset)
+        } else {
+            spawn_ray(at, light.wi, self.offset)
+        }
     }
 
     fn resolve(&self, bsdf: &Bsdf, surface: &Surface) -> Bsdf {

@@ -1,0 +1,166 @@
+//! What scatters light at a path's vertex and what a path travels through: a BSDF at a surface
+//! or the phase function in a medium, as next-event estimation sees them; the random numbers
+//! every bounce draws; which medium a path is in; and what a shadow ray lets through.
+//!
+//! A path starts in the camera's medium (`Scene::camera_medium`, vacuum when there is none) and
+//! changes medium only where it crosses a surface: through glass (a refraction) or an
+//! index-matched interface. Crossing against the surface's normal enters the material's
+//! interior medium, crossing along it returns to the outside medium. Objects therefore hold one
+//! medium each inside the outside one; a medium-filled object inside another is not modelled.
+
+use super::World;
+use crate::geometry::{Ray, SurfacePoint};
+use crate::lights::LightSample;
+use crate::material::{Bsdf, Frame, Material};
+use crate::medium::{Medium, henyey_greenstein};
+use crate::sampler::PixelSampler;
+use glam::{Vec2, Vec3};
+
+/// A scatterer seen from a fixed outgoing direction: the value and the sampling density of an
+/// incident world direction `wi`.
+pub(super) trait Scatterer {
+    /// `f * |cos|` for a surface, the phase function's value in a medium.
+    fn f(&self, wi: Vec3) -> Vec3;
+    /// The solid-angle density with which the scatterer's own sampling draws `wi`.
+    fn pdf(&self, wi: Vec3) -> f32;
+}
+
+/// A BSDF in its shading frame, seen from `wo` (local).
+pub(super) struct SurfaceScatter<'a> {
+    pub bsdf: &'a Bsdf,
+    pub frame: &'a Frame,
+    pub wo: Vec3,
+}
+
+impl Scatterer for SurfaceScatter<'_> {
+    fn f(&self, wi: Vec3) -> Vec3 {
+        self.bsdf.eval(self.wo, self.frame.to_local(wi))
+    }
+
+    fn pdf(&self, wi: Vec3) -> f32 {
+        self.bsdf.pdf(self.wo, self.frame.to_local(wi))
+    }
+}
+
+/// A Henyey-Greenstein phase function of asymmetry `g`, seen from `wo` (world, unit length).
+pub(super) struct Phase {
+    pub wo: Vec3,
+    pub g: f32,
+}
+
+impl Scatterer for Phase {
+    fn f(&self, wi: Vec3) -> Vec3 {
+        Vec3::splat(henyey_greenstein(self.wo.dot(wi), self.g))
+    }
+
+    fn pdf(&self, wi: Vec3) -> f32 {
+        henyey_greenstein(self.wo.dot(wi), self.g)
+    }
+}
+
+/// The random numbers of one bounce, all drawn whether used or not, in this fixed order (see
+/// [`crate::sampler::DIMENSIONS_PER_BOUNCE`]). A scattering in a medium draws the same block:
+/// its phase direction takes the BSDF's pair and leaves `choice` unused.
+pub(super) struct BounceNumbers {
+    pub light_choice: f32,
+    pub light: Vec2,
+    pub choice: f32,
+    pub scatter: Vec2,
+    pub roulette: f32,
+}
+
+impl BounceNumbers {
+    pub(super) fn draw(sampler: &mut PixelSampler) -> Self {
+        let light_choice = sampler.next_1d();
+        let light = sampler.next_2d();
+        let choice = sampler.next_1d();
+        let scatter = sampler.next_2d();
+        let roulette = sampler.next_1d();
+        BounceNumbers {
+            light_choice,
+            light,
+            choice,
+            scatter,
+            roulette,
+        }
+    }
+}
+
+impl World {
+    /// The medium `medium` names: vacuum for `None`.
+    pub(super) fn medium(&self, medium: Option<u32>) -> &Medium {
+        medium.map_or(&Medium::VACUUM, |m| &self.scene.media[m as usize])
+    }
+
+    /// The medium a ray in `medium` flies through: `medium` itself, unless the ray escapes to
+    /// infinity (`escapes`), which only the outside medium can hold. A closed object's interior
+    /// is bounded, so a ray that escapes from "inside" one has leaked: a free flight sampled a
+    /// scattering point a rounding error beyond the boundary. Left in the interior medium, such
+    /// a path would scatter forever in an unbounded copy of it; in the outside medium it meets
+    /// what any ray leaving the object would.
+    pub(super) fn flight_medium(&self, medium: Option<u32>, escapes: bool) -> &Medium {
+        self.medium(if escapes {
+            self.scene.camera_medium
+        } else {
+            medium
+        })
+    }
+
+    /// The medium beyond a surface of `material` that a path crosses, entering the object when
+    /// it arrived on the front side (`front_facing`).
+    pub(super) fn medium_across(&self, material: &Material, front_facing: bool) -> Option<u32> {
+        if front_facing {
+            material.interior
+        } else {
+            self.scene.camera_medium
+        }
+    }
+
+    /// What reaches `shadow`'s start from `light` through the media along it, per channel:
+    /// zero when a surface other than an index-matched interface blocks it, else the product
+    /// of each segment's transmittance between interfaces, starting in `medium`.
+    ///
+    /// Each segment asks for the closest *certain* blocker, so that with no interface in the
+    /// way the answer is blocked exactly when [`crate::geometry::Accel::occluded_with`] would
+    /// say so (that is what keeps `--effects all` bit-identical), and it pays what a renderer
+    /// that always tracks media pays: a closest-hit query instead of an any-hit one.
+    pub(super) fn transmittance(
+        &self,
+        shadow: Ray,
+        light: &LightSample,
+        medium: Option<u32>,
+        stats: &mut super::PathStats,
+    ) -> Vec3 {
+        let mut shadow = shadow;
+        let mut medium = medium;
+        let mut transmittance = Vec3::ONE;
+        loop {
+            let blocker =
+                self.accel
+                    .intersect_certain_with(&shadow, self.traversal, &mut stats.traversal);
+            let end = blocker.map_or(shadow.t_max, |h| h.t);
+            let escapes = end == f32::INFINITY;
+            transmittance *= self
+                .flight_medium(medium, escapes)
+                .transmittance(end * shadow.dir.length());
+            let Some(hit) = blocker else {
+                return transmittance;
+            };
+            let triangle = &self.scene.triangles[hit.triangle as usize];
+            let material = &self.scene.materials[triangle.material as usize];
+            if material.bsdf != Bsdf::Interface || transmittance == Vec3::ZERO {
+                return Vec3::ZERO;
+            }
+            let front_facing = shadow.dir.dot(self.accel.unit_normal(hit.triangle)) < 0.0;
+            medium = self.medium_across(material, front_facing);
+            let at = SurfacePoint::on_triangle_with_normal(
+                &triangle.p,
+                hit.b1,
+                hit.b2,
+                self.accel.plane_normal(hit.triangle),
+            );
+            stats.shadow_rays += 1;
+            shadow = self.shadow_ray(&at, light);
+        }
+    }
+}
