@@ -74,7 +74,7 @@ impl EnvironmentMap {
             width,
             height,
             texels,
-            rotation: rotate_degrees.to_radians().sin_cos(),
+            rotation: crate::math::sin_cos(rotate_degrees.to_radians()),
         }
     }
 
@@ -96,8 +96,8 @@ impl EnvironmentMap {
         let x = dir.x * cos - dir.z * sin;
         let z = dir.x * sin + dir.z * cos;
         // atan2 rather than acos: it keeps its precision near the poles.
-        let theta = sin_theta(dir).atan2(dir.y);
-        let phi = x.atan2(z);
+        let theta = crate::math::atan2(sin_theta(dir), dir.y);
+        let phi = crate::math::atan2(x, z);
         Vec2::new(0.5 + phi * (0.5 / PI), theta * (1.0 / PI))
     }
 
@@ -105,8 +105,8 @@ impl EnvironmentMap {
     pub fn direction(&self, uv: Vec2) -> (Vec3, f32) {
         let theta = PI * uv.y;
         let phi = 2.0 * PI * (uv.x - 0.5);
-        let (sin_theta, cos_theta) = theta.sin_cos();
-        let (sin_phi, cos_phi) = phi.sin_cos();
+        let (sin_theta, cos_theta) = crate::math::sin_cos(theta);
+        let (sin_phi, cos_phi) = crate::math::sin_cos(phi);
         let (x, z) = (sin_theta * sin_phi, sin_theta * cos_phi);
         let (sin, cos) = self.rotation;
         let dir = Vec3::new(x * cos + z * sin, cos_theta, z * cos - x * sin);
@@ -121,7 +121,7 @@ impl EnvironmentMap {
             .chunks(self.width as usize)
             .enumerate()
             .flat_map(|(row, texels)| {
-                let sin_theta = (PI * (row as f32 + 0.5) / h).sin();
+                let sin_theta = crate::math::sin(PI * (row as f32 + 0.5) / h);
                 texels.iter().map(move |&t| luminance(t) * sin_theta)
             })
             .collect()
@@ -133,8 +133,8 @@ impl EnvironmentMap {
         let h = f64::from(self.height);
         let mut sum = 0.0f64;
         for (row, texels) in self.texels.chunks(self.width as usize).enumerate() {
-            let top = (std::f64::consts::PI * row as f64 / h).cos();
-            let bottom = (std::f64::consts::PI * (row + 1) as f64 / h).cos();
+            let top = crate::math::sin_cos_f64(std::f64::consts::PI * row as f64 / h).1;
+            let bottom = crate::math::sin_cos_f64(std::f64::consts::PI * (row + 1) as f64 / h).1;
             let row_sum: f64 = texels.iter().map(|&t| f64::from(luminance(t))).sum();
             sum += row_sum / f64::from(self.width) * 0.5 * (top - bottom);
         }

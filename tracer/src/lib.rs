@@ -28,6 +28,7 @@ pub mod geometry;
 pub mod integrator;
 pub mod lights;
 pub mod material;
+pub mod math;
 pub mod medium;
 pub mod output;
 pub mod sampler;

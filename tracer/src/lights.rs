@@ -398,8 +398,8 @@ pub fn luminance(c: Vec3) -> f32 {
 pub fn uniform_sphere(u: Vec2) -> Vec3 {
     let z = 1.0 - 2.0 * u.x;
     let r = (1.0 - z * z).max(0.0).sqrt();
-    let phi = 2.0 * PI * u.y;
-    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+    let (sin, cos) = crate::math::sin_cos(2.0 * PI * u.y);
+    Vec3::new(r * cos, r * sin, z)
 }
 
 /// The radius of a sphere around every triangle: half the diagonal of their bounding box.

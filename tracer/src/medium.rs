@@ -34,7 +34,8 @@
 //! **Arithmetic.** The exponential and logarithm here are our own ([`exp_neg`], [`ln`]): basic
 //! IEEE operations in f64 in a fixed order, so that images do not depend on which variant of
 //! glibc's `expf`/`logf` a processor gets at run time (glibc picks FMA variants where the
-//! processor has FMA). The phase function's azimuth uses `f32::sin_cos`, as the BSDFs do.
+//! processor has FMA). The phase function's azimuth uses [`crate::math::sin_cos`], as the BSDFs
+//! do, for the same reason.
 
 use crate::material::Frame;
 use glam::{Vec2, Vec3};
@@ -166,7 +167,7 @@ pub fn sample_henyey_greenstein(wo: Vec3, g: f32, u: Vec2) -> (Vec3, f32) {
     }
     .clamp(-1.0, 1.0);
     let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
-    let (sin_phi, cos_phi) = (2.0 * PI * u.y).sin_cos();
+    let (sin_phi, cos_phi) = crate::math::sin_cos(2.0 * PI * u.y);
     let local = Vec3::new(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta);
     let wi = Frame::from_normal(wo).to_world(local);
     (wi, henyey_greenstein(cos_theta, g))

@@ -157,7 +157,7 @@ pub fn linear_to_srgb(c: f32) -> f32 {
     if c <= 0.003_130_8 {
         12.92 * c
     } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
+        1.055 * crate::math::powf(c, 1.0 / 2.4) - 0.055
     }
 }
 
@@ -166,7 +166,7 @@ pub fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.040_45 {
         c / 12.92
     } else {
-        ((c + 0.055) / 1.055).powf(2.4)
+        crate::math::powf((c + 0.055) / 1.055, 2.4)
     }
 }
 

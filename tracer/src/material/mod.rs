@@ -245,7 +245,8 @@ fn concentric_disk(u: Vec2) -> Vec2 {
     } else {
         (o.y, FRAC_PI_2 - FRAC_PI_4 * (o.x / o.y))
     };
-    r * Vec2::new(theta.cos(), theta.sin())
+    let (sin, cos) = crate::math::sin_cos(theta);
+    r * Vec2::new(cos, sin)
 }
 
 #[cfg(test)]

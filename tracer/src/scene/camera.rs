@@ -108,7 +108,7 @@ impl Camera {
         let forward = (self.look_at - self.position).normalize();
         let right = forward.cross(self.up).normalize();
         let up = right.cross(forward);
-        let half_height = (0.5 * self.vfov_degrees.to_radians()).tan();
+        let half_height = crate::math::tan(0.5 * self.vfov_degrees.to_radians());
         let half_width = half_height * width as f32 / height as f32;
         CameraRays {
             origin: self.position,
@@ -176,7 +176,7 @@ fn concentric_disk(u: Vec2) -> Vec2 {
     } else {
         (o.y, 2.0 * FRAC_PI_4 - FRAC_PI_4 * (o.x / o.y))
     };
-    let (sin, cos) = theta.sin_cos();
+    let (sin, cos) = crate::math::sin_cos(theta);
     Vec2::new(r * cos, r * sin)
 }
 

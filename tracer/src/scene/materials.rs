@@ -248,14 +248,7 @@ impl<'a> MaterialTable<'a> {
 fn decode_texture(bytes: &[u8]) -> Result<Texture, image::ImageError> {
     let image = image::load_from_memory(bytes)?.into_rgb8();
     let to_linear: Vec<f32> = (0..=255u8)
-        .map(|v| {
-            let c = v as f32 / 255.0;
-            if c <= 0.04045 {
-                c / 12.92
-            } else {
-                ((c + 0.055) / 1.055).powf(2.4)
-            }
-        })
+        .map(|v| crate::output::srgb_to_linear(f32::from(v) / 255.0))
         .collect();
     let texels = image
         .pixels()

@@ -1,0 +1,92 @@
+//! The transcendental functions of pixel math, computed the same on every machine.
+//!
+//! `f32::sin_cos`, `atan2`, `powf` and their kin call the platform's C library, and glibc picks
+//! among implementations of some of them when the program starts, by the processor's features
+//! (`__sincosf_fma` on a machine with fused multiply-add, another without), which need not round
+//! alike: the same scene could then render different bits on two x86-64 machines. These call
+//! `libm` instead, a pure-software port of musl's implementations that uses only IEEE basic
+//! operations in a fixed order (built without its architecture-specific paths). Everything in
+//! the tracer that decides a pixel goes through here; `tests/portable_math.rs` checks that no
+//! other call creeps in.
+
+/// `(sin x, cos x)`.
+pub fn sin_cos(x: f32) -> (f32, f32) {
+    libm::sincosf(x)
+}
+
+/// `(sin x, cos x)` in double precision.
+pub fn sin_cos_f64(x: f64) -> (f64, f64) {
+    libm::sincos(x)
+}
+
+/// `sin x`.
+pub fn sin(x: f32) -> f32 {
+    libm::sinf(x)
+}
+
+/// `tan x`.
+pub fn tan(x: f32) -> f32 {
+    libm::tanf(x)
+}
+
+/// `asin x`.
+pub fn asin(x: f32) -> f32 {
+    libm::asinf(x)
+}
+
+/// The angle of `(x, y)` from the positive x axis, in `[-pi, pi]`.
+pub fn atan2(y: f32, x: f32) -> f32 {
+    libm::atan2f(y, x)
+}
+
+/// `x` to the power `y`.
+pub fn powf(x: f32, y: f32) -> f32 {
+    libm::powf(x, y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Against the standard library's (the platform's) functions, which are within an ulp or
+    /// two of the exact value: the two may differ in the last bits, never by more.
+    #[test]
+    fn agrees_with_the_platform_within_a_few_ulps() {
+        let close = |a: f32, b: f32| (a - b).abs() <= 4.0 * f32::EPSILON * b.abs().max(1e-30);
+        for i in 0..20_000 {
+            let x = -40.0 + 80.0 * (i as f32) / 20_000.0;
+            let (s, c) = sin_cos(x);
+            assert!(close(s, x.sin()) && close(c, x.cos()), "sin_cos({x})");
+            assert!(close(sin(x), x.sin()), "sin({x})");
+            let (s, c) = sin_cos_f64(f64::from(x));
+            assert!(
+                (s - f64::from(x).sin()).abs() < 1e-15 && (c - f64::from(x).cos()).abs() < 1e-15
+            );
+            let y = 3.0 * (i as f32 / 20_000.0) - 1.5;
+            assert!(close(atan2(y, x), y.atan2(x)), "atan2({y}, {x})");
+            let t = 1.5 * (i as f32 / 20_000.0) - 0.75;
+            assert!(close(tan(t), t.tan()), "tan({t})");
+            let a = 2.0 * (i as f32 / 20_000.0) - 1.0;
+            assert!(
+                close(asin(a), a.asin()) || (asin(a) - a.asin()).abs() < 1e-7,
+                "asin({a})"
+            );
+            let p = i as f32 / 20_000.0;
+            for e in [1.0 / 2.4, 2.4, 0.5, 3.0] {
+                assert!(close(powf(p, e), p.powf(e)), "powf({p}, {e})");
+            }
+        }
+    }
+
+    /// A few values known exactly (or to the last bit of their correctly rounded value).
+    #[test]
+    fn exact_values() {
+        assert_eq!(sin_cos(0.0), (0.0, 1.0));
+        assert_eq!(atan2(0.0, 1.0), 0.0);
+        assert_eq!(atan2(1.0, 0.0), std::f32::consts::FRAC_PI_2);
+        assert_eq!(powf(2.0, 10.0), 1024.0);
+        assert_eq!(powf(1.0, 2.4), 1.0);
+        assert_eq!(tan(0.0), 0.0);
+        assert_eq!(asin(1.0), std::f32::consts::FRAC_PI_2);
+    }
+}
