@@ -10,13 +10,12 @@
 use super::reference::Reference;
 use super::{Cost, Knob};
 use crate::compare::{Metrics, mean_flip};
-use rayon::prelude::*;
 use std::time::Instant;
 use tracer::geometry::{Accel, BuildQuality, OffsetMethod, Traversal};
 use tracer::lights::{EnvironmentSampling, Lights};
 use tracer::output::RgbImage;
 use tracer::scene::RenderSettings;
-use tracer::{Film, Rect, World};
+use tracer::{FrameConfig, World};
 
 /// The side of the square tiles a frame is cut into.
 pub const TILE: u32 = 32;
@@ -115,31 +114,9 @@ pub fn render(world: &World, pool: &rayon::ThreadPool, repeat_below: f64) -> Tim
 /// [`render`], timed as `timing` says.
 pub fn render_with(world: &World, pool: &rayon::ThreadPool, timing: Timing) -> Timed {
     let (width, height) = (world.scene.settings.width, world.scene.settings.height);
-    let tiles: Vec<Rect> = (0..height.div_ceil(TILE))
-        .flat_map(|ty| (0..width.div_ceil(TILE)).map(move |tx| (tx, ty)))
-        .map(|(tx, ty)| {
-            let (x, y) = (tx * TILE, ty * TILE);
-            Rect {
-                x,
-                y,
-                w: TILE.min(width - x),
-                h: TILE.min(height - y),
-            }
-        })
-        .collect();
     let once = || {
         let started = Instant::now();
-        let outputs: Vec<_> = pool.install(|| {
-            tiles
-                .par_iter()
-                .map(|&rect| tracer::render_tile(world, 0, rect))
-                .collect()
-        });
-        let mut film = Film::new(width, height);
-        for output in &outputs {
-            film.insert(output.rect, &output.pixels, &output.cost);
-            film.stats.add(&output.stats);
-        }
+        let film = tracer::render_frame(world, 0, pool, FrameConfig { tile: TILE });
         (film, started.elapsed().as_secs_f64())
     };
     let (film, first) = once();

@@ -31,9 +31,9 @@ mod report;
 use anyhow::{Context, ensure};
 use clap::ValueEnum;
 use std::path::PathBuf;
-use tracer::geometry::{Accel, BuildQuality};
+use tracer::World;
+use tracer::geometry::BuildQuality;
 use tracer::scene::RenderSettings;
-use tracer::{Effects, World};
 
 /// The default image width (and height, for a square scene): small enough that the full set of
 /// ladders runs in minutes on two cores, large enough for a few thousand pixels of statistics.
@@ -208,9 +208,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()?;
-    let effects = Effects::of(&scene);
-    let accel = Accel::build(&scene.triangles, BuildQuality::default());
-    let mut world = World::new(scene, accel, effects);
+    let mut world = World::prepare(scene, None);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
 

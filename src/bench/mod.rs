@@ -22,8 +22,7 @@
 mod rtt;
 
 use crate::accuracy::bench::render;
-use crate::cli::{EffectsChoice, ImageArgs};
-use crate::render::prepare_world;
+use crate::cli::ImageArgs;
 use anyhow::Context;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -209,7 +208,7 @@ fn bench_scene(
         .apply(&mut scene.settings)
         .with_context(|| format!("benchmarking {}", path.display()))?;
     let load_seconds = started.elapsed().as_secs_f64();
-    let build = timed(|| prepare_world(scene, EffectsChoice::Auto));
+    let build = timed(|| tracer::World::prepare(scene, None));
     let (mut world, build_seconds, build_cpu_seconds) =
         (build.value, build.seconds, build.cpu_seconds);
     if let Some(depth) = args.max_depth {
