@@ -13,7 +13,7 @@
 //! same version is invisible to it: delete the cache after such a change.
 
 use super::bench;
-use anyhow::Context;
+use crate::LabError;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -96,7 +96,7 @@ impl Reference {
         spp: u32,
         world: &mut World,
         pool: &rayon::ThreadPool,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self, LabError> {
         let baseline = world.scene.settings.clone();
         let seed = baseline.seed ^ REFERENCE_SEED_SALT;
         let key = Key {
@@ -162,7 +162,7 @@ impl Reference {
             &sidecar_path,
             serde_json::to_string_pretty(&sidecar)? + "\n",
         )
-        .with_context(|| format!("cannot write {}", sidecar_path.display()))?;
+        .map_err(LabError::io("write", &sidecar_path))?;
         Ok(Reference {
             image,
             source: Source::Rendered { stale },
@@ -274,17 +274,16 @@ fn key_differences(cached: &Key, wanted: &Key) -> String {
 
 /// The scene's content hash ([`runtime::node::bundle::scene_hash`], the one the peers log),
 /// over every file it was read from in the loader's order, named as the loader names them.
-pub fn hash_scene_files(scene: &Path, files: &[String]) -> anyhow::Result<String> {
+pub fn hash_scene_files(scene: &Path, files: &[String]) -> Result<String, LabError> {
     let root = scene.parent().unwrap_or(Path::new(""));
     let files = files
         .iter()
         .map(|name| {
             let path = root.join(name);
-            let bytes = std::fs::read(&path)
-                .with_context(|| format!("cannot read {} to hash it", path.display()))?;
+            let bytes = std::fs::read(&path).map_err(LabError::io("read", &path))?;
             Ok(runtime::node::bundle::scene_file(name.clone(), bytes))
         })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .collect::<Result<Vec<_>, LabError>>()?;
     Ok(runtime::node::bundle::scene_hash(&files))
 }
 
