@@ -25,10 +25,13 @@ const CHANNELS: [&str; 3] = ["R", "G", "B"];
 /// The per-pixel metrics of a test image against a reference, over all pixels and RGB channels.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Metrics {
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
     /// Mean of (a - b)^2.
     pub mse: f64,
+    /// The square root of `mse`.
     pub rmse: f64,
     /// Mean of (a - b)^2 / (b + 0.01)^2.
     pub rel_mse: f64,
@@ -45,33 +48,49 @@ pub struct Metrics {
     pub non_finite: u64,
 }
 
+/// The largest difference between the images, where it is, and the two values there.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct MaxDifference {
+    /// The absolute difference.
     pub value: f64,
+    /// Its column.
     pub x: u32,
+    /// Its row.
     pub y: u32,
+    /// Its channel: R, G or B.
     pub channel: &'static str,
+    /// The test image's value there.
     pub test: f32,
+    /// The reference's value there.
     pub reference: f32,
 }
 
 /// Everything `tessera compare` reports.
 #[derive(Clone, Debug, Serialize)]
 pub struct Comparison {
+    /// The test image's path.
     pub test: String,
+    /// The reference's path.
     pub reference: String,
+    /// Both images' channel names, sorted.
     pub channels: Vec<String>,
+    /// The per-pixel metrics (flattened into this object in JSON).
     #[serde(flatten)]
     pub metrics: Metrics,
+    /// Mean FLIP and its conditions.
     pub flip: Flip,
 }
 
 /// Mean FLIP, with the conditions it was measured under.
 #[derive(Clone, Debug, Serialize)]
 pub struct Flip {
+    /// Mean FLIP error over the pixels, 0 (identical) to 1.
     pub mean: f64,
+    /// The exposure both images were multiplied by.
     pub exposure: f32,
+    /// FLIP's viewing condition.
     pub pixels_per_degree: f32,
+    /// How linear values became 8-bit sRGB for FLIP.
     pub tone_mapping: &'static str,
 }
 

@@ -25,17 +25,24 @@ pub enum LabError {
     /// A file or folder could not be read, written or created; `what` says which.
     #[error("cannot {what} {}", path.display())]
     Io {
+        /// What was being done: read, write, create.
         what: &'static str,
+        /// The file or folder.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
+    /// A scene did not load.
     #[error(transparent)]
     Scene(#[from] tracer::SceneError),
+    /// An image could not be read or written.
     #[error(transparent)]
     Output(#[from] tracer::output::OutputError),
+    /// The rendering thread pool could not start.
     #[error(transparent)]
     Pool(#[from] rayon::ThreadPoolBuildError),
+    /// A report could not be serialised or a sidecar parsed.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
     /// The input is not what the measurement needs (sizes, channel sets, argument values).
@@ -43,14 +50,21 @@ pub enum LabError {
     Invalid(String),
     /// A plotting back end failed.
     #[error("cannot draw {}: {message}", path.display())]
-    Plot { path: PathBuf, message: String },
+    Plot {
+        /// The plot being drawn.
+        path: PathBuf,
+        /// What the back end said.
+        message: String,
+    },
     /// The steal round trip's transport failed.
     #[error("{0}")]
     Net(String),
     /// A failure, with what was being done when it happened.
     #[error("{context}")]
     Context {
+        /// What was being done.
         context: String,
+        /// What went wrong.
         #[source]
         source: Box<LabError>,
     },

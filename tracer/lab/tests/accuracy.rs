@@ -7,6 +7,9 @@
 //! exactly 0.5 / (1 - 0.5) = 1 whatever the tessellation. Flat shading: interpolated normals are
 //! not energy-conserving, which would make the exact answer something else.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 use lab::accuracy::{Config, Cost, Knob, Rgb};
 use std::path::{Path, PathBuf};
 

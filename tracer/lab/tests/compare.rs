@@ -1,6 +1,9 @@
 //! The image metrics through the library, on real EXR files in a temporary folder; the expected
 //! values are worked out by hand (`tests/accuracy.rs` at the top runs `tessera compare` itself).
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 use std::path::Path;
 
 fn write_rgb(

@@ -136,6 +136,7 @@ pub enum Knob {
 }
 
 impl Knob {
+    /// Every knob, in the order the report shows them.
     pub const ALL: [Knob; 7] = [
         Knob::Spp,
         Knob::Depth,
@@ -146,6 +147,7 @@ impl Knob {
         Knob::Environment,
     ];
 
+    /// The knob's name in the CSV, the report and on the command line.
     pub fn name(self) -> &'static str {
         match self {
             Knob::Spp => "spp",

@@ -31,17 +31,23 @@ pub enum Source {
     Analytic([f32; 3]),
     /// Read from the output folder, its sidecar matching the current settings.
     Cached,
-    /// Rendered now; `stale` says why a cached one could not be used, if there was one.
-    Rendered { stale: Option<String> },
+    /// Rendered now.
+    Rendered {
+        /// Why the cached one could not be used, if there was one.
+        stale: Option<String>,
+    },
 }
 
+/// The image every rung is measured against, and how it was obtained.
 pub struct Reference {
     image: RgbImage,
+    /// Where the image came from.
     pub source: Source,
     /// Samples per pixel of a rendered reference (0 for an analytic one).
     pub spp: u32,
-    /// The estimated MSE and relative MSE of the reference itself (0 for an analytic one).
+    /// The estimated MSE of the reference itself (0 for an analytic one).
     pub noise_mse: f64,
+    /// The reference's own estimated relative MSE (0 for an analytic one).
     pub noise_rel_mse: f64,
     /// How long the render took (when it was made, for a cached one).
     pub render_seconds: f64,
@@ -72,6 +78,7 @@ struct Sidecar {
 }
 
 impl Reference {
+    /// A constant image of `mean` radiance at every pixel: the exact answer of a furnace.
     pub fn analytic(width: u32, height: u32, mean: [f32; 3]) -> Self {
         Reference {
             image: RgbImage {
@@ -173,10 +180,12 @@ impl Reference {
         })
     }
 
+    /// The reference image.
     pub fn image(&self) -> &RgbImage {
         &self.image
     }
 
+    /// The root of the reference's own estimated MSE.
     pub fn noise_rmse(&self) -> f64 {
         self.noise_mse.sqrt()
     }

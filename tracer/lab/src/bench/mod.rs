@@ -28,13 +28,16 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tracer::scene::RenderSettings;
 
+/// Changes a scene's settings after loading, or says what is wrong with them.
+pub type Adjust = Box<dyn Fn(&mut RenderSettings) -> Result<(), String>>;
+
 /// What [`run`] measures, and how it reports.
 pub struct Config {
     /// Scene files (empty: every `scenes/*/*.toml` under the current folder).
     pub scenes: Vec<PathBuf>,
     /// Applied to each scene's settings after loading, with the checks `tessera render` makes
     /// (the command line's image overrides); an error names what is wrong.
-    pub adjust: Box<dyn Fn(&mut RenderSettings) -> Result<(), String>>,
+    pub adjust: Adjust,
     /// Maximum depth of the full-path pass (`None`: each scene's).
     pub max_depth: Option<u32>,
     /// Rendering threads (`None`: all cores).
@@ -50,30 +53,43 @@ pub struct Config {
 /// Everything one `tessera bench` run measured.
 #[derive(Debug, Serialize)]
 pub struct Report {
+    /// Rendering threads.
     pub threads: usize,
     /// The machine's load average (1, 5, 15 minutes) before and after, so a reader can tell a
     /// quiet machine from one shared with other work.
     pub load_before: Option<[f64; 3]>,
+    /// The load average after the last measurement.
     pub load_after: Option<[f64; 3]>,
+    /// Every scene measured.
     pub scenes: Vec<SceneBench>,
+    /// Every scene left out, with why.
     pub skipped: Vec<Skipped>,
+    /// The steal round trip, if asked for.
     pub steal_rtt: Option<rtt::StealRtt>,
 }
 
 /// One scene's figures.
 #[derive(Debug, Serialize)]
 pub struct SceneBench {
+    /// The scene file, as given.
     pub scene: String,
+    /// Triangles after loading.
     pub triangles: usize,
+    /// Image width rendered.
     pub width: u32,
+    /// Image height rendered.
     pub height: u32,
+    /// Samples per pixel rendered.
     pub samples_per_pixel: u32,
     /// Reading and validating the TOML and OBJ/MTL files.
     pub load_seconds: f64,
     /// Building the BVH (and the light tables, which take a small fraction of it).
     pub build_seconds: f64,
+    /// CPU-seconds of the whole process during the build.
     pub build_cpu_seconds: Option<f64>,
+    /// Camera rays alone (maximum depth 0).
     pub primary: Pass,
+    /// Full paths at the scene's (or `--max-depth`'s) depth.
     pub paths: Pass,
     /// Where the full-path image was written (`--out`).
     pub image: Option<String>,
@@ -86,9 +102,11 @@ pub struct Pass {
     pub max_depth: Option<u32>,
     /// Closest-hit plus shadow rays.
     pub rays: u64,
+    /// Wall seconds of the render.
     pub seconds: f64,
     /// User plus system CPU time of the whole process during the render (all threads).
     pub cpu_seconds: Option<f64>,
+    /// Closest-hit plus shadow rays per wall second.
     pub rays_per_second: f64,
     /// Samples dropped as non-finite (a bug if ever non-zero).
     pub invalid_samples: u64,
@@ -97,7 +115,9 @@ pub struct Pass {
 /// A scene that was not measured, and why.
 #[derive(Debug, Serialize)]
 pub struct Skipped {
+    /// The scene file, as given.
     pub scene: String,
+    /// Why it was skipped.
     pub reason: String,
 }
 
