@@ -3,10 +3,8 @@
 //! output, error messages); the metrics and the ladders themselves are tested through the
 //! library in `tracer/lab/tests/`.
 //!
-//! The analytic scene is a furnace: a closed sphere, seen from inside, whose every surface emits
-//! 0.5 and reflects half of what arrives (diffuse albedo 0.5), so the radiance everywhere is
-//! exactly 0.5 / (1 - 0.5) = 1 whatever the tessellation. Flat shading: interpolated normals are
-//! not energy-conserving, which would make the exact answer something else.
+//! The analytic scene is a furnace whose radiance is exactly 1 everywhere
+//! (`tracer/lab/tests/furnace.toml` says why).
 
 // Test code: an unwrap that fails is a failed test, with its place in the output.
 #![allow(clippy::unwrap_used)]
@@ -16,33 +14,6 @@ mod common;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Output;
-
-const FURNACE: &str = r#"
-[render]
-width = 16
-height = 16
-spp = 1
-seed = 0
-
-[camera]
-position = [0, 0, 0]
-look_at = [0, 0, -1]
-vfov = 60
-
-[materials.furnace]
-type = "emissive"
-albedo = 0.5
-emission = 0.5
-
-[[object]]
-shape = "sphere"
-material = "furnace"
-radius = 1
-subdivisions = 3
-inward = true
-perturb = 0.1
-smooth = false
-"#;
 
 fn tessera(args: &[&str]) -> Output {
     common::tessera()
@@ -57,23 +28,15 @@ fn tessera_ok(args: &[&str]) -> String {
     String::from_utf8(out.stdout).expect("stdout is UTF-8")
 }
 
-fn furnace(dir: &Path) -> PathBuf {
-    let path = dir.join("furnace.toml");
-    std::fs::write(&path, FURNACE).unwrap();
-    path
+/// The furnace scene file.
+fn furnace() -> PathBuf {
+    common::repo("tracer/lab/tests/furnace.toml")
 }
 
-fn write_rgb(
-    path: &Path,
-    width: usize,
-    height: usize,
-    pixel: impl Fn(usize, usize) -> [f32; 3] + Sync,
-) {
-    exr::prelude::write_rgb_file(path, width, height, |x, y| {
-        let [r, g, b] = pixel(x, y);
-        (r, g, b)
-    })
-    .unwrap();
+/// Writes a constant `width` x `height` image of `value` as OpenEXR, through the tracer's writer.
+fn write_flat(path: &Path, width: u32, height: u32, value: f32) {
+    let pixels = vec![[value; 3]; (width * height) as usize];
+    tracer::output::write_exr(path, width, height, &pixels).unwrap();
 }
 
 fn compare_json(a: &Path, b: &Path) -> Value {
@@ -93,24 +56,20 @@ fn compare_prints_its_metrics_as_json_or_as_text() {
         dir.path().join("test.exr"),
         dir.path().join("reference.exr"),
     );
-    // 4x2 pixels, 24 values of 0.5; the test image has 0.75 in the green of pixel (3, 1).
-    write_rgb(&reference, 4, 2, |_, _| [0.5; 3]);
-    write_rgb(&test, 4, 2, |x, y| {
-        if (x, y) == (3, 1) {
-            [0.5, 0.75, 0.5]
-        } else {
-            [0.5; 3]
-        }
-    });
+    // 3x1 pixels, 9 values of 0.5; the test image has 0.75 in the red of pixel (2, 0). Both
+    // under 1, so that FLIP's clamped tone mapping sees the difference.
+    write_flat(&reference, 3, 1, 0.5);
+    let mut pixels = vec![[0.5f32; 3]; 3];
+    pixels[2][0] = 0.75;
+    tracer::output::write_exr(&test, 3, 1, &pixels).unwrap();
     let json = compare_json(&test, &reference);
-    let n = 24.0;
-    assert_eq!(json["mse"].as_f64(), Some(0.0625 / n), "{json}");
+    assert_eq!(json["mse"].as_f64(), Some(0.0625 / 9.0), "{json}");
     let max = &json["max_difference"];
     assert_eq!(
         (max["value"].as_f64(), max["x"].as_u64(), max["y"].as_u64()),
-        (Some(0.25), Some(3), Some(1))
+        (Some(0.25), Some(2), Some(0))
     );
-    assert_eq!(max["channel"], "G");
+    assert_eq!(max["channel"], "R");
     assert!(json["flip"]["mean"].as_f64().unwrap() > 0.0, "{json}");
     // The text report says how FLIP saw the images.
     let text = tessera_ok(&[
@@ -132,8 +91,8 @@ fn different_sizes_or_channels_are_a_clear_error() {
         dir.path().join("tall.exr"),
         dir.path().join("rgba.exr"),
     );
-    write_rgb(&wide, 4, 2, |_, _| [1.0; 3]);
-    write_rgb(&tall, 2, 4, |_, _| [1.0; 3]);
+    write_flat(&wide, 4, 2, 1.0);
+    write_flat(&tall, 2, 4, 1.0);
     exr::prelude::write_rgba_file(&rgba, 4, 2, |_, _| (1.0f32, 1.0f32, 1.0f32, 1.0f32)).unwrap();
     let sizes = tessera(&["compare", wide.to_str().unwrap(), tall.to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&sizes.stderr);
@@ -154,7 +113,7 @@ fn different_sizes_or_channels_are_a_clear_error() {
 #[test]
 fn accuracy_runs_the_ladders_the_flags_name() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = furnace(dir.path());
+    let scene = furnace();
     let out = dir.path().join("out");
     let stdout = tessera_ok(&[
         "accuracy",

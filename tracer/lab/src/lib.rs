@@ -94,3 +94,13 @@ pub(crate) fn ensure(holds: bool, message: &str) -> Result<(), LabError> {
         Err(LabError::Invalid(message.to_owned()))
     }
 }
+
+/// A rayon pool of `threads` threads (`None`: one per core), and its size.
+pub(crate) fn pool(threads: Option<usize>) -> Result<(usize, rayon::ThreadPool), LabError> {
+    let threads =
+        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+    Ok((threads, pool))
+}

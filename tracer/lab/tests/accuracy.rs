@@ -2,10 +2,8 @@
 //! `tessera accuracy` computes, without the command line (`tests/accuracy.rs` at the top runs
 //! the command itself).
 //!
-//! The analytic scene is a furnace: a closed sphere, seen from inside, whose every surface emits
-//! 0.5 and reflects half of what arrives (diffuse albedo 0.5), so the radiance everywhere is
-//! exactly 0.5 / (1 - 0.5) = 1 whatever the tessellation. Flat shading: interpolated normals are
-//! not energy-conserving, which would make the exact answer something else.
+//! The analytic scene is a furnace whose radiance is exactly 1 everywhere
+//! (`tracer/lab/tests/furnace.toml` says why).
 
 // Test code: an unwrap that fails is a failed test, with its place in the output.
 #![allow(clippy::unwrap_used)]
@@ -13,37 +11,9 @@
 use lab::accuracy::{Config, Cost, Knob, Rgb};
 use std::path::{Path, PathBuf};
 
-const FURNACE: &str = r#"
-[render]
-width = 16
-height = 16
-spp = 1
-seed = 0
-
-[camera]
-position = [0, 0, 0]
-look_at = [0, 0, -1]
-vfov = 60
-
-[materials.furnace]
-type = "emissive"
-albedo = 0.5
-emission = 0.5
-
-[[object]]
-shape = "sphere"
-material = "furnace"
-radius = 1
-subdivisions = 3
-inward = true
-perturb = 0.1
-smooth = false
-"#;
-
-fn furnace(dir: &Path) -> PathBuf {
-    let path = dir.join("furnace.toml");
-    std::fs::write(&path, FURNACE).unwrap();
-    path
+/// The furnace scene file.
+fn furnace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/furnace.toml")
 }
 
 /// The command's defaults (`tessera accuracy --help`), timing each render once, for `scene`
@@ -97,7 +67,7 @@ fn number(row: &std::collections::BTreeMap<String, String>, column: &str) -> f64
 #[test]
 fn rmse_falls_as_one_over_the_square_root_of_spp_on_the_furnace() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = furnace(dir.path());
+    let scene = furnace();
     for seed in 1..=4u64 {
         let out = dir.path().join(format!("seed-{seed}"));
         lab::accuracy::run(&Config {
@@ -140,7 +110,7 @@ fn rmse_falls_as_one_over_the_square_root_of_spp_on_the_furnace() {
 #[test]
 fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = furnace(dir.path());
+    let scene = furnace();
     let out = dir.path().join("out");
     // Each run's reference, as accuracy.md states it.
     let run = |size: u32| {

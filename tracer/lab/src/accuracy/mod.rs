@@ -194,12 +194,7 @@ pub fn run(args: &Config) -> Result<(), LabError> {
         frames: 1,
     };
     let files_hash = reference::hash_scene_files(&args.scene, &scene.files)?;
-    let threads = args
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()?;
+    let (threads, pool) = crate::pool(args.threads)?;
     let mut world = World::prepare(scene, None);
     std::fs::create_dir_all(&args.out).map_err(LabError::io("create", &args.out))?;
 

@@ -132,12 +132,7 @@ pub fn run(args: &Config) -> Result<Report, LabError> {
         !scenes.is_empty(),
         "no scenes given and no scenes/*/*.toml here; run from the repository root",
     )?;
-    let threads = args
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()?;
+    let (threads, pool) = crate::pool(args.threads)?;
     if let Some(out) = &args.out {
         std::fs::create_dir_all(out).map_err(LabError::io("create", out))?;
     }
