@@ -5,9 +5,12 @@
 //!   cluster of processes): frames balanced by the PBT or a grid, stolen between peers.
 //! - `cluster`: `tessera keygen`, `tessera peer` and `tessera slurm` (one task of a SLURM step).
 //! - `report`: progress on a terminal, log lines elsewhere, the stats JSON and the tile-map PNGs.
-//! - `compare`: `tessera compare`, the error metrics of one image against another.
-//! - `accuracy`: `tessera accuracy`, what accuracy costs in time, as a table and a plot.
-//! - `bench`: `tessera bench`, rays per second of the tracer alone, and the steal round trip.
+//! - `compare`: `tessera compare`, the error metrics of one image against another
+//!   ([`lab::compare`]).
+//! - `accuracy`: `tessera accuracy`, what accuracy costs in time, as a table and a plot
+//!   ([`lab::accuracy`]).
+//! - `bench`: `tessera bench`, rays per second of the tracer alone, and the steal round trip
+//!   ([`lab::bench`]).
 //! - `simulate`: `tessera simulate`, scaling experiments in virtual time on a cost trace.
 
 mod accuracy;

@@ -1,6 +1,9 @@
 //! A real cluster: `tessera keygen`, `tessera serve` and `tessera peer` as separate processes
 //! talking QUIC with mutual TLS on loopback.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 mod common;
 
 use common::{

@@ -1,6 +1,9 @@
 //! The core promise, end to end through the binary: a frame's bits do not depend on how many
 //! peers rendered it, how it was cut into tiles, whether tiles were stolen, or on thread counts.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 mod common;
 
 use common::{frames, pixels, repo, run_ok, tessera};

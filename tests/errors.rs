@@ -1,6 +1,9 @@
 //! What a user sees when something is wrong: the message and its causes, and exit status 1;
 //! never a backtrace, even with `RUST_BACKTRACE` set, as many Rust users have it.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 mod common;
 
 use common::tessera;

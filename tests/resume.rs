@@ -3,6 +3,9 @@
 //! frame is bit for bit what an uninterrupted render writes. With other settings, `--resume`
 //! re-renders from frame 0.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 mod common;
 
 use common::{

@@ -1,6 +1,9 @@
 //! `tessera simulate` through the real binary: the files it writes, their contents, that a saved
 //! trace gives the same runs as the recipe it came from, and clear errors for bad input.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 mod common;
 
 use common::{run_ok, tessera};

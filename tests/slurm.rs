@@ -3,6 +3,9 @@
 //! is everything after srun has started the tasks, on any machine. `tests/slurm_real.rs` runs
 //! the same command under a real srun where SLURM can be set up.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 mod common;
 
 use common::{frames, keygen, render_alone, repo, spawn_reading, tessera, wait_for, wait_success};

@@ -5,6 +5,9 @@
 //!
 //! Each test skips, saying why, where no cluster can be set up, and fails instead in CI.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 mod common;
 
 use common::slurm::Cluster;

@@ -12,9 +12,9 @@
 
 use std::time::Instant;
 
-use rayon::prelude::*;
 use sim::TraceWriter;
-use tracer::{BLOCK_SIZE, Film, Rect};
+use std::sync::atomic::{AtomicU64, Ordering};
+use tracer::{BLOCK_SIZE, FrameConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -30,48 +30,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let world = tracer::World::prepare(scene, None);
     let (w, h) = (settings.width, settings.height);
     let mut writer = TraceWriter::create(std::path::Path::new(out), w, h, BLOCK_SIZE, scene_path)?;
-    // Tiles of 32x32 pixels, block-aligned, so that every block's cost comes from one tile.
-    let side = 4 * BLOCK_SIZE;
-    let rects: Vec<Rect> = (0..h.div_ceil(side))
-        .flat_map(|row| {
-            (0..w.div_ceil(side)).map(move |column| {
-                let (x, y) = (column * side, row * side);
-                Rect {
-                    x,
-                    y,
-                    w: side.min(w - x),
-                    h: side.min(h - y),
-                }
-            })
-        })
-        .collect();
-    let (mut work, mut busy) = (0u64, 0.0f64);
+    // Tiles of 32x32 pixels (the default), block-aligned, so that every block's cost comes from
+    // one tile; every tile is timed alone, and the busy time summed in nanoseconds.
+    let pool = rayon::ThreadPoolBuilder::new().build()?;
+    let busy_nanos = AtomicU64::new(0);
+    let mut work = 0u64;
     let started = Instant::now();
     for frame in 0..frames {
-        let outputs: Vec<_> = rects
-            .par_iter()
-            .map(|&rect| {
-                let start = Instant::now();
-                let output = tracer::render_tile(&world, frame, rect);
-                (output, start.elapsed().as_secs_f64())
-            })
-            .collect();
-        let mut film = Film::new(w, h);
-        for (output, seconds) in &outputs {
-            film.insert(output.rect, &output.pixels, &output.cost);
-            work += output.cost.work;
-            busy += seconds;
-        }
+        let film = tracer::render_frame_by(&world, &pool, FrameConfig::default(), |rect| {
+            let start = Instant::now();
+            let output = tracer::render_tile(&world, frame, rect);
+            let nanos = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
+            busy_nanos.fetch_add(nanos, Ordering::Relaxed);
+            output
+        });
+        work += film.stats.work();
         writer.push(&film.block_work)?;
         eprintln!(
             "frame {frame}: {} units of work",
             film.block_work.iter().sum::<u64>()
         );
     }
+    let busy = busy_nanos.into_inner() as f64 / 1e9;
     println!(
         "{frames} frames of {w}x{h} in {:.1} s on {} threads: {work} units of work in {busy:.2} thread-seconds, {:.4e} units per thread-second",
         started.elapsed().as_secs_f64(),
-        rayon::current_num_threads(),
+        pool.current_num_threads(),
         work as f64 / busy
     );
     Ok(())

@@ -1,7 +1,7 @@
 //! Helpers shared by the end-to-end tests: run the real binary, read its EXR output; `slurm`
 //! starts a real SLURM cluster on this machine.
 
-#![allow(dead_code)]
+#![allow(dead_code, clippy::unwrap_used)]
 
 pub mod slurm;
 

@@ -7,13 +7,14 @@
 //! against binary, where the binary traversal's rounds would only add time.
 //!
 //! Why thread CPU time and the best round: on a machine shared with other work a wall clock
-//! counts the other work too, and interference only ever adds time. The render runs on this one
-//! thread (no rayon), so the thread's CPU time (Linux's `/proc/thread-self/schedstat`) is the
-//! render's. Depth is Mitsuba's comparison setting, 7 bounces.
+//! counts the other work too, and interference only ever adds time. The render runs as one tile
+//! on a pool of one thread and is measured on that thread, so the thread's CPU time (Linux's
+//! `/proc/thread-self/schedstat`) is the render's. Depth is Mitsuba's comparison setting, 7
+//! bounces.
 
 use std::path::Path;
 use tracer::geometry::Traversal;
-use tracer::{Rect, World, render_tile};
+use tracer::{FrameConfig, World, render_frame};
 
 /// This thread's CPU time in seconds, from the first field of `schedstat` (nanoseconds on CPU).
 fn thread_cpu_seconds() -> f64 {
@@ -57,28 +58,27 @@ fn main() {
     } else {
         &[Traversal::RobustBinary, Traversal::Robust]
     };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool of one thread builds");
     let mut best = [f64::INFINITY; 2];
     let mut hashes = Vec::new();
     for _ in 0..rounds {
         for (i, &traversal) in traversals.iter().enumerate() {
             world.traversal = traversal;
-            let start = thread_cpu_seconds();
-            let out = render_tile(
-                &world,
-                0,
-                Rect {
-                    x: 0,
-                    y: 0,
-                    w: size,
-                    h: size,
-                },
-            );
-            let seconds = thread_cpu_seconds() - start;
-            let s = out.stats;
+            // One tile of the whole image on a pool of one thread, measured on that thread:
+            // `install` from inside the pool runs the frame right there.
+            let (film, seconds) = pool.install(|| {
+                let start = thread_cpu_seconds();
+                let film = render_frame(&world, 0, &pool, FrameConfig { tile: size });
+                (film, thread_cpu_seconds() - start)
+            });
+            let s = film.stats;
             let rays = (s.rays + s.shadow_rays) as f64;
             best[i] = best[i].min(seconds * 1e9 / rays);
             // FNV-1a over every channel's bits.
-            let hash = out
+            let hash = film
                 .pixels
                 .iter()
                 .flatten()

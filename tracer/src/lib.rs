@@ -1,6 +1,7 @@
 //! Pixels from a scene. No async, no network, and no clock of its own: the cost of a tile is
 //! counted work (BVH nodes visited, triangles tested, shading events), which is deterministic;
-//! callers that want wall time measure it around [`render_tile`].
+//! callers that want wall time measure it around [`render_tile`] (or each tile of
+//! [`render_frame_by`]).
 //!
 //! Module map:
 //! - [`scene`]: the in-memory scene ([`Scene`]) and its loader from TOML + OBJ/MTL files, with
@@ -19,11 +20,13 @@
 //!   (seed, frame, pixel, sample index, dimension).
 //! - [`integrator`]: the path tracer with next-event estimation and multiple importance sampling.
 //! - [`tile`]: the unit of work: render a rectangle of a frame, get its pixels and its cost map.
+//! - [`frame`]: a whole frame on one machine: a grid of tiles on a given rayon pool, into a film.
 //! - [`output`]: OpenEXR (linear float RGB) and tone-mapped sRGB PNG writers.
 
 pub mod distribution;
 pub mod effects;
 pub mod environment;
+pub mod frame;
 pub mod geometry;
 pub mod integrator;
 pub mod lights;
@@ -39,5 +42,6 @@ pub use material::Material;
 pub use scene::{Scene, SceneError};
 
 pub use effects::Effects;
+pub use frame::{FrameConfig, render_frame, render_frame_by, tile_grid};
 pub use integrator::{PathStats, World};
 pub use tile::{BLOCK_SIZE, Film, Rect, TileCost, TileOutput, render_tile};

@@ -10,12 +10,12 @@ mod common;
 use common::rng::Rng;
 use glam::Vec3;
 use std::path::Path;
+use tracer::World;
 use tracer::geometry::{
     Accel, BoxSimd, BuildQuality, Ray, Traversal, TraversalStats, intersect_brute_force,
     occluded_brute_force,
 };
 use tracer::scene::Triangle;
-use tracer::{Rect, World};
 
 fn triangle(p: [Vec3; 3]) -> Triangle {
     Triangle {
@@ -141,17 +141,11 @@ fn render_with(
     {
         return (Vec::new(), None);
     }
-    let out = tracer::render_tile(
-        &world,
-        0,
-        Rect {
-            x: 0,
-            y: 0,
-            w: size,
-            h: size,
-        },
-    );
-    assert_eq!(out.stats.invalid_samples, 0);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .expect("a pool of two threads builds");
+    let out = tracer::render_frame(&world, 0, &pool, tracer::FrameConfig::default());
     let bits = out.pixels.iter().flatten().map(|c| c.to_bits()).collect();
     (bits, Some(out.stats))
 }

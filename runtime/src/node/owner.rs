@@ -202,6 +202,7 @@ impl Owner {
                 membership.handle_closed(now, conn);
             }
             Step::Stopped => return Err(NodeError::Stopped),
+            Step::Failed(error) => return Err(error),
         }
         self.apply(membership, director);
         Ok(())
@@ -285,7 +286,7 @@ fn assemble(
         tracer::BLOCK_SIZE,
         &film.block_work,
     )?;
-    let frame = u32::try_from(frame.0).expect("invariant: the director deals frames of a u32 job");
+    let frame = bundle::tracer_frame(frame)?;
     let completed = CompletedFrame {
         frame,
         film,

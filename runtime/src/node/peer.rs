@@ -198,6 +198,10 @@ pub async fn run_peer(
             }
             Step::Core(event) => tracing::debug!(?event, "core event"),
             Step::Stopped => break,
+            Step::Failed(error) => {
+                session.link.shutdown().await;
+                return Err(error);
+            }
         }
     }
     session.link.shutdown().await;

@@ -53,13 +53,13 @@ impl Renderer {
         Ok((Self { pool, world, done }, results))
     }
 
-    fn submit(&self, item: WorkItem) {
+    /// Renders `item`, whose frame is the tracer's `frame` ([`bundle::tracer_frame`]).
+    fn submit(&self, item: WorkItem, frame: u32) {
         let world = self.world.clone();
         let done = self.done.clone();
         self.pool.spawn(move || {
             let started = Instant::now();
             let rect = bundle::tracer_rect(item.tile.rect);
-            let frame = u32::try_from(item.frame.0).unwrap_or(u32::MAX);
             let output = tracer::render_tile(&world, frame, rect);
             // The loop may be gone at shutdown; the tile is then simply not needed.
             let _ = done.send((item, output, started..Instant::now()));
@@ -133,6 +133,8 @@ pub(crate) enum Step {
     Closed { conn: ConnId, reason: CloseReason },
     /// The transport stopped.
     Stopped,
+    /// This peer cannot go on (work for a frame the tracer cannot render).
+    Failed(NodeError),
 }
 
 /// The machinery of one peer: core, link, renderer, timer.
@@ -238,9 +240,12 @@ impl Session {
             self.send(peer, &message);
         }
         while let Some(item) = self.core.poll_work() {
-            match &self.renderer {
-                Some(renderer) => renderer.submit(item),
-                None => tracing::error!("the core handed out work before the scene was loaded"),
+            match (&self.renderer, bundle::tracer_frame(item.frame)) {
+                (Some(renderer), Ok(frame)) => renderer.submit(item, frame),
+                (Some(_), Err(error)) => self.pending.push_back(Step::Failed(error.into())),
+                (None, _) => {
+                    tracing::error!("the core handed out work before the scene was loaded")
+                }
             }
         }
         while let Some(event) = self.core.poll_event() {

@@ -17,8 +17,11 @@ type Point = (f64, f64, String);
 /// against time when time grows with samples), so a knob that beats "just render longer" shows as
 /// a point below the spp curve, and a bias as a curve that flattens. Each point is labelled with
 /// its knob value; the reference's own noise is drawn as a dashed floor.
-pub fn write_svg(path: &Path, run: &Run) -> anyhow::Result<()> {
-    draw(path, run).map_err(|e| anyhow::anyhow!("cannot draw {}: {e}", path.display()))
+pub fn write_svg(path: &Path, run: &Run) -> Result<(), crate::LabError> {
+    draw(path, run).map_err(|e| crate::LabError::Plot {
+        path: path.to_owned(),
+        message: e.to_string(),
+    })
 }
 
 fn draw(path: &Path, run: &Run) -> Result<(), Box<dyn std::error::Error>> {

@@ -13,7 +13,7 @@
 //! same version is invisible to it: delete the cache after such a change.
 
 use super::bench;
-use anyhow::Context;
+use crate::LabError;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -31,17 +31,23 @@ pub enum Source {
     Analytic([f32; 3]),
     /// Read from the output folder, its sidecar matching the current settings.
     Cached,
-    /// Rendered now; `stale` says why a cached one could not be used, if there was one.
-    Rendered { stale: Option<String> },
+    /// Rendered now.
+    Rendered {
+        /// Why the cached one could not be used, if there was one.
+        stale: Option<String>,
+    },
 }
 
+/// The image every rung is measured against, and how it was obtained.
 pub struct Reference {
     image: RgbImage,
+    /// Where the image came from.
     pub source: Source,
     /// Samples per pixel of a rendered reference (0 for an analytic one).
     pub spp: u32,
-    /// The estimated MSE and relative MSE of the reference itself (0 for an analytic one).
+    /// The estimated MSE of the reference itself (0 for an analytic one).
     pub noise_mse: f64,
+    /// The reference's own estimated relative MSE (0 for an analytic one).
     pub noise_rel_mse: f64,
     /// How long the render took (when it was made, for a cached one).
     pub render_seconds: f64,
@@ -72,6 +78,7 @@ struct Sidecar {
 }
 
 impl Reference {
+    /// A constant image of `mean` radiance at every pixel: the exact answer of a furnace.
     pub fn analytic(width: u32, height: u32, mean: [f32; 3]) -> Self {
         Reference {
             image: RgbImage {
@@ -96,7 +103,7 @@ impl Reference {
         spp: u32,
         world: &mut World,
         pool: &rayon::ThreadPool,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self, LabError> {
         let baseline = world.scene.settings.clone();
         let seed = baseline.seed ^ REFERENCE_SEED_SALT;
         let key = Key {
@@ -162,7 +169,7 @@ impl Reference {
             &sidecar_path,
             serde_json::to_string_pretty(&sidecar)? + "\n",
         )
-        .with_context(|| format!("cannot write {}", sidecar_path.display()))?;
+        .map_err(LabError::io("write", &sidecar_path))?;
         Ok(Reference {
             image,
             source: Source::Rendered { stale },
@@ -173,10 +180,12 @@ impl Reference {
         })
     }
 
+    /// The reference image.
     pub fn image(&self) -> &RgbImage {
         &self.image
     }
 
+    /// The root of the reference's own estimated MSE.
     pub fn noise_rmse(&self) -> f64 {
         self.noise_mse.sqrt()
     }
@@ -274,17 +283,16 @@ fn key_differences(cached: &Key, wanted: &Key) -> String {
 
 /// The scene's content hash ([`runtime::node::bundle::scene_hash`], the one the peers log),
 /// over every file it was read from in the loader's order, named as the loader names them.
-pub fn hash_scene_files(scene: &Path, files: &[String]) -> anyhow::Result<String> {
+pub fn hash_scene_files(scene: &Path, files: &[String]) -> Result<String, LabError> {
     let root = scene.parent().unwrap_or(Path::new(""));
     let files = files
         .iter()
         .map(|name| {
             let path = root.join(name);
-            let bytes = std::fs::read(&path)
-                .with_context(|| format!("cannot read {} to hash it", path.display()))?;
+            let bytes = std::fs::read(&path).map_err(LabError::io("read", &path))?;
             Ok(runtime::node::bundle::scene_file(name.clone(), bytes))
         })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .collect::<Result<Vec<_>, LabError>>()?;
     Ok(runtime::node::bundle::scene_hash(&files))
 }
 

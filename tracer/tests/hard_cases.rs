@@ -1,5 +1,5 @@
-//! Hard cases end to end: scenes written by the test, rendered by the real `tessera` binary, read
-//! back from its EXR files.
+//! Hard cases: scenes written by the test to a folder, loaded and rendered whole through the
+//! tracer's own frame layer ([`tracer::render_frame`], as every renderer of a whole frame does).
 //!
 //! Where a ray tracer leaks light, loses precision or divides by zero: a camera inside a closed
 //! emitter (a ray slipping through an edge shows as a dark pixel), the Cornell box far from the
@@ -8,30 +8,39 @@
 //! construction (a closed emitter of radiance E with albedo 0 looks like E from every direction,
 //! exactly), or from the unmodified scene, never from the code under test.
 
-mod common;
-
-use common::{pixels, repo, run_ok, tessera};
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use tracer::{Effects, FrameConfig, World, render_frame};
 
 /// Emission of the closed emitters: dyadic, so any number of equal samples averages exactly.
 const E: [f32; 3] = [1.5, 0.75, 3.0];
 
-/// Writes `toml` to `dir/name.toml`, renders it with `flags` and returns frame 0's pixels.
-fn render(dir: &Path, name: &str, toml: &str, flags: &[&str]) -> Vec<[f32; 3]> {
-    let scene = dir.join(format!("{name}.toml"));
-    std::fs::write(&scene, toml).unwrap();
-    let out = dir.join(format!("out-{name}"));
-    let mut command = tessera();
-    command
-        .arg("render")
-        .arg(&scene)
-        .arg("--out")
-        .arg(&out)
-        .args(["--peers", "1"])
-        .args(flags);
-    run_ok(&mut command);
-    let image = pixels(&out.join("frame-0000.exr"));
+/// What a render changes from the scene as written.
+#[derive(Clone, Copy, Default)]
+struct Overrides {
+    /// `Some(Effects::ALL)`: every effect on, as `tessera render --effects all` renders.
+    effects: Option<Effects>,
+    /// Another pixel-sampler seed, as `tessera render --seed` sets it.
+    seed: Option<u64>,
+}
+
+/// A folder of the shipped scenes.
+fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
+}
+
+/// Writes `toml` to `dir/name.toml`, renders frame 0 of it as `overrides` say and returns its
+/// pixels, every one finite and not negative.
+fn render(dir: &Path, name: &str, toml: &str, overrides: Overrides) -> Vec<[f32; 3]> {
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, toml).unwrap();
+    let mut scene = tracer::scene::load(&path).unwrap();
+    if let Some(seed) = overrides.seed {
+        scene.settings.seed = seed;
+    }
+    let world = World::prepare(scene, overrides.effects);
+    let pool = rayon::ThreadPoolBuilder::new().build().unwrap();
+    let image = render_frame(&world, 0, &pool, FrameConfig::default()).pixels;
     for p in &image {
         assert!(
             p.iter().all(|c| c.is_finite() && *c >= 0.0),
@@ -99,9 +108,21 @@ fn inside_a_closed_emissive_sphere_every_pixel_is_the_emission() {
             emitter_material()
         );
         let name = format!("sphere-{i}");
-        assert_all_exactly(&name, &render(dir.path(), &name, &toml, &[]), E);
+        assert_all_exactly(
+            &name,
+            &render(dir.path(), &name, &toml, Overrides::default()),
+            E,
+        );
         if i == 0 {
-            let forced = render(dir.path(), "sphere-0-all", &toml, &["--effects", "all"]);
+            let forced = render(
+                dir.path(),
+                "sphere-0-all",
+                &toml,
+                Overrides {
+                    effects: Some(Effects::ALL),
+                    ..Overrides::default()
+                },
+            );
             assert_all_exactly("sphere-0 with every effect on", &forced, E);
         }
     }
@@ -142,8 +163,21 @@ fn the_cornell_box_far_away_tiny_or_huge_renders_like_the_original() {
             p(278.0, 273.0, 0.0)
         )
     };
-    let original = render(dir.path(), "original", &variant(1.0, 0.0), &[]);
-    let reseeded = render(dir.path(), "reseeded", &variant(1.0, 0.0), &["--seed", "1"]);
+    let original = render(
+        dir.path(),
+        "original",
+        &variant(1.0, 0.0),
+        Overrides::default(),
+    );
+    let reseeded = render(
+        dir.path(),
+        "reseeded",
+        &variant(1.0, 0.0),
+        Overrides {
+            seed: Some(1),
+            ..Overrides::default()
+        },
+    );
     // The Monte Carlo error of an image mean, from two independent renders: each pixel's
     // variance is estimated by half its squared difference.
     let n = original.len() as f64;
@@ -166,7 +200,12 @@ fn the_cornell_box_far_away_tiny_or_huge_renders_like_the_original() {
         ("scaled-1e-6", 1e-6, 0.0),
         ("scaled-1e4", 1e4, 0.0),
     ] {
-        let image = render(dir.path(), name, &variant(scale, shift), &[]);
+        let image = render(
+            dir.path(),
+            name,
+            &variant(scale, shift),
+            Overrides::default(),
+        );
         let m = mean(&image);
         for c in 0..3 {
             // The difference of two renders' means: sqrt(2) standard errors, four of them.
@@ -262,7 +301,7 @@ fn grazing_rays_along_a_floor_find_no_hole() {
             emitter_material()
         );
         let name = format!("grazing-{i}");
-        let image = render(dir.path(), &name, &toml, &[]);
+        let image = render(dir.path(), &name, &toml, Overrides::default());
         let (w, h) = (200usize, 100usize);
         for x in 0..w {
             let column: Vec<[f32; 3]> = (0..h).map(|y| image[y * w + x]).collect();
@@ -312,7 +351,11 @@ fn rays_exactly_along_the_axes_with_signed_zeros_stay_inside_a_closed_room() {
                  [camera]\nposition = {position}\nlook_at = {look_at}\nup = {up}\nvfov = {vfov}\n{room}"
             );
             let name = format!("axis-{i}-{vfov}");
-            assert_all_exactly(&name, &render(dir.path(), &name, &toml, &[]), E);
+            assert_all_exactly(
+                &name,
+                &render(dir.path(), &name, &toml, Overrides::default()),
+                E,
+            );
         }
     }
 }
@@ -383,6 +426,10 @@ fn needle_and_degenerate_triangles_leave_no_hole() {
             emitter_material()
         );
         let name = format!("needles-{i}");
-        assert_all_exactly(&name, &render(dir.path(), &name, &toml, &[]), E);
+        assert_all_exactly(
+            &name,
+            &render(dir.path(), &name, &toml, Overrides::default()),
+            E,
+        );
     }
 }

@@ -13,7 +13,7 @@ use super::curve::Curve;
 use super::findings;
 use super::leaks::LeakCheck;
 use super::reference::{Reference, Source};
-use anyhow::Context;
+use crate::LabError;
 use std::fmt::Write as _;
 use std::path::Path;
 use tracer::geometry::Traversal;
@@ -54,10 +54,10 @@ impl Run<'_> {
     }
 }
 
-pub fn write_all(out: &Path, run: &Run) -> anyhow::Result<()> {
+pub fn write_all(out: &Path, run: &Run) -> Result<(), LabError> {
     let write = |name: &str, text: String| {
         let path = out.join(name);
-        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))
+        std::fs::write(&path, text).map_err(LabError::io("write", path))
     };
     write("accuracy.csv", csv(run))?;
     write("accuracy.md", markdown(run))?;

@@ -1,4 +1,4 @@
-//! `tessera accuracy`: what accuracy costs in time, measured rather than asserted.
+//! What accuracy costs in time, measured rather than asserted (`tessera accuracy`).
 //!
 //! Every accuracy knob of the renderer trades time for error, and a reader choosing settings needs
 //! both numbers side by side. So the command renders one scene over a ladder of values per knob,
@@ -20,77 +20,65 @@
 //! - `findings`: the equal-time and equal-error comparisons, in sentences; `curve`: the spp
 //!   ladder as the yardstick they are read off.
 
-pub(crate) mod bench;
+pub mod bench;
 mod curve;
 mod findings;
 mod leaks;
 mod plot;
-mod reference;
+pub mod reference;
 mod report;
 
-use anyhow::{Context, ensure};
+use crate::{LabError, ensure};
 use clap::ValueEnum;
 use std::path::PathBuf;
-use tracer::geometry::{Accel, BuildQuality};
+use tracer::World;
+use tracer::geometry::BuildQuality;
 use tracer::scene::RenderSettings;
-use tracer::{Effects, World};
 
 /// The default image width (and height, for a square scene): small enough that the full set of
 /// ladders runs in minutes on two cores, large enough for a few thousand pixels of statistics.
 pub const DEFAULT_SIZE: u32 = 128;
 
-/// Measure what accuracy costs in time: render a scene over a ladder of values per accuracy knob
-/// and write DIR/accuracy.csv, DIR/accuracy.md and DIR/accuracy.svg.
-#[derive(Debug, clap::Args)]
-pub struct AccuracyArgs {
+/// What [`run`] measures and where it writes: the command line's flags, defaults resolved by the
+/// binary's argument parser.
+#[derive(Clone, Debug)]
+pub struct Config {
     /// The scene file (TOML; see scenes/README.md).
     pub scene: PathBuf,
     /// Output folder; the cached reference (reference.exr and reference.json) lives here too.
-    #[arg(long, default_value = "accuracy")]
     pub out: PathBuf,
     /// The top of the samples-per-pixel ladder 1, 2, 4, ... (rounded down to a power of two).
-    #[arg(long, default_value_t = 1024)]
     pub max_spp: u32,
     /// Image width (default: 128 pixels on the scene's longer side, keeping its aspect ratio).
-    #[arg(long)]
     pub width: Option<u32>,
     /// Image height (default: as for the width).
-    #[arg(long)]
     pub height: Option<u32>,
     /// Samples per pixel of the depth, roulette, BVH and traversal ladders.
-    #[arg(long, default_value_t = 64)]
     pub knob_spp: u32,
     /// Samples per pixel of the rendered reference (default: 4 x max-spp).
-    #[arg(long)]
     pub reference_spp: Option<u32>,
     /// The exact mean radiance of every pixel, "R,G,B", for scenes that have one (a furnace):
     /// used as the reference instead of a render.
-    #[arg(long, value_parser = parse_rgb)]
     pub analytic_mean: Option<Rgb>,
     /// Seed of the ladders' pixel sampler (default: the scene's).
-    #[arg(long)]
     pub seed: Option<u64>,
     /// Which knobs to measure, comma-separated.
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = Knob::ALL)]
     pub knobs: Vec<Knob>,
     /// Rays shot per traversal by the closed-sphere leak check.
-    #[arg(long, default_value_t = 1 << 19)]
     pub leak_rays: u32,
     /// Renders (and BVH builds) faster than this many seconds are repeated and the fastest run
     /// kept, for times that scheduler noise and other processes disturb less; 0 times each once.
-    #[arg(long, default_value_t = 1.0)]
     pub repeat_below: f64,
     /// Time every render (and BVH build) at least this many times and keep the fastest: on a
     /// machine busy with other work, more runs give steadier comparisons.
-    #[arg(long, default_value_t = 1)]
     pub repeats: u32,
     /// What the comparisons (equal cost, efficiency, the plot) count as cost: wall time, or the
     /// tracer's counted work, which the machine's load does not change (for a shared machine).
-    #[arg(long, value_enum, default_value_t = Cost::Time)]
     pub cost: Cost,
     /// Rendering threads (default: all cores).
-    #[arg(long)]
     pub threads: Option<usize>,
+    /// The command as a reader would retype it, for the report's header.
+    pub command: String,
 }
 
 /// What a rung costs, for the comparisons between rungs.
@@ -148,6 +136,7 @@ pub enum Knob {
 }
 
 impl Knob {
+    /// Every knob, in the order the report shows them.
     pub const ALL: [Knob; 7] = [
         Knob::Spp,
         Knob::Depth,
@@ -158,6 +147,7 @@ impl Knob {
         Knob::Environment,
     ];
 
+    /// The knob's name in the CSV, the report and on the command line.
     pub fn name(self) -> &'static str {
         match self {
             Knob::Spp => "spp",
@@ -171,19 +161,21 @@ impl Knob {
     }
 }
 
-pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
-    ensure!(
+/// Measures every knob `args.knobs` names, prints progress, and writes DIR/accuracy.csv,
+/// DIR/accuracy.md and DIR/accuracy.svg.
+pub fn run(args: &Config) -> Result<(), LabError> {
+    ensure(
         args.max_spp >= 1 && args.knob_spp >= 1,
-        "samples per pixel must be at least 1"
-    );
-    ensure!(
+        "samples per pixel must be at least 1",
+    )?;
+    ensure(
         args.reference_spp.is_none_or(|n| n >= 2),
-        "the reference needs at least 2 samples per pixel"
-    );
-    ensure!(
+        "the reference needs at least 2 samples per pixel",
+    )?;
+    ensure(
         args.repeat_below.is_finite() && args.repeat_below >= 0.0,
-        "--repeat-below must be a number of seconds, 0 or more"
-    );
+        "--repeat-below must be a number of seconds, 0 or more",
+    )?;
     let mut scene = tracer::scene::load(&args.scene)?;
     let (width, height) = image_size(
         args.width,
@@ -202,17 +194,9 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
         frames: 1,
     };
     let files_hash = reference::hash_scene_files(&args.scene, &scene.files)?;
-    let threads = args
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()?;
-    let effects = Effects::of(&scene);
-    let accel = Accel::build(&scene.triangles, BuildQuality::default());
-    let mut world = World::new(scene, accel, effects);
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let (threads, pool) = crate::pool(args.threads)?;
+    let mut world = World::prepare(scene, None);
+    std::fs::create_dir_all(&args.out).map_err(LabError::io("create", &args.out))?;
 
     println!(
         "{}: {}x{}, {} triangles, effects {}, {} threads; baseline: unlimited depth, roulette from depth {}, robust traversal, {:?} BVH",
@@ -275,7 +259,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
         });
     }
     let run = report::Run {
-        command: command_line(),
+        command: args.command.clone(),
         load_average: [load_before, load_average()],
         cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
         scene: args.scene.display().to_string(),
@@ -308,7 +292,7 @@ fn image_size(
     height: Option<u32>,
     scene_w: u32,
     scene_h: u32,
-) -> anyhow::Result<(u32, u32)> {
+) -> Result<(u32, u32), LabError> {
     let aspect = f64::from(scene_w) / f64::from(scene_h);
     let scaled = |v: f64| (v.round() as u32).max(1);
     let size = match (width, height) {
@@ -320,23 +304,11 @@ fn image_size(
         }
         (None, None) => (scaled(f64::from(DEFAULT_SIZE) * aspect), DEFAULT_SIZE),
     };
-    ensure!(
+    ensure(
         size.0 > 0 && size.1 > 0,
-        "the image must be at least 1x1 pixels"
-    );
+        "the image must be at least 1x1 pixels",
+    )?;
     Ok(size)
-}
-
-fn parse_rgb(text: &str) -> Result<Rgb, String> {
-    let values: Vec<f32> = text
-        .split(',')
-        .map(|v| v.trim().parse::<f32>().map_err(|e| format!("`{v}`: {e}")))
-        .collect::<Result<_, _>>()?;
-    match values[..] {
-        [r, g, b] if values.iter().all(|v| v.is_finite() && *v >= 0.0) => Ok(Rgb([r, g, b])),
-        [v] if v.is_finite() && v >= 0.0 => Ok(Rgb([v; 3])),
-        _ => Err("expected R,G,B (or one value for grey): finite and not negative".to_owned()),
-    }
 }
 
 /// The one-minute load average (`/proc/loadavg`, Linux only): how many threads wanted a core. Above
@@ -344,12 +316,6 @@ fn parse_rgb(text: &str) -> Result<Rgb, String> {
 fn load_average() -> Option<f64> {
     let text = std::fs::read_to_string("/proc/loadavg").ok()?;
     text.split_whitespace().next()?.parse().ok()
-}
-
-/// The command as a reader would retype it: `tessera` and the arguments given.
-fn command_line() -> String {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    format!("tessera {}", args.join(" "))
 }
 
 #[cfg(test)]
@@ -363,14 +329,5 @@ mod tests {
         assert_eq!(image_size(None, None, 600, 800).unwrap(), (96, 128));
         assert_eq!(image_size(Some(64), None, 1920, 1080).unwrap(), (64, 36));
         assert_eq!(image_size(Some(10), Some(20), 512, 512).unwrap(), (10, 20));
-    }
-
-    #[test]
-    fn colours_parse_as_three_values_or_one() {
-        assert_eq!(parse_rgb("1,0.5, 2").unwrap(), Rgb([1.0, 0.5, 2.0]));
-        assert_eq!(parse_rgb("0.25").unwrap(), Rgb([0.25; 3]));
-        assert!(parse_rgb("1,2").is_err());
-        assert!(parse_rgb("1,-2,3").is_err());
-        assert!(parse_rgb("1,nan,3").is_err());
     }
 }

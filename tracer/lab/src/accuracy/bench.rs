@@ -10,13 +10,12 @@
 use super::reference::Reference;
 use super::{Cost, Knob};
 use crate::compare::{Metrics, mean_flip};
-use rayon::prelude::*;
 use std::time::Instant;
 use tracer::geometry::{Accel, BuildQuality, OffsetMethod, Traversal};
 use tracer::lights::{EnvironmentSampling, Lights};
 use tracer::output::RgbImage;
 use tracer::scene::RenderSettings;
-use tracer::{Film, Rect, World};
+use tracer::{FrameConfig, World};
 
 /// The side of the square tiles a frame is cut into.
 pub const TILE: u32 = 32;
@@ -47,20 +46,28 @@ pub const ROULETTE_DEPTH_CAP: u32 = 64;
 /// One measured rung of a ladder.
 #[derive(Clone, Debug)]
 pub struct Row {
+    /// The knob this rung turns.
     pub knob: Knob,
     /// The knob's value, as a reader would name it ("16 spp", "depth 4", "off", "Medium", ...).
     pub setting: String,
+    /// The render settings of this rung.
     pub settings: RenderSettings,
+    /// The BVH build quality of this rung.
     pub bvh: BuildQuality,
+    /// The traversal of this rung.
     pub traversal: Traversal,
+    /// Seconds to build the BVH (the BVH ladder only; 0 elsewhere).
     pub build_seconds: f64,
+    /// Seconds to render the frame (the fastest of the repeats).
     pub render_seconds: f64,
     /// Closest-hit plus shadow rays traced.
     pub rays: u64,
     /// The tracer's counted work ([`tracer::PathStats::work`]): a cost that, unlike the time, does
     /// not depend on the machine or its load.
     pub work: u64,
+    /// The error against the reference.
     pub metrics: Metrics,
+    /// Mean FLIP against the reference.
     pub flip: f64,
     /// Whatever else the rung showed (an image that changed when it must not, dropped samples).
     pub note: String,
@@ -86,6 +93,7 @@ impl Row {
         1.0 / (self.metrics.rel_mse * self.cost(cost))
     }
 
+    /// Closest-hit plus shadow rays per second of render time, in millions.
     pub fn mrays_per_second(&self) -> f64 {
         self.rays as f64 / self.render_seconds / 1e6
     }
@@ -93,10 +101,15 @@ impl Row {
 
 /// A rendered frame and what it cost.
 pub struct Timed {
+    /// The frame's pixels.
     pub image: RgbImage,
+    /// Wall seconds of the render (the fastest of the repeats).
     pub seconds: f64,
+    /// Closest-hit plus shadow rays traced.
     pub rays: u64,
+    /// The tracer's counted work.
     pub work: u64,
+    /// Samples dropped as non-finite (a bug if ever non-zero).
     pub invalid_samples: u64,
 }
 
@@ -115,31 +128,9 @@ pub fn render(world: &World, pool: &rayon::ThreadPool, repeat_below: f64) -> Tim
 /// [`render`], timed as `timing` says.
 pub fn render_with(world: &World, pool: &rayon::ThreadPool, timing: Timing) -> Timed {
     let (width, height) = (world.scene.settings.width, world.scene.settings.height);
-    let tiles: Vec<Rect> = (0..height.div_ceil(TILE))
-        .flat_map(|ty| (0..width.div_ceil(TILE)).map(move |tx| (tx, ty)))
-        .map(|(tx, ty)| {
-            let (x, y) = (tx * TILE, ty * TILE);
-            Rect {
-                x,
-                y,
-                w: TILE.min(width - x),
-                h: TILE.min(height - y),
-            }
-        })
-        .collect();
     let once = || {
         let started = Instant::now();
-        let outputs: Vec<_> = pool.install(|| {
-            tiles
-                .par_iter()
-                .map(|&rect| tracer::render_tile(world, 0, rect))
-                .collect()
-        });
-        let mut film = Film::new(width, height);
-        for output in &outputs {
-            film.insert(output.rect, &output.pixels, &output.cost);
-            film.stats.add(&output.stats);
-        }
+        let film = tracer::render_frame(world, 0, pool, FrameConfig { tile: TILE });
         (film, started.elapsed().as_secs_f64())
     };
     let (film, first) = once();
@@ -179,6 +170,8 @@ pub struct Bench<'a> {
 }
 
 impl<'a> Bench<'a> {
+    /// A bench of `world` on `pool`, measured against `reference`, each render timed as `timing`
+    /// says; the world's settings on entry are every rung's baseline.
     pub fn new(
         world: World,
         pool: &'a rayon::ThreadPool,
@@ -195,6 +188,7 @@ impl<'a> Bench<'a> {
         }
     }
 
+    /// The world as it is between rungs (the baseline settings).
     pub fn world(&self) -> &World {
         &self.world
     }

@@ -1,8 +1,8 @@
-//! `tessera bench`: how fast the tracer is, in rays per second, on real scenes.
+//! How fast the tracer is, in rays per second, on real scenes (`tessera bench`).
 //!
 //! The figures are meant to be set beside other renderers' (Mitsuba 3, Cycles) and beside our own
 //! earlier runs, so the command measures the tracer alone: frame 0 of each scene is rendered
-//! straight through [`tracer::render_tile`] by rayon over tiles, on every core, with no peers, no
+//! straight through [`tracer::render_frame`] on every core, with no peers, no
 //! network and no file output in the timed part. That is the same timed render `tessera accuracy`
 //! uses, so the two commands cannot disagree about what "one render" costs.
 //!
@@ -22,68 +22,74 @@
 mod rtt;
 
 use crate::accuracy::bench::render;
-use crate::cli::{EffectsChoice, ImageArgs};
-use crate::render::prepare_world;
-use anyhow::Context;
+use crate::{LabError, ensure};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use tracer::scene::RenderSettings;
 
-/// Measure the tracer: rays per second for camera rays alone and for full paths, BVH build time,
-/// CPU-seconds and wall seconds, per scene.
-#[derive(Debug, clap::Args)]
-pub struct BenchArgs {
-    /// Scene files (default: every `scenes/*/*.toml` under the current folder; the ones in
-    /// `scenes/shared/` are skipped, and listed as skipped, when `../shared/scenes` is absent).
+/// Changes a scene's settings after loading, or says what is wrong with them.
+pub type Adjust = Box<dyn Fn(&mut RenderSettings) -> Result<(), String>>;
+
+/// What [`run`] measures, and how it reports.
+pub struct Config {
+    /// Scene files (empty: every `scenes/*/*.toml` under the current folder).
     pub scenes: Vec<PathBuf>,
-    #[command(flatten)]
-    pub image: ImageArgs,
-    /// Maximum depth of the full-path pass, in scattering events as pbrt counts them: a path has
-    /// at most `D + 1` segments, so Mitsuba's `max_depth = 8` is our 7 (default: each scene's).
-    #[arg(long)]
+    /// Applied to each scene's settings after loading, with the checks `tessera render` makes
+    /// (the command line's image overrides); an error names what is wrong.
+    pub adjust: Adjust,
+    /// Maximum depth of the full-path pass (`None`: each scene's).
     pub max_depth: Option<u32>,
-    /// Rendering threads (default: all cores).
-    #[arg(long)]
+    /// Rendering threads (`None`: all cores).
     pub threads: Option<usize>,
-    /// Write each full-path image to DIR/SCENE.exr, to compare with another renderer's.
-    #[arg(long)]
+    /// Where each full-path image is written as SCENE.exr, if anywhere.
     pub out: Option<PathBuf>,
-    /// Also time this many steal exchanges (request, then a grant of tiles) between two peers
-    /// over QUIC on loopback; 0 skips it.
-    #[arg(long, default_value_t = 0)]
+    /// Steal exchanges to time between two peers on loopback; 0 skips them.
     pub steal_rtt: usize,
     /// Print JSON instead of text.
-    #[arg(long)]
     pub json: bool,
 }
 
 /// Everything one `tessera bench` run measured.
 #[derive(Debug, Serialize)]
 pub struct Report {
+    /// Rendering threads.
     pub threads: usize,
     /// The machine's load average (1, 5, 15 minutes) before and after, so a reader can tell a
     /// quiet machine from one shared with other work.
     pub load_before: Option<[f64; 3]>,
+    /// The load average after the last measurement.
     pub load_after: Option<[f64; 3]>,
+    /// Every scene measured.
     pub scenes: Vec<SceneBench>,
+    /// Every scene left out, with why.
     pub skipped: Vec<Skipped>,
+    /// The steal round trip, if asked for.
     pub steal_rtt: Option<rtt::StealRtt>,
 }
 
 /// One scene's figures.
 #[derive(Debug, Serialize)]
 pub struct SceneBench {
+    /// The scene file, as given.
     pub scene: String,
+    /// Triangles after loading.
     pub triangles: usize,
+    /// Image width rendered.
     pub width: u32,
+    /// Image height rendered.
     pub height: u32,
+    /// Samples per pixel rendered.
     pub samples_per_pixel: u32,
     /// Reading and validating the TOML and OBJ/MTL files.
     pub load_seconds: f64,
     /// Building the BVH (and the light tables, which take a small fraction of it).
     pub build_seconds: f64,
+    /// CPU-seconds of the whole process during the build.
     pub build_cpu_seconds: Option<f64>,
+    /// Camera rays alone (maximum depth 0).
     pub primary: Pass,
+    /// Full paths at the scene's (or `--max-depth`'s) depth.
     pub paths: Pass,
     /// Where the full-path image was written (`--out`).
     pub image: Option<String>,
@@ -96,9 +102,11 @@ pub struct Pass {
     pub max_depth: Option<u32>,
     /// Closest-hit plus shadow rays.
     pub rays: u64,
+    /// Wall seconds of the render.
     pub seconds: f64,
     /// User plus system CPU time of the whole process during the render (all threads).
     pub cpu_seconds: Option<f64>,
+    /// Closest-hit plus shadow rays per wall second.
     pub rays_per_second: f64,
     /// Samples dropped as non-finite (a bug if ever non-zero).
     pub invalid_samples: u64,
@@ -107,28 +115,26 @@ pub struct Pass {
 /// A scene that was not measured, and why.
 #[derive(Debug, Serialize)]
 pub struct Skipped {
+    /// The scene file, as given.
     pub scene: String,
+    /// Why it was skipped.
     pub reason: String,
 }
 
-pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+/// Measures every scene (and the steal round trip, if asked) and prints the figures.
+pub fn run(args: &Config) -> Result<Report, LabError> {
     let scenes = if args.scenes.is_empty() {
         shipped_scenes(Path::new("scenes"))?
     } else {
         args.scenes.clone()
     };
-    anyhow::ensure!(
+    ensure(
         !scenes.is_empty(),
-        "no scenes given and no scenes/*/*.toml here; run from the repository root"
-    );
-    let threads = args
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()?;
+        "no scenes given and no scenes/*/*.toml here; run from the repository root",
+    )?;
+    let (threads, pool) = crate::pool(args.threads)?;
     if let Some(out) = &args.out {
-        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+        std::fs::create_dir_all(out).map_err(LabError::io("create", out))?;
     }
     let mut report = Report {
         threads,
@@ -179,37 +185,37 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             report.skipped.len()
         );
     }
-    Ok(())
+    Ok(report)
 }
 
 /// Loads, builds and renders one scene twice. The outer error stops the command (a malformed
 /// scene, an unwritable output); the inner one is a scene skipped because its files are absent.
 fn bench_scene(
     path: &Path,
-    args: &BenchArgs,
+    args: &Config,
     pool: &rayon::ThreadPool,
-) -> anyhow::Result<Result<SceneBench, Skipped>> {
+) -> Result<Result<SceneBench, Skipped>, LabError> {
     let started = Instant::now();
-    let mut scene =
-        match tracer::scene::load(path) {
-            Ok(scene) => scene,
-            Err(error) => {
-                return match absent_file(&error) {
-                    Some(file) => Ok(Err(Skipped {
-                        scene: path.display().to_string(),
-                        reason: format!("{file} is absent"),
-                    })),
-                    None => Err(anyhow::Error::from(error)
-                        .context(format!("benchmarking {}", path.display()))),
-                };
-            }
-        };
+    let mut scene = match tracer::scene::load(path) {
+        Ok(scene) => scene,
+        Err(error) => {
+            return match absent_file(&error) {
+                Some(file) => Ok(Err(Skipped {
+                    scene: path.display().to_string(),
+                    reason: format!("{file} is absent"),
+                })),
+                None => {
+                    Err(LabError::from(error).context(format!("benchmarking {}", path.display())))
+                }
+            };
+        }
+    };
     // The same overrides, with the same checks, as `tessera render` applies.
-    args.image
-        .apply(&mut scene.settings)
-        .with_context(|| format!("benchmarking {}", path.display()))?;
+    (args.adjust)(&mut scene.settings).map_err(|message| {
+        LabError::Invalid(message).context(format!("benchmarking {}", path.display()))
+    })?;
     let load_seconds = started.elapsed().as_secs_f64();
-    let build = timed(|| prepare_world(scene, EffectsChoice::Auto));
+    let build = timed(|| tracer::World::prepare(scene, None));
     let (mut world, build_seconds, build_cpu_seconds) =
         (build.value, build.seconds, build.cpu_seconds);
     if let Some(depth) = args.max_depth {
@@ -301,20 +307,18 @@ fn absent_file(error: &tracer::SceneError) -> Option<String> {
 }
 
 /// `DIR/*/*.toml`, sorted.
-fn shipped_scenes(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+fn shipped_scenes(dir: &Path) -> Result<Vec<PathBuf>, LabError> {
     let mut scenes = Vec::new();
     if !dir.is_dir() {
         return Ok(scenes);
     }
-    for entry in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
-        let folder = entry?.path();
+    for entry in std::fs::read_dir(dir).map_err(LabError::io("read", dir))? {
+        let folder = entry.map_err(LabError::io("read", dir))?.path();
         if !folder.is_dir() {
             continue;
         }
-        for file in
-            std::fs::read_dir(&folder).with_context(|| format!("reading {}", folder.display()))?
-        {
-            let file = file?.path();
+        for file in std::fs::read_dir(&folder).map_err(LabError::io("read", &folder))? {
+            let file = file.map_err(LabError::io("read", &folder))?.path();
             if file.extension().is_some_and(|e| e == "toml") {
                 scenes.push(file);
             }
@@ -382,14 +386,13 @@ fn load_average() -> Option<[f64; 3]> {
 mod tests {
     use super::*;
 
-    fn args() -> BenchArgs {
-        BenchArgs {
+    fn args() -> Config {
+        Config {
             scenes: Vec::new(),
-            image: ImageArgs {
-                spp: Some(2),
-                width: Some(8),
-                height: Some(6),
-            },
+            adjust: Box::new(|settings| {
+                (settings.samples_per_pixel, settings.width, settings.height) = (2, 8, 6);
+                Ok(())
+            }),
             max_depth: None,
             threads: Some(1),
             out: None,
@@ -407,7 +410,7 @@ mod tests {
 
     #[test]
     fn primary_pass_traces_one_camera_ray_per_sample_and_paths_trace_more() {
-        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/furnace/furnace.toml");
+        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/furnace/furnace.toml");
         let measured = bench_scene(&scene, &args(), &pool())
             .expect("the furnace loads")
             .expect("nothing absent");
@@ -448,7 +451,13 @@ mod tests {
         );
         let error = bench_scene(&malformed, &args(), &pool())
             .expect_err("a malformed scene stops the bench");
-        assert!(format!("{error:#}").contains("bogus"), "{error:#}");
+        let mut chain = error.to_string();
+        let mut cause = std::error::Error::source(&error);
+        while let Some(next) = cause {
+            chain += &format!(": {next}");
+            cause = next.source();
+        }
+        assert!(chain.contains("bogus"), "{chain}");
     }
 
     #[test]
@@ -465,7 +474,7 @@ mod tests {
 
     #[test]
     fn shipped_scenes_are_found_sorted() {
-        let scenes = shipped_scenes(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes"))
+        let scenes = shipped_scenes(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes"))
             .expect("reading scenes/");
         assert!(
             scenes

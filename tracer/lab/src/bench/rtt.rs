@@ -9,7 +9,7 @@
 //! by the transport's own test (`loopback_round_trips_and_large_messages_arrive_intact` in
 //! `runtime/tests/net_security.rs`); this one times the messages a steal really sends.
 
-use anyhow::Context;
+use crate::LabError;
 use runtime::net::{ClusterCerts, Event, Expect, Link};
 use runtime_core::wire::{self, FrameId, Message, TileId, TileSpec};
 use serde::Serialize;
@@ -60,22 +60,35 @@ impl fmt::Display for StealRtt {
 }
 
 /// Times `exchanges` steal round trips (after a warm-up) between two peers on 127.0.0.1.
-pub fn measure(exchanges: usize) -> anyhow::Result<StealRtt> {
-    let tokio = crate::render::tokio_runtime()?;
+pub fn measure(exchanges: usize) -> Result<StealRtt, LabError> {
+    // Two workers, as `tessera render` runs its transport: tokio only moves bytes and timers.
+    let tokio = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| LabError::Net(e.to_string()))?;
     tokio.block_on(async {
         tokio::time::timeout(TIME_LIMIT, exchange(exchanges))
             .await
-            .context("the steal round trips did not finish within a minute")?
+            .map_err(|_| {
+                LabError::Net("the steal round trips did not finish within a minute".into())
+            })?
     })
 }
 
-async fn exchange(exchanges: usize) -> anyhow::Result<StealRtt> {
-    let certs = ClusterCerts::generate(2)?;
+/// A transport error, as the message a user reads.
+fn net(error: impl std::fmt::Display) -> LabError {
+    LabError::Net(error.to_string())
+}
+
+async fn exchange(exchanges: usize) -> Result<StealRtt, LabError> {
+    let certs = ClusterCerts::generate(2).map_err(net)?;
     let config = runtime::node::Options::default().net;
     let loopback = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
     let (thief, mut thief_events) =
-        Link::bind(loopback, &certs.peers()[0], config.clone(), decode)?;
-    let (victim, mut victim_events) = Link::bind(loopback, &certs.peers()[1], config, decode)?;
+        Link::bind(loopback, &certs.peers()[0], config.clone(), decode).map_err(net)?;
+    let (victim, mut victim_events) =
+        Link::bind(loopback, &certs.peers()[1], config, decode).map_err(net)?;
 
     let grant_tiles: Vec<TileSpec> = (0..GRANT_TILES as u32)
         .map(|i| {
@@ -88,7 +101,7 @@ async fn exchange(exchanges: usize) -> anyhow::Result<StealRtt> {
         tiles: grant_tiles.clone(),
     })
     .len();
-    let victim_addr = victim.local_addr()?;
+    let victim_addr = victim.local_addr().map_err(net)?;
     let answering = tokio::spawn(async move {
         while let Some(event) = victim_events.recv().await {
             if let Event::Message {
@@ -107,7 +120,10 @@ async fn exchange(exchanges: usize) -> anyhow::Result<StealRtt> {
         }
     });
 
-    let conn = thief.connect(victim_addr, Expect::Peer(1)).await?;
+    let conn = thief
+        .connect(victim_addr, Expect::Peer(1))
+        .await
+        .map_err(net)?;
     let mut rtts = Vec::with_capacity(exchanges);
     let mut request_bytes = 0;
     for i in 0..WARM_UP + exchanges {
@@ -117,18 +133,20 @@ async fn exchange(exchanges: usize) -> anyhow::Result<StealRtt> {
         });
         request_bytes = request.len();
         let started = Instant::now();
-        thief.send(conn, &request).await?;
+        thief.send(conn, &request).await.map_err(net)?;
         loop {
             match thief_events
                 .recv()
                 .await
-                .context("the thief's transport stopped")?
+                .ok_or_else(|| net("the thief's transport stopped"))?
             {
                 Event::Message {
                     message: Message::StealGrant { frame, .. },
                     ..
                 } if frame == FrameId(i as u64) => break,
-                Event::Closed { reason, .. } => anyhow::bail!("the connection closed: {reason:?}"),
+                Event::Closed { reason, .. } => {
+                    return Err(net(format!("the connection closed: {reason:?}")));
+                }
                 _ => {}
             }
         }
