@@ -18,6 +18,7 @@ mod bench;
 mod cli;
 mod cluster;
 mod compare;
+mod frame_files;
 mod render;
 mod report;
 mod resume;

@@ -7,7 +7,7 @@ use crate::cli::{
     BalancerKind, DealOrder, EffectsChoice, FrameArgs, ImageArgs, RenderArgs, ServeArgs, flag_name,
 };
 use crate::report::{self, FrameStats, PeerFrameStats, Progress, StatsFile, TileStats};
-use crate::resume;
+use crate::{frame_files, resume};
 use anyhow::Context;
 use runtime::net::PeerIdentity;
 use runtime::node::{self, CompletedFrame, FrameSink, Job};
@@ -133,7 +133,7 @@ fn execute(
     args: &FrameArgs,
     peers: usize,
     threads: usize,
-    drive: impl FnOnce(Job, &mut Sink<'_>) -> anyhow::Result<node::LocalRun>,
+    drive: impl FnOnce(Job, &mut Sink) -> anyhow::Result<node::LocalRun>,
 ) -> anyhow::Result<()> {
     let started = Instant::now();
     // A trace feeds the simulator every frame's costs in order; a resumed render has only some.
@@ -189,8 +189,16 @@ fn execute(
     if let Some(why) = &missing {
         progress.line(&resume::describe(first, settings.frames, why, &render_hash));
     }
+    let writer = frame_files::Writer::start(
+        frame_files::Settings {
+            out: args.out.clone(),
+            exposure: args.exposure,
+            tile_map: args.tile_map,
+            render_hash: render_hash.clone(),
+        },
+        progress.clone(),
+    )?;
     let mut sink = Sink {
-        args,
         progress,
         stats: StatsFile {
             scene: args.scene.display().to_string(),
@@ -216,6 +224,7 @@ fn execute(
             None => None,
         },
         accepted: report::Accepted::new(),
+        files: writer,
     };
     let job = Job {
         world,
@@ -226,7 +235,11 @@ fn execute(
         partitioner,
     };
     let render_started = Instant::now();
-    let run = drive(job, &mut sink)?;
+    let run = drive(job, &mut sink);
+    // Every frame handed over is written before the render counts as done, or fails.
+    let written = sink.files.finish();
+    let run = run?;
+    written?;
     let render_seconds = render_started.elapsed().as_secs_f64();
     sink.progress.finish();
     if first == settings.frames && missing.is_some() {
@@ -311,8 +324,7 @@ pub fn tokio_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 }
 
 /// Writes each finished frame and keeps its statistics.
-struct Sink<'a> {
-    args: &'a FrameArgs,
+struct Sink {
     progress: Progress,
     stats: StatsFile,
     rays: u64,
@@ -320,18 +332,18 @@ struct Sink<'a> {
     trace: Option<sim::trace::Trace>,
     /// The results the owner kept, telling the Gantt charts which renders were duplicates.
     accepted: report::Accepted,
+    /// Writes the frames' files off the owner's loop.
+    files: frame_files::Writer,
 }
 
-impl FrameSink for Sink<'_> {
+impl FrameSink for Sink {
     fn frame(&mut self, done: CompletedFrame) -> Result<(), String> {
-        self.write(&done).map_err(|e| format!("{e:#}"))?;
         self.rays += done.rays;
         if let Some(trace) = &mut self.trace {
             trace
                 .push(done.film.block_work.clone())
                 .map_err(|e| e.to_string())?;
         }
-        self.progress.frame_done(done.frame, done.seconds);
         for t in &done.tiles {
             let rect = [t.rect.x, t.rect.y, t.rect.w, t.rect.h];
             self.accepted
@@ -350,41 +362,19 @@ impl FrameSink for Sink<'_> {
         };
         frame.summarise_leaves();
         self.stats.frames.push(frame);
-        Ok(())
-    }
-}
-
-impl Sink<'_> {
-    fn write(&self, done: &CompletedFrame) -> anyhow::Result<()> {
-        let (args, film) = (self.args, &done.film);
-        let name = |ext: &str| resume::frame_path(&args.out, done.frame, ext);
-        tracer::output::write_png(
-            &name("png"),
-            film.width,
-            film.height,
-            &film.pixels,
-            args.exposure,
-        )?;
-        if args.tile_map {
-            let preview = tracer::output::tone_map(&film.pixels, args.exposure);
-            let path = args.out.join(format!("tiles-{:04}.png", done.frame));
-            let costs: Vec<([u32; 4], u64)> = done
-                .tiles
-                .iter()
-                .map(|t| ([t.rect.x, t.rect.y, t.rect.w, t.rect.h], t.measured))
-                .collect();
-            report::write_tile_map(&path, film.width, film.height, &preview, &costs)?;
-        }
-        // The EXR goes last: `--resume` takes a frame whose EXR is there for done, so the
-        // previews must be there before it.
-        tracer::output::write_exr_with_text(
-            &name("exr"),
-            film.width,
-            film.height,
-            &film.pixels,
-            &[(resume::ATTRIBUTE, &self.stats.render_hash)],
-        )?;
-        Ok(())
+        let costs = done
+            .tiles
+            .iter()
+            .map(|t| ([t.rect.x, t.rect.y, t.rect.w, t.rect.h], t.measured))
+            .collect();
+        self.files
+            .send(frame_files::Frame {
+                frame: done.frame,
+                seconds: done.seconds,
+                film: done.film,
+                costs,
+            })
+            .map_err(|e| format!("{e:#}"))
     }
 }
 

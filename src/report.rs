@@ -8,7 +8,8 @@ use serde::{Deserialize, Serialize};
 use std::io::IsTerminal;
 use std::path::Path;
 
-/// Progress over the frames of a render.
+/// Progress over the frames of a render. Clones share one bar: the frame writer ticks it.
+#[derive(Clone)]
 pub struct Progress {
     bar: Option<ProgressBar>,
 }
