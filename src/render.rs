@@ -207,6 +207,7 @@ fn execute(
             samples_per_pixel: settings.samples_per_pixel,
             balancer: flag_name(&args.balancer),
             deal: flag_name(&args.deal),
+            motion: args.motion.to_string(),
             effects: world.effects.to_string(),
             peers,
             render_hash,

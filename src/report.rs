@@ -70,6 +70,9 @@ pub struct StatsFile {
     /// How tiles were dealt to peers: `interleaved`, `contiguous` or `round-robin` (empty in
     /// files written before dealing was a choice, which always dealt contiguously).
     pub deal: String,
+    /// Motion-compensated prediction (`--motion`): the largest shift searched, in blocks per
+    /// frame, or `off` (empty in files written before it existed, which predicted still: off).
+    pub motion: String,
     /// The light-transport effects the render paid for (see `tracer::Effects`).
     pub effects: String,
     pub peers: usize,

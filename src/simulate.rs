@@ -34,7 +34,8 @@ pub struct SimulateArgs {
     #[arg(long, value_enum, default_value_t = DealOrder::Interleaved)]
     pub deal: DealOrder,
     /// Motion-compensated prediction: the largest shift of the cost landscape between frames
-    /// searched, in blocks per frame, or `off` (as `tessera render --motion`).
+    /// searched, in blocks per frame, or `off` (as `tessera render --motion`; with --validate,
+    /// the render's).
     #[arg(long, default_value_t = crate::cli::Motion::default(), value_parser = crate::cli::parse_motion)]
     pub motion: crate::cli::Motion,
     /// Simulate only this frame of the trace, over and over: a static scene, every frame of
@@ -450,6 +451,12 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
             None => bail!("unknown deal {name:?} in {}", stats_path.display()),
         },
     };
+    // The render's own prediction, not this command's --motion: the tiles must be cut alike.
+    let motion = match stats.motion.as_str() {
+        "" => crate::cli::Motion(None),
+        text => crate::cli::parse_motion(text)
+            .map_err(|e| anyhow::anyhow!("motion in {}: {e}", stats_path.display()))?,
+    };
     let steal = match args.policy.as_slice() {
         [] => true,
         [policy] => policy.steal,
@@ -486,18 +493,12 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
     scenario.frames = Some(frames);
     scenario.keep_assignments = true;
     let tiles = stats.frames[0].tiles.len();
-    let partitioner = crate::render::partitioner(
-        kind,
-        tiles,
-        deal,
-        args.motion,
-        trace.width(),
-        trace.height(),
-    )?;
+    let partitioner =
+        crate::render::partitioner(kind, tiles, deal, motion, trace.width(), trace.height())?;
     let run = scenario::run(trace, partitioner, &scenario)?;
     let mut csv = String::from("frame,measured_s,simulated_s,ratio,tiles,same_initial_sets\n");
     println!(
-        "simulating {} peers x {slots} slots, {} with{} stealing, {tiles} tiles, at {rate:.4e} work/s per slot",
+        "simulating {} peers x {slots} slots, {} with{} stealing, {tiles} tiles, motion {motion}, at {rate:.4e} work/s per slot",
         stats.peers,
         stats.balancer,
         if steal { "" } else { "out" }

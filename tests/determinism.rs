@@ -200,7 +200,12 @@ fn a_recorded_trace_drives_the_simulator() {
 /// but only printed, since they depend on this machine.
 #[test]
 fn the_simulator_deals_the_tiles_the_runtime_dealt() {
-    for (balancer, peers, deal) in [("pbt", "3", "contiguous"), ("regular", "4", "round-robin")] {
+    // The third render predicts without motion: the simulator must read that from stats.json.
+    for (balancer, peers, deal, motion) in [
+        ("pbt", "3", "contiguous", "16"),
+        ("regular", "4", "round-robin", "16"),
+        ("pbt", "3", "interleaved", "off"),
+    ] {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("out");
         let trace = dir.path().join("trace.jsonl");
@@ -216,6 +221,8 @@ fn the_simulator_deals_the_tiles_the_runtime_dealt() {
                 "12",
                 "--deal",
                 deal,
+                "--motion",
+                motion,
                 "--trace",
                 trace.to_str().unwrap(),
                 "--stats",
@@ -235,6 +242,11 @@ fn the_simulator_deals_the_tiles_the_runtime_dealt() {
         assert!(
             stdout.contains("initial tile sets identical in 3 of 3 frames"),
             "{balancer} dealt {deal} to {peers} peers:\n{stdout}"
+        );
+        // The prediction is the render's, read from stats.json, not the simulator's default.
+        assert!(
+            stdout.contains(&format!("motion {motion},")),
+            "{balancer}, motion {motion}:\n{stdout}"
         );
         let csv = std::fs::read_to_string(dir.path().join("validation/validation.csv")).unwrap();
         assert_eq!(csv.lines().count(), 1 + 3, "{csv}");
