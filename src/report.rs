@@ -300,17 +300,24 @@ pub fn write_gantt(
     accepted: &Accepted,
 ) -> anyhow::Result<std::path::PathBuf> {
     use sim::plot::{BarKind, FrameSpan, GanttBar};
+    // Each tile's initial peer by (frame, tile), by number: a resumed render's entries start at
+    // its first frame. Looked up once per bar, not searched for.
+    let initial: std::collections::HashMap<(u64, u32), u32> = stats
+        .frames
+        .iter()
+        .flat_map(|f| {
+            f.tiles
+                .iter()
+                .map(move |t| ((u64::from(f.frame), t.tile), t.initial_peer))
+        })
+        .collect();
     let mut bars = Vec::new();
     for (peer, tiles) in timelines {
         for t in tiles {
             let rect = [t.rect.x, t.rect.y, t.rect.w, t.rect.h];
-            let taken = stats
-                .frames
-                .iter()
-                // By number, not position: a resumed render's entries start at its first frame.
-                .find(|f| u64::from(f.frame) == t.frame)
-                .and_then(|f| f.tiles.iter().find(|r| r.tile == t.tile))
-                .is_some_and(|r| r.initial_peer != peer.0);
+            let taken = initial
+                .get(&(t.frame, t.tile))
+                .is_some_and(|&first| first != peer.0);
             let kind = if !accepted.contains(&(t.frame, peer.0, rect)) {
                 BarKind::Duplicate
             } else if t.piece {

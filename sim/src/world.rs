@@ -139,7 +139,8 @@ impl SimWorld {
 impl World for SimWorld {
     fn render(&mut self, now: Duration, peer: PeerId, item: &WorkItem) -> Rendered {
         let frame = item.frame.0;
-        let cost = self.map(frame).cost(item.tile.rect);
+        let map = self.map(frame);
+        let (cost, width, height) = (map.cost(item.tile.rect), map.width(), map.height());
         let speed = self.speeds[peer.0 as usize];
         self.starts[peer.0 as usize] += 1;
         let seconds = (cost * self.seconds_per_unit + self.tile_overhead) / speed;
@@ -155,12 +156,11 @@ impl World for SimWorld {
             if charted {
                 let taken = tally.initial.get(item.tile.id.0 as usize).copied() != Some(peer);
                 let start = now.as_secs_f64();
-                let map = &self.maps[(frame % self.maps.len() as u64) as usize];
                 let begun = self
                     .begun
                     .entry(frame)
-                    .or_insert_with(|| vec![false; map.width() as usize * map.height() as usize]);
-                let kind = match mark_begun(begun, map.width(), item.tile.rect) {
+                    .or_insert_with(|| vec![false; width as usize * height as usize]);
+                let kind = match mark_begun(begun, width, item.tile.rect) {
                     false => BarKind::Duplicate,
                     true if item.tile.piece != wire::Piece::WHOLE => BarKind::Piece,
                     true if taken => BarKind::Taken,

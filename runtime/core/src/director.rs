@@ -267,8 +267,7 @@ impl Director {
         // The prediction was aimed, when the last frame was measured, at the frame to be dealt
         // next then; a frame dealt later, before another is measured, lies further ahead.
         if let Some(measured) = self.last_measured {
-            let ahead = u32::try_from(self.next.saturating_sub(measured)).unwrap_or(u32::MAX);
-            self.partitioner.aim(ahead)?;
+            self.partitioner.aim(self.ahead_of(measured))?;
         }
         let tiles = self.partitioner.tiles();
         let mut participants: Vec<PeerId> = self.peers.difference(&self.overdue).copied().collect();
@@ -326,6 +325,13 @@ impl Director {
             return Err(DirectorError::DealtTwice { frame });
         }
         Ok(Some(deal))
+    }
+
+    /// How many frames after the measured frame `measured` the next one dealt is (at least 1).
+    fn ahead_of(&self, measured: u64) -> u32 {
+        u32::try_from(self.next.saturating_sub(measured))
+            .unwrap_or(u32::MAX)
+            .max(1)
     }
 
     /// Whether the next frame's prediction is doubted (see [`Config::doubt_error`]).
@@ -473,8 +479,8 @@ impl Director {
         }
         // The next frame dealt is the first not yet dealt: with a frame in flight it is two
         // after the one measured, and the prediction carries motion on that far.
-        let ahead = u32::try_from(self.next.saturating_sub(frame.0)).unwrap_or(u32::MAX);
-        let update = self.partitioner.observe_ahead(map, ahead.max(1))?;
+        let ahead = self.ahead_of(frame.0);
+        let update = self.partitioner.observe_ahead(map, ahead)?;
         self.last_measured = Some(frame.0);
         if let Some(motion) = self.partitioner.motion() {
             tracing::debug!(%frame, ahead, dx = motion.dx, dy = motion.dy, "the costs moved");

@@ -214,7 +214,7 @@ pub fn utilisation_svg(
         }
     }
     let span_lanes = Lanes::of_spans(frames);
-    let band = 40 + 16 * span_lanes.count.max(1);
+    let band = 40 + 16 * span_lanes.count();
     let strips = (28 * rows).clamp(120, 1400);
     let root = SVGBackend::new(path, (WIDTH, 70 + band + strips + 200)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| error(&e))?;
@@ -240,7 +240,7 @@ pub fn utilisation_svg(
         .margin_left(10)
         .y_label_area_size(LABEL_AREA)
         .x_label_area_size(0)
-        .build_cartesian_2d(0.0..end, 0.0..span_lanes.count.max(1) as f64)
+        .build_cartesian_2d(0.0..end, 0.0..span_lanes.count() as f64)
         .map_err(|e| error(&e))?;
     chart
         .configure_mesh()
@@ -363,9 +363,8 @@ fn draw_legend(
 struct Lanes {
     /// The lane of each bar, in the order given.
     lane: Vec<u32>,
-    /// Lanes per row (or in all, for spans).
+    /// Lanes per row (one row holding all, for spans).
     per_row: Vec<u32>,
-    count: u32,
 }
 
 impl Lanes {
@@ -380,12 +379,7 @@ impl Lanes {
             lane[i] = place(&mut free_at[row], bars[i].start, bars[i].end);
             per_row[row] = per_row[row].max(lane[i] + 1);
         }
-        let count = per_row.iter().copied().max().unwrap_or(1);
-        Lanes {
-            lane,
-            per_row,
-            count,
-        }
+        Lanes { lane, per_row }
     }
 
     fn of_spans(spans: &[FrameSpan]) -> Lanes {
@@ -396,12 +390,15 @@ impl Lanes {
         for i in order {
             lane[i] = place(&mut free_at, spans[i].start, spans[i].end);
         }
-        let count = free_at.len().max(1) as u32;
         Lanes {
             lane,
-            per_row: vec![count],
-            count,
+            per_row: vec![free_at.len().max(1) as u32],
         }
+    }
+
+    /// The most lanes any row has.
+    fn count(&self) -> u32 {
+        self.per_row.iter().copied().max().unwrap_or(1)
     }
 
     /// The vertical extent of bar `i` in row `row`.
@@ -528,7 +525,7 @@ mod tests {
             },
         ];
         assert_eq!(
-            Lanes::of_spans(&frames).count,
+            Lanes::of_spans(&frames).count(),
             2,
             "frames in flight overlap"
         );
