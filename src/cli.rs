@@ -56,8 +56,10 @@ pub struct ServeArgs {
     /// The folder `tessera keygen` wrote (this node uses peer 0's certificate).
     #[arg(long)]
     pub certs: PathBuf,
-    /// Peers to wait for before the first frame.
-    #[arg(long)]
+    /// Peers to wait for before the first frame: a minimum, since peers may join at any time
+    /// (each with a certificate of its own from `tessera keygen`) and take part from then on.
+    /// 0 starts at once, rendering alone until someone joins.
+    #[arg(long, default_value_t = 1)]
     pub expect: usize,
 }
 

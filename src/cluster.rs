@@ -9,6 +9,7 @@ use runtime::slurm::{self, Role};
 use std::net::{Ipv4Addr, SocketAddr, ToSocketAddrs};
 use std::path::Path;
 use std::time::{Duration, Instant};
+use tokio::signal::unix::SignalKind;
 
 pub fn keygen(args: &KeygenArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
@@ -155,10 +156,24 @@ fn join(
         ..node::Options::default()
     };
     let tokio = crate::render::tokio_runtime()?;
+    // SIGTERM is how SLURM (preemption, `scancel`, the end of a time limit) and cloud
+    // machines about to be taken back ask a process to stop: the peer hands back what it
+    // has not started and leaves, so the render loses nothing and waits for no timeout.
+    let (asked, leave) = node::Leave::channel();
+    let mut terminate = tokio
+        .block_on(async { tokio::signal::unix::signal(SignalKind::terminate()) })
+        .context("listening for SIGTERM")?;
+    tokio.spawn(async move {
+        if terminate.recv().await.is_some() {
+            tracing::info!("SIGTERM: leaving the render");
+            let _ = asked.send(true);
+        }
+    });
     tracing::info!("peer {index} joining {owner} with {threads} threads");
     let started = Instant::now();
-    let tiles = loop {
-        match tokio.block_on(node::run_peer(owner, listen, &identity, options.clone())) {
+    let run = loop {
+        let attempt = node::run_peer(owner, listen, &identity, options.clone(), leave.clone());
+        match tokio.block_on(attempt) {
             Err(error) if slurm::nobody_answered(&error) && started.elapsed() < patience => {
                 tracing::info!("nobody answers at {owner} yet: trying again");
             }
@@ -175,10 +190,12 @@ fn join(
             result => break result?,
         }
     };
-    println!(
-        "peer {index}: rendered {} tiles; the render is over",
-        tiles.len()
-    );
+    let ending = if run.left {
+        "left the render when asked (SIGTERM), having handed back the rest"
+    } else {
+        "the render is over"
+    };
+    println!("peer {index}: rendered {} tiles; {ending}", run.tiles.len());
     Ok(())
 }
 

@@ -35,8 +35,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     })
 }
 
-/// `tessera serve`: this process owns the frames (peer 0) and renders too; `--expect` peers
-/// join it from other processes or machines.
+/// `tessera serve`: this process owns the frames (peer 0) and renders too; peers join it from
+/// other processes or machines: `--expect` of them before the first frame, any more later.
 pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
     let identity = PeerIdentity::load(&args.certs, 0)
         .with_context(|| format!("loading peer 0's certificate from {}", args.certs.display()))?;
@@ -254,6 +254,9 @@ fn execute(
         return Ok(());
     }
     let mut stats = sink.stats;
+    // Peers may join a served render after it started: count everyone who took part.
+    let took_part: std::collections::BTreeSet<_> = run.peers.keys().map(|(_, peer)| *peer).collect();
+    stats.peers = stats.peers.max(took_part.len());
     for ((frame, peer), peer_stats) in &run.peers {
         if let Some(entry) = stats
             .frames
@@ -281,7 +284,7 @@ fn execute(
         settings.frames - first,
         settings.width,
         settings.height,
-        peers,
+        stats.peers,
         render_seconds,
         started.elapsed().as_secs_f64(),
         sink.rays as f64 / render_seconds / 1e6,

@@ -131,7 +131,16 @@ async fn garbage_and_lies_cost_their_sender_its_connection_and_nothing_else() {
     // The honest peer 1 joins; the render completes.
     let honest = tokio::spawn({
         let identity = certs.peers()[1].clone();
-        async move { node::run_peer(addr, loopback, &identity, node::Options::default()).await }
+        async move {
+            node::run_peer(
+                addr,
+                loopback,
+                &identity,
+                node::Options::default(),
+                node::Leave::never(),
+            )
+            .await
+        }
     });
     let frames = tokio::time::timeout(Duration::from_secs(60), render)
         .await

@@ -346,6 +346,8 @@ impl SimWorld {
                 }
             }
             Event::OwnerLost { frame } => print.words(&[14, frame.0]),
+            Event::PeerLeaving { peer } => print.words(&[17, u64::from(peer.0)]),
+            Event::Left => print.word(18),
         }
     }
 }
@@ -367,7 +369,8 @@ fn message_frame(message: &Message) -> Option<u64> {
         | Message::Peers { .. }
         | Message::Scene { .. }
         | Message::SceneReady
-        | Message::Goodbye { .. } => None,
+        | Message::Goodbye { .. }
+        | Message::Leaving => None,
     }
 }
 

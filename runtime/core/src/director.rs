@@ -413,6 +413,13 @@ impl Director {
                 }
                 Ok(None)
             }
+            CoreEvent::PeerLeaving { peer } => {
+                // Its connection closes once its last results are in; until then it is dealt
+                // nothing.
+                self.peers.remove(&peer);
+                self.overdue.remove(&peer);
+                Ok(Some(event))
+            }
             CoreEvent::FrameWaning { frame } => {
                 if let Some(running) = self.running.get_mut(&frame) {
                     running.waned = true;

@@ -3,10 +3,13 @@
 //! A connection that completed its TLS handshake says `Hello { version, peer, slots }`; the owner
 //! checks the version and that the certificate vouches for the claimed id, answers `Welcome`
 //! and ships the scene (`Scene { files, params }`); the peer answers `SceneReady` once it has
-//! loaded it, and from then on it is a **member**. [`Membership::start`] ends admission: every
-//! member is told where the others are (`Peers`) and is reported [`Action::Joined`], and
-//! connections that arrive later are refused. A member whose connection closes is reported
-//! [`Action::Left`].
+//! loaded it, and from then on it is a **member**. [`Membership::start`] starts the render:
+//! every member is told where the others are (`Peers`) and is reported [`Action::Joined`].
+//! Admission stays open: a peer that becomes a member later is told where every member is, every
+//! other member is told where it is (so that each pair connects, the higher id dialing the
+//! lower), and it is reported joined at once, to take part in the frames from then on. A member
+//! whose connection closes is reported [`Action::Left`]; a new process with its identity may
+//! join again.
 //!
 //! Races this settles (each has a scripted test): a connection that closes while loading the
 //! scene is forgotten, not admitted; a second connection claiming a member's id, or the owner's,
@@ -132,14 +135,6 @@ impl<C: Ord + Copy> Membership<C> {
 
     /// A connection finished its handshake; `remote` is its address as the peers will dial it.
     pub fn handle_connected(&mut self, _now: Duration, conn: C, remote: String) {
-        if self.started {
-            self.refuse(
-                conn,
-                Refusal::Protocol,
-                "the render has started; no new peers",
-            );
-            return;
-        }
         self.conns.insert(conn, Stage::Connected { remote });
     }
 
@@ -159,7 +154,9 @@ impl<C: Ord + Copy> Membership<C> {
         match (stage, message) {
             // The connection closes next: a member leaves then, a joiner is forgotten now.
             (Stage::Member { .. }, Message::Goodbye { .. }) => {}
-            (_, Message::Goodbye { .. }) => {
+            // A joiner that goes before it is a member (a peer asked to leave while loading the
+            // scene says `Leaving` first) is forgotten.
+            (_, Message::Goodbye { .. } | Message::Leaving) => {
                 self.conns.remove(&conn);
             }
             (Stage::Connected { remote }, hello @ Message::Hello { .. }) => {
@@ -192,7 +189,10 @@ impl<C: Ord + Copy> Membership<C> {
             }
             (Stage::Loading { peer, remote }, Message::SceneReady) => {
                 self.conns.insert(conn, Stage::Member { peer });
-                self.members.insert(peer, (conn, remote));
+                self.members.insert(peer, (conn, remote.clone()));
+                if self.started {
+                    self.admit_late(peer, conn, remote);
+                }
             }
             (_, other) => {
                 let reason = format!("unexpected {}", other.kind());
@@ -211,7 +211,7 @@ impl<C: Ord + Copy> Membership<C> {
         }
     }
 
-    /// Ends admission: tells every member where the others are and reports each joined.
+    /// Starts the render: tells every member where the others are and reports each joined.
     pub fn start(&mut self, _now: Duration) {
         if self.started {
             return;
@@ -234,20 +234,35 @@ impl<C: Ord + Copy> Membership<C> {
             });
             self.out.push_back(Action::Joined { peer, conn });
         }
-        // Connections still joining never will: the render has started without them.
-        let joining: Vec<C> = self
-            .conns
+    }
+
+    /// `peer` became a member on `conn` after the render started: it learns where everyone
+    /// is, everyone learns where it is, and it joins the frames.
+    fn admit_late(&mut self, peer: PeerId, conn: C, remote: String) {
+        let addresses: Vec<PeerAddress> = self
+            .members
             .iter()
-            .filter(|(_, stage)| !matches!(stage, Stage::Member { .. }))
-            .map(|(&conn, _)| conn)
+            .map(|(&peer, (_, remote))| PeerAddress {
+                peer,
+                addr: remote.clone(),
+            })
             .collect();
-        for conn in joining {
-            self.refuse(
-                conn,
-                Refusal::Protocol,
-                "the render has started; no new peers",
-            );
+        self.out.push_back(Action::Send {
+            conn,
+            message: Message::Peers { peers: addresses },
+        });
+        let newcomer = PeerAddress { peer, addr: remote };
+        for (&other, &(other_conn, _)) in &self.members {
+            if other != peer {
+                self.out.push_back(Action::Send {
+                    conn: other_conn,
+                    message: Message::Peers {
+                        peers: vec![newcomer.clone()],
+                    },
+                });
+            }
         }
+        self.out.push_back(Action::Joined { peer, conn });
     }
 
     pub fn poll_action(&mut self) -> Option<Action<C>> {

@@ -27,7 +27,7 @@ use crate::peer::PeerStats;
 mod tests;
 
 /// The version of this protocol. Bump it on any change to [`Message`]'s layout.
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
 
 /// The smallest piece worth cutting a tile into, in pixels: one 8x8 block, the unit the tracer
 /// measures cost in. Below it a piece's transfer and per-piece overhead cost more than its work.
@@ -135,6 +135,11 @@ pub enum Message {
     FrameStats { frame: FrameId, stats: PeerStats },
     /// The sender is closing the connection.
     Goodbye { reason: GoodbyeReason },
+    /// A peer tells the owner that it is leaving the render (it was asked to stop, as SLURM and
+    /// cloud preemption ask, with SIGTERM): it takes no more work, gives away none, and closes
+    /// once the tiles in its renderer are rendered and sent. The owner re-issues everything else
+    /// it held at once and deals it nothing more.
+    Leaving,
 }
 
 impl Message {
@@ -170,6 +175,7 @@ impl Message {
             Message::FrameDone { .. } => "FrameDone",
             Message::FrameStats { .. } => "FrameStats",
             Message::Goodbye { .. } => "Goodbye",
+            Message::Leaving => "Leaving",
         }
     }
 }
@@ -496,7 +502,8 @@ fn validate(message: &Message, limits: &Limits) -> Result<(), WireError> {
         | Message::Status { .. }
         | Message::FrameDone { .. }
         | Message::FrameStats { .. }
-        | Message::Goodbye { .. } => Ok(()),
+        | Message::Goodbye { .. }
+        | Message::Leaving => Ok(()),
     }
 }
 

@@ -18,6 +18,10 @@ use runtime_core::wire::{FrameId, Message, PeerId, TileId, TileResult, TileSpec}
 #[path = "core_scripted/faults.rs"]
 mod faults;
 
+/// Peers that join a running render, and peers that leave it when asked.
+#[path = "core_scripted/elastic.rs"]
+mod elastic;
+
 /// The end of a frame: tiles cut on steal and rendered in pieces, stragglers backed up.
 #[path = "core_scripted/tails.rs"]
 mod tails;

@@ -14,7 +14,7 @@ pub mod peer;
 mod session;
 
 pub use owner::{Job, Owner, PeerReport};
-pub use peer::run_peer;
+pub use peer::{Leave, PeerRun, run_peer};
 pub use session::LocalTile;
 
 use crate::net::{BindError, ClusterCerts, ConnectError};
@@ -22,6 +22,11 @@ use runtime_core::wire::{PeerId, TileId};
 use std::net::{Ipv4Addr, SocketAddr};
 use std::time::Duration;
 use tracer::Film;
+
+/// The longest a node waits for its goodbyes (and a leaving peer for its last results) to leave
+/// before its endpoint closes every connection: a peer that stopped reading would hold a send
+/// forever.
+const GOODBYE_BOUND: Duration = Duration::from_secs(2);
 
 /// How a node runs: its renderer, its policy and its transport's bounds.
 #[derive(Clone, Debug)]
@@ -148,9 +153,9 @@ pub async fn run_local(
         let options = options.clone();
         tasks.push(tokio::spawn(async move {
             let id = PeerId(identity.index());
-            run_peer(owner_addr, loopback, &identity, options)
+            run_peer(owner_addr, loopback, &identity, options, Leave::never())
                 .await
-                .map(|tiles| (id, tiles))
+                .map(|run| (id, run.tiles))
         }));
     }
     let (report, own_tiles) = owner.run(job, peers - 1, sink).await?;

@@ -6,11 +6,11 @@
 
 use super::bundle;
 use super::session::{Session, Step};
-use super::{CompletedFrame, FrameSink, NodeError, Options, TileRecord};
+use super::{CompletedFrame, FrameSink, GOODBYE_BOUND, NodeError, Options, TileRecord};
 use crate::net::{CloseCode, PeerIdentity};
 use runtime_core::director::{self, Director, Piece};
 use runtime_core::membership::{Action, Membership, Refusal};
-use runtime_core::peer::{Event as CoreEvent, PeerStats};
+use runtime_core::peer::{Event as CoreEvent, Failure, PeerStats};
 use runtime_core::wire::{FrameId, GoodbyeReason, Message, PeerId, RenderParams, SceneFile};
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -18,8 +18,6 @@ use std::sync::Arc;
 use std::time::Duration;
 use tracer::{Film, World};
 
-/// The longest the owner waits for its goodbyes to leave at the end of a render.
-const GOODBYE_BOUND: Duration = Duration::from_secs(2);
 
 /// What the owner renders.
 pub struct Job {
@@ -171,11 +169,22 @@ impl Owner {
                     }
                     CoreEvent::PeerFailed {
                         peer,
+                        reason: Failure::Left,
+                        reissued,
+                        frame,
+                    } => {
+                        tracing::info!(%peer, %frame, reissued, "peer leaving; the tiles it had not started were re-issued");
+                    }
+                    CoreEvent::PeerFailed {
+                        peer,
                         reason,
                         reissued,
                         ..
                     } => {
                         tracing::warn!(%peer, ?reason, reissued, "peer failed; its tiles were re-issued");
+                    }
+                    CoreEvent::PeerLeaving { peer } => {
+                        tracing::info!(%peer, "peer leaving the render");
                     }
                     CoreEvent::FaultyPeer {
                         peer, tile, fault, ..

@@ -10,15 +10,55 @@ use runtime_core::wire::{GoodbyeReason, Message, PROTOCOL_VERSION, PeerId};
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::sync::Arc;
+use tokio::sync::watch;
 
-/// Joins the owner at `owner`, renders until the render is over, and returns this peer's tiles
-/// rendered (for the Gantt chart) when the owner says goodbye.
+/// Asks a running peer to leave the render, as SIGTERM asks a SLURM task or a preempted cloud
+/// machine to stop: the peer hands back what it has not started, finishes the tiles in its
+/// renderer, and goes (see the protocol's *Joining and leaving*). [`Leave::never`] for a peer
+/// nobody will ask.
+#[derive(Clone, Debug)]
+pub struct Leave(Option<watch::Receiver<bool>>);
+
+impl Leave {
+    pub fn never() -> Self {
+        Self(None)
+    }
+
+    /// A request and the sender that makes it: send `true` to ask.
+    pub fn channel() -> (watch::Sender<bool>, Self) {
+        let (sender, receiver) = watch::channel(false);
+        (sender, Self(Some(receiver)))
+    }
+
+    /// Resolves once asked; never, if the sender is gone without asking.
+    async fn asked(&mut self) {
+        if let Some(receiver) = &mut self.0
+            && receiver.wait_for(|&asked| asked).await.is_ok()
+        {
+            return;
+        }
+        std::future::pending().await
+    }
+}
+
+/// How a peer's part in a render ended.
+#[derive(Debug)]
+pub struct PeerRun {
+    /// The tiles this peer rendered, with times since its own start (for the Gantt chart).
+    pub tiles: Vec<super::LocalTile>,
+    /// Whether it left when asked ([`Leave`]) rather than at the render's end.
+    pub left: bool,
+}
+
+/// Joins the owner at `owner` and renders until the render is over, or until asked to `leave`
+/// and done handing back.
 pub async fn run_peer(
     owner: SocketAddr,
     listen: SocketAddr,
     identity: &PeerIdentity,
     options: Options,
-) -> Result<Vec<super::LocalTile>, NodeError> {
+    mut leave: Leave,
+) -> Result<PeerRun, NodeError> {
     let me = PeerId(identity.index());
     let mut session = Session::bind(listen, identity, &options)?;
     let owner_conn = session.link.connect(owner, Expect::Peer(0)).await?;
@@ -38,8 +78,19 @@ pub async fn run_peer(
     let mut dialing: BTreeMap<SocketAddr, PeerId> = BTreeMap::new();
     // Why the owner's connection ended, if not as a finished render's does.
     let mut lost = None;
+    let mut left = false;
     loop {
-        match session.step().await {
+        let step = tokio::select! {
+            step = session.step() => step,
+            () = leave.asked(), if !session.core.is_leaving() => {
+                tracing::info!(%me, "asked to leave: handing back the tiles not being rendered");
+                let now = session.now();
+                session.core.leave(now, PeerId(0));
+                session.flush();
+                continue;
+            }
+        };
+        match step {
             Step::Connected {
                 conn,
                 remote,
@@ -148,10 +199,12 @@ pub async fn run_peer(
                         session.flush();
                     }
                     Message::Peers { peers } if conn == owner_conn => {
-                        for address in peers
-                            .into_iter()
-                            .filter(|a| a.peer < me && a.peer != PeerId(0))
-                        {
+                        // The first list names every member; later ones name a peer that
+                        // joined since. Of each pair, the higher id dials the lower.
+                        let known: Vec<PeerId> = session.peers.ids().collect();
+                        for address in peers.into_iter().filter(|a| {
+                            a.peer < me && a.peer != PeerId(0) && !known.contains(&a.peer)
+                        }) {
                             let Ok(addr) = address.addr.parse::<SocketAddr>() else {
                                 tracing::warn!(addr = address.addr, "unusable peer address");
                                 continue;
@@ -196,6 +249,17 @@ pub async fn run_peer(
             Step::Core(CoreEvent::OwnerLost { frame }) => {
                 tracing::warn!(%frame, "the owner is gone")
             }
+            Step::Core(CoreEvent::Left) => {
+                tracing::info!(%me, "the last results are sent: leaving the render");
+                session.send_conn(
+                    owner_conn,
+                    &Message::Goodbye {
+                        reason: GoodbyeReason::Shutdown,
+                    },
+                );
+                left = true;
+                break;
+            }
             Step::Core(event) => tracing::debug!(?event, "core event"),
             Step::Stopped => break,
             Step::Failed(error) => {
@@ -204,9 +268,16 @@ pub async fn run_peer(
             }
         }
     }
+    if left {
+        // The last results and the goodbye must leave before the endpoint closes.
+        let _ = tokio::time::timeout(super::GOODBYE_BOUND, session.drain_sends()).await;
+    }
     session.link.shutdown().await;
     match lost {
         Some(reason) => Err(NodeError::OwnerLost(reason)),
-        None => Ok(std::mem::take(&mut session.local_tiles)),
+        None => Ok(PeerRun {
+            tiles: std::mem::take(&mut session.local_tiles),
+            left,
+        }),
     }
 }

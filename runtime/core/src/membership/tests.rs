@@ -202,20 +202,85 @@ fn messages_out_of_turn_close_that_connection_only() {
     assert_eq!(m.members(), 1);
 }
 
+fn address(peer: u32) -> PeerAddress {
+    PeerAddress {
+        peer: PeerId(peer),
+        addr: format!("10.0.0.{peer}:1"),
+    }
+}
+
 #[test]
-fn after_the_start_newcomers_and_unfinished_joiners_are_refused() {
+fn after_the_start_a_newcomer_joins_at_once_and_every_pair_learns_of_each_other() {
     let mut m = membership();
     join(&mut m, 1);
-    m.handle_connected(T, 2, "b".into());
+    join(&mut m, 3);
+    // Peer 2 is half way through joining when the render starts: it finishes later.
+    m.handle_connected(T, 2, address(2).addr);
     m.handle_message(T, 2, hello(2), &cert_of(2));
     m.start(T);
-    m.handle_connected(T, 3, "c".into());
-    let all = actions(&mut m);
+    let started = actions(&mut m);
+    assert!(closes(&started).is_empty(), "{started:?}");
+    m.handle_message(T, 2, Message::SceneReady, &cert_of(2));
+    let late = actions(&mut m);
     assert_eq!(
-        closes(&all),
-        vec![(2, Refusal::Protocol), (3, Refusal::Protocol)]
+        late,
+        vec![
+            Action::Send {
+                conn: 2,
+                message: Message::Peers {
+                    peers: vec![address(1), address(2), address(3)]
+                }
+            },
+            Action::Send {
+                conn: 1,
+                message: Message::Peers {
+                    peers: vec![address(2)]
+                }
+            },
+            Action::Send {
+                conn: 3,
+                message: Message::Peers {
+                    peers: vec![address(2)]
+                }
+            },
+            Action::Joined {
+                peer: PeerId(2),
+                conn: 2
+            },
+        ]
     );
-    assert!(m.is_started());
+    assert_eq!(m.members(), 3);
+    // One that connects from scratch after the start is welcomed and joins the same way.
+    let fourth = join(&mut m, 4);
+    assert!(matches!(
+        &fourth[..],
+        [
+            Action::Send {
+                message: Message::Welcome { .. },
+                ..
+            },
+            Action::Send {
+                message: Message::Scene { .. },
+                ..
+            },
+            Action::Send { conn: 4, .. },
+            Action::Send { conn: 1, .. },
+            Action::Send { conn: 2, .. },
+            Action::Send { conn: 3, .. },
+            Action::Joined {
+                peer: PeerId(4),
+                conn: 4
+            },
+        ]
+    ), "{fourth:?}");
+}
+
+#[test]
+fn a_member_that_left_may_come_back_under_its_identity_and_rejoin() {
+    let mut m = membership();
+    join(&mut m, 1);
+    m.start(T);
+    actions(&mut m);
     // A member's goodbye is not a protocol error; its close then reports it gone.
     let bye = Message::Goodbye {
         reason: GoodbyeReason::Shutdown,
@@ -223,4 +288,17 @@ fn after_the_start_newcomers_and_unfinished_joiners_are_refused() {
     m.handle_message(T, 1, bye, &cert_of(1));
     m.handle_closed(T, 1);
     assert_eq!(actions(&mut m), vec![Action::Left { peer: PeerId(1) }]);
+    assert_eq!(m.members(), 0);
+    let again = join(&mut m, 101);
+    assert!(
+        again.contains(&Action::Joined {
+            peer: PeerId(1),
+            conn: 101
+        }),
+        "{again:?}"
+    );
+    // While it is a member, its identity stays taken after the start too.
+    m.handle_connected(T, 201, "x".into());
+    m.handle_message(T, 201, hello(1), &cert_of(201));
+    assert_eq!(closes(&actions(&mut m)), vec![(201, Refusal::Identity)]);
 }

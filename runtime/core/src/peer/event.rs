@@ -52,6 +52,12 @@ pub enum Event {
     },
     /// (Peer) the owner of `frame` is gone; this peer dropped the frame.
     OwnerLost { frame: FrameId },
+    /// (Owner) `peer` is leaving the render: it is dealt nothing more. Its connection closes
+    /// once its last tiles are in; the driver reports that as usual.
+    PeerLeaving { peer: PeerId },
+    /// (Peer) this peer was leaving and has sent the last of its results: the driver may say
+    /// goodbye and close.
+    Left,
 }
 
 /// A free audit of determinism: every result that overlapped one already received (a backup
@@ -71,6 +77,9 @@ pub enum Failure {
     Lost,
     /// The peer may hold work but sent nothing for `Config::peer_timeout`.
     Silent,
+    /// The peer said it is leaving ([`Message::Leaving`](crate::wire::Message::Leaving)): what it
+    /// held went to others at once, and the tiles in its renderer may still come.
+    Left,
 }
 
 /// What was wrong with a peer's result.

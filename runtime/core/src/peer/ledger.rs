@@ -125,6 +125,19 @@ impl Ledger {
         ledger
     }
 
+    /// `peer` joined the render while this frame runs. It takes part from now on with no
+    /// tiles of its own (an empty `Assign` names the frame and its participants): it steals
+    /// from them, and takes re-issues and backups once it reports itself idle. A peer that was
+    /// lost and comes back (a new process with the same identity) starts afresh.
+    pub(super) fn admit(&mut self, now: Duration, peer: PeerId, out: &mut Outbox) {
+        if peer == self.me || self.peers.get(&peer).is_some_and(|view| view.alive) {
+            return;
+        }
+        self.peers.insert(peer, PeerView::new(now));
+        let participants = self.live_peers();
+        self.send_assign(now, peer, participants, Vec::new(), out);
+    }
+
     pub(super) fn is_complete(&self) -> bool {
         self.missing == 0
     }

@@ -204,12 +204,32 @@ impl Core {
         self.settle(now);
     }
 
-    /// A connection to `peer` is up (after the driver's handshake and scene transfer).
+    /// A connection to `peer` is up (after the driver's handshake and scene transfer). On the
+    /// owner, a peer that joins while frames run takes part in them from now on (see the
+    /// protocol's *Joining and leaving*).
     pub fn handle_peer_connected(&mut self, now: Duration, peer: PeerId) {
         if peer != self.id() {
             self.connected.insert(peer);
+            for ledger in self.ledgers.values_mut() {
+                ledger.admit(now, peer, &mut self.out);
+            }
         }
         self.settle(now);
+    }
+
+    /// (Peer) leaves the render `owner` owns, as a peer asked to stop (SIGTERM) does: it tells
+    /// the owner ([`Message::Leaving`]), drops every tile it has not handed its renderer (the
+    /// owner re-issues them), takes and gives no more work, and reports [`Event::Left`] once
+    /// the tiles in its renderer are rendered and their results sent.
+    pub fn leave(&mut self, now: Duration, owner: PeerId) {
+        let (worker, mut cx) = self.split(now);
+        worker.leave(&mut cx, owner);
+        self.settle(now);
+    }
+
+    /// Whether [`Core::leave`] was called.
+    pub fn is_leaving(&self) -> bool {
+        self.worker.leaving
     }
 
     /// The connection to `peer` is gone: closed, timed out, or said `Goodbye`.
@@ -300,6 +320,14 @@ impl Core {
             Message::StealGrant { frame, tiles } => worker.on_grant(&mut cx, from, frame, tiles),
             Message::StealRefuse { frame } => worker.on_refuse(&mut cx, from, frame),
             Message::FrameDone { frame } => worker.on_frame_done(&mut cx, from, frame),
+            Message::Leaving => {
+                // Harmless on a peer that owns nothing: it only stops stealing from `from`.
+                worker.forget_victim(from);
+                for ledger in self.ledgers.values_mut() {
+                    ledger.on_peer_lost(now, from, Failure::Left, &mut self.out);
+                }
+                self.out.events.push_back(Event::PeerLeaving { peer: from });
+            }
             Message::StealNotice {
                 frame,
                 victim,
@@ -354,10 +382,16 @@ impl Core {
                 }
             }
             self.ledgers.retain(|_, ledger| !ledger.is_complete());
+            if self.worker.leaving {
+                // Grants and `Assign`s that were on their way when it left: the owner knows it
+                // left and re-issues them.
+                self.worker.shed();
+            }
             self.worker.fill_slots(now, self.config.prefetch_depth);
             let (worker, mut cx) = self.split(now);
             worker.maybe_steal(&mut cx);
             worker.report_idle(&mut cx);
+            worker.report_left(&mut cx);
             if self.out.local.is_empty() {
                 break;
             }

@@ -230,7 +230,7 @@ impl Worker {
             Thief::Backoff { until } if cx.now < until => return,
             Thief::Backoff { .. } | Thief::Ready => self.thief = Thief::Ready,
         }
-        if !cx.config.steal || !self.wants_work(cx.config, cx.now) {
+        if self.leaving || !cx.config.steal || !self.wants_work(cx.config, cx.now) {
             return;
         }
         let victim = match pick_victim(

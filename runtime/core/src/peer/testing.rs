@@ -382,6 +382,51 @@ impl<W: World> Cluster<W> {
         }
     }
 
+    /// Adds `peer`, with `slots` and the cluster's first core's policy, to the running cluster
+    /// (a dead peer comes back as a new process): it connects to every live peer and every live
+    /// peer to it, now (the owner's core then admits it to the frames it runs, as a late join
+    /// over the network does).
+    pub fn join(&mut self, peer: PeerId, slots: usize, seed: u64) {
+        assert!(
+            self.nodes
+                .get(&peer)
+                .is_none_or(|node| matches!(node.state, NodeState::Dead)),
+            "{peer} is already in the cluster"
+        );
+        let config = self
+            .nodes
+            .values()
+            .next()
+            .map(|node| node.core.config().clone())
+            .unwrap_or_default();
+        let now = self.now;
+        let mut core = Core::new(peer, slots, config, seed);
+        let others: Vec<PeerId> = self.live_peers().collect();
+        for &other in &others {
+            core.handle_peer_connected(now, other);
+        }
+        let node = Node {
+            core,
+            state: NodeState::Up,
+            deadline: None,
+        };
+        self.nodes.insert(peer, node);
+        self.flush(peer);
+        for other in others {
+            self.node(other).core.handle_peer_connected(now, peer);
+            self.flush(other);
+        }
+    }
+
+    /// Asks `peer` to leave the render `owner` owns ([`Core::leave`]). Once it reports
+    /// [`Event::Left`] it goes as a closed connection does: what it sent still arrives, and the
+    /// others learn of it after `loss_detection`.
+    pub fn leave(&mut self, peer: PeerId, owner: PeerId) {
+        let now = self.now;
+        self.node(peer).core.leave(now, owner);
+        self.flush(peer);
+    }
+
     /// Stops `peer` without closing its connections, as a long pause or a partition would.
     pub fn freeze(&mut self, peer: PeerId) {
         self.node(peer).state = NodeState::Frozen(Vec::new());
@@ -499,8 +544,13 @@ impl<W: World> Cluster<W> {
                 self.schedule(transit.delay, deliver);
             }
         }
+        let mut left = false;
         while let Some(event) = self.node(peer).core.poll_event() {
+            left |= event == Event::Left;
             self.world.observe(now, Seen::Event { peer, event });
+        }
+        if left {
+            self.kill(peer, false);
         }
         self.rearm(peer);
     }

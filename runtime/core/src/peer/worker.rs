@@ -53,6 +53,11 @@ pub(super) struct Worker {
     /// Since when `stats` count: the last `FrameStats`, or the first `Assign` after a time with
     /// no frame.
     stats_since: Duration,
+    /// This peer is leaving the render ([`super::Core::leave`]): it holds only what its
+    /// renderer has, and takes and gives nothing more.
+    pub(super) leaving: bool,
+    /// Whether [`Event::Left`] was reported.
+    left: bool,
 }
 
 pub(super) struct FrameState {
@@ -102,6 +107,54 @@ impl Worker {
             last_to_owner: Duration::ZERO,
             stats,
             stats_since: Duration::ZERO,
+            leaving: false,
+            left: false,
+        }
+    }
+
+    /// Starts leaving: tells `owner`, and drops whatever the renderer has not taken.
+    pub(super) fn leave(&mut self, cx: &mut Ctx, owner: PeerId) {
+        if self.leaving {
+            return;
+        }
+        self.leaving = true;
+        self.send_to_owner(cx, owner, Message::Leaving);
+        self.shed();
+        self.report_left(cx);
+    }
+
+    /// Drops every tile not in the renderer, of every frame: queued, prefetched, and ready but
+    /// not yet taken by the driver. Only for a leaving peer, whose owner re-issues them.
+    pub(super) fn shed(&mut self) {
+        for state in self.frames.values_mut() {
+            state.queue.clear();
+            state.queue_work = 0.0;
+            state.prefetch.clear();
+            state.prefetch_work = 0.0;
+        }
+        for item in std::mem::take(&mut self.ready) {
+            self.in_flight
+                .remove(&(item.frame, item.tile.id, item.tile.piece));
+        }
+    }
+
+    /// Reports [`Event::Left`] once a leaving peer's renderer is empty and the answer to a steal
+    /// request it sent before leaving is in: a grant must not reach a closed connection, where
+    /// only the owner's last safety net would find its tiles; this peer tells the owner of it
+    /// instead (the notice), and the owner re-issues it.
+    pub(super) fn report_left(&mut self, cx: &mut Ctx) {
+        let waiting = matches!(self.thief, Thief::Asking { .. });
+        if self.leaving && !self.left && !waiting && self.in_flight.is_empty() {
+            self.left = true;
+            cx.out.events.push_back(Event::Left);
+        }
+    }
+
+    /// Stops stealing from `peer`, which is leaving the render.
+    pub(super) fn forget_victim(&mut self, peer: PeerId) {
+        self.peers.retain(|&other| other != peer);
+        if matches!(self.thief, Thief::Asking { victim, .. } if victim == peer) {
+            self.give_up_on_victim();
         }
     }
 
@@ -269,10 +322,7 @@ impl Worker {
             self.drop_unstarted(frame);
             cx.out.events.push_back(Event::OwnerLost { frame });
         }
-        self.peers.retain(|&other| other != peer);
-        if matches!(self.thief, Thief::Asking { victim, .. } if victim == peer) {
-            self.give_up_on_victim();
-        }
+        self.forget_victim(peer);
     }
 
     /// Hands tiles to free renderer slots (from the oldest frame with work waiting: its
@@ -338,8 +388,9 @@ impl Worker {
     /// A peer busy with a newer frame is idle in an older one it has finished its part of: the
     /// older frame's owner may then give it backups and re-issues, which it renders first.
     pub(super) fn report_idle(&mut self, cx: &mut Ctx) {
-        if matches!(self.thief, Thief::Asking { .. }) {
-            // A grant on its way may hold work of any frame.
+        if self.leaving || matches!(self.thief, Thief::Asking { .. }) {
+            // A leaving peer's owner knows it holds nothing for it; a grant on its way may
+            // hold work of any frame.
             return;
         }
         let idle: Vec<FrameId> = self

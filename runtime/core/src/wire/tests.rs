@@ -100,6 +100,7 @@ fn samples() -> Vec<Message> {
         Message::Goodbye {
             reason: GoodbyeReason::BadScene,
         },
+        Message::Leaving,
     ]
 }
 
