@@ -19,13 +19,29 @@ const SIZE: [&str; 8] = [
     "--width", "96", "--height", "80", "--spp", "8", "--frames", "6",
 ];
 
+/// Frames slow enough (about a second each on one thread) that a peer started after frame 0
+/// is done joins while most of the render is still to come.
+const SLOW: [&str; 8] = [
+    "--width", "96", "--height", "80", "--spp", "96", "--frames", "6",
+];
+
 /// Starts `tessera serve`; its stderr lines arrive on the returned channel.
 fn serve(certs: &Path, out: &Path, port: u16, expect: usize) -> (Child, mpsc::Receiver<String>) {
+    serve_sized(certs, out, port, expect, &SIZE)
+}
+
+fn serve_sized(
+    certs: &Path,
+    out: &Path,
+    port: u16,
+    expect: usize,
+    size: &[&str],
+) -> (Child, mpsc::Receiver<String>) {
     let mut command = tessera();
     command
         .arg("serve")
         .arg(repo(SCENE))
-        .args(SIZE)
+        .args(size)
         .args([
             "--listen",
             &format!("127.0.0.1:{port}"),
@@ -68,12 +84,16 @@ fn peer(certs: &Path, port: u16, index: u32) -> Command {
 
 /// The same frames rendered by one process alone.
 fn reference(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    reference_sized(dir, &SIZE)
+}
+
+fn reference_sized(dir: &Path, size: &[&str]) -> Vec<(String, Vec<u8>)> {
     let out = dir.join("reference");
     run_ok(
         tessera()
             .arg("render")
             .arg(repo(SCENE))
-            .args(SIZE)
+            .args(size)
             .args(["--peers", "1", "--out"])
             .arg(&out),
     );
@@ -112,8 +132,11 @@ fn trio_past_frame_0(dir: &Path) -> Trio {
 
 /// Every frame in `out` is bit-identical to a single-process render of the same frames.
 fn assert_frames_match_reference(dir: &Path, out: &Path) {
+    assert_frames_match(out, reference(dir));
+}
+
+fn assert_frames_match(out: &Path, expected: Vec<(String, Vec<u8>)>) {
     let got = frames(out);
-    let expected = reference(dir);
     assert_eq!(got.len(), expected.len());
     for ((name, a), (_, b)) in got.iter().zip(&expected) {
         assert!(a == b, "{name} differs from the single-process render");
@@ -265,4 +288,109 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
     for frame in stats["frames"].as_array().unwrap() {
         assert_eq!(frame["duplicates_disagreed"], 0, "{frame}");
     }
+}
+
+/// The frames of `stats.json` in `out` in which `peer` rendered at least one tile.
+fn frames_rendered_by(out: &Path, peer: u32) -> Vec<u64> {
+    let stats: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    stats["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|frame| {
+            frame["tiles"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|tile| tile["peer"] == peer)
+        })
+        .map(|frame| frame["frame"].as_u64().unwrap())
+        .collect()
+}
+
+/// Elastic membership: `serve --expect 1` starts with peer 1; peer 2, started once frame 0 is
+/// done, joins the running render, is dealt work from the next frames on, and changes no pixel.
+#[test]
+fn a_peer_joining_a_running_render_takes_part_and_changes_no_pixel() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    keygen(&certs, 3);
+    let port = free_port();
+    let out = dir.path().join("cluster");
+    let (server, lines) = serve_sized(&certs, &out, port, 1, &SLOW);
+    let first = peer(&certs, port, 1).spawn().unwrap();
+    assert!(
+        wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
+        "the cluster never finished frame 0"
+    );
+    let late = peer(&certs, port, 2).spawn().unwrap();
+    assert!(
+        wait_for(&lines, "peer joined the render", Duration::from_secs(60)),
+        "the late peer was not admitted"
+    );
+    wait_success(server, "serve", Duration::from_secs(180));
+    wait_success(first, "peer 1", Duration::from_secs(30));
+    wait_success(late, "peer 2", Duration::from_secs(30));
+    assert_frames_match(&out, reference_sized(dir.path(), &SLOW));
+    let by_late = frames_rendered_by(&out, 2);
+    assert!(!by_late.contains(&0), "peer 2 rendered in frame 0: {by_late:?}");
+    assert!(
+        by_late.contains(&5),
+        "peer 2 joined but took no part in the last frame: {by_late:?}"
+    );
+}
+
+/// A peer sent SIGTERM (how SLURM and cloud preemption ask a process to stop) hands back what it
+/// has not started, sends what it has rendered, says goodbye and exits 0; the owner re-issues
+/// its tiles at once instead of waiting out its silence, and the frames are bit-identical.
+#[test]
+fn a_peer_sent_sigterm_hands_back_its_work_and_leaves_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    keygen(&certs, 3);
+    let port = free_port();
+    let out = dir.path().join("cluster");
+    let (server, lines) = serve_sized(&certs, &out, port, 2, &SLOW);
+    let steady = peer(&certs, port, 1).spawn().unwrap();
+    let mut leaver = peer(&certs, port, 2)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    assert!(
+        wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
+        "the cluster never finished frame 0"
+    );
+    let status = Command::new("kill")
+        .args(["-TERM", &leaver.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let asked = std::time::Instant::now();
+    let mut log = Vec::new();
+    let mut left_after = None;
+    while let Ok(line) = lines.recv_timeout(Duration::from_secs(180)) {
+        if line.contains("peer leaving the render") {
+            left_after.get_or_insert(asked.elapsed());
+        }
+        log.push(line);
+    }
+    let log = log.join("\n");
+    wait_success(server, "serve", Duration::from_secs(30));
+    wait_success(steady, "peer 1", Duration::from_secs(30));
+    let exit = leaver.wait().unwrap();
+    let mut said = String::new();
+    std::io::Read::read_to_string(&mut leaver.stdout.take().unwrap(), &mut said).unwrap();
+    assert!(exit.success(), "the peer asked to leave failed: {exit}\n{said}");
+    assert!(said.contains("left the render when asked"), "{said}");
+    let heard = left_after.unwrap_or_else(|| panic!("the owner never heard it leave:\n{log}"));
+    assert!(heard < Duration::from_secs(2), "heard of it after {heard:?}");
+    assert!(
+        !log.contains("peer failed"),
+        "a peer that left was treated as failed:\n{log}"
+    );
+    assert_frames_match(&out, reference_sized(dir.path(), &SLOW));
+    let by_leaver = frames_rendered_by(&out, 2);
+    assert!(by_leaver.contains(&0), "{by_leaver:?}");
+    assert!(!by_leaver.contains(&5), "it rendered after leaving: {by_leaver:?}");
 }

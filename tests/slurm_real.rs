@@ -26,6 +26,11 @@ const SIZE: [&str; 8] = [
     "--width", "96", "--height", "80", "--spp", "32", "--frames", "6",
 ];
 const FRAMES: usize = 6;
+/// Frames of about a second on two or three tasks: a peer started by a second `srun` once
+/// frame 0 is done (which takes a second or two) joins with most of the render still to come.
+const SLOW: [&str; 8] = [
+    "--width", "96", "--height", "80", "--spp", "128", "--frames", "6",
+];
 /// srun as docs/cluster.md launches it: a task that dies neither takes the step down
 /// (`--kill-on-bad-exit=0`) nor starts a clock on the others (`--wait=0`).
 const SRUN: [&str; 4] = ["-N3", "-n3", "--kill-on-bad-exit=0", "--wait=0"];
@@ -127,8 +132,7 @@ fn with_kill_on_bad_exit_one_killed_task_ends_the_step() {
 /// A task that starts three seconds after the others (a slow node) is waited for: the owner
 /// starts frame 0 only once every task of the step has joined, so task 2 renders in it.
 ///
-/// This is not elastic membership: a task that joins once the render has started is not
-/// used (docs/cluster.md, "Not done yet").
+/// A task that comes only after the render started is `a_peer_joining_a_running_step_...`.
 #[test]
 fn a_task_that_starts_late_is_waited_for() {
     let Some(cluster) = Cluster::start_or_skip("a_task_that_starts_late_is_waited_for") else {
@@ -143,6 +147,74 @@ fn a_task_that_starts_late_is_waited_for() {
     assert!(started.elapsed() >= Duration::from_secs(3));
     assert_frames_match_reference(&out);
     assert!(tiles_of(&out, 2)[0] > 0, "frame 0 started without task 2");
+}
+
+/// Elastic membership under SLURM: a step of two tasks renders; once frame 0 is done, a job
+/// of its own puts a third peer on node n3 (`tessera peer --join`, as a later allocation
+/// would), which joins the running render, renders in the frames after, and changes no pixel.
+#[test]
+fn a_peer_joining_a_running_step_takes_part_and_changes_no_pixel() {
+    let Some(cluster) =
+        Cluster::start_or_skip("a_peer_joining_a_running_step_takes_part_and_changes_no_pixel")
+    else {
+        return;
+    };
+    let job = Job::new(&cluster);
+    let out = cluster.dir().join("joined");
+    let two = ["-N2", "-n2", "--kill-on-bad-exit=0", "--wait=0"];
+    let (child, lines) = spawn(job.srun_sized(&two, &out, "", &SLOW));
+    assert!(
+        wait_for(&lines, "frame 0 done", STEP_TIMEOUT),
+        "the step never finished frame 0"
+    );
+    let owner = job.task(0, 0);
+    let port = default_port(owner.job, 0);
+    let mut late = cluster.command("srun");
+    late.args(["-N1", "-n1", "-w", "n3"])
+        .arg(env!("CARGO_BIN_EXE_tessera"))
+        .args(["peer", "--join", &format!("127.0.0.1:{port}")])
+        .args(["--index", "2", "--threads", "1", "--certs"])
+        .arg(&job.certs)
+        .env("NO_COLOR", "1");
+    let late = spawn(late);
+    let (status, log) = finish((child, lines));
+    assert!(status.success(), "the first step failed: {status}\n{log}");
+    let (late_status, late_log) = finish(late);
+    assert!(late_status.success(), "the late peer failed: {late_status}\n{late_log}");
+    assert!(log.contains("peer joined the render"), "{log}");
+    assert_frames_match(&out, reference_sized(&SLOW));
+    let tiles = tiles_of(&out, 2);
+    assert_eq!(tiles[0], 0, "the late peer rendered in frame 0");
+    assert!(tiles[FRAMES - 1] > 0, "the late peer took no part: {tiles:?}");
+}
+
+/// Task 2 sent SIGTERM in frame 1, as SLURM preempts a task or ends a time limit: it hands back
+/// what it has not started and exits 0; the owner re-issues that at once (no silence
+/// timeout), srun reports no failed task, and every frame is the one-peer render's.
+#[test]
+fn a_task_sent_sigterm_hands_back_its_work_and_the_step_succeeds() {
+    let Some(cluster) =
+        Cluster::start_or_skip("a_task_sent_sigterm_hands_back_its_work_and_the_step_succeeds")
+    else {
+        return;
+    };
+    let job = Job::new(&cluster);
+    let out = cluster.dir().join("terminated");
+    let (child, lines) = spawn(job.srun_sized(&SRUN, &out, "", &SLOW));
+    assert!(
+        wait_for(&lines, "frame 0 done", STEP_TIMEOUT),
+        "the step never finished frame 0"
+    );
+    job.task(0, 2).signal("-TERM");
+    let (status, log) = finish((child, lines));
+    assert!(status.success(), "srun failed: {status}\n{log}");
+    assert!(log.contains("left the render when asked"), "{log}");
+    assert!(log.contains("peer leaving the render"), "{log}");
+    assert!(!log.contains("peer failed"), "{log}");
+    assert_frames_match(&out, reference_sized(&SLOW));
+    let tiles = tiles_of(&out, 2);
+    assert!(tiles[0] > 0, "task 2 rendered nothing before it left");
+    assert_eq!(tiles[FRAMES - 1], 0, "task 2 rendered after it left");
 }
 
 /// Two steps of one job at once (`srun ... & srun ... & wait` in an allocation) listen on
@@ -303,6 +375,11 @@ impl Job<'_> {
     /// becomes tessera with the same pid: srun starts tasks under SLURM's daemons, not as
     /// children of the test, and this is how a test finds one to kill.
     fn srun(&self, flags: &[&str], out: &Path, before: &str) -> Command {
+        self.srun_sized(flags, out, before, &SIZE)
+    }
+
+    /// [`Job::srun`] with frames of another size.
+    fn srun_sized(&self, flags: &[&str], out: &Path, before: &str, size: &[&str]) -> Command {
         let record = format!(
             r#"echo "$$ $SLURMD_NODENAME $SLURM_JOB_ID" > "{}/$SLURM_STEP_ID.$SLURM_PROCID"; {before}
 exec "$0" "$@""#,
@@ -311,7 +388,7 @@ exec "$0" "$@""#,
         let mut command = self.cluster.command("srun");
         command.args(flags).args(["sh", "-c", &record]);
         command.arg(env!("CARGO_BIN_EXE_tessera")).arg("slurm");
-        command.arg(repo(SCENE)).args(SIZE);
+        command.arg(repo(SCENE)).args(size);
         command.args(["--threads", "1", "--tiles", "64", "--peer-timeout", "2"]);
         command
             .arg("--certs")
@@ -342,11 +419,16 @@ exec "$0" "$@""#,
 impl Task {
     /// SIGKILL: no goodbye, no connection closed, as when a node dies.
     fn kill(&self) {
+        self.signal("-KILL");
+    }
+
+    /// Sends the task `signal` (`-TERM`, `-KILL`).
+    fn signal(&self, signal: &str) {
         let status = Command::new("kill")
-            .args(["-KILL", &self.pid.to_string()])
+            .args([signal, &self.pid.to_string()])
             .status()
             .unwrap();
-        assert!(status.success(), "kill -KILL {} failed", self.pid);
+        assert!(status.success(), "kill {signal} {} failed", self.pid);
     }
 }
 
@@ -399,18 +481,24 @@ fn shell_line(command: &Command) -> String {
 /// The frames of one peer alone, rendered once per test binary.
 fn reference() -> &'static [(String, Vec<u8>)] {
     static REFERENCE: OnceLock<Vec<(String, Vec<u8>)>> = OnceLock::new();
-    REFERENCE.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        render_alone(SCENE, &SIZE, dir.path());
-        frames(dir.path())
-    })
+    REFERENCE.get_or_init(|| reference_sized(&SIZE))
+}
+
+fn reference_sized(size: &[&str]) -> Vec<(String, Vec<u8>)> {
+    let dir = tempfile::tempdir().unwrap();
+    render_alone(SCENE, size, dir.path());
+    frames(dir.path())
 }
 
 fn assert_frames_match_reference(out: &Path) {
-    let (got, expected) = (frames(out), reference());
+    assert_frames_match(out, reference().to_vec());
+}
+
+fn assert_frames_match(out: &Path, expected: Vec<(String, Vec<u8>)>) {
+    let got = frames(out);
     assert_eq!(got.len(), FRAMES, "{}", out.display());
     assert_eq!(expected.len(), FRAMES);
-    for ((name, a), (_, b)) in got.iter().zip(expected) {
+    for ((name, a), (_, b)) in got.iter().zip(&expected) {
         assert!(
             a == b,
             "{name} in {} differs from the one-peer render",
