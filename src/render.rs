@@ -255,7 +255,8 @@ fn execute(
     }
     let mut stats = sink.stats;
     // Peers may join a served render after it started: count everyone who took part.
-    let took_part: std::collections::BTreeSet<_> = run.peers.keys().map(|(_, peer)| *peer).collect();
+    let took_part: std::collections::BTreeSet<_> =
+        run.peers.keys().map(|(_, peer)| *peer).collect();
     stats.peers = stats.peers.max(took_part.len());
     for ((frame, peer), peer_stats) in &run.peers {
         if let Some(entry) = stats

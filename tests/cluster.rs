@@ -334,7 +334,10 @@ fn a_peer_joining_a_running_render_takes_part_and_changes_no_pixel() {
     wait_success(late, "peer 2", Duration::from_secs(30));
     assert_frames_match(&out, reference_sized(dir.path(), &SLOW));
     let by_late = frames_rendered_by(&out, 2);
-    assert!(!by_late.contains(&0), "peer 2 rendered in frame 0: {by_late:?}");
+    assert!(
+        !by_late.contains(&0),
+        "peer 2 rendered in frame 0: {by_late:?}"
+    );
     assert!(
         by_late.contains(&5),
         "peer 2 joined but took no part in the last frame: {by_late:?}"
@@ -381,10 +384,16 @@ fn a_peer_sent_sigterm_hands_back_its_work_and_leaves_cleanly() {
     let exit = leaver.wait().unwrap();
     let mut said = String::new();
     std::io::Read::read_to_string(&mut leaver.stdout.take().unwrap(), &mut said).unwrap();
-    assert!(exit.success(), "the peer asked to leave failed: {exit}\n{said}");
+    assert!(
+        exit.success(),
+        "the peer asked to leave failed: {exit}\n{said}"
+    );
     assert!(said.contains("left the render when asked"), "{said}");
     let heard = left_after.unwrap_or_else(|| panic!("the owner never heard it leave:\n{log}"));
-    assert!(heard < Duration::from_secs(2), "heard of it after {heard:?}");
+    assert!(
+        heard < Duration::from_secs(2),
+        "heard of it after {heard:?}"
+    );
     assert!(
         !log.contains("peer failed"),
         "a peer that left was treated as failed:\n{log}"
@@ -392,5 +401,8 @@ fn a_peer_sent_sigterm_hands_back_its_work_and_leaves_cleanly() {
     assert_frames_match(&out, reference_sized(dir.path(), &SLOW));
     let by_leaver = frames_rendered_by(&out, 2);
     assert!(by_leaver.contains(&0), "{by_leaver:?}");
-    assert!(!by_leaver.contains(&5), "it rendered after leaving: {by_leaver:?}");
+    assert!(
+        !by_leaver.contains(&5),
+        "it rendered after leaving: {by_leaver:?}"
+    );
 }

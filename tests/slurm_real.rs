@@ -180,12 +180,18 @@ fn a_peer_joining_a_running_step_takes_part_and_changes_no_pixel() {
     let (status, log) = finish((child, lines));
     assert!(status.success(), "the first step failed: {status}\n{log}");
     let (late_status, late_log) = finish(late);
-    assert!(late_status.success(), "the late peer failed: {late_status}\n{late_log}");
+    assert!(
+        late_status.success(),
+        "the late peer failed: {late_status}\n{late_log}"
+    );
     assert!(log.contains("peer joined the render"), "{log}");
     assert_frames_match(&out, reference_sized(&SLOW));
     let tiles = tiles_of(&out, 2);
     assert_eq!(tiles[0], 0, "the late peer rendered in frame 0");
-    assert!(tiles[FRAMES - 1] > 0, "the late peer took no part: {tiles:?}");
+    assert!(
+        tiles[FRAMES - 1] > 0,
+        "the late peer took no part: {tiles:?}"
+    );
 }
 
 /// Task 2 sent SIGTERM in frame 1, as SLURM preempts a task or ends a time limit: it hands back
@@ -215,6 +221,81 @@ fn a_task_sent_sigterm_hands_back_its_work_and_the_step_succeeds() {
     let tiles = tiles_of(&out, 2);
     assert!(tiles[0] > 0, "task 2 rendered nothing before it left");
     assert_eq!(tiles[FRAMES - 1], 0, "task 2 rendered after it left");
+}
+
+/// The sbatch example of docs/cluster.md, as written there, submitted with `sbatch --wait`
+/// (the command line sizes it for this cluster: three nodes, one CPU a task; it overrides the
+/// script's `#SBATCH` lines): certificates made for the job, the shipped scene rendered at its
+/// own settings by three tasks, and the certificates gone when the job ends.
+#[test]
+fn the_sbatch_example_of_the_cluster_guide_renders() {
+    let Some(cluster) = Cluster::start_or_skip("the_sbatch_example_of_the_cluster_guide_renders")
+    else {
+        return;
+    };
+    let guide = std::fs::read_to_string(repo("docs/cluster.md")).unwrap();
+    let start = guide
+        .find("```sh\n#!/bin/bash")
+        .expect("docs/cluster.md has an sbatch example")
+        + "```sh\n".len();
+    let script = &guide[start..start + guide[start..].find("```").unwrap()];
+    let dir = cluster.dir().join("sbatch");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("render.sbatch");
+    std::fs::write(&path, script).unwrap();
+    let tessera = Path::new(env!("CARGO_BIN_EXE_tessera"));
+    let search = format!(
+        "{}:{}",
+        tessera.parent().unwrap().display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let mut sbatch = cluster.command("sbatch");
+    sbatch
+        .args(["--wait", "-N3", "-n3", "-c1", "-o"])
+        .arg(dir.join("job-%j.log"))
+        .arg("--chdir")
+        .arg(repo(""))
+        .arg(&path)
+        .current_dir(&dir)
+        .env("PATH", search)
+        .env("NO_COLOR", "1");
+    let (status, log) = finish(spawn(sbatch));
+    let job_log: String = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("job-"))
+        .map(|e| std::fs::read_to_string(e.path()).unwrap_or_default())
+        .collect();
+    assert!(
+        status.success(),
+        "sbatch failed: {status}\n{log}\n{job_log}"
+    );
+    let folders: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .unwrap()
+                .to_string_lossy()
+                .starts_with("tessera-")
+        })
+        .collect();
+    let [folder] = &folders[..] else {
+        panic!("expected one tessera-JOBID folder: {folders:?}\n{job_log}");
+    };
+    assert_eq!(frames(&folder.join("out")).len(), 24, "{job_log}");
+    assert!(
+        !folder.join("certs").exists(),
+        "the job left its keys behind"
+    );
+    for peer in 0..3 {
+        let tiles = tiles_of(&folder.join("out"), peer);
+        assert!(
+            tiles.iter().sum::<usize>() > 0,
+            "task {peer} rendered nothing\n{job_log}"
+        );
+    }
 }
 
 /// Two steps of one job at once (`srun ... & srun ... & wait` in an allocation) listen on

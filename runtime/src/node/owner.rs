@@ -18,7 +18,6 @@ use std::sync::Arc;
 use std::time::Duration;
 use tracer::{Film, World};
 
-
 /// What the owner renders.
 pub struct Job {
     pub world: Arc<World>,

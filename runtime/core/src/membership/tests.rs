@@ -252,27 +252,30 @@ fn after_the_start_a_newcomer_joins_at_once_and_every_pair_learns_of_each_other(
     assert_eq!(m.members(), 3);
     // One that connects from scratch after the start is welcomed and joins the same way.
     let fourth = join(&mut m, 4);
-    assert!(matches!(
-        &fourth[..],
-        [
-            Action::Send {
-                message: Message::Welcome { .. },
-                ..
-            },
-            Action::Send {
-                message: Message::Scene { .. },
-                ..
-            },
-            Action::Send { conn: 4, .. },
-            Action::Send { conn: 1, .. },
-            Action::Send { conn: 2, .. },
-            Action::Send { conn: 3, .. },
-            Action::Joined {
-                peer: PeerId(4),
-                conn: 4
-            },
-        ]
-    ), "{fourth:?}");
+    assert!(
+        matches!(
+            &fourth[..],
+            [
+                Action::Send {
+                    message: Message::Welcome { .. },
+                    ..
+                },
+                Action::Send {
+                    message: Message::Scene { .. },
+                    ..
+                },
+                Action::Send { conn: 4, .. },
+                Action::Send { conn: 1, .. },
+                Action::Send { conn: 2, .. },
+                Action::Send { conn: 3, .. },
+                Action::Joined {
+                    peer: PeerId(4),
+                    conn: 4
+                },
+            ]
+        ),
+        "{fourth:?}"
+    );
 }
 
 #[test]

@@ -100,9 +100,9 @@ fn a_peer_asked_to_leave_hands_back_its_queue_at_once_and_no_tile_is_lost() {
                 let after: Vec<_> = cluster
                     .trace()
                     .iter()
-                    .filter(|r| {
-                        matches!(r, Record::Started { peer: PeerId(2), at, .. } if *at > asked)
-                    })
+                    .filter(
+                        |r| matches!(r, Record::Started { peer: PeerId(2), at, .. } if *at > asked),
+                    )
                     .collect();
                 assert!(after.is_empty(), "{case}: {after:?}");
             }
