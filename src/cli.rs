@@ -198,9 +198,15 @@ pub struct FrameArgs {
     pub exposure: f32,
     /// Keep the frames OUT already holds from a render of the same scene files and settings
     /// (each frame-NNNN.exr records their hash) and render from the first one missing. A frame
-    /// of other settings counts as missing, so changed settings re-render every frame.
+    /// of other settings counts as missing, so changed settings re-render every frame. The
+    /// first missing frame goes on from its checkpoint (OUT/checkpoint.bin) if there is one.
     #[arg(long)]
     pub resume: bool,
+    /// Seconds between checkpoints of the frame in progress (OUT/checkpoint.bin: every tile
+    /// the owner has of it, written atomically, only when some came in since), so that
+    /// `--resume` after a stop goes on within a long frame. 0 writes none.
+    #[arg(long, default_value_t = 30.0)]
+    pub checkpoint_every: f64,
 }
 
 /// A value as the command line spells it (`round-robin`), which is also how files record it.

@@ -158,6 +158,7 @@ fn execute(
     } else {
         (0, None)
     };
+    let checkpoint = checkpointing(args, &render_hash, first)?;
     let world = Arc::new(prepare_world(scene, args.effects));
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
@@ -188,6 +189,14 @@ fn execute(
     ));
     if let Some(why) = &missing {
         progress.line(&resume::describe(first, settings.frames, why, &render_hash));
+    }
+    if let Some(kept) = checkpoint.as_ref().and_then(|c| c.resume.as_ref()) {
+        progress.line(&format!(
+            "--resume: frame {first} goes on from its checkpoint: {} results, {} of its {} tiles whole",
+            kept.results.len(),
+            kept.whole_tiles(),
+            kept.tiles.len()
+        ));
     }
     let writer = frame_files::Writer::start(
         frame_files::Settings {
@@ -234,6 +243,7 @@ fn execute(
         frames: settings.frames,
         first,
         partitioner,
+        checkpoint,
     };
     let render_started = Instant::now();
     let run = drive(job, &mut sink);
@@ -293,6 +303,54 @@ fn execute(
         args.out.display(),
     );
     Ok(())
+}
+
+/// How the owner checkpoints this render (`--checkpoint-every`), with the checkpoint of frame
+/// `first` to go on from when `--resume` finds one of this render.
+fn checkpointing(
+    args: &FrameArgs,
+    render_hash: &str,
+    first: u32,
+) -> anyhow::Result<Option<node::checkpoint::Checkpointing>> {
+    let every = args.checkpoint_every;
+    anyhow::ensure!(
+        (0.0..1e9).contains(&every),
+        "--checkpoint-every {every}: must be a number of seconds, 0 (no checkpoints) or more"
+    );
+    let path = args.out.join(node::checkpoint::FILE);
+    let resume = match args.resume {
+        true => match node::checkpoint::Checkpoint::read(&path) {
+            Ok(Some(kept))
+                if kept.render_hash == render_hash && kept.frame.0 == u64::from(first) =>
+            {
+                Some(kept)
+            }
+            Ok(Some(kept)) => {
+                tracing::info!(
+                    "--resume: {} is of {} or of other settings; frame {first} starts afresh",
+                    path.display(),
+                    kept.frame
+                );
+                None
+            }
+            Ok(None) => None,
+            Err(error) => {
+                tracing::warn!("--resume: {error}; frame {first} starts afresh");
+                None
+            }
+        },
+        false => None,
+    };
+    if every == 0.0 && resume.is_none() {
+        return Ok(None);
+    }
+    Ok(Some(node::checkpoint::Checkpointing {
+        path,
+        // With checkpoints off, a kept one is still resumed from; none is written after it.
+        every: (every > 0.0).then(|| std::time::Duration::from_secs_f64(every)),
+        render_hash: render_hash.to_owned(),
+        resume,
+    }))
 }
 
 fn options(args: &FrameArgs, threads: usize) -> node::Options {

@@ -36,7 +36,9 @@ pub fn remove_leftovers(out: &Path) -> std::io::Result<usize> {
         let entry = entry?;
         let name = entry.file_name();
         let name = name.to_string_lossy();
-        let ours = name.starts_with("frame-") || name.starts_with("tiles-");
+        let ours = name.starts_with("frame-")
+            || name.starts_with("tiles-")
+            || name.starts_with(runtime::node::checkpoint::FILE);
         if ours && name.ends_with(tracer::output::TEMPORARY_SUFFIX) && entry.path().is_file() {
             std::fs::remove_file(entry.path())?;
             removed += 1;

@@ -113,6 +113,99 @@ fn a_killed_render_resumes_from_its_first_missing_frame_with_the_same_bits() {
     assert!(std::fs::read(out.join("frame-0000.exr")).unwrap() != before);
 }
 
+/// One long frame, checkpointed every 0.3 s, killed (SIGKILL) once a checkpoint is on disk and
+/// before the frame is: `--resume` goes on from the checkpoint (it says what it kept), the frame
+/// is bit for bit the uninterrupted render's, and the checkpoint is gone once the render is
+/// done. A checkpoint of other settings is not used.
+#[test]
+fn a_render_killed_within_a_long_frame_resumes_from_its_checkpoint_with_the_same_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let long_at = |spp: &str, out: &Path, extra: &[&str]| {
+        let mut command = tessera();
+        command
+            .arg("render")
+            .arg(repo(SCENE))
+            .args([
+                "--width", "96", "--height", "80", "--spp", spp, "--frames", "1",
+            ])
+            .args([
+                "--tiles",
+                "64",
+                "--threads",
+                "2",
+                "--checkpoint-every",
+                "0.3",
+            ])
+            .arg("--out")
+            .arg(out)
+            .args(extra)
+            .env("NO_COLOR", "1");
+        command
+    };
+    let long = |out: &Path, extra: &[&str]| long_at("384", out, extra);
+    let reference_dir = dir.path().join("reference");
+    run_ok(&mut long(&reference_dir, &["--peers", "1"]));
+    let reference = frames(&reference_dir);
+    assert!(
+        !reference_dir.join("checkpoint.bin").exists(),
+        "a finished render left its checkpoint"
+    );
+
+    let out = dir.path().join("out");
+    let checkpoint = out.join("checkpoint.bin");
+    let mut child = long(&out, &["--peers", "2"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + Duration::from_secs(120);
+    while !checkpoint.is_file() {
+        assert!(std::time::Instant::now() < deadline, "no checkpoint came");
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the render ended first"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    assert!(
+        frames(&out).is_empty(),
+        "the frame was done before the kill: the test needs a frame in progress"
+    );
+    let kept = std::fs::read(&checkpoint).unwrap();
+
+    let resumed = run_ok(&mut long(&out, &["--peers", "2", "--resume"]));
+    let log = String::from_utf8_lossy(&resumed.stderr);
+    let line = log
+        .lines()
+        .find(|l| l.contains("goes on from its checkpoint"))
+        .unwrap_or_else(|| panic!("the checkpoint was not used:\n{log}"));
+    let results: usize = line
+        .split("checkpoint: ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{line}"));
+    assert!(results > 0, "{line}");
+    let got = frames(&out);
+    assert_eq!(got.len(), 1);
+    assert!(got[0].1 == reference[0].1, "the resumed frame differs");
+    assert!(
+        !checkpoint.exists(),
+        "the finished render left its checkpoint"
+    );
+
+    // The same checkpoint, resumed with other settings, is of another render: not used.
+    std::fs::write(&checkpoint, kept).unwrap();
+    let other = run_ok(&mut long_at("8", &out, &["--peers", "1", "--resume"]));
+    let log = String::from_utf8_lossy(&other.stderr);
+    assert!(
+        log.contains("is of frame 0 or of other settings") && !log.contains("goes on from"),
+        "{log}"
+    );
+}
+
 #[test]
 fn resume_and_trace_together_are_refused_naming_both_flags() {
     let dir = tempfile::tempdir().unwrap();

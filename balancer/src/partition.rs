@@ -243,6 +243,30 @@ impl Partitioner {
         }
     }
 
+    /// How this partitioner deals its tiles.
+    pub fn order(&self) -> Order {
+        match self {
+            Partitioner::Pbt(pbt) => pbt.order,
+            Partitioner::Regular(regular) => regular.order,
+        }
+    }
+
+    /// Deals `tiles` (not necessarily this partitioner's: a checkpoint's) to `peers` peers in
+    /// this partitioner's deal order, as [`Self::assign`] deals its own.
+    pub fn assign_tiles(
+        &self,
+        tiles: &[Tile],
+        peers: usize,
+        weights: Option<&[f64]>,
+    ) -> Result<Assignment, Error> {
+        deal(
+            tiles.iter().map(|tile| tile.predicted),
+            self.order(),
+            peers,
+            weights,
+        )
+    }
+
     /// Deals the tiles to `peers` peers, optionally weighted by peer speed (`None`: equal).
     /// Run `p` lists the indices into [`Self::tiles`] that peer `p` starts with.
     pub fn assign(&self, peers: usize, weights: Option<&[f64]>) -> Result<Assignment, Error> {

@@ -12,7 +12,7 @@ use crate::{Assignment, Config, CostMap, Error, Grid, Order, Partitioner, Rect, 
 pub struct Regular {
     width: u32,
     height: u32,
-    order: Order,
+    pub(crate) order: Order,
     rects: Vec<Rect>,
     predicted: Vec<f64>,
     predictor: Predictor,

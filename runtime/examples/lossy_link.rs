@@ -44,6 +44,7 @@ fn job() -> Result<Job, Box<dyn std::error::Error>> {
     };
     Ok(Job {
         partitioner: balancer::Partitioner::new(128, 96, &config)?,
+        checkpoint: None,
         world: Arc::new(tracer::World::prepare(scene, None)),
         files,
         params,

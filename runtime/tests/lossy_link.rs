@@ -34,6 +34,7 @@ fn job(frames: u32) -> Job {
     };
     Job {
         partitioner: balancer::Partitioner::new(64, 48, &config).unwrap(),
+        checkpoint: None,
         world: Arc::new(tracer::World::prepare(scene, None)),
         files,
         params,

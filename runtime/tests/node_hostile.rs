@@ -63,6 +63,7 @@ fn job() -> Job {
         frames,
         first: 0,
         partitioner,
+        checkpoint: None,
     }
 }
 

@@ -81,7 +81,7 @@ pub struct Pbt {
     width: u32,
     height: u32,
     target: usize,
-    order: Order,
+    pub(crate) order: Order,
     tree: Tree,
     predictor: Predictor,
     /// The leaves, depth-first: the tile order.

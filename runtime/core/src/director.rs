@@ -168,6 +168,9 @@ pub struct Director {
     partitioner: Partitioner,
     /// Remote participants the owner deals to (connected, scene loaded).
     peers: BTreeSet<PeerId>,
+    /// The tiles to cut the first frame into instead of the partitioner's: those of a
+    /// checkpoint of it (see [`Director::resume_with`]).
+    resumed: Option<Vec<balancer::Tile>>,
     /// Participants whose work was backed up as overdue and that have not been heard of since
     /// (by their statistics): a frozen peer would hold up every frame dealt to it, so it is
     /// dealt nothing until it shows it is alive.
@@ -212,6 +215,7 @@ impl Director {
             me,
             partitioner,
             peers: BTreeSet::new(),
+            resumed: None,
             overdue: BTreeSet::new(),
             next: config.first,
             running: BTreeMap::new(),
@@ -238,6 +242,19 @@ impl Director {
     /// The peers frames are dealt to besides the owner.
     pub fn peers(&self) -> impl Iterator<Item = PeerId> + '_ {
         self.peers.iter().copied()
+    }
+
+    /// The first frame ([`Config::first`]) is cut into `tiles`, those of a checkpoint of it
+    /// taken by a render that was stopped, so that the checkpoint's results fit its tiles
+    /// (the driver hands them to `Core::resume_frame`). The balancer learns from the frame as
+    /// from any other.
+    pub fn resume_with(&mut self, tiles: Vec<balancer::Tile>) {
+        self.resumed = Some(tiles);
+    }
+
+    /// The deal of `frame` while it runs: its tiles, for a checkpoint.
+    pub fn running_deal(&self, frame: FrameId) -> Option<&Deal> {
+        self.running.get(&frame).map(|running| &running.deal)
     }
 
     /// `peer` is connected and ready to render: it is dealt work from the next frame on.
@@ -269,11 +286,20 @@ impl Director {
         if let Some(measured) = self.last_measured {
             self.partitioner.aim(self.ahead_of(measured))?;
         }
-        let tiles = self.partitioner.tiles();
+        let resumed = self
+            .resumed
+            .take()
+            .filter(|_| self.next == self.config.first);
+        let tiles = resumed.clone().unwrap_or_else(|| self.partitioner.tiles());
         let mut participants: Vec<PeerId> = self.peers.difference(&self.overdue).copied().collect();
         participants.push(self.me);
         participants.sort_unstable();
-        let assignment = self.partitioner.assign(participants.len(), None)?;
+        let assignment = match &resumed {
+            Some(tiles) => self
+                .partitioner
+                .assign_tiles(tiles, participants.len(), None)?,
+            None => self.partitioner.assign(participants.len(), None)?,
+        };
         let mut initial = vec![self.me; tiles.len()];
         let mut assignments = BTreeMap::new();
         for (&peer, run) in participants.iter().zip(&assignment.runs) {

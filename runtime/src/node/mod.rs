@@ -5,10 +5,12 @@
 //! - [`peer`]: any other peer (`tessera peer`).
 //! - `session`: the event loop both share: link events, render results and the core's timer.
 //! - [`bundle`]: the scene's files and tiles' pixels and costs as the wire carries them.
+//! - [`checkpoint`]: the frame in progress kept on disk, for `--resume` within a frame.
 //! - [`run_local`]: several peers in one process over real QUIC on loopback, certificates made
 //!   in memory: the default of `tessera render`.
 
 pub mod bundle;
+pub mod checkpoint;
 pub mod owner;
 pub mod peer;
 mod session;
@@ -149,7 +151,7 @@ pub async fn run_local(
     let owner = Owner::bind(loopback, &certs.peers()[0], options.clone())?;
     let owner_addr = owner.local_addr()?;
     let mut tasks = Vec::new();
-    for identity in certs.peers()[1..].iter().cloned() {
+    for identity in certs.peers().into_iter().skip(1) {
         let options = options.clone();
         tasks.push(tokio::spawn(async move {
             let id = PeerId(identity.index());

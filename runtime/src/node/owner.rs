@@ -5,6 +5,7 @@
 //! too: its own core is one of the participants.
 
 use super::bundle;
+use super::checkpoint::{self, Checkpoint, Checkpointing};
 use super::session::{Session, Step};
 use super::{CompletedFrame, FrameSink, GOODBYE_BOUND, NodeError, Options, TileRecord};
 use crate::net::{CloseCode, PeerIdentity};
@@ -30,6 +31,9 @@ pub struct Job {
     /// The first frame to render: those before it are done already (`--resume`). Usually 0.
     pub first: u32,
     pub partitioner: balancer::Partitioner,
+    /// Whether and where the frame in progress is checkpointed, and a checkpoint to resume
+    /// the first frame from.
+    pub checkpoint: Option<Checkpointing>,
 }
 
 /// The owner, bound and listening, before the render starts.
@@ -84,6 +88,16 @@ impl Owner {
             ..director::Config::default()
         };
         let mut director = Director::new(me, job.partitioner, config);
+        let mut checkpoints = job.checkpoint.map(Checkpoints::new);
+        // Results of the first frame kept by a stopped render, for its ledger.
+        let mut kept = checkpoints
+            .as_mut()
+            .and_then(|c| c.plan.resume.take())
+            .filter(|kept| kept.frame.0 == u64::from(job.first))
+            .map(|kept| {
+                director.resume_with(kept.tiles);
+                (kept.frame, kept.results)
+            });
         let mut report = PeerReport::new();
         while membership.members() < expect {
             let step = self.session.step().await;
@@ -94,11 +108,19 @@ impl Owner {
         while !director.is_finished() {
             let now = self.session.now();
             while let Some(deal) = director.poll_deal(now)? {
-                self.session.core.start_frame(
+                let done = match kept.take() {
+                    Some((frame, results)) if frame == deal.frame => results,
+                    other => {
+                        kept = other;
+                        Vec::new()
+                    }
+                };
+                self.session.core.resume_frame(
                     now,
                     deal.frame,
                     deal.assignments,
                     deal.render_pixels,
+                    done,
                 )?;
                 self.session.flush();
             }
@@ -120,17 +142,31 @@ impl Owner {
             if director.is_finished() {
                 break;
             }
-            let deadline = director
-                .poll_timeout()
-                .map(|t| tokio::time::Instant::from_std(self.session.epoch() + t));
+            let deadline = [
+                director.poll_timeout(),
+                checkpoints.as_ref().and_then(|c| c.due),
+            ]
+            .into_iter()
+            .flatten()
+            .min()
+            .map(|t| tokio::time::Instant::from_std(self.session.epoch() + t));
             let step = tokio::select! {
                 step = self.session.step() => Some(step),
                 () = sleep_until(deadline) => None,
             };
             match step {
                 Some(step) => self.on_step(step, &mut membership, &mut director, &mut report)?,
-                None => director.handle_timeout(self.session.now()),
+                None => {
+                    let now = self.session.now();
+                    director.handle_timeout(now);
+                    if let Some(checkpoints) = &mut checkpoints {
+                        checkpoints.on_timeout(now, &self.session.core, &director);
+                    }
+                }
             }
+        }
+        if let Some(checkpoints) = checkpoints {
+            checkpoints.finish().await;
         }
         let peers: Vec<PeerId> = self.session.peers.ids().collect();
         for peer in peers {
@@ -243,6 +279,84 @@ impl Owner {
             }
         }
         self.session.flush();
+    }
+}
+
+/// The owner's checkpoints of the frame in progress: every `plan.every`, the oldest running
+/// frame's accepted results, if more came in since the last, written by a blocking task while
+/// the loop goes on (a checkpoint of a large frame is tens of megabytes). One write at a time:
+/// a checkpoint due while the last is still being written waits for the next turn.
+struct Checkpoints {
+    plan: Checkpointing,
+    /// When the next checkpoint is due; never without `plan.every`.
+    due: Option<Duration>,
+    /// The frame and result count of the last checkpoint written.
+    last: Option<(FrameId, usize)>,
+    writing: Option<tokio::task::JoinHandle<()>>,
+}
+
+impl Checkpoints {
+    fn new(plan: Checkpointing) -> Self {
+        Self {
+            due: plan.every,
+            plan,
+            last: None,
+            writing: None,
+        }
+    }
+
+    fn on_timeout(&mut self, now: Duration, core: &runtime_core::peer::Core, director: &Director) {
+        let (Some(due), Some(every)) = (self.due, self.plan.every) else {
+            return;
+        };
+        if now < due {
+            return;
+        }
+        self.due = Some(now + every);
+        if self
+            .writing
+            .as_ref()
+            .is_some_and(|task| !task.is_finished())
+        {
+            return;
+        }
+        let Some(frame) = core.running_frames().next() else {
+            return;
+        };
+        let (Some(results), Some(deal)) = (core.accepted(frame), director.running_deal(frame))
+        else {
+            return;
+        };
+        if results.is_empty() || self.last == Some((frame, results.len())) {
+            return;
+        }
+        self.last = Some((frame, results.len()));
+        let checkpoint = Checkpoint {
+            render_hash: self.plan.render_hash.clone(),
+            frame,
+            tiles: deal.tiles.clone(),
+            results,
+        };
+        let path = self.plan.path.clone();
+        self.writing = Some(tokio::task::spawn_blocking(move || {
+            match checkpoint.write(&path) {
+                Ok(()) => tracing::debug!(%frame, "checkpoint written"),
+                // A checkpoint is insurance: failing to write one costs nothing now.
+                Err(error) => {
+                    tracing::warn!(%error, "cannot write the checkpoint {}", path.display())
+                }
+            }
+        }));
+    }
+
+    /// The render is done: no checkpoint is needed any more.
+    async fn finish(self) {
+        if let Some(task) = self.writing {
+            let _ = task.await;
+        }
+        if let Err(error) = checkpoint::remove(&self.plan.path) {
+            tracing::warn!(%error, "cannot remove the checkpoint {}", self.plan.path.display());
+        }
     }
 }
 

@@ -608,3 +608,33 @@ fn frames_dealt_ahead_are_predicted_where_a_moving_spot_will_be() {
         );
     }
 }
+
+#[test]
+fn a_resumed_first_frame_is_cut_into_its_checkpoints_tiles_and_the_rest_as_usual() {
+    // The checkpoint's tiles: a 4x2 grid, not what a 16-leaf PBT cuts.
+    let kept: Vec<balancer::Tile> = grid(4, 2).tiles();
+    for first in [0, 3] {
+        let config = Config {
+            frames: first + 3,
+            first,
+            ..Config::default()
+        };
+        let mut director = Director::new(OWNER, pbt(16), config);
+        director.handle_peer_joined(Duration::ZERO, PeerId(1));
+        director.resume_with(kept.clone());
+        let mut cluster = cluster(2);
+        let (deals, _) = drive(&mut director, &mut cluster, &|_| halves(4));
+        assert_eq!(deals.len(), 3);
+        assert_eq!(deals[0].frame, FrameId(first));
+        assert_eq!(deals[0].tiles, kept, "first {first}");
+        let dealt: usize = deals[0].assignments.values().map(Vec::len).sum();
+        assert_eq!(dealt, kept.len());
+        for deal in &deals[1..] {
+            assert_eq!(
+                deal.tiles.len(),
+                16,
+                "first {first}: later frames are the PBT's"
+            );
+        }
+    }
+}

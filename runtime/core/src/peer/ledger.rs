@@ -74,7 +74,10 @@ struct PeerView {
 
 impl Ledger {
     /// Opens the ledger and sends every participant its tiles (this peer's own by local
-    /// delivery).
+    /// delivery). `done` are results of the frame kept from before (a checkpoint of a render
+    /// that was stopped): they are recorded first, as this peer's own, and a tile they cover is
+    /// given to nobody; a tile they cover in part is given whole, its duplicate parts audited.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn start(
         now: Duration,
         me: PeerId,
@@ -82,6 +85,7 @@ impl Ledger {
         assignments: BTreeMap<PeerId, Vec<TileSpec>>,
         render_pixels: u64,
         config: &Config,
+        done: Vec<TileResult>,
         out: &mut Outbox,
     ) -> Self {
         let mut ledger = Self {
@@ -118,11 +122,31 @@ impl Ledger {
         }
         ledger.missing = ledger.tiles.len();
         ledger.predicted_total = ledger.tiles.values().map(|e| e.spec.predicted).sum();
+        for result in done {
+            if let Some(fault) = ledger.record(now, me, result, out) {
+                // A checkpoint that does not fit its own partition: its result is not used.
+                out.events.push_back(fault);
+            }
+        }
+        if ledger.missing == 0 {
+            // The kept results cover the frame: it completed above, and nobody needs tiles.
+            return ledger;
+        }
         let participants = ledger.live_peers();
-        for (peer, tiles) in assignments {
+        for (peer, mut tiles) in assignments {
+            tiles.retain(|spec| ledger.tiles.get(&spec.id).is_some_and(|e| !e.complete));
             ledger.send_assign(now, peer, participants.clone(), tiles, out);
         }
         ledger
+    }
+
+    /// Every result accepted so far, in tile order: what a checkpoint of the frame keeps.
+    pub(super) fn accepted(&self) -> Vec<TileResult> {
+        self.tiles
+            .values()
+            .flat_map(|entry| entry.pieces.results())
+            .cloned()
+            .collect()
     }
 
     /// `peer` joined the render while this frame runs. It takes part from now on with no

@@ -109,6 +109,12 @@ impl Core {
         self.ledgers.keys().copied()
     }
 
+    /// (Owner) every result of running `frame` accepted so far, in tile order (`None` if the
+    /// frame is not running here): what a checkpoint keeps, for [`Core::resume_frame`].
+    pub fn accepted(&self, frame: FrameId) -> Option<Vec<TileResult>> {
+        self.ledgers.get(&frame).map(Ledger::accepted)
+    }
+
     /// Tiles handed to the renderer (or ready to be) and not yet returned.
     pub fn in_flight(&self) -> usize {
         self.worker.in_flight.len()
@@ -125,6 +131,20 @@ impl Core {
         frame: FrameId,
         assignments: BTreeMap<PeerId, Vec<TileSpec>>,
         render_pixels: u64,
+    ) -> Result<(), FrameError> {
+        self.resume_frame(now, frame, assignments, render_pixels, Vec::new())
+    }
+
+    /// (Owner) [`Core::start_frame`], with `done`: results of the frame kept from a render
+    /// that was stopped (a checkpoint of [`Core::accepted`]). They count as received; tiles
+    /// they cover are given to nobody, and the frame completes at once if they cover it all.
+    pub fn resume_frame(
+        &mut self,
+        now: Duration,
+        frame: FrameId,
+        assignments: BTreeMap<PeerId, Vec<TileSpec>>,
+        render_pixels: u64,
+        done: Vec<TileResult>,
     ) -> Result<(), FrameError> {
         let newest = self.worker.newest().max(self.newest_owned);
         if let Some(newest) = newest.filter(|&newest| frame <= newest) {
@@ -161,6 +181,7 @@ impl Core {
             assignments,
             render_pixels.max(1),
             &self.config,
+            done,
             &mut self.out,
         );
         self.ledgers.insert(frame, ledger);

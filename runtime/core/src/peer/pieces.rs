@@ -36,6 +36,11 @@ impl Pieces {
             .map(|(_, (peer, result))| (*peer, result))
     }
 
+    /// Every result received, in tree order.
+    pub(super) fn results(&self) -> impl Iterator<Item = &TileResult> + '_ {
+        self.results.values().map(|(_, result)| result)
+    }
+
     pub(super) fn insert(&mut self, from: PeerId, result: TileResult) {
         self.results.insert(result.piece, (from, result));
     }
