@@ -151,8 +151,8 @@ pub async fn run_local(
     let owner = Owner::bind(loopback, &certs.peers()[0], options.clone())?;
     let owner_addr = owner.local_addr()?;
     let mut tasks = Vec::new();
-    for identity in certs.peers().into_iter().skip(1) {
-        let options = options.clone();
+    for identity in &certs.peers()[1..] {
+        let (identity, options) = (identity.clone(), options.clone());
         tasks.push(tokio::spawn(async move {
             let id = PeerId(identity.index());
             run_peer(owner_addr, loopback, &identity, options, Leave::never())
