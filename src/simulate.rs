@@ -95,6 +95,10 @@ pub struct SimulateArgs {
     /// Whether a victim cuts a tile too large to give whole and gives its far half.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub split_on_steal: bool,
+    /// Whether a peer re-predicts the rest of a tile from the pieces of it it has rendered.
+    #[arg(long, default_value_t = runtime_core::peer::Config::default().relearn_pieces,
+          action = clap::ArgAction::Set)]
+    pub relearn_pieces: bool,
     /// Whether the owner backs up an overdue peer's work on idle peers (speculation).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub backups: bool,
@@ -342,6 +346,7 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
     };
     scenario.core.prefetch_depth = args.prefetch;
     scenario.core.split_on_steal = args.split_on_steal;
+    scenario.core.relearn_pieces = args.relearn_pieces;
     if !args.backups {
         scenario.core.speculation = None;
     }

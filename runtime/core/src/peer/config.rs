@@ -62,6 +62,13 @@ pub struct Config {
     /// The smallest piece a victim cuts a tile into, in pixels: below this a transfer costs more
     /// than the work it moves. One 8x8 block (the unit the tracer measures cost in) by default.
     pub min_piece_pixels: u64,
+    /// When a piece of a tile has rendered, whether the rest of that tile still queued here is
+    /// predicted anew from it: its predicted cost is scaled by what the piece took against what
+    /// its prediction said at this peer's pace (within [`RELEARN_BOUND`] either way). A tile
+    /// the prediction got wrong (all of them, on a frame cut blind) then shows its true weight
+    /// to thieves, who take a fair share of it instead of judging it by its area. Off, pieces
+    /// keep the tile's prediction shared by area.
+    pub relearn_pieces: bool,
     /// (Owner) When to render again, elsewhere, work that is overdue on a peer; `None`: never
     /// (a peer that stops answering then costs `peer_timeout`).
     pub speculation: Option<Speculation>,
@@ -72,6 +79,11 @@ pub struct Config {
     /// then predicted from older costs. Default 0.5.
     pub waning: f64,
 }
+
+/// How far one rendered piece may scale the prediction of the rest of its tile, either way
+/// ([`Config::relearn_pieces`]): one piece's time is a noisy sample (a thread descheduled, a
+/// cache cold), and a bound keeps a single outlier from making the rest look free or endless.
+pub const RELEARN_BOUND: f64 = 16.0;
 
 /// When the owner gives copies of a straggler's work to idle peers, as MapReduce's backup tasks
 /// and Spark's speculation do. A missing tile is *overdue* when the participants believed to
@@ -131,6 +143,7 @@ impl Default for Config {
             peer_timeout: Duration::from_secs(10),
             split_on_steal: true,
             min_piece_pixels: crate::wire::MIN_PIECE_PIXELS,
+            relearn_pieces: true,
             speculation: Some(Speculation::default()),
             waning: 0.5,
         }

@@ -23,7 +23,7 @@ mod worker;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::Duration;
 
-pub use config::{Config, Speculation, VictimOrder};
+pub use config::{Config, RELEARN_BOUND, Speculation, VictimOrder};
 pub use event::{Audit, Event, Failure, Fault, PeerStats};
 
 use crate::rng::SplitMix;

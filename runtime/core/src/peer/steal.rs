@@ -157,7 +157,7 @@ impl Estimates {
     }
 
     /// Seconds this peer needs for `work`, if it has measured its rate yet.
-    fn seconds_for(&self, work: f64, slots: usize) -> Option<f64> {
+    pub(super) fn seconds_for(&self, work: f64, slots: usize) -> Option<f64> {
         self.slot_rate
             .filter(|r| *r > 0.0)
             .map(|r| work / (r * slots.max(1) as f64))

@@ -21,6 +21,16 @@ use super::{Ctx, WorkItem};
 use crate::peer::event::{Event, PeerStats};
 use crate::wire::{FrameId, Message, PeerId, Piece, TileId, TileResult, TileSpec};
 
+/// The smallest piece a hot tile is rendered in ([`FrameState::hot`]), in pixels: below a
+/// cost block (8x8), since a hot spot can be a single block; a pixel's value does not depend on
+/// its piece, and the owner sums the blocks' counted work over the pieces that cover them.
+const HOT_PIECE_PIXELS: u64 = 16;
+
+/// How much costlier than predicted a piece must have been for the rest of its tile to be
+/// rendered finer: smaller mispredictions are what every prediction has, and cutting for them
+/// only adds pieces, each with its overhead.
+const HOT_SCALE: f64 = 4.0;
+
 /// A piece of work in the renderer: its frame, tile and piece.
 pub(super) type FlightKey = (FrameId, TileId, Piece);
 
@@ -69,6 +79,11 @@ pub(super) struct FrameState {
     pub(super) prefetch_work: f64,
     /// The largest piece handed to the renderer at once, as the owner's newest `Assign` said.
     render_pixels: u64,
+    /// Tiles re-predicted costlier than their share of `render_pixels` pays for
+    /// ([`Config::relearn_pieces`](super::Config::relearn_pieces)), with the smaller pieces
+    /// they are rendered in: a piece that costs `s` times its prediction is cut `s` times finer,
+    /// so that its cost is what a normal piece's is and thieves can share a hot spot out.
+    hot: BTreeMap<TileId, u64>,
     /// `Assign`s and grants received and `TileDone`s sent this frame: the owner compares them
     /// with what it knows of, to tell a stale idle report from a current one.
     assigned: u32,
@@ -292,10 +307,13 @@ impl Worker {
             return;
         };
         let now = cx.now;
+        let took = now.saturating_sub(flight.started);
         self.stats.busy += now.saturating_sub(flight.accounted_from);
         self.stats.tiles_rendered += 1;
-        self.estimates
-            .sample_rate(flight.predicted, now.saturating_sub(flight.started));
+        if cx.config.relearn_pieces {
+            self.relearn(result.frame, result.tile, flight.predicted, took);
+        }
+        self.estimates.sample_rate(flight.predicted, took);
         match self.frames.get_mut(&result.frame) {
             Some(state) => {
                 state.done += 1;
@@ -304,6 +322,58 @@ impl Worker {
             }
             None => {
                 tracing::debug!(frame = %result.frame, tile = %result.tile, "result of a finished frame: dropped")
+            }
+        }
+    }
+
+    /// A piece of `tile` predicted at `predicted` took `took`: the rest of the tile still waiting
+    /// here is likely to cost alike, so its prediction is scaled by the piece's actual over its
+    /// expected time at this peer's measured pace (before this piece is folded into the pace).
+    fn relearn(&mut self, frame: FrameId, tile: TileId, predicted: f64, took: Duration) {
+        use super::config::RELEARN_BOUND;
+        let Some(expected) = self.estimates.seconds_for(predicted, 1) else {
+            return;
+        };
+        let Some(state) = self.frames.get_mut(&frame) else {
+            return;
+        };
+        if expected <= 0.0 || took.is_zero() {
+            return;
+        }
+        let scale = (took.as_secs_f64() / expected).clamp(1.0 / RELEARN_BOUND, RELEARN_BOUND);
+        if scale >= HOT_SCALE {
+            let finer = (state.render_pixels as f64 / scale).max(HOT_PIECE_PIXELS as f64) as u64;
+            let limit = state.hot.entry(tile).or_insert(state.render_pixels);
+            *limit = (*limit).min(finer);
+            // A prefetched piece of the tile, cut before it was known to be hot, goes back to
+            // the front of the queue to be cut finer: the renderer has not started it.
+            let limit = *limit;
+            let mut index = state.prefetch.len();
+            while index > 0 {
+                index -= 1;
+                if state.prefetch[index].id == tile && state.prefetch[index].rect.area() > limit {
+                    let spec = state
+                        .prefetch
+                        .remove(index)
+                        .expect("invariant: the index is within the prefetch");
+                    state.prefetch_work = shrink(
+                        state.prefetch_work,
+                        spec.predicted,
+                        state.prefetch.is_empty(),
+                    );
+                    state.queue_work += spec.predicted;
+                    state.queue.push_front(spec);
+                }
+            }
+        }
+        for (queue, work) in [
+            (&mut state.queue, &mut state.queue_work),
+            (&mut state.prefetch, &mut state.prefetch_work),
+        ] {
+            for spec in queue.iter_mut().filter(|spec| spec.id == tile) {
+                let relearned = spec.predicted * scale;
+                *work = (*work + relearned - spec.predicted).max(0.0);
+                spec.predicted = relearned;
             }
         }
     }
@@ -458,6 +528,7 @@ impl FrameState {
             prefetch: VecDeque::new(),
             prefetch_work: 0.0,
             render_pixels: u64::MAX,
+            hot: BTreeMap::new(),
             assigned: 0,
             stolen: 0,
             done: 0,
@@ -472,7 +543,12 @@ impl FrameState {
     /// a peer is busy with can still move.
     fn pop_queue(&mut self) -> Option<TileSpec> {
         let mut tile = self.queue.pop_front()?;
-        while tile.rect.area() > self.render_pixels
+        let limit = self
+            .hot
+            .get(&tile.id)
+            .copied()
+            .unwrap_or(self.render_pixels);
+        while tile.rect.area() > limit
             && let Some((first, second)) = tile.halves()
         {
             self.queue.push_front(second);

@@ -222,3 +222,62 @@ fn backups_wait_for_an_idle_peer_and_a_real_delay() {
         "{renders:?}"
     );
 }
+
+/// A renderer whose true cost is a unit per 16 pixels, but 4 units per pixel of columns 32 to
+/// 39, in the third tile (a hot spot the prediction, by area alone, did not see; its holder
+/// has measured its pace on two tiles by then).
+fn hot_left_renderer() -> runtime_core::peer::testing::Renderer {
+    Box::new(|_, item| {
+        let rect = item.tile.rect;
+        let (left, right) = (rect.x.max(32), (rect.x + rect.w).min(40));
+        let hot = u64::from(right.saturating_sub(left)) * u64::from(rect.h);
+        let cool = rect.area() - hot;
+        let units = 4.0 * hot as f64 + cool as f64 / 16.0;
+        Rendered {
+            duration: Duration::from_secs_f64(units * MS_PER_UNIT),
+            result: synthetic_result(item),
+        }
+    })
+}
+
+/// A frame cut blind (every tile predicted by its area) whose third tile holds a hot spot: a
+/// peer that re-predicts the rest of a tile from its first piece shows thieves its true weight
+/// and renders it in finer pieces, so several peers share the spot and the frame ends sooner;
+/// without it the spot's pieces look as cheap as any and their holder renders them alone.
+#[test]
+fn pieces_re_predict_the_rest_of_their_tile_and_a_blind_frame_ends_sooner() {
+    let mut makespans = Vec::new();
+    for relearn in [true, false] {
+        let config = Config {
+            relearn_pieces: relearn,
+            ..Config::default()
+        };
+        let peers: Vec<(PeerId, usize)> = (0..8).map(|p| (PeerId(p), 1)).collect();
+        let mut cluster = Cluster::new(&config, &peers, 7, hot_left_renderer());
+        let all = sized_tiles(0, &[16.0; 64], 16);
+        let assignments = contiguous_tiles(8, all);
+        cluster
+            .start_frame_in_pieces(OWNER, FrameId(1), assignments, 64)
+            .unwrap();
+        finish(&mut cluster);
+        let (elapsed, results) = completion(&cluster, FrameId(1));
+        assert_all_results(&results, FrameId(1), 64);
+        assert_no_refusals_or_faults(&cluster);
+        let spot: std::collections::BTreeSet<PeerId> = cluster
+            .trace()
+            .iter()
+            .filter_map(|record| match record {
+                Record::Started { peer, item, .. } if item.tile.id == TileId(2) => Some(*peer),
+                _ => None,
+            })
+            .collect();
+        makespans.push((elapsed, spot.len()));
+    }
+    let [(with, spread), (without, alone)] = makespans[..] else {
+        unreachable!("two runs")
+    };
+    assert!(
+        with < without.mul_f64(0.9) && spread > alone,
+        "re-predicting did not help: {makespans:?}"
+    );
+}
