@@ -11,6 +11,7 @@ use super::format::{self, ObjectSpec, SceneSpec};
 use super::materials::MaterialTable;
 use super::obj::{self, NO_MATERIAL};
 use super::shapes::{Transform, given_keys, shape_triangles};
+use super::motion::{MovingObject, Shutter, TransformKey, TransformTrack};
 use super::{Camera, CameraKey, CameraTrack, PointLight, RenderSettings, Scene, Triangle};
 use crate::environment::{Environment, EnvironmentMap, decode_exr};
 use glam::Vec3;
@@ -92,12 +93,13 @@ pub fn load_with_report(
         text,
         table: MaterialTable::new(&toml, text, &spec.materials, &spec.media),
         triangles: Vec::new(),
+        moving: Vec::new(),
         report: LoadReport::default(),
     };
     for object in &spec.objects {
         builder.object(object)?;
     }
-    if builder.triangles.is_empty() {
+    if builder.triangles.is_empty() && builder.moving.is_empty() {
         return Err(SceneError::in_file(&toml, "the scene has no triangles"));
     }
     if let Some(unused) = builder.table.unused_definition() {
@@ -115,13 +117,20 @@ pub fn load_with_report(
         log,
         table,
         triangles,
+        moving,
         report,
         ..
     } = builder;
+    let shutter = spec.camera.get_ref().shutter.map_or(Shutter::default(), |s| {
+        let [open, close] = s.0;
+        Shutter { open, close }
+    });
     let scene = Scene {
-        settings: render_settings(&spec, &camera),
+        settings: render_settings(&spec, &camera, &moving),
         camera,
+        shutter,
         triangles,
+        moving,
         materials: table.materials,
         textures: table.textures,
         point_lights: spec.lights.iter().map(point_light).collect(),
@@ -140,6 +149,7 @@ struct Builder<'a> {
     text: &'a str,
     table: MaterialTable<'a>,
     triangles: Vec<Triangle>,
+    moving: Vec<MovingObject>,
     report: LoadReport,
 }
 
@@ -177,6 +187,7 @@ impl Builder<'_> {
                 "[[object]] key `{key}` does not apply to `{source}`"
             )));
         }
+        let track = self.track(o)?;
         let default_material = match &o.material {
             Some(name) => Some(self.table.toml_material(&mut self.log, name)?),
             None => None,
@@ -186,7 +197,7 @@ impl Builder<'_> {
             let (resolved, bytes) = self.log.read(Some(at), path.get_ref())?;
             let defined = |name: &str| self.table.defines(name);
             let mesh = obj::load(&mut self.log, &resolved, &bytes, &defined)?;
-            return self.place_obj(o, resolved, mesh, default_material);
+            return self.place_obj(o, track, resolved, mesh, default_material);
         }
         let kind = o
             .shape
@@ -197,12 +208,53 @@ impl Builder<'_> {
             )));
         };
         let local = shape_triangles(kind, o, material).map_err(err)?;
-        self.place(o, source, local).map_err(err)
+        self.place(o, track, source, local).map_err(err)
+    }
+
+    /// The keys of a moving object, in order, each completed from the object's own transform;
+    /// `None` when the object stands still (no keys, or keys that all say the same).
+    fn track(&self, o: &ObjectSpec) -> Result<Option<TransformTrack>, SceneError> {
+        let mut keys: Vec<TransformKey> = Vec::with_capacity(o.keys.len());
+        let mut lines: Vec<usize> = Vec::with_capacity(o.keys.len());
+        for spanned in &o.keys {
+            let k = spanned.get_ref();
+            let line = line_of(self.text, spanned.span().start);
+            let err = |detail: String| SceneError::at_line(self.toml, line, detail);
+            if let (Some(last), Some(&last_line)) = (keys.last(), lines.last()) {
+                if k.frame == last.frame {
+                    return Err(err(format!(
+                        "object keys: two keys at frame {} (the other at line {last_line})",
+                        k.frame
+                    )));
+                }
+                if k.frame < last.frame {
+                    return Err(err(format!(
+                        "object keys out of order: frame {} comes after frame {} (line \
+                         {last_line}); give keys in increasing frame order",
+                        k.frame, last.frame
+                    )));
+                }
+            }
+            let key = key_pose(o, Some(k));
+            if let Some(last) = keys.last()
+                && (key.scale * last.scale).cmple(Vec3::ZERO).any()
+            {
+                return Err(err(format!(
+                    "object keys: `scale` changes sign between frames {} and {}, so it would \
+                     pass through zero and flatten the object",
+                    last.frame, key.frame
+                )));
+            }
+            keys.push(key);
+            lines.push(line);
+        }
+        Ok(TransformTrack::new(keys))
     }
 
     fn place_obj(
         &mut self,
         o: &ObjectSpec,
+        track: Option<TransformTrack>,
         path: String,
         mut mesh: obj::ObjMesh,
         default_material: Option<u32>,
@@ -228,61 +280,105 @@ impl Builder<'_> {
         for t in &mut mesh.triangles {
             t.material = ids[&t.material];
         }
-        self.place(o, path.clone(), mesh.triangles)
+        self.place(o, track, path.clone(), mesh.triangles)
             .map_err(|detail| SceneError::in_file(&path, detail))
     }
 
-    /// Transforms `local` triangles into the scene, dropping zero-area ones.
+    /// Transforms `local` triangles into the scene, dropping zero-area ones; or, for an object
+    /// that moves by `track`, keeps them in object space with it.
     fn place(
         &mut self,
         o: &ObjectSpec,
+        track: Option<TransformTrack>,
         source: String,
         local: Vec<Triangle>,
     ) -> Result<(), String> {
-        let rotate = [o.rotate_x, o.rotate_y, o.rotate_z].map(|r| r.map_or(0.0, |r| r.0));
-        let transform = Transform::new(
-            o.scale.map_or(Vec3::ONE, |s| s.0),
-            Vec3::from(rotate),
-            o.translate.map_or(Vec3::ZERO, |t| t.0),
-        );
-        let before = self.triangles.len();
-        let mut degenerate = 0;
+        // A still object with keys that all say the same stands at that pose, as if it had no
+        // keys; a moving one is checked, and warned about, where its first key places it.
+        let pose = match &track {
+            Some(track) => track.keys()[0],
+            None => key_pose(o, o.keys.first().map(|k| k.get_ref())),
+        };
+        let transform = Transform::new(pose.scale, pose.rotate_degrees, pose.translate);
+        let mut kept = Vec::with_capacity(local.len());
+        let mut placed = Vec::with_capacity(local.len());
         for t in &local {
-            let t = if transform.is_identity() {
+            let world = if transform.is_identity() {
                 *t
             } else {
                 transform.apply(t)
             };
-            let area = t.area_vector().length_squared();
+            let area = world.area_vector().length_squared();
             if !area.is_finite() {
                 return Err(
                     "a triangle's area overflows 32-bit floats (coordinates too large)".into(),
                 );
             }
-            if area > 0.0 {
-                self.triangles.push(t);
-            } else {
-                degenerate += 1;
+            // A moving triangle must have area where it is modelled too: that is where rays
+            // meet it.
+            if area > 0.0 && (track.is_none() || t.area_vector().length_squared() > 0.0) {
+                kept.push(if track.is_some() { *t } else { world });
+                placed.push(world);
             }
         }
-        let kept = self.triangles.len() - before;
-        let too_far = warn_if_too_far(&source, &self.triangles[before..]);
+        let degenerate = local.len() - kept.len();
+        let too_far = warn_if_too_far(&source, &placed);
         if degenerate > 0 {
             tracing::warn!(
                 "{source}: dropped {degenerate} zero-area triangles of {}",
                 local.len()
             );
         }
-        if kept == 0 {
+        if kept.is_empty() {
             return Err(format!("{source}: every triangle has zero area"));
         }
         self.report.objects.push(ObjectReport {
             source,
-            triangles: kept,
+            triangles: kept.len(),
             degenerate,
             too_far,
         });
+        match track {
+            Some(track) => {
+                if let Some(t) = kept
+                    .iter()
+                    .find(|t| self.table.materials[t.material as usize].emission != Vec3::ZERO)
+                {
+                    let name = &self.table.materials[t.material as usize].name;
+                    return Err(format!(
+                        "material `{name}` emits, and moving lights are not supported: only \
+                         objects that stand still may emit"
+                    ));
+                }
+                self.moving.push(MovingObject {
+                    triangles: kept,
+                    track,
+                });
+            }
+            None => self.triangles.extend(kept),
+        }
         Ok(())
+    }
+}
+
+/// The pose of key `key` of object `o` (its frame, 0 without a key): each transform key the
+/// key gives, else the object's own, else the identity's.
+fn key_pose(o: &ObjectSpec, key: Option<&format::ObjectKeySpec>) -> TransformKey {
+    let pick = |key: Option<format::Finite>, object: Option<format::Finite>| {
+        key.or(object).map_or(0.0, |r| r.0)
+    };
+    TransformKey {
+        frame: key.map_or(0, |k| k.frame),
+        scale: key.and_then(|k| k.scale).or(o.scale).map_or(Vec3::ONE, |s| s.0),
+        rotate_degrees: Vec3::new(
+            pick(key.and_then(|k| k.rotate_x), o.rotate_x),
+            pick(key.and_then(|k| k.rotate_y), o.rotate_y),
+            pick(key.and_then(|k| k.rotate_z), o.rotate_z),
+        ),
+        translate: key
+            .and_then(|k| k.translate)
+            .or(o.translate)
+            .map_or(Vec3::ZERO, |t| t.0),
     }
 }
 
@@ -442,9 +538,16 @@ fn point_light(l: &format::LightSpec) -> PointLight {
     }
 }
 
-fn render_settings(spec: &SceneSpec, camera: &CameraTrack) -> RenderSettings {
+fn render_settings(spec: &SceneSpec, camera: &CameraTrack, moving: &[MovingObject]) -> RenderSettings {
     let r = &spec.render;
-    let last_key = camera.keys().last().map_or(0, |k| k.frame);
+    let objects = moving.iter().filter_map(|o| o.track.keys().last());
+    let last_key = camera
+        .keys()
+        .iter()
+        .map(|k| k.frame)
+        .chain(objects.map(|k| k.frame))
+        .max()
+        .unwrap_or(0);
     RenderSettings {
         width: r.width.0,
         height: r.height.0,
