@@ -177,13 +177,21 @@ mod tests {
         let time = s.time();
         let mut t = s.clone();
         let main: Vec<f32> = (0..64).map(|_| t.next_1d()).collect();
-        assert_eq!(t.time(), time, "drawing other numbers moves nothing in the time stream");
+        assert_eq!(
+            t.time(),
+            time,
+            "drawing other numbers moves nothing in the time stream"
+        );
         assert!(!main.contains(&time));
         let lens = s.lens();
         assert!(time != lens.x && time != lens.y);
         let mut u = PixelSampler::new(1, 0, 0, 0, 0);
         let _ = u.time();
-        assert_eq!(u.next_1d(), main[0], "drawing the time shifts no main number");
+        assert_eq!(
+            u.next_1d(),
+            main[0],
+            "drawing the time shifts no main number"
+        );
         // Uniform over the exposure: the mean of many samples' times is a half.
         let n = 20_000;
         let mean = (0..n)

@@ -67,9 +67,7 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
     // never draws a time; with the shutter opening at the frame (the default) that is the
     // frame, and the camera is the one it always was there.
     let instant = shutter.time(frame, 0.0);
-    let still = track
-        .at_time(instant)
-        .rays(settings.width, settings.height);
+    let still = track.at_time(instant).rays(settings.width, settings.height);
     let blur = world.effects.motion_blur;
     let (bx0, by0, bw, bh) = rect.blocks();
     let mut blocks = vec![0u64; (bw * bh) as usize];

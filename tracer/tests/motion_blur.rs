@@ -53,7 +53,13 @@ fn covered(x: f64, (l0, dl): (f64, f64), (r0, dr): (f64, f64)) -> f64 {
 fn expected(i: u32, left: (f64, f64), right: (f64, f64)) -> f64 {
     let n = 512;
     let sum: f64 = (0..n)
-        .map(|k| covered(f64::from(i) + (f64::from(k) + 0.5) / f64::from(n), left, right))
+        .map(|k| {
+            covered(
+                f64::from(i) + (f64::from(k) + 0.5) / f64::from(n),
+                left,
+                right,
+            )
+        })
         .sum();
     1.0 - sum / f64::from(n)
 }
@@ -108,8 +114,17 @@ fn case_toml(case: &Case, spp: u32) -> String {
     let axis = |c: f64| if case.vertical { [0.0, c] } else { [c, 0.0] };
     let (h, long) = (case.half * k, 4.0 * k);
     let (hx, hy) = if case.vertical { (long, h) } else { (h, long) };
-    let corners = format!("[[{}, {}, 0], [{}, {}, 0], [{}, {}, 0], [{}, {}, 0]]", -hx, -hy, -hx, hy, hx, hy, hx, -hy);
-    let scale = |g: f64| if case.vertical { format!("[1, {g}, 1]") } else { format!("[{g}, 1, 1]") };
+    let corners = format!(
+        "[[{}, {}, 0], [{}, {}, 0], [{}, {}, 0], [{}, {}, 0]]",
+        -hx, -hy, -hx, hy, hx, hy, hx, -hy
+    );
+    let scale = |g: f64| {
+        if case.vertical {
+            format!("[1, {g}, 1]")
+        } else {
+            format!("[{g}, 1, 1]")
+        }
+    };
     let (object_keys, camera_keys) = if case.camera {
         let eye = |frame: u32, c: f64| {
             let [x, y] = axis(-c * k);
@@ -193,7 +208,10 @@ fn check(case: Case) {
         let sigma = (e * (1.0 - e) / f64::from(draws)).sqrt();
         let off = (m - e).abs() / (sigma + 1e-3);
         worst = worst.max(off);
-        assert!(off < 5.0, "{case:?}: pixel {i} is {m}, exactly {e} (sigma {sigma})");
+        assert!(
+            off < 5.0,
+            "{case:?}: pixel {i} is {m}, exactly {e} (sigma {sigma})"
+        );
     }
     for (edge, (start, shift)) in [left, right].into_iter().enumerate() {
         let width = shift.abs();
@@ -223,8 +241,14 @@ fn check(case: Case) {
             "{case:?} edge {edge}: ramp {fitted:.3} px wide, moved {width:.3} px; worst pixel \
              {worst:.2} sigma, worst residual {residual:.4}"
         );
-        assert!((fitted / width - 1.0).abs() < 0.04, "{case:?} edge {edge}: {fitted} vs {width}");
-        assert!(residual < 5.0 * (0.25 / f64::from(draws)).sqrt() + 1e-3, "{case:?}: not a line");
+        assert!(
+            (fitted / width - 1.0).abs() < 0.04,
+            "{case:?} edge {edge}: {fitted} vs {width}"
+        );
+        assert!(
+            residual < 5.0 * (0.25 / f64::from(draws)).sqrt() + 1e-3,
+            "{case:?}: not a line"
+        );
     }
 }
 

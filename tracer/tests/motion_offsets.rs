@@ -23,12 +23,20 @@ use tracer::scene::{Placement, TransformKey, TransformTrack};
 fn placement(rng: &mut Rng, distance: i32) -> (TransformKey, Placement) {
     let scale = Vec3::from_array(std::array::from_fn(|_| {
         let magnitude = 10f32.powf(rng.range(-2.0, 2.0));
-        if rng.index(4) == 0 { -magnitude } else { magnitude }
+        if rng.index(4) == 0 {
+            -magnitude
+        } else {
+            magnitude
+        }
     }));
     let key = TransformKey {
         frame: 0,
         scale,
-        rotate_degrees: Vec3::new(rng.range(-360.0, 360.0), rng.range(-360.0, 360.0), rng.range(-360.0, 360.0)),
+        rotate_degrees: Vec3::new(
+            rng.range(-360.0, 360.0),
+            rng.range(-360.0, 360.0),
+            rng.range(-360.0, 360.0),
+        ),
         translate: rng.direction() * 10f32.powi(distance),
     };
     (key, key.placement())
@@ -64,7 +72,10 @@ fn a_spawned_origin_taken_back_into_object_space_is_strictly_on_its_side() {
                     let (b1, b2) = rng.barycentrics();
                     let point = placed_point(&placement, &v, b1, b2);
                     assert!(point.error.is_finite() && point.normal != Vec3::ZERO);
-                    let (up, down) = (back(&placement, &point, point.normal), back(&placement, &point, -point.normal));
+                    let (up, down) = (
+                        back(&placement, &point, point.normal),
+                        back(&placement, &point, -point.normal),
+                    );
                     let what = format!("{v:?} at ({b1}, {b2}) placed by {placement:?}");
                     assert!(side(&v, up) > 0.0, "{what}: {up} not above");
                     assert!(side(&v, down) < 0.0, "{what}: {down} not below");
@@ -157,7 +168,11 @@ fn probe(radius: f32, distance: i32, seed: u64, n: u32) -> Counts {
         };
         let at = motion.locate(hit.triangle).expect("a moving triangle");
         let (surface, normal) = motion.surface(&moment, at, &hit);
-        let inward = if normal.dot(primary.dir) < 0.0 { normal } else { -normal };
+        let inward = if normal.dot(primary.dir) < 0.0 {
+            normal
+        } else {
+            -normal
+        };
         let d = rng.direction();
         let dir = if rng.index(2) == 0 {
             if d.dot(inward) < 0.0 { -d } else { d }
@@ -165,7 +180,10 @@ fn probe(radius: f32, distance: i32, seed: u64, n: u32) -> Counts {
             // Grazing, but far above the rounding of a direction (see `offsets.rs`).
             d.cross(inward).normalize() + inward * [1e-2, 1e-4][rng.index(2)]
         };
-        match closest(&spawn_ray(&surface, dir, OffsetMethod::ErrorBound), &mut stats) {
+        match closest(
+            &spawn_ray(&surface, dir, OffsetMethod::ErrorBound),
+            &mut stats,
+        ) {
             None => counts.bounce_leaks += 1,
             Some(h) if h.triangle == hit.triangle => counts.self_hits += 1,
             Some(_) => {}
@@ -191,7 +209,10 @@ fn closed_moving_spheres_neither_leak_nor_self_hit_nor_shadow_their_inside() {
                     counts.self_hits,
                     counts.false_occlusions,
                 ];
-                assert_eq!(failures, [0; 4], "radius {radius}, 10^{distance} away: {counts:?}");
+                assert_eq!(
+                    failures, [0; 4],
+                    "radius {radius}, 10^{distance} away: {counts:?}"
+                );
             }
         }
     }
@@ -211,9 +232,17 @@ fn the_placed_normal_is_the_placed_triangles_and_the_point_lies_on_it() {
         if placement.linear.determinant() < 0.0 {
             normal = -normal;
         }
-        assert!((point.normal.as_dvec3() - normal).length() < 1e-5, "{} vs {normal}", point.normal);
+        assert!(
+            (point.normal.as_dvec3() - normal).length() < 1e-5,
+            "{} vs {normal}",
+            point.normal
+        );
         let exact = w[0] + b1 as f64 * (w[1] - w[0]) + b2 as f64 * (w[2] - w[0]);
         let off = (point.p.as_dvec3() - exact).abs();
-        assert!(off.cmple(point.error.as_dvec3()).all(), "{off} beyond {}", point.error);
+        assert!(
+            off.cmple(point.error.as_dvec3()).all(),
+            "{off} beyond {}",
+            point.error
+        );
     }
 }

@@ -36,9 +36,18 @@ fn a_square_spinning_a_quarter_turn_or_more_shows_the_closed_form_radial_profile
     let (size, spp) = (96u32, 64u32);
     let a = 0.25 * f64::from(size) / (2.0 * 20f64.to_radians().tan());
     let spins = [
-        ("[[object.keys]]\nframe = 0\n[[object.keys]]\nframe = 1\nrotate_z = 90\n", "[0, 1]"),
-        ("[[object.keys]]\nframe = 0\n[[object.keys]]\nframe = 1\nrotate_z = 360\n", "[0, 0.25]"),
-        ("[[object.keys]]\nframe = 0\n[[object.keys]]\nframe = 1\nrotate_z = -720\n", "[0.5, 0.625]"),
+        (
+            "[[object.keys]]\nframe = 0\n[[object.keys]]\nframe = 1\nrotate_z = 90\n",
+            "[0, 1]",
+        ),
+        (
+            "[[object.keys]]\nframe = 0\n[[object.keys]]\nframe = 1\nrotate_z = 360\n",
+            "[0, 0.25]",
+        ),
+        (
+            "[[object.keys]]\nframe = 0\n[[object.keys]]\nframe = 1\nrotate_z = -720\n",
+            "[0.5, 0.625]",
+        ),
     ];
     for (keys, shutter) in spins {
         let scene = spinning(keys, shutter, size, spp);
@@ -50,7 +59,10 @@ fn a_square_spinning_a_quarter_turn_or_more_shows_the_closed_form_radial_profile
         let (lo, hi) = (a + 1.5, a * 2f64.sqrt() - 1.5);
         let mut sums = vec![(0.0f64, 0.0f64, 0u32); rings];
         for (i, p) in out.pixels.iter().enumerate() {
-            let (x, y) = ((i as u32 % size) as f64 + 0.5, (i as u32 / size) as f64 + 0.5);
+            let (x, y) = (
+                (i as u32 % size) as f64 + 0.5,
+                (i as u32 / size) as f64 + 0.5,
+            );
             let r = (x - f64::from(size) / 2.0).hypot(y - f64::from(size) / 2.0);
             if r < lo || r >= hi {
                 continue;
@@ -177,7 +189,11 @@ fn motion_renders_the_same_bits_specialised_and_with_every_effect_on() {
         let scene = room(shutter, 2);
         assert_eq!(Effects::of(&scene).motion_blur, shutter == "[-0.25, 0.25]");
         for frame in [0, 2] {
-            assert_same_bits(&format!("room, shutter {shutter}, frame {frame}"), &scene, frame);
+            assert_same_bits(
+                &format!("room, shutter {shutter}, frame {frame}"),
+                &scene,
+                frame,
+            );
         }
     }
     let still = load_str(&still_room("shutter = [0, 0.5]", "")).expect("loads");
@@ -230,7 +246,8 @@ fn still_room(camera: &str, sphere_keys: &str) -> String {
 fn scenes_that_do_not_move_render_the_bits_they_rendered_without_motion() {
     let plain = load_str(&still_room("", "")).expect("loads");
     let reference = bits(&render(&plain, None, 0).pixels);
-    let same_keys = "[[object.keys]]\nframe = 0\n[[object.keys]]\nframe = 5\ntranslate = [0.3, 0.5, 0]\n";
+    let same_keys =
+        "[[object.keys]]\nframe = 0\n[[object.keys]]\nframe = 5\ntranslate = [0.3, 0.5, 0]\n";
     for (camera, keys) in [
         ("shutter = [0, 0.5]", ""),
         ("shutter = [0, 0]", ""),
@@ -238,7 +255,10 @@ fn scenes_that_do_not_move_render_the_bits_they_rendered_without_motion() {
         ("shutter = [-1, 0]", same_keys),
     ] {
         let scene = load_str(&still_room(camera, keys)).expect("loads");
-        assert!(scene.moving.is_empty(), "{camera} {keys}: keys that all agree stand still");
+        assert!(
+            scene.moving.is_empty(),
+            "{camera} {keys}: keys that all agree stand still"
+        );
         for effects in [None, Some(Effects::ALL)] {
             assert_eq!(
                 bits(&render(&scene, effects, 0).pixels),
@@ -276,9 +296,21 @@ fn bad_shutters_and_keys_are_errors_that_name_the_line() {
     }
     let key = |frame: u32, rest: &str| format!("[[object.keys]]\nframe = {frame}\n{rest}\n");
     for (keys, line, words) in [
-        (key(4, "") + &key(2, "translate = [1, 0, 0]"), 32, "out of order: frame 2 comes after frame 4"),
-        (key(3, "") + &key(3, "translate = [1, 0, 0]"), 32, "two keys at frame 3"),
-        (key(0, "scale = 1") + &key(2, "scale = [1, -1, 1]"), 32, "changes sign"),
+        (
+            key(4, "") + &key(2, "translate = [1, 0, 0]"),
+            32,
+            "out of order: frame 2 comes after frame 4",
+        ),
+        (
+            key(3, "") + &key(3, "translate = [1, 0, 0]"),
+            32,
+            "two keys at frame 3",
+        ),
+        (
+            key(0, "scale = 1") + &key(2, "scale = [1, -1, 1]"),
+            32,
+            "changes sign",
+        ),
         (key(0, "colour = 1"), 31, "unknown field `colour`"),
     ] {
         let error = error_of(&still_room("", &keys));
@@ -298,7 +330,8 @@ fn bad_shutters_and_keys_are_errors_that_name_the_line() {
 
 #[test]
 fn object_keys_set_the_default_frame_count_and_interpolate_between_them() {
-    let keys = "[[object.keys]]\nframe = 2\n[[object.keys]]\nframe = 9\ntranslate = [1.7, 0.5, 0]\n";
+    let keys =
+        "[[object.keys]]\nframe = 2\n[[object.keys]]\nframe = 9\ntranslate = [1.7, 0.5, 0]\n";
     let scene = load_str(&still_room("", keys)).expect("loads");
     assert_eq!(scene.settings.frames, 10);
     let track = &scene.moving[0].track;
@@ -306,5 +339,8 @@ fn object_keys_set_the_default_frame_count_and_interpolate_between_them() {
     assert_eq!(track.keys()[0].translate, glam::Vec3::new(0.3, 0.5, 0.0));
     assert_eq!(track.keys()[1].rotate_degrees.y, 30.0);
     let mid = track.at(5.5).translation;
-    assert!((mid - glam::DVec3::new(1.0, 0.5, 0.0)).length() < 1e-6, "{mid}");
+    assert!(
+        (mid - glam::DVec3::new(1.0, 0.5, 0.0)).length() < 1e-6,
+        "{mid}"
+    );
 }

@@ -257,7 +257,9 @@ pub fn placed_point(placement: &Placement, v: &[Vec3; 3], b1: f32, b2: f32) -> S
     SurfacePoint {
         p,
         error: round_up(abs(&placement.linear) * e_object + g * p.as_dvec3().abs() + world_noise),
-        normal: (placement.normal * object_normal).normalize_or_zero().as_vec3(),
+        normal: (placement.normal * object_normal)
+            .normalize_or_zero()
+            .as_vec3(),
         spawn: Some([local.normal, -local.normal].map(origin)),
     }
 }

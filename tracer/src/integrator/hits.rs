@@ -34,7 +34,12 @@ pub(super) struct Placed<'a> {
 
 impl World {
     /// The closest hit of `ray` at `moment`.
-    pub(super) fn closest(&self, ray: &Ray, moment: &Moment, stats: &mut TraversalStats) -> Option<Hit> {
+    pub(super) fn closest(
+        &self,
+        ray: &Ray,
+        moment: &Moment,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
         let hit = self.accel.intersect_with(ray, self.traversal, stats);
         if self.motion.is_empty() {
             return hit;
@@ -65,8 +70,7 @@ impl World {
     /// Whether anything certainly blocks `ray` at `moment`.
     pub(super) fn occluded(&self, ray: &Ray, moment: &Moment, stats: &mut TraversalStats) -> bool {
         self.accel.occluded_with(ray, self.traversal, stats)
-            || (!self.motion.is_empty()
-                && self.motion.occluded(moment, ray, self.traversal, stats))
+            || (!self.motion.is_empty() && self.motion.occluded(moment, ray, self.traversal, stats))
     }
 
     /// The triangle `hit` names and where it is at `moment`.
@@ -87,11 +91,9 @@ impl World {
                 }
             }
             Some(MovingTriangle { object, triangle }) => {
-                let (at, unit_normal) = self.motion.surface(
-                    moment,
-                    MovingTriangle { object, triangle },
-                    hit,
-                );
+                let (at, unit_normal) =
+                    self.motion
+                        .surface(moment, MovingTriangle { object, triangle }, hit);
                 Placed {
                     triangle: &self.scene.moving[object].triangles[triangle],
                     at,

@@ -30,8 +30,7 @@
 use crate::effects::Effects;
 use crate::geometry::{
     Accel, Moment, MotionAccel, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats,
-    on_huge_pages,
-    spawn_ray, spawn_ray_to,
+    on_huge_pages, spawn_ray, spawn_ray_to,
 };
 use crate::lights::{EnvironmentSampling, LightSample, Lights};
 use crate::material::{Bsdf, Frame};

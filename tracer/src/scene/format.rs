@@ -449,16 +449,26 @@ checked_type!(Scale, Triple<1>, |v| {
 checked_type!(ShutterSpec, Vec<f32>, |v| {
     // A Vec rather than `[f32; 2]`: serde's arrays ignore elements beyond their length.
     let &[open, close] = v.as_slice() else {
-        return Err(format!("must be two numbers `[open, close]`, not {}", v.len()));
+        return Err(format!(
+            "must be two numbers `[open, close]`, not {}",
+            v.len()
+        ));
     };
     if !open.is_finite() || !close.is_finite() {
         Err(not_finite())
     } else if open > close {
-        Err(format!("[{open}, {close}] closes before it opens (give `[open, close]`)"))
+        Err(format!(
+            "[{open}, {close}] closes before it opens (give `[open, close]`)"
+        ))
     } else if open.abs() > 1.0 || close.abs() > 1.0 {
-        Err(format!("[{open}, {close}] must lie within one frame of the frame, in [-1, 1]"))
+        Err(format!(
+            "[{open}, {close}] must lie within one frame of the frame, in [-1, 1]"
+        ))
     } else if close - open > 1.0 {
-        Err(format!("[{open}, {close}] stays open {} frames, more than one", close - open))
+        Err(format!(
+            "[{open}, {close}] stays open {} frames, more than one",
+            close - open
+        ))
     } else {
         Ok([open, close])
     }

@@ -9,9 +9,9 @@ use super::error::{SceneError, line_of};
 use super::files::{DiskFiles, FileLog, MemoryFiles, SceneFiles};
 use super::format::{self, ObjectSpec, SceneSpec};
 use super::materials::MaterialTable;
+use super::motion::{MovingObject, Shutter, TransformKey, TransformTrack};
 use super::obj::{self, NO_MATERIAL};
 use super::shapes::{Transform, given_keys, shape_triangles};
-use super::motion::{MovingObject, Shutter, TransformKey, TransformTrack};
 use super::{Camera, CameraKey, CameraTrack, PointLight, RenderSettings, Scene, Triangle};
 use crate::environment::{Environment, EnvironmentMap, decode_exr};
 use glam::Vec3;
@@ -121,10 +121,14 @@ pub fn load_with_report(
         report,
         ..
     } = builder;
-    let shutter = spec.camera.get_ref().shutter.map_or(Shutter::default(), |s| {
-        let [open, close] = s.0;
-        Shutter { open, close }
-    });
+    let shutter = spec
+        .camera
+        .get_ref()
+        .shutter
+        .map_or(Shutter::default(), |s| {
+            let [open, close] = s.0;
+            Shutter { open, close }
+        });
     let scene = Scene {
         settings: render_settings(&spec, &camera, &moving),
         camera,
@@ -369,7 +373,10 @@ fn key_pose(o: &ObjectSpec, key: Option<&format::ObjectKeySpec>) -> TransformKey
     };
     TransformKey {
         frame: key.map_or(0, |k| k.frame),
-        scale: key.and_then(|k| k.scale).or(o.scale).map_or(Vec3::ONE, |s| s.0),
+        scale: key
+            .and_then(|k| k.scale)
+            .or(o.scale)
+            .map_or(Vec3::ONE, |s| s.0),
         rotate_degrees: Vec3::new(
             pick(key.and_then(|k| k.rotate_x), o.rotate_x),
             pick(key.and_then(|k| k.rotate_y), o.rotate_y),
@@ -538,7 +545,11 @@ fn point_light(l: &format::LightSpec) -> PointLight {
     }
 }
 
-fn render_settings(spec: &SceneSpec, camera: &CameraTrack, moving: &[MovingObject]) -> RenderSettings {
+fn render_settings(
+    spec: &SceneSpec,
+    camera: &CameraTrack,
+    moving: &[MovingObject],
+) -> RenderSettings {
     let r = &spec.render;
     let objects = moving.iter().filter_map(|o| o.track.keys().last());
     let last_key = camera

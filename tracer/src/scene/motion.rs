@@ -89,7 +89,10 @@ impl TransformTrack {
     pub fn new(keys: Vec<TransformKey>) -> Option<Self> {
         let ordered = keys.windows(2).all(|w| w[0].frame < w[1].frame);
         let moves = keys.windows(2).any(|w| !w[0].same_pose(&w[1]));
-        let rotations = keys.iter().map(|k| rotation(k.rotate_degrees.as_dvec3())).collect();
+        let rotations = keys
+            .iter()
+            .map(|k| rotation(k.rotate_degrees.as_dvec3()))
+            .collect();
         (keys.len() >= 2 && ordered && moves).then_some(Self { keys, rotations })
     }
 
@@ -124,7 +127,11 @@ impl TransformTrack {
         let (a, b) = self.segment_keys(segment);
         let first = segment.saturating_sub(1).min(self.keys.len() - 1);
         if a.frame == b.frame {
-            return placement(a.scale.as_dvec3(), self.rotations[first], a.translate.as_dvec3());
+            return placement(
+                a.scale.as_dvec3(),
+                self.rotations[first],
+                a.translate.as_dvec3(),
+            );
         }
         let s = (time - f64::from(a.frame)) / (f64::from(b.frame) - f64::from(a.frame));
         let lerp = |x: Vec3, y: Vec3| x.as_dvec3() + s * (y.as_dvec3() - x.as_dvec3());
@@ -133,7 +140,11 @@ impl TransformTrack {
         } else {
             rotation(lerp(a.rotate_degrees, b.rotate_degrees))
         };
-        placement(lerp(a.scale, b.scale), rotate, lerp(a.translate, b.translate))
+        placement(
+            lerp(a.scale, b.scale),
+            rotate,
+            lerp(a.translate, b.translate),
+        )
     }
 }
 
@@ -218,7 +229,10 @@ mod tests {
         let turned = track.at(4.0).linear;
         assert!((turned - DMat3::IDENTITY).abs_diff_eq(DMat3::ZERO, 1e-12));
         let quarter = track.at(2.5).point(DVec3::X);
-        assert!((quarter - DVec3::new(0.5, 0.0, -1.0)).length() < 1e-12, "{quarter}");
+        assert!(
+            (quarter - DVec3::new(0.5, 0.0, -1.0)).length() < 1e-12,
+            "{quarter}"
+        );
         assert_eq!(
             (track.segment(1.0), track.segment(2.0), track.segment(7.0)),
             (0, 1, 2)
