@@ -167,7 +167,8 @@ fn probe(radius: f32, distance: i32, seed: u64, n: u32) -> Counts {
             continue;
         };
         let at = motion.locate(hit.triangle).expect("a moving triangle");
-        let (surface, normal) = motion.surface(&moment, at, &hit);
+        let surface = motion.surface(&moment, at, &hit);
+        let normal = surface.normal;
         let inward = if normal.dot(primary.dir) < 0.0 {
             normal
         } else {

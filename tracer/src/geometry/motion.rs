@@ -120,6 +120,9 @@ impl MotionAccel {
     /// Which moving object and triangle the global index `triangle` names, or `None` for a
     /// static triangle.
     pub fn locate(&self, triangle: u32) -> Option<MovingTriangle> {
+        if self.objects.is_empty() {
+            return None;
+        }
         let index = triangle.checked_sub(self.first)?;
         let object = self.objects.partition_point(|o| o.offset <= index) - 1;
         Some(MovingTriangle {
@@ -184,15 +187,14 @@ impl MotionAccel {
             })
     }
 
-    /// The world-space hit point of `hit` on moving triangle `at`, with the error bound that
-    /// spawning from it needs ([`placed_point`]), and the triangle's unit winding normal in the
-    /// world (the side it faces, as [`Accel::unit_normal`] gives for static triangles).
-    pub fn surface(&self, moment: &Moment, at: MovingTriangle, hit: &Hit) -> (SurfacePoint, Vec3) {
+    /// The world-space hit point of `hit` on moving triangle `at`, with its bound and the
+    /// origins rays leaving it start from ([`placed_point`]); its `normal` is the triangle's
+    /// unit winding normal in the world (the side it faces, as [`Accel::unit_normal`] gives for
+    /// still triangles).
+    pub fn surface(&self, moment: &Moment, at: MovingTriangle, hit: &Hit) -> SurfacePoint {
         let mover = &self.objects[at.object];
         let placement = &moment.placements[at.object].1;
-        let v = &mover.vertices[at.triangle];
-        let point = placed_point(placement, v, hit.b1, hit.b2);
-        (point, point.normal)
+        placed_point(placement, &mover.vertices[at.triangle], hit.b1, hit.b2)
     }
 
     /// The placement of object `object` at `moment`: for shading normals.

@@ -9,7 +9,7 @@
 //! path's time, with the error bound that spawning from it needs.
 
 use super::World;
-use crate::geometry::{Hit, Moment, MovingTriangle, Ray, SurfacePoint, TraversalStats};
+use crate::geometry::{Hit, Moment, Ray, SurfacePoint, TraversalStats};
 use crate::scene::{Placement, Triangle};
 use glam::{Vec2, Vec3};
 
@@ -90,15 +90,13 @@ impl World {
                     placement: None,
                 }
             }
-            Some(MovingTriangle { object, triangle }) => {
-                let (at, unit_normal) =
-                    self.motion
-                        .surface(moment, MovingTriangle { object, triangle }, hit);
+            Some(moving) => {
+                let at = self.motion.surface(moment, moving, hit);
                 Placed {
-                    triangle: &self.scene.moving[object].triangles[triangle],
+                    triangle: &self.scene.moving[moving.object].triangles[moving.triangle],
                     at,
-                    unit_normal,
-                    placement: Some(self.motion.placement(moment, object)),
+                    unit_normal: at.normal,
+                    placement: Some(self.motion.placement(moment, moving.object)),
                 }
             }
         }

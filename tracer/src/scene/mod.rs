@@ -10,6 +10,7 @@ mod camera;
 mod error;
 mod files;
 mod format;
+mod keys;
 mod load;
 mod materials;
 mod motion;
