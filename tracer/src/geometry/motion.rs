@@ -144,6 +144,8 @@ impl MotionAccel {
     ) -> Option<Hit> {
         for (mover, (segment, placement)) in self.objects.iter().zip(&moment.placements) {
             let t_max = best.map_or(ray.t_max, |h| h.t);
+            // The swept box counts as one node of work, as a box of the tree would.
+            stats.nodes += 1;
             if !mover.bounds[*segment].may_hit(ray, t_max) {
                 continue;
             }
@@ -180,6 +182,7 @@ impl MotionAccel {
             .iter()
             .zip(&moment.placements)
             .any(|(mover, (segment, placement))| {
+                stats.nodes += 1;
                 mover.bounds[*segment].may_hit(ray, ray.t_max)
                     && mover
                         .accel
