@@ -29,7 +29,7 @@
 //! against. Moving objects are the exception: rays meet them in object space, so a ray leaving
 //! one must start off the surface *there*, and their points carry the two origins, one per
 //! side, offset in object space and placed in the world (`SurfacePoint::spawn`,
-//! `motion.rs`).
+//! `motion/bounds.rs`).
 
 use super::triangle::gamma;
 use super::{Hit, Ray};
