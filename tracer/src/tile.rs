@@ -69,6 +69,8 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
     let instant = shutter.time(frame, 0.0);
     let still = track.at_time(instant).rays(settings.width, settings.height);
     let blur = world.effects.motion_blur;
+    // A camera that never moves is the same at every time, to the bit: set up once.
+    let camera_moves = blur && track.moves();
     let (bx0, by0, bw, bh) = rect.blocks();
     let mut blocks = vec![0u64; (bw * bh) as usize];
     let mut pixels = Vec::with_capacity(rect.area() as usize);
@@ -82,12 +84,15 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
                 let mut sampler = PixelSampler::new(settings.seed, frame, x, y, sample);
                 let jitter = sampler.next_2d();
                 let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
-                let (time, camera) = if blur {
-                    let time = shutter.time(frame, sampler.time());
-                    let camera = track.at_time(time).rays(settings.width, settings.height);
-                    (time, camera)
+                let time = if blur {
+                    shutter.time(frame, sampler.time())
                 } else {
-                    (instant, still)
+                    instant
+                };
+                let camera = if camera_moves {
+                    track.at_time(time).rays(settings.width, settings.height)
+                } else {
+                    still
                 };
                 // A pinhole never draws the lens's numbers, so it traces exactly the rays it
                 // traced before lenses existed.

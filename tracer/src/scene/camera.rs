@@ -60,6 +60,11 @@ impl CameraTrack {
         &self.keys
     }
 
+    /// Whether the camera ever moves: two neighbouring keys differ.
+    pub fn moves(&self) -> bool {
+        self.keys.windows(2).any(|w| w[0].camera != w[1].camera)
+    }
+
     /// The camera at `frame`.
     pub fn at(&self, frame: u32) -> Camera {
         self.at_time(f64::from(frame))

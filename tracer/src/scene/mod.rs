@@ -118,12 +118,7 @@ impl Scene {
     /// Whether anything moves while the shutter is open: the camera between two keys that
     /// differ, or an object (objects with keys that are all alike are placed still).
     pub fn moves(&self) -> bool {
-        let camera = self
-            .camera
-            .keys()
-            .windows(2)
-            .any(|w| w[0].camera != w[1].camera);
-        camera || !self.moving.is_empty()
+        self.camera.moves() || !self.moving.is_empty()
     }
 
     /// The triangles whose material emits: the scene's area lights, in triangle order.

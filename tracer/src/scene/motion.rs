@@ -164,7 +164,8 @@ impl TransformKey {
     }
 }
 
-/// The rotation about x, then y, then z by `degrees`, in f64.
+/// The rotation about x, then y, then z by `degrees`, in f64. An angle of zero costs nothing
+/// (objects mostly turn about one axis, and placements are computed per sample).
 fn rotation(degrees: DVec3) -> DMat3 {
     let r = degrees * (std::f64::consts::PI / 180.0);
     let about = |axis: usize, angle: f64| {
@@ -175,21 +176,31 @@ fn rotation(degrees: DVec3) -> DMat3 {
             _ => DMat3::from_cols_array(&[cos, sin, 0.0, -sin, cos, 0.0, 0.0, 0.0, 1.0]),
         }
     };
-    about(2, r.z) * about(1, r.y) * about(0, r.x)
+    [(2, r.z), (1, r.y), (0, r.x)]
+        .into_iter()
+        .filter(|&(_, angle)| angle != 0.0)
+        .fold(None, |turned: Option<DMat3>, (axis, angle)| {
+            let next = about(axis, angle);
+            Some(turned.map_or(next, |m| m * next))
+        })
+        .unwrap_or(DMat3::IDENTITY)
 }
 
 /// Scale, then rotate by `rotate`, then translate; in f64.
 fn placement(scale: DVec3, rotate: DMat3, translation: DVec3) -> Placement {
     // The inverse of a rotation is its transpose, and of a scale its reciprocal: composing
     // them, rather than inverting the product, keeps the inverse to the rounding of one
-    // product of matrices.
-    let inverse = DMat3::from_diagonal(scale.recip()) * rotate.transpose();
+    // product. A diagonal factor scales columns (or rows), so no full product is needed.
+    let scaled =
+        |m: DMat3, s: DVec3| DMat3::from_cols(m.x_axis * s.x, m.y_axis * s.y, m.z_axis * s.z);
+    // diag(1 / s) R^T is (R diag(1 / s))^T.
+    let inverse_transposed = scaled(rotate, scale.recip());
     Placement {
-        linear: rotate * DMat3::from_diagonal(scale),
-        inverse,
+        linear: scaled(rotate, scale),
+        inverse: inverse_transposed.transpose(),
         // The transpose of the inverse the rays use, exactly: the normal of the plane that
         // rays meet.
-        normal: inverse.transpose(),
+        normal: inverse_transposed,
         translation,
     }
 }
