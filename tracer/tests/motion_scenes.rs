@@ -344,3 +344,29 @@ fn object_keys_set_the_default_frame_count_and_interpolate_between_them() {
         "{mid}"
     );
 }
+
+#[test]
+fn a_moving_ball_of_smoke_renders_the_same_bits_specialised_and_forced() {
+    // Shadow rays pass a moving interface (the transmittance's closest certain blocker comes
+    // from the moving object's tree), and paths enter and leave its medium while it moves.
+    let toml = still_room("shutter = [0, 1]", "")
+        .replace(
+            "radius = 0.5\n        material = \"wall\"",
+            "radius = 0.6\n        material = \"smoke\"",
+        )
+        .replace(
+            "rotate_y = 30\n",
+            "rotate_y = 30\n[[object.keys]]\nframe = 0\n[[object.keys]]\nframe = 1\n\
+             translate = [-0.6, 1.4, 0.2]\n[materials.smoke]\ntype = \"interface\"\n\
+             medium = \"fog\"\n[media.fog]\nsigma_s = 2\nsigma_a = 0.5\n",
+        );
+    let scene = load_str(&toml).expect("the smoke room loads");
+    let effects = Effects::of(&scene);
+    assert!(effects.media && effects.motion_blur, "{effects}");
+    assert_eq!(scene.moving.len(), 1);
+    let (out, forced) = assert_same_bits("a moving ball of smoke", &scene, 0);
+    assert!(out.stats.medium_scatters > 0 && forced.medium_scatters > 0);
+    // Guard: the smoke is seen, so the bits above are not those of an empty room.
+    let empty = load_str(&still_room("shutter = [0, 1]", "")).expect("loads");
+    assert_ne!(bits(&out.pixels), bits(&render(&empty, None, 0).pixels));
+}
