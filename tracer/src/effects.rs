@@ -28,6 +28,16 @@
 //!   in either mode; a pinhole frame traces exactly the rays it traced before lenses existed,
 //!   and the lens's random numbers come from a stream of their own ([`crate::sampler`]), so
 //!   drawing them or not shifts no other number.
+//! - `motion_blur`: the shutter stays open for a while and something moves (the camera between
+//!   keys that differ, or an object with keys). Only then does each sample draw its time, from
+//!   a stream of its own ([`crate::sampler`]), and take the camera and the moving objects where
+//!   they are at that time. Without it every sample is taken at the frame's instant plus the
+//!   shutter's opening (`frame + open`). Forced on in a scene without it, either the shutter is
+//!   an instant, and every drawn time is `frame + open + u * 0`, that same instant to the bit;
+//!   or nothing moves, and the camera at any time is its one pose (interpolating between equal
+//!   keys gives `a + s * 0 = a`). Objects with keys move in every mode, between frames too,
+//!   through their own trees (`crate::geometry::MotionAccel`); that is animation, not an
+//!   effect, and scenes without them never touch that code.
 //! - `specular_reflection`, `glossy_reflection`, `refraction`, `diffuse`: reported, and counted
 //!   per sample (refractions); the BSDF is a closed enum, so no code of an absent material runs.
 //! - `media`: a used material binds a medium that is not vacuum, the camera starts in one, or a
@@ -88,6 +98,8 @@ pub struct Effects {
     pub shading_normals: bool,
     /// Participating media (or index-matched boundaries) exist: rays are tracked through them.
     pub media: bool,
+    /// The shutter is open for a while and something moves: each sample has a time of its own.
+    pub motion_blur: bool,
 }
 
 impl Effects {
@@ -106,14 +118,14 @@ impl Effects {
         textures: true,
         shading_normals: true,
         media: true,
+        motion_blur: true,
     };
 
     /// The effects `scene` needs. Only materials that some triangle uses count.
     pub fn of(scene: &Scene) -> Effects {
         let used = |pred: fn(&Bsdf) -> bool| {
             scene
-                .triangles
-                .iter()
+                .all_triangles()
                 .any(|t| pred(&scene.materials[t.material as usize].bsdf))
         };
         let area_lights = scene.emissive_triangles().next().is_some();
@@ -129,7 +141,7 @@ impl Effects {
         let glossy_reflection = used(|b| matches!(b, Bsdf::Conductor { .. }));
         let not_vacuum = |m: Option<u32>| m.is_some_and(|m| !scene.media[m as usize].is_vacuum());
         let media = not_vacuum(scene.camera_medium)
-            || scene.triangles.iter().any(|t| {
+            || scene.all_triangles().any(|t| {
                 let material = &scene.materials[t.material as usize];
                 matches!(material.bsdf, Bsdf::Interface) || not_vacuum(material.interior)
             });
@@ -148,8 +160,9 @@ impl Effects {
             textures: used(
                 |b| matches!(b, Bsdf::Diffuse { albedo, texture: Some(_) } if *albedo != Vec3::ZERO),
             ),
-            shading_normals: scene.triangles.iter().any(|t| t.n.is_some()),
+            shading_normals: scene.all_triangles().any(|t| t.n.is_some()),
             media,
+            motion_blur: scene.shutter.is_open() && scene.moves(),
         }
     }
 
@@ -174,6 +187,7 @@ impl Effects {
             (self.textures, "textures"),
             (self.shading_normals, "shading-normals"),
             (self.media, "media"),
+            (self.motion_blur, "motion-blur"),
         ];
         flags
             .into_iter()

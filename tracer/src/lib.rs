@@ -8,7 +8,8 @@
 //!   validation that names file, line and problem.
 //! - [`geometry`]: rays, the watertight triangle test, the BVH (built by obvhs, collapsed into
 //!   8-wide nodes, traversed by our own robust slab test with eight boxes and four triangles per
-//!   SIMD step, each lane exactly the scalar test), and the spawn-offset rule for secondary rays.
+//!   SIMD step, each lane exactly the scalar test), the spawn-offset rule for secondary rays,
+//!   and moving objects, traced in their own space at each sample's time.
 //! - [`material`]: the closed set of materials ([`Material`]) and their BSDFs in a local frame.
 //! - [`effects`]: the light-transport effects a scene calls for, so absent ones cost nothing.
 //! - [`medium`]: homogeneous participating media (absorption, Henyey-Greenstein scattering),

@@ -10,6 +10,8 @@
 //! from a stream of their own rather than from dimensions 2 and 3: placing them there would have
 //! moved every bounce's block, so every image rendered before the lens existed would have changed
 //! its bits. A pinhole camera never draws them, and its images are the same bits as before.
+//! The sample's time within the shutter ([`PixelSampler::time`]) has a stream of its own for the
+//! same reason.
 
 use glam::Vec2;
 
@@ -72,6 +74,18 @@ impl PixelSampler {
         lens.next_2d()
     }
 
+    /// The sample's fraction of the exposure, in [0, 1): one camera dimension in the time's own
+    /// stream, the same whenever it is asked for and independent of every other number, so a
+    /// render without motion blur, which never asks, draws what it drew before time existed.
+    pub fn time(&self) -> f32 {
+        let mut time = PixelSampler {
+            key: mix(self.key ^ TIME_STREAM),
+            dimension: 0,
+            bounce: 0,
+        };
+        time.next_1d()
+    }
+
     /// The channel choice and the free-flight distance of the current bounce's segment through
     /// a medium, in [0, 1)^2: a pair in the medium stream of this bounce, independent of every
     /// other number and the same however often it is asked for.
@@ -89,6 +103,8 @@ impl PixelSampler {
 const LENS_STREAM: u64 = 0x1e45_0000_0000_0001;
 /// Tells the media's streams from the others, as [`LENS_STREAM`] does.
 const MEDIUM_STREAM: u64 = 0x3ed1_0000_0000_0002;
+/// Tells the time's stream from the others, as [`LENS_STREAM`] does.
+const TIME_STREAM: u64 = 0x71e0_0000_0000_0003;
 
 /// The SplitMix64 finaliser: a bijection on u64 with full avalanche.
 fn mix(mut z: u64) -> u64 {
@@ -153,6 +169,36 @@ mod tests {
         );
         assert!(!main.contains(&lens.x) && !main.contains(&lens.y));
         assert_ne!(PixelSampler::new(1, 0, 0, 0, 1).lens(), lens);
+    }
+
+    #[test]
+    fn the_time_stream_is_fixed_and_apart_from_the_lens_and_the_main_one() {
+        let s = PixelSampler::new(1, 0, 0, 0, 0);
+        let time = s.time();
+        let mut t = s.clone();
+        let main: Vec<f32> = (0..64).map(|_| t.next_1d()).collect();
+        assert_eq!(
+            t.time(),
+            time,
+            "drawing other numbers moves nothing in the time stream"
+        );
+        assert!(!main.contains(&time));
+        let lens = s.lens();
+        assert!(time != lens.x && time != lens.y);
+        let mut u = PixelSampler::new(1, 0, 0, 0, 0);
+        let _ = u.time();
+        assert_eq!(
+            u.next_1d(),
+            main[0],
+            "drawing the time shifts no main number"
+        );
+        // Uniform over the exposure: the mean of many samples' times is a half.
+        let n = 20_000;
+        let mean = (0..n)
+            .map(|i| f64::from(PixelSampler::new(3, 1, i % 101, i / 101, i % 7).time()))
+            .sum::<f64>()
+            / f64::from(n);
+        assert!((mean - 0.5).abs() < 0.01, "mean {mean}");
     }
 
     #[test]

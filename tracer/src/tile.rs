@@ -62,14 +62,15 @@ pub struct TileCost {
 /// Renders `rect` of `frame`: every pixel, every sample, in a fixed order.
 pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
     let settings = &world.scene.settings;
-    let camera = world
-        .scene
-        .camera
-        .at(frame)
-        .rays(settings.width, settings.height);
-    // A pinhole frame never draws the lens's numbers, so it traces exactly the rays it traced
-    // before lenses existed.
-    let lens = world.effects.depth_of_field && camera.has_lens();
+    let (track, shutter) = (&world.scene.camera, world.scene.shutter);
+    // Without motion blur every sample is taken at one instant, the shutter's opening, and
+    // never draws a time; with the shutter opening at the frame (the default) that is the
+    // frame, and the camera is the one it always was there.
+    let instant = shutter.time(frame, 0.0);
+    let still = track.at_time(instant).rays(settings.width, settings.height);
+    let blur = world.effects.motion_blur;
+    // A camera that never moves is the same at every time, to the bit: set up once.
+    let camera_moves = blur && track.moves();
     let (bx0, by0, bw, bh) = rect.blocks();
     let mut blocks = vec![0u64; (bw * bh) as usize];
     let mut pixels = Vec::with_capacity(rect.area() as usize);
@@ -83,12 +84,25 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
                 let mut sampler = PixelSampler::new(settings.seed, frame, x, y, sample);
                 let jitter = sampler.next_2d();
                 let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
+                let time = if blur {
+                    shutter.time(frame, sampler.time())
+                } else {
+                    instant
+                };
+                let camera = if camera_moves {
+                    track.at_time(time).rays(settings.width, settings.height)
+                } else {
+                    still
+                };
+                // A pinhole never draws the lens's numbers, so it traces exactly the rays it
+                // traced before lenses existed.
+                let lens = world.effects.depth_of_field && camera.has_lens();
                 let ray = if lens {
                     camera.ray_through_lens(px, py, sampler.lens())
                 } else {
                     camera.ray(px, py)
                 };
-                let radiance = world.radiance(ray, &mut sampler, &mut pixel_stats);
+                let radiance = world.radiance(ray, time, &mut sampler, &mut pixel_stats);
                 if radiance.is_finite() {
                     sum += radiance;
                 } else {

@@ -211,6 +211,8 @@ fn shipped_scenes_render_the_same_bits_specialised_or_forced() {
         ("point-in-sphere/point-in-sphere.toml", 0),
         ("glass-cluster-pan/glass-cluster-pan.toml", 0),
         ("glass-cluster-pan/glass-cluster-pan.toml", 13),
+        ("cornell-blur/cornell-blur.toml", 0),
+        ("cornell-blur/cornell-blur.toml", 12),
     ] {
         let scene = shipped(name, 24, 20, 4);
         assert_ne!(

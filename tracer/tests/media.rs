@@ -123,7 +123,7 @@ fn radiance_under_the_light(scene: Scene) -> (Vec3, PathStats) {
     };
     let mut stats = PathStats::default();
     let mut sampler = PixelSampler::new(0, 0, 0, 0, 0);
-    let radiance = world.radiance(ray, &mut sampler, &mut stats);
+    let radiance = world.radiance(ray, 0.0, &mut sampler, &mut stats);
     (radiance, stats)
 }
 

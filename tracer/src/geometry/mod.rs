@@ -17,12 +17,17 @@
 //!   where not, with the same results bit for bit ([`BoxSimd`]).
 //! - `quad`: leaves packed four triangles to a group, and the SIMD filter that rejects four at
 //!   a time what the watertight test would reject at its first step.
+//! - `motion`: moving objects, each in its own tree in object space, under a flat list of
+//!   boxes swept over their keyframe segments; rays taken into object space at their time, and
+//!   hits brought back with error bounds that keep spawned rays off the surface
+//!   ([`MotionAccel`], [`placed_point`]).
 //! - `traverse`: the same robust traversal over the binary tree, and obvhs's own, for
 //!   comparison ([`Traversal`]).
 
 mod build;
 mod bvh;
 mod memory;
+mod motion;
 mod node8;
 mod offset;
 mod quad;
@@ -32,6 +37,7 @@ mod wide;
 
 pub use bvh::{Accel, BuildQuality, Traversal, intersect_brute_force, occluded_brute_force};
 pub(crate) use memory::on_huge_pages;
+pub use motion::{Moment, MotionAccel, MovingTriangle, placed_point};
 pub use offset::{
     OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, plane_normal, spawn_ray, spawn_ray_to,
 };

@@ -26,7 +26,10 @@
 //! Scenes come into the tracer with their transforms already applied (the loader bakes them
 //! into world-space vertices), so there is no transform between a hit and its offset: the
 //! bound is on the world-space point, computed from the same vertices the ray was tested
-//! against.
+//! against. Moving objects are the exception: rays meet them in object space, so a ray leaving
+//! one must start off the surface *there*, and their points carry the two origins, one per
+//! side, offset in object space and placed in the world (`SurfacePoint::spawn`,
+//! `motion/bounds.rs`).
 
 use super::triangle::gamma;
 use super::{Hit, Ray};
@@ -67,6 +70,10 @@ pub struct SurfacePoint {
     pub error: Vec3,
     /// The unit plane normal `(v1 - v0) x (v2 - v0)` of the triangle, or zero.
     pub normal: Vec3,
+    /// For a point on a moving object: where rays leaving it start, on the side `normal`
+    /// points to and on the other, worked out in the object's space (see
+    /// `crate::geometry::placed_point`); `None` elsewhere, where origins are offset here.
+    pub spawn: Option<[Vec3; 2]>,
 }
 
 impl SurfacePoint {
@@ -76,6 +83,7 @@ impl SurfacePoint {
             p,
             error: Vec3::ZERO,
             normal: Vec3::ZERO,
+            spawn: None,
         }
     }
 
@@ -111,6 +119,7 @@ impl SurfacePoint {
             p,
             error: gamma(2) * p.abs() + gamma(4) * along,
             normal,
+            spawn: None,
         }
     }
 }
@@ -138,13 +147,14 @@ pub fn hit_point(p: &[Vec3; 3], b1: f32, b2: f32) -> Vec3 {
 }
 
 /// `point` moved off its surface to the side of its normal that `toward` points to. A point on
-/// no surface (zero normal) is returned unchanged.
+/// no surface (zero normal) is returned unchanged. A point on a moving object gives the origin
+/// it carries for that side, whatever `method` (the comparison offset is for still geometry).
 pub fn offset_ray_origin(point: &SurfacePoint, toward: Vec3, method: OffsetMethod) -> Vec3 {
-    let n = if point.normal.dot(toward) < 0.0 {
-        -point.normal
-    } else {
-        point.normal
-    };
+    let below = point.normal.dot(toward) < 0.0;
+    if let Some([above_origin, below_origin]) = point.spawn {
+        return if below { below_origin } else { above_origin };
+    }
+    let n = if below { -point.normal } else { point.normal };
     match method {
         OffsetMethod::ErrorBound => offset_by_error(point.p, point.error, n),
         OffsetMethod::FixedUlp => offset_by_ulps(point.p, n),

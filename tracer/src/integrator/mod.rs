@@ -15,7 +15,12 @@
 //! spectral density ratios (the balance heuristic over hero channels).
 //!
 //! Module map: `scatter` (a BSDF or a phase function as next-event estimation sees it, the
-//! bounce's random numbers, which medium a path is in, and shadow-ray transmittance).
+//! bounce's random numbers, which medium a path is in, and shadow-ray transmittance); `hits`
+//! (where rays meet the static and the moving geometry at the path's time, and the local
+//! geometry at a hit).
+//!
+//! Motion: a path has one time (`radiance`'s `time`, drawn per sample where the scene has
+//! motion blur), and every ray of it meets the moving objects where they are then.
 //!
 //! Specialisation: every branch guarded by a flag of [`Effects`] is one whose work would add
 //! exactly zero when the scene lacks the effect (see [`crate::effects`] for the argument, flag by
@@ -24,8 +29,8 @@
 
 use crate::effects::Effects;
 use crate::geometry::{
-    Accel, Hit, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats, on_huge_pages,
-    spawn_ray, spawn_ray_to,
+    Accel, Moment, MotionAccel, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats,
+    on_huge_pages, spawn_ray, spawn_ray_to,
 };
 use crate::lights::{EnvironmentSampling, LightSample, Lights};
 use crate::material::{Bsdf, Frame};
@@ -33,14 +38,18 @@ use crate::medium::{Flight, hero_channel, mean_ratio, sample_henyey_greenstein};
 use crate::sampler::PixelSampler;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
+use hits::Surface;
 use scatter::{BounceNumbers, Phase, Scatterer, SurfaceScatter};
 
+mod hits;
 mod scatter;
 
 /// A scene prepared for rendering: its acceleration structure, lights and effect set.
 pub struct World {
     pub scene: Scene,
     pub accel: Accel,
+    /// The moving objects' trees, built from [`Scene::moving`]; empty when nothing moves.
+    pub motion: MotionAccel,
     pub lights: Lights,
     pub effects: Effects,
     /// How rays meet the BVH: our robust traversal (the default), or obvhs's own for comparison.
@@ -117,9 +126,17 @@ impl World {
         // those reads a page-table walk (`geometry/memory.rs`).
         scene.triangles = on_huge_pages(scene.triangles);
         let lights = Lights::new(&scene, &effects);
+        let first = u32::try_from(scene.triangles.len())
+            .expect("fewer than 2^32 triangles: Hit::triangle is a u32");
+        let motion = MotionAccel::build(
+            &scene.moving,
+            first,
+            crate::geometry::BuildQuality::default(),
+        );
         Self {
             scene,
             accel,
+            motion,
             lights,
             effects,
             traversal: Traversal::Robust,
@@ -142,8 +159,21 @@ impl World {
         self
     }
 
-    /// The radiance arriving along `ray` for one sample.
-    pub fn radiance(&self, ray: Ray, sampler: &mut PixelSampler, stats: &mut PathStats) -> Vec3 {
+    /// The radiance arriving along `ray` for one sample taken at `time` (in frames: where the
+    /// moving objects are).
+    pub fn radiance(
+        &self,
+        ray: Ray,
+        time: f64,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        let moment = if self.motion.is_empty() {
+            Moment::default()
+        } else {
+            self.motion.moment(time)
+        };
+        let moment = &moment;
         let settings = &self.scene.settings;
         let effects = &self.effects;
         let mut ray = ray;
@@ -169,9 +199,7 @@ impl World {
             sampler.start_bounce(segment);
             segment += 1;
             stats.rays += 1;
-            let found = self
-                .accel
-                .intersect_with(&ray, self.traversal, &mut stats.traversal);
+            let found = self.closest(&ray, moment, &mut stats.traversal);
             if effects.media {
                 stats.flights += 1;
                 let length = ray.dir.length();
@@ -215,8 +243,8 @@ impl World {
                                     &phase,
                                     &at,
                                     medium,
-                                    u.light_choice,
-                                    u.light,
+                                    moment,
+                                    (u.light_choice, u.light),
                                     stats,
                                 );
                         }
@@ -252,7 +280,7 @@ impl World {
                 break;
             };
             stats.hits += 1;
-            let surface = self.surface(&ray, &hit);
+            let surface = self.surface(&ray, &hit, moment);
             let material = &self.scene.materials[surface.material as usize];
             if effects.media && material.bsdf == Bsdf::Interface {
                 // Straight on into the medium beyond, as if nothing were there: no scattering
@@ -293,8 +321,8 @@ impl World {
                         &scatter,
                         &surface.at,
                         medium,
-                        u.light_choice,
-                        u.light,
+                        moment,
+                        (u.light_choice, u.light),
                         stats,
                     );
             }
@@ -332,8 +360,8 @@ impl World {
         scatter: &impl Scatterer,
         at: &SurfacePoint,
         medium: Option<u32>,
-        u_choice: f32,
-        u: Vec2,
+        moment: &Moment,
+        (u_choice, u): (f32, Vec2),
         stats: &mut PathStats,
     ) -> Vec3 {
         stats.light_samples += 1;
@@ -350,15 +378,12 @@ impl World {
         // through, and passes index-matched interfaces (`scatter.rs`). A vacuum lets exactly 1
         // through, and `x * 1` is `x`, so the product below keeps its bits either way.
         let transmittance = if self.effects.media {
-            let transmittance = self.transmittance(shadow, &light, medium, stats);
+            let transmittance = self.transmittance(shadow, &light, medium, moment, stats);
             if transmittance == Vec3::ZERO {
                 return Vec3::ZERO;
             }
             transmittance
-        } else if self
-            .accel
-            .occluded_with(&shadow, self.traversal, &mut stats.traversal)
-        {
+        } else if self.occluded(&shadow, moment, &mut stats.traversal) {
             return Vec3::ZERO;
         } else {
             Vec3::ONE
@@ -423,58 +448,6 @@ impl World {
             other => other,
         }
     }
-
-    /// The local geometry at a hit.
-    fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
-        let triangle = &self.scene.triangles[hit.triangle as usize];
-        let at = SurfacePoint::on_triangle_with_normal(
-            &triangle.p,
-            hit.b1,
-            hit.b2,
-            self.accel.plane_normal(hit.triangle),
-        );
-        // Normals keep the winding's orientation: the side a ray arrives from is what tells a
-        // dielectric whether it is entering or leaving, and an emitter whether it is seen from
-        // the front. Reflection-only BSDFs are two-sided by themselves.
-        let geometric = self.accel.unit_normal(hit.triangle);
-        let front_facing = ray.dir.dot(geometric) < 0.0;
-        let b0 = 1.0 - hit.b1 - hit.b2;
-        let shading_normal = match triangle.n {
-            Some(n) if self.effects.shading_normals => {
-                let interpolated = (b0 * n[0] + hit.b1 * n[1] + hit.b2 * n[2]).normalize_or_zero();
-                if interpolated == Vec3::ZERO {
-                    geometric
-                } else if interpolated.dot(geometric) < 0.0 {
-                    -interpolated
-                } else {
-                    interpolated
-                }
-            }
-            _ => geometric,
-        };
-        // Texture coordinates are only ever read by a texture lookup.
-        let uv = triangle
-            .uv
-            .filter(|_| self.effects.textures)
-            .map(|uv| b0 * uv[0] + hit.b1 * uv[1] + hit.b2 * uv[2]);
-        Surface {
-            at,
-            shading_normal,
-            uv,
-            material: triangle.material,
-            front_facing,
-        }
-    }
-}
-
-/// The geometry of a hit; both normals on the winding's side.
-struct Surface {
-    /// The hit point, with what spawning rays from it needs: its error bound and plane normal.
-    at: SurfacePoint,
-    shading_normal: Vec3,
-    uv: Option<Vec2>,
-    material: u32,
-    front_facing: bool,
 }
 
 fn power_heuristic(f: f32, g: f32) -> f32 {

@@ -9,7 +9,7 @@
 //! medium each inside the outside one; a medium-filled object inside another is not modelled.
 
 use super::World;
-use crate::geometry::{Ray, SurfacePoint};
+use crate::geometry::{Moment, Ray};
 use crate::lights::LightSample;
 use crate::material::{Bsdf, Frame, Material};
 use crate::medium::{Medium, henyey_greenstein};
@@ -129,15 +129,14 @@ impl World {
         shadow: Ray,
         light: &LightSample,
         medium: Option<u32>,
+        moment: &Moment,
         stats: &mut super::PathStats,
     ) -> Vec3 {
         let mut shadow = shadow;
         let mut medium = medium;
         let mut transmittance = Vec3::ONE;
         loop {
-            let blocker =
-                self.accel
-                    .intersect_certain_with(&shadow, self.traversal, &mut stats.traversal);
+            let blocker = self.closest_certain(&shadow, moment, &mut stats.traversal);
             let end = blocker.map_or(shadow.t_max, |h| h.t);
             let escapes = end == f32::INFINITY;
             transmittance *= self
@@ -146,21 +145,15 @@ impl World {
             let Some(hit) = blocker else {
                 return transmittance;
             };
-            let triangle = &self.scene.triangles[hit.triangle as usize];
-            let material = &self.scene.materials[triangle.material as usize];
+            let placed = self.placed(&hit, moment);
+            let material = &self.scene.materials[placed.triangle.material as usize];
             if material.bsdf != Bsdf::Interface || transmittance == Vec3::ZERO {
                 return Vec3::ZERO;
             }
-            let front_facing = shadow.dir.dot(self.accel.unit_normal(hit.triangle)) < 0.0;
+            let front_facing = shadow.dir.dot(placed.unit_normal) < 0.0;
             medium = self.medium_across(material, front_facing);
-            let at = SurfacePoint::on_triangle_with_normal(
-                &triangle.p,
-                hit.b1,
-                hit.b2,
-                self.accel.plane_normal(hit.triangle),
-            );
             stats.shadow_rays += 1;
-            shadow = self.shadow_ray(&at, light);
+            shadow = self.shadow_ray(&placed.at, light);
         }
     }
 }

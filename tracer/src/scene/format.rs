@@ -71,6 +71,8 @@ pub(crate) struct CameraSpec {
     pub focus_distance: Option<Positive>,
     /// The medium outside every object, where the camera starts: global fog.
     pub medium: Option<Spanned<String>>,
+    /// When the shutter opens and closes around each frame, in frames.
+    pub shutter: Option<ShutterSpec>,
     #[serde(default)]
     pub keys: Vec<Spanned<CameraKeySpec>>,
 }
@@ -158,6 +160,22 @@ pub(crate) struct ObjectSpec {
     pub corners: Option<[Point; 4]>,
     pub min: Option<Point>,
     pub max: Option<Point>,
+    pub translate: Option<Point>,
+    pub scale: Option<Scale>,
+    pub rotate_x: Option<Finite>,
+    pub rotate_y: Option<Finite>,
+    pub rotate_z: Option<Finite>,
+    /// Keyframed transforms (`[[object.keys]]`): the object moves.
+    #[serde(default)]
+    pub keys: Vec<Spanned<ObjectKeySpec>>,
+}
+
+/// One `[[object.keys]]` entry: a frame and any of the object's transform keys, the rest taken
+/// from the object.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct ObjectKeySpec {
+    pub frame: u32,
     pub translate: Option<Point>,
     pub scale: Option<Scale>,
     pub rotate_x: Option<Finite>,
@@ -328,6 +346,10 @@ pub(crate) struct Radiance(pub Vec3);
 /// A scale: a number (uniform) or `[x, y, z]`, every component finite and non-zero.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Scale(pub Vec3);
+/// A shutter interval `[open, close]` in frames around the frame: finite, `open <= close`, both
+/// within one frame of it, open for one frame at most (`[0, 1]`: a 360-degree shutter).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ShutterSpec(pub [f32; 2]);
 
 /// Deserialises a value of type `T` with `check`, whose error message the toml crate places at
 /// the value's line and key.
@@ -422,6 +444,34 @@ checked_type!(Scale, Triple<1>, |v| {
             Err("must not be 0".to_owned())
         }
     })
+});
+
+checked_type!(ShutterSpec, Vec<f32>, |v| {
+    // A Vec rather than `[f32; 2]`: serde's arrays ignore elements beyond their length.
+    let &[open, close] = v.as_slice() else {
+        return Err(format!(
+            "must be two numbers `[open, close]`, not {}",
+            v.len()
+        ));
+    };
+    if !open.is_finite() || !close.is_finite() {
+        Err(not_finite())
+    } else if open > close {
+        Err(format!(
+            "[{open}, {close}] closes before it opens (give `[open, close]`)"
+        ))
+    } else if open.abs() > 1.0 || close.abs() > 1.0 {
+        Err(format!(
+            "[{open}, {close}] must lie within one frame of the frame, in [-1, 1]"
+        ))
+    } else if close - open > 1.0 {
+        Err(format!(
+            "[{open}, {close}] stays open {} frames, more than one",
+            close - open
+        ))
+    } else {
+        Ok([open, close])
+    }
 });
 
 fn not_finite() -> String {

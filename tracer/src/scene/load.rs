@@ -8,10 +8,12 @@
 use super::error::{SceneError, line_of};
 use super::files::{DiskFiles, FileLog, MemoryFiles, SceneFiles};
 use super::format::{self, ObjectSpec, SceneSpec};
+use super::keys::{camera_track, key_pose, object_track, shutter};
 use super::materials::MaterialTable;
+use super::motion::{MovingObject, TransformTrack};
 use super::obj::{self, NO_MATERIAL};
 use super::shapes::{Transform, given_keys, shape_triangles};
-use super::{Camera, CameraKey, CameraTrack, PointLight, RenderSettings, Scene, Triangle};
+use super::{CameraTrack, PointLight, RenderSettings, Scene, Triangle};
 use crate::environment::{Environment, EnvironmentMap, decode_exr};
 use glam::Vec3;
 use std::collections::{BTreeMap, BTreeSet};
@@ -92,12 +94,13 @@ pub fn load_with_report(
         text,
         table: MaterialTable::new(&toml, text, &spec.materials, &spec.media),
         triangles: Vec::new(),
+        moving: Vec::new(),
         report: LoadReport::default(),
     };
     for object in &spec.objects {
         builder.object(object)?;
     }
-    if builder.triangles.is_empty() {
+    if builder.triangles.is_empty() && builder.moving.is_empty() {
         return Err(SceneError::in_file(&toml, "the scene has no triangles"));
     }
     if let Some(unused) = builder.table.unused_definition() {
@@ -115,13 +118,16 @@ pub fn load_with_report(
         log,
         table,
         triangles,
+        moving,
         report,
         ..
     } = builder;
     let scene = Scene {
-        settings: render_settings(&spec, &camera),
+        settings: render_settings(&spec, &camera, &moving),
         camera,
+        shutter: shutter(&spec),
         triangles,
+        moving,
         materials: table.materials,
         textures: table.textures,
         point_lights: spec.lights.iter().map(point_light).collect(),
@@ -140,6 +146,7 @@ struct Builder<'a> {
     text: &'a str,
     table: MaterialTable<'a>,
     triangles: Vec<Triangle>,
+    moving: Vec<MovingObject>,
     report: LoadReport,
 }
 
@@ -177,6 +184,7 @@ impl Builder<'_> {
                 "[[object]] key `{key}` does not apply to `{source}`"
             )));
         }
+        let track = object_track(self.toml, self.text, o)?;
         let default_material = match &o.material {
             Some(name) => Some(self.table.toml_material(&mut self.log, name)?),
             None => None,
@@ -186,7 +194,7 @@ impl Builder<'_> {
             let (resolved, bytes) = self.log.read(Some(at), path.get_ref())?;
             let defined = |name: &str| self.table.defines(name);
             let mesh = obj::load(&mut self.log, &resolved, &bytes, &defined)?;
-            return self.place_obj(o, resolved, mesh, default_material);
+            return self.place_obj(o, track, resolved, mesh, default_material);
         }
         let kind = o
             .shape
@@ -197,12 +205,13 @@ impl Builder<'_> {
             )));
         };
         let local = shape_triangles(kind, o, material).map_err(err)?;
-        self.place(o, source, local).map_err(err)
+        self.place(o, track, source, local).map_err(err)
     }
 
     fn place_obj(
         &mut self,
         o: &ObjectSpec,
+        track: Option<TransformTrack>,
         path: String,
         mut mesh: obj::ObjMesh,
         default_material: Option<u32>,
@@ -228,60 +237,83 @@ impl Builder<'_> {
         for t in &mut mesh.triangles {
             t.material = ids[&t.material];
         }
-        self.place(o, path.clone(), mesh.triangles)
+        self.place(o, track, path.clone(), mesh.triangles)
             .map_err(|detail| SceneError::in_file(&path, detail))
     }
 
-    /// Transforms `local` triangles into the scene, dropping zero-area ones.
+    /// Transforms `local` triangles into the scene, dropping zero-area ones; or, for an object
+    /// that moves by `track`, keeps them in object space with it.
     fn place(
         &mut self,
         o: &ObjectSpec,
+        track: Option<TransformTrack>,
         source: String,
         local: Vec<Triangle>,
     ) -> Result<(), String> {
-        let rotate = [o.rotate_x, o.rotate_y, o.rotate_z].map(|r| r.map_or(0.0, |r| r.0));
-        let transform = Transform::new(
-            o.scale.map_or(Vec3::ONE, |s| s.0),
-            Vec3::from(rotate),
-            o.translate.map_or(Vec3::ZERO, |t| t.0),
-        );
-        let before = self.triangles.len();
-        let mut degenerate = 0;
+        // A still object with keys that all say the same stands at that pose, as if it had no
+        // keys; a moving one is checked, and warned about, where its first key places it.
+        let pose = match &track {
+            Some(track) => track.keys()[0],
+            None => key_pose(o, o.keys.first().map(|k| k.get_ref())),
+        };
+        let transform = Transform::new(pose.scale, pose.rotate_degrees, pose.translate);
+        let mut kept = Vec::with_capacity(local.len());
+        let mut placed = Vec::with_capacity(local.len());
         for t in &local {
-            let t = if transform.is_identity() {
+            let world = if transform.is_identity() {
                 *t
             } else {
                 transform.apply(t)
             };
-            let area = t.area_vector().length_squared();
+            let area = world.area_vector().length_squared();
             if !area.is_finite() {
                 return Err(
                     "a triangle's area overflows 32-bit floats (coordinates too large)".into(),
                 );
             }
-            if area > 0.0 {
-                self.triangles.push(t);
-            } else {
-                degenerate += 1;
+            // A moving triangle must have area where it is modelled too: that is where rays
+            // meet it.
+            if area > 0.0 && (track.is_none() || t.area_vector().length_squared() > 0.0) {
+                kept.push(if track.is_some() { *t } else { world });
+                placed.push(world);
             }
         }
-        let kept = self.triangles.len() - before;
-        let too_far = warn_if_too_far(&source, &self.triangles[before..]);
+        let degenerate = local.len() - kept.len();
+        let too_far = warn_if_too_far(&source, &placed);
         if degenerate > 0 {
             tracing::warn!(
                 "{source}: dropped {degenerate} zero-area triangles of {}",
                 local.len()
             );
         }
-        if kept == 0 {
+        if kept.is_empty() {
             return Err(format!("{source}: every triangle has zero area"));
         }
         self.report.objects.push(ObjectReport {
             source,
-            triangles: kept,
+            triangles: kept.len(),
             degenerate,
             too_far,
         });
+        match track {
+            Some(track) => {
+                if let Some(t) = kept
+                    .iter()
+                    .find(|t| self.table.materials[t.material as usize].emission != Vec3::ZERO)
+                {
+                    let name = &self.table.materials[t.material as usize].name;
+                    return Err(format!(
+                        "material `{name}` emits, and moving lights are not supported: only \
+                         objects that stand still may emit"
+                    ));
+                }
+                self.moving.push(MovingObject {
+                    triangles: kept,
+                    track,
+                });
+            }
+            None => self.triangles.extend(kept),
+        }
         Ok(())
     }
 }
@@ -324,68 +356,6 @@ fn warn_if_too_far(source: &str, triangles: &[Triangle]) -> Option<u64> {
         return Some((distance / median).round() as u64);
     }
     None
-}
-
-fn camera_track(file: &str, text: &str, spec: &SceneSpec) -> Result<CameraTrack, SceneError> {
-    let c = spec.camera.get_ref();
-    if c.keys.is_empty() {
-        let line = line_of(text, spec.camera.span().start);
-        return Ok(CameraTrack::fixed(camera(file, line, c.pose())?));
-    }
-    let mut keys = Vec::with_capacity(c.keys.len());
-    let mut frames = BTreeMap::new();
-    for key in &c.keys {
-        let k = key.get_ref();
-        let line = line_of(text, key.span().start);
-        if let Some(first) = frames.insert(k.frame, line) {
-            let detail = format!(
-                "camera: two keys at frame {} (the other at line {first})",
-                k.frame
-            );
-            return Err(SceneError::at_line(file, line, detail));
-        }
-        let camera = camera(file, line, k.pose().or(c.pose()))?;
-        keys.push(CameraKey {
-            frame: k.frame,
-            camera,
-        });
-    }
-    Ok(
-        CameraTrack::new(keys)
-            .expect("keys are non-empty and their frames distinct: checked above"),
-    )
-}
-
-/// The camera of a complete pose; `line` is where the pose is given.
-fn camera(file: &str, line: usize, pose: format::Pose) -> Result<Camera, SceneError> {
-    let err = |detail: &str| SceneError::at_line(file, line, format!("camera: {detail}"));
-    let position = pose.position.ok_or_else(|| err("needs `position`"))?.0;
-    let look_at = pose.look_at.ok_or_else(|| err("needs `look_at`"))?.0;
-    let up = pose.up.map_or(Vec3::Y, |u| u.0);
-    let forward = look_at - position;
-    if forward == Vec3::ZERO {
-        return Err(err("`look_at` equals `position`"));
-    }
-    let right = forward.cross(up);
-    if !right.is_finite() || right.length_squared() <= f32::MIN_POSITIVE {
-        return Err(err("`up` is zero or parallel to the view direction"));
-    }
-    let vfov_degrees = pose.vfov.map_or(40.0, |v| v.0);
-    // In focus by default at the point looked at, as photographers aim.
-    let focus_distance = pose.focus_distance.map_or(forward.length(), |f| f.0);
-    if !focus_distance.is_finite() {
-        return Err(err(
-            "the distance from `position` to `look_at` overflows 32-bit floats",
-        ));
-    }
-    Ok(Camera {
-        position,
-        look_at,
-        up,
-        vfov_degrees,
-        aperture_radius: pose.aperture_radius.map_or(0.0, |a| a.0),
-        focus_distance,
-    })
 }
 
 /// The environment of `[environment]`: a constant radiance, or a map read through `log` (so it is
@@ -442,9 +412,20 @@ fn point_light(l: &format::LightSpec) -> PointLight {
     }
 }
 
-fn render_settings(spec: &SceneSpec, camera: &CameraTrack) -> RenderSettings {
+fn render_settings(
+    spec: &SceneSpec,
+    camera: &CameraTrack,
+    moving: &[MovingObject],
+) -> RenderSettings {
     let r = &spec.render;
-    let last_key = camera.keys().last().map_or(0, |k| k.frame);
+    let objects = moving.iter().filter_map(|o| o.track.keys().last());
+    let last_key = camera
+        .keys()
+        .iter()
+        .map(|k| k.frame)
+        .chain(objects.map(|k| k.frame))
+        .max()
+        .unwrap_or(0);
     RenderSettings {
         width: r.width.0,
         height: r.height.0,

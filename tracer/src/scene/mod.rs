@@ -1,7 +1,8 @@
 //! The in-memory scene: what the loader produces and the integrator consumes.
 //!
-//! Everything is in world space and fully resolved (materials by index, textures decoded to linear
-//! RGB), so that rendering never touches the filesystem. The loader ([`load`]) reads a TOML scene
+//! Everything is resolved (materials by index, textures decoded to linear RGB), and placed in
+//! world space but for moving objects, which keep object space and a track (`motion.rs`), so
+//! that rendering never touches the filesystem. The loader ([`load`]) reads a TOML scene
 //! file and the OBJ/MTL meshes and textures it references through a [`SceneFiles`] source, so the
 //! same code loads from disk or from the in-memory file set a peer received over the network.
 
@@ -9,8 +10,10 @@ mod camera;
 mod error;
 mod files;
 mod format;
+mod keys;
 mod load;
 mod materials;
+mod motion;
 mod mtl;
 mod obj;
 mod shapes;
@@ -20,6 +23,7 @@ pub use camera::{Camera, CameraKey, CameraRays, CameraTrack};
 pub use error::{Location, SceneError};
 pub use files::{DiskFiles, MemoryFiles, SceneFiles, normalize};
 pub use load::{LoadReport, ObjectReport, load, load_from, load_str, load_with_report};
+pub use motion::{MovingObject, Placement, Shutter, TransformKey, TransformTrack};
 pub use texture::Texture;
 
 use crate::environment::Environment;
@@ -32,8 +36,14 @@ use glam::{Vec2, Vec3};
 pub struct Scene {
     pub settings: RenderSettings,
     pub camera: CameraTrack,
-    /// Every triangle of every mesh, in world space, degenerate ones already dropped.
+    /// When the camera's shutter is open around each frame (`[camera] shutter`).
+    pub shutter: Shutter,
+    /// Every triangle of every object that stays still, in world space, degenerate ones
+    /// already dropped.
     pub triangles: Vec<Triangle>,
+    /// The objects that move by keyframes, in object space with their tracks, in file order.
+    /// Their triangles are numbered after [`Scene::triangles`] (see `geometry::motion`).
+    pub moving: Vec<MovingObject>,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub point_lights: Vec<PointLight>,
@@ -98,6 +108,19 @@ pub struct PointLight {
 }
 
 impl Scene {
+    /// Every triangle, still and moving (the moving ones in object space), for what asks only
+    /// which materials and attributes are in use.
+    pub fn all_triangles(&self) -> impl Iterator<Item = &Triangle> {
+        let moving = self.moving.iter().flat_map(|o| &o.triangles);
+        self.triangles.iter().chain(moving)
+    }
+
+    /// Whether anything moves while the shutter is open: the camera between two keys that
+    /// differ, or an object (objects with keys that are all alike are placed still).
+    pub fn moves(&self) -> bool {
+        self.camera.moves() || !self.moving.is_empty()
+    }
+
     /// The triangles whose material emits: the scene's area lights, in triangle order.
     pub fn emissive_triangles(&self) -> impl Iterator<Item = (u32, &Triangle)> {
         self.triangles

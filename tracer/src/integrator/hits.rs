@@ -1,0 +1,149 @@
+//! Where a path's rays meet the scene, and the local geometry where they do.
+//!
+//! The static geometry answers first, through its tree, exactly as it did before anything could
+//! move; moving objects are then asked at the path's time ([`Moment`]) for anything closer
+//! (`crate::geometry::motion`). A scene without moving objects skips them with one test of an
+//! empty list per query, so its rays trace the same way, to the bit and nearly to the cycle.
+//! Hits on moving triangles are numbered after the static ones, so the tie rule (the lower
+//! index wins) carries over, and the geometry of such a hit is placed in the world at the
+//! path's time, with the error bound that spawning from it needs.
+
+use super::World;
+use crate::geometry::{Hit, Moment, Ray, SurfacePoint, TraversalStats};
+use crate::scene::{Placement, Triangle};
+use glam::{Vec2, Vec3};
+
+/// The geometry of a hit; both normals on the winding's side.
+pub(super) struct Surface {
+    /// The hit point, with what spawning rays from it needs: its error bound and plane normal.
+    pub at: SurfacePoint,
+    pub shading_normal: Vec3,
+    pub uv: Option<Vec2>,
+    pub material: u32,
+    pub front_facing: bool,
+}
+
+/// A hit's triangle and where it is: the point with its bound, the unit winding normal, and for
+/// a moving triangle (in object space) its placement.
+pub(super) struct Placed<'a> {
+    pub triangle: &'a Triangle,
+    pub at: SurfacePoint,
+    pub unit_normal: Vec3,
+    pub placement: Option<&'a Placement>,
+}
+
+impl World {
+    /// The closest hit of `ray` at `moment`.
+    pub(super) fn closest(
+        &self,
+        ray: &Ray,
+        moment: &Moment,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
+        let hit = self.accel.intersect_with(ray, self.traversal, stats);
+        if self.motion.is_empty() {
+            return hit;
+        }
+        self.motion
+            .closest::<false>(moment, ray, hit, self.traversal, stats)
+    }
+
+    /// The closest hit of `ray` among those a shadow ray must respect (see
+    /// [`crate::geometry::Accel::intersect_certain_with`]): `Some` exactly when
+    /// [`World::occluded`] says blocked.
+    pub(super) fn closest_certain(
+        &self,
+        ray: &Ray,
+        moment: &Moment,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
+        let hit = self
+            .accel
+            .intersect_certain_with(ray, self.traversal, stats);
+        if self.motion.is_empty() {
+            return hit;
+        }
+        self.motion
+            .closest::<true>(moment, ray, hit, self.traversal, stats)
+    }
+
+    /// Whether anything certainly blocks `ray` at `moment`.
+    pub(super) fn occluded(&self, ray: &Ray, moment: &Moment, stats: &mut TraversalStats) -> bool {
+        self.accel.occluded_with(ray, self.traversal, stats)
+            || (!self.motion.is_empty() && self.motion.occluded(moment, ray, self.traversal, stats))
+    }
+
+    /// The triangle `hit` names and where it is at `moment`.
+    pub(super) fn placed<'a>(&'a self, hit: &Hit, moment: &'a Moment) -> Placed<'a> {
+        match self.motion.locate(hit.triangle) {
+            None => {
+                let triangle = &self.scene.triangles[hit.triangle as usize];
+                Placed {
+                    triangle,
+                    at: SurfacePoint::on_triangle_with_normal(
+                        &triangle.p,
+                        hit.b1,
+                        hit.b2,
+                        self.accel.plane_normal(hit.triangle),
+                    ),
+                    unit_normal: self.accel.unit_normal(hit.triangle),
+                    placement: None,
+                }
+            }
+            Some(moving) => {
+                let at = self.motion.surface(moment, moving, hit);
+                Placed {
+                    triangle: &self.scene.moving[moving.object].triangles[moving.triangle],
+                    at,
+                    unit_normal: at.normal,
+                    placement: Some(self.motion.placement(moment, moving.object)),
+                }
+            }
+        }
+    }
+
+    /// The local geometry at a hit.
+    pub(super) fn surface(&self, ray: &Ray, hit: &Hit, moment: &Moment) -> Surface {
+        let Placed {
+            triangle,
+            at,
+            unit_normal: geometric,
+            placement,
+        } = self.placed(hit, moment);
+        // Normals keep the winding's orientation: the side a ray arrives from is what tells a
+        // dielectric whether it is entering or leaving, and an emitter whether it is seen from
+        // the front. Reflection-only BSDFs are two-sided by themselves.
+        let front_facing = ray.dir.dot(geometric) < 0.0;
+        let b0 = 1.0 - hit.b1 - hit.b2;
+        let shading_normal = match triangle.n {
+            Some(n) if self.effects.shading_normals => {
+                let mut interpolated = b0 * n[0] + hit.b1 * n[1] + hit.b2 * n[2];
+                // A moving triangle's normals are in object space; they turn with it.
+                if let Some(placement) = placement {
+                    interpolated = (placement.normal * interpolated.as_dvec3()).as_vec3();
+                }
+                let interpolated = interpolated.normalize_or_zero();
+                if interpolated == Vec3::ZERO {
+                    geometric
+                } else if interpolated.dot(geometric) < 0.0 {
+                    -interpolated
+                } else {
+                    interpolated
+                }
+            }
+            _ => geometric,
+        };
+        // Texture coordinates are only ever read by a texture lookup.
+        let uv = triangle
+            .uv
+            .filter(|_| self.effects.textures)
+            .map(|uv| b0 * uv[0] + hit.b1 * uv[1] + hit.b2 * uv[2]);
+        Surface {
+            at,
+            shading_normal,
+            uv,
+            material: triangle.material,
+            front_facing,
+        }
+    }
+}
