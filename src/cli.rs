@@ -104,6 +104,11 @@ pub struct SlurmArgs {
     /// first); each try waits for the transport's 10 s handshake timeout.
     #[arg(long, default_value_t = 120.0)]
     pub join_timeout: f64,
+    /// Peers task 0 waits for before the first frame (default: every other task of the step).
+    /// Tasks that come later join the running render, so a step whose tasks start unevenly, or
+    /// one of which never starts, need not hold the first frame for the last.
+    #[arg(long)]
+    pub expect: Option<usize>,
 }
 
 #[derive(Debug, clap::Args)]

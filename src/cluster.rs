@@ -87,12 +87,17 @@ pub fn slurm(mut args: SlurmArgs) -> anyhow::Result<()> {
                 step.owner,
                 step.port
             );
+            let expect = args.expect.unwrap_or(peers);
+            anyhow::ensure!(
+                expect <= peers,
+                "--expect {expect}: the step has only {peers} tasks besides task 0"
+            );
             args.job.threads = threads;
             crate::render::serve(&ServeArgs {
                 job: args.job,
                 listen: SocketAddr::from((Ipv4Addr::UNSPECIFIED, step.port)),
                 certs: args.certs,
-                expect: peers,
+                expect,
             })
         }
         Role::Peer { index } => {

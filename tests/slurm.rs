@@ -26,7 +26,11 @@ const NODES: &str = "localhost,node-b[1-2]";
 /// right now; the job ids tried start at one that depends on this process, so that two test
 /// runs at once rarely try the same.
 fn job_with_free_port() -> u64 {
-    let start = 1_000_000 + std::process::id() as u64 % 2000;
+    // Tests of this binary run at once: each call starts its search further on, so that two
+    // tests never both find the same port free before either binds it.
+    static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let start = 1_000_000 + (std::process::id() as u64 + 97 * call) % 2000;
     (start..start + 2000)
         .find(|&job| std::net::UdpSocket::bind(("0.0.0.0", default_port(job, 0))).is_ok())
         .expect("some port of step 0 in 20000..40000 is free")
@@ -118,6 +122,30 @@ fn a_three_task_step_renders_what_one_peer_renders() {
             "task {peer} rendered no tile"
         );
     }
+}
+
+/// `--expect 1` on a three-task step: task 0 starts with task 1 alone, and the render completes
+/// without task 2, which never comes; task 2's rank is still refused more than the step has.
+#[test]
+fn with_expect_task_zero_starts_without_the_tasks_that_never_come() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    keygen(&certs, 3);
+    let job = job_with_free_port();
+    let out = dir.path().join("step");
+    let first = task(&certs, &out, job, 1, 3).spawn().unwrap();
+    let owner = task(&certs, &out, job, 0, 3)
+        .args(["--expect", "1"])
+        .spawn()
+        .unwrap();
+    wait_success(owner, "task 0", Duration::from_secs(180));
+    wait_success(first, "task 1", Duration::from_secs(30));
+    assert_eq!(frames(&out).len(), 6);
+    let message = failure(task(&certs, &out, job, 0, 3).args(["--expect", "3"]));
+    assert!(
+        message.contains("--expect 3") && message.contains("only 2 tasks"),
+        "{message}"
+    );
 }
 
 /// Outside SLURM it says what is missing and renders nothing.
