@@ -12,6 +12,8 @@ each, on loopback with mutual TLS; the Cornell box, 4 frames of 160x120 at 256 s
   calm     nobody is disturbed
   kill     peer 3 gets SIGKILL during frame 1 (as soon as the owner prints that frame 0 is done)
   stop     peer 3 gets SIGSTOP during frame 1, and SIGCONT 6 s later
+  term     peer 3 gets SIGTERM during frame 1 (preemption): it hands back what it has not started
+           and leaves
 
 For each run the script prints each frame's seconds from stats.json (what it added to the render:
 from the frame before it completing to its own completion, the first frame from being dealt),
@@ -42,7 +44,7 @@ def main():
     parser.add_argument("--tessera", default="target/release/tessera")
     parser.add_argument("--out", default="out/bench/faults", type=Path)
     parser.add_argument("--port", type=int, default=47331)
-    parser.add_argument("--runs", default="calm,kill,stop")
+    parser.add_argument("--runs", default="calm,kill,stop,term")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     certs = args.out / "certs"
@@ -89,6 +91,8 @@ def run(name, out, certs, reference, args):
         time.sleep(0.5)
         if name == "kill":
             victim.send_signal(signal.SIGKILL)
+        elif name == "term":
+            victim.send_signal(signal.SIGTERM)
         else:
             victim.send_signal(signal.SIGSTOP)
             time.sleep(6.0)
