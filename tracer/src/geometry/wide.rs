@@ -25,7 +25,7 @@ use super::bvh::{Accel, Closest};
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
 use super::node8::{BoxTest, Node8, Portable, WIDTH, WideRay, avx_available};
-use super::quad::{LANES, Quad, QuadRay};
+use super::quad::{LANES, LaneHits, Quad, QuadRay};
 use super::traverse::FAR_SCALE;
 use super::triangle::ShearedRay;
 use super::{Hit, Ray, TraversalStats};
@@ -264,7 +264,7 @@ impl Accel {
                 if count > 0 {
                     // A nearer leaf may have moved the closest hit in front of this one.
                     if t <= cull(&closest)
-                        && self.test_leaf::<ANY_HIT>(
+                        && self.test_leaf::<ANY_HIT, B>(
                             node.index[lane],
                             count,
                             &sheared,
@@ -340,11 +340,12 @@ impl Accel {
     }
 
     /// Tests the `count` triangles of the leaf whose groups start at `first`: the SIMD filter
-    /// four at a time, then the scalar test on the lanes it leaves. Returns whether any became
-    /// the closest hit (with `ANY_HIT`, stops at the first). Every triangle up to where it
-    /// stops counts as tested, filtered out or not.
+    /// four at a time (eight, two groups in one step, where `B` has the lanes), then the
+    /// scalar test on the lanes it leaves. Returns whether any became the closest hit (with
+    /// `ANY_HIT`, stops at the first). Every triangle up to where it stops counts as tested,
+    /// filtered out or not, so pairs count what groups one by one count.
     #[inline(always)]
-    fn test_leaf<const ANY_HIT: bool>(
+    fn test_leaf<const ANY_HIT: bool, B: BoxTest>(
         &self,
         first: u32,
         count: u32,
@@ -355,30 +356,65 @@ impl Accel {
     ) -> bool {
         let groups = (count as usize).div_ceil(LANES);
         let first = first as usize;
+        let quads = &self.wide.quads[first..first + groups];
         let mut found = false;
-        for quad in &self.wide.quads[first..first + groups] {
-            let quad_hits = quad_ray.intersect(quad);
-            let mut candidates = quad_hits.candidates;
-            while candidates != 0 {
-                let lane = candidates.trailing_zeros();
-                candidates &= candidates - 1;
-                let k = (quad.entry + lane) as usize;
-                let kept = if quad_hits.exact & (1 << lane) != 0 {
-                    closest.offer_hit(quad_hits.hit(lane as usize), self.original[k])
-                } else {
-                    closest.offer(sheared, &self.vertices[k], self.original[k])
-                };
-                if kept {
-                    found = true;
-                    if ANY_HIT {
-                        stats.triangles += u64::from(lane + 1);
-                        return true;
-                    }
-                }
+        let mut g = 0;
+        while g < groups {
+            // Only a leaf's last group is partial, so a pair's first group is full and the
+            // pair's lanes are entries `entry .. entry + 8` in order.
+            let (stopped, tested) = if B::PAIRS && g + 1 < groups {
+                let hits = B::intersect_pair(quad_ray, &quads[g], &quads[g + 1]);
+                let tested = quads[g].len + quads[g + 1].len;
+                g += 2;
+                let entry = quads[g - 2].entry;
+                (self.offer_lanes::<ANY_HIT, 8>(&hits, entry, sheared, closest, &mut found, stats), tested)
+            } else {
+                let hits = quad_ray.intersect(&quads[g]);
+                g += 1;
+                let entry = quads[g - 1].entry;
+                (self.offer_lanes::<ANY_HIT, LANES>(&hits, entry, sheared, closest, &mut found, stats), quads[g - 1].len)
+            };
+            if stopped {
+                return true;
             }
-            stats.triangles += u64::from(quad.len);
+            stats.triangles += u64::from(tested);
         }
         found
+    }
+
+    /// Offers the candidate lanes of `hits` (triangles `entry + lane`) to `closest`, lowest
+    /// lane first: a lane settled in SIMD with its hit, the others through the scalar test.
+    /// Sets `found` when one is kept; returns whether an any-hit query stops here, having
+    /// counted the lanes up to the stopping one as tested.
+    #[inline(always)]
+    fn offer_lanes<const ANY_HIT: bool, const N: usize>(
+        &self,
+        hits: &LaneHits<N>,
+        entry: u32,
+        sheared: &ShearedRay,
+        closest: &mut Closest,
+        found: &mut bool,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        let mut candidates = hits.candidates;
+        while candidates != 0 {
+            let lane = candidates.trailing_zeros();
+            candidates &= candidates - 1;
+            let k = (entry + lane) as usize;
+            let kept = if hits.exact & (1 << lane) != 0 {
+                closest.offer_hit(hits.hit(lane as usize), self.original[k])
+            } else {
+                closest.offer(sheared, &self.vertices[k], self.original[k])
+            };
+            if kept {
+                *found = true;
+                if ANY_HIT {
+                    stats.triangles += u64::from(lane + 1);
+                    return true;
+                }
+            }
+        }
+        false
     }
 }
 
