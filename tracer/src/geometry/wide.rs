@@ -18,8 +18,9 @@
 //! bit.
 //!
 //! Leaves are the binary tree's leaves, the same runs of `Accel::vertices`, packed four triangles
-//! to a group for the SIMD triangle test of `quad.rs`; `Accel::vertices` stays for the scalar
-//! test, which settles what the SIMD one leaves.
+//! to a group for the SIMD triangle test of `quad.rs` (with AVX, a leaf's first two groups in one
+//! step of eight lanes, `quad_avx.rs`); `Accel::vertices` stays for the scalar test, which
+//! settles what the SIMD one leaves.
 
 use super::bvh::{Accel, Closest};
 #[cfg(target_arch = "x86_64")]
@@ -33,8 +34,9 @@ use glam::Vec3;
 use obvhs::bvh2::Bvh2;
 use std::mem::MaybeUninit;
 
-/// The instructions that test a node's boxes: AVX where the processor has it, else SSE (or
-/// plain code off x86-64). Either gives the same results bit for bit; only speed differs.
+/// The instructions that test a node's boxes and a leaf's triangles: AVX where the processor
+/// has it (eight boxes, and two groups of four triangles, per step), else SSE (or plain code
+/// off x86-64). Either gives the same results bit for bit; only speed differs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum BoxSimd {
     /// Two steps of four lanes: SSE2 on x86-64 (every x86-64 processor), plain code elsewhere.
@@ -79,8 +81,9 @@ impl Bvh8 {
     /// Collapses `bvh`: each node takes its binary node's two children, then repeatedly
     /// replaces the inner child with the largest surface area by its two children, until it has
     /// eight or only leaves. Deterministic: ties go to the first such child.
-    /// Leaves are packed into groups of four triangles from `vertices` (`Accel::vertices`).
-    pub(super) fn collapse(bvh: &Bvh2, vertices: &[[Vec3; 3]]) -> Bvh8 {
+    /// Leaves are packed into groups of four triangles from `vertices` (`Accel::vertices`),
+    /// with their input triangles from `original` (`Accel::original`).
+    pub(super) fn collapse(bvh: &Bvh2, vertices: &[[Vec3; 3]], original: &[u32]) -> Bvh8 {
         if bvh.nodes.is_empty() {
             return Bvh8::default();
         }
@@ -129,8 +132,12 @@ impl Bvh8 {
                         u32::try_from(quads.len()).expect("fewer groups than leaf entries");
                     node.count[lane] = u8::try_from(child.prim_count)
                         .expect("build.rs clamps leaves to 255 triangles");
-                    let leaf = &vertices[first..first + child.prim_count as usize];
-                    quads.extend(Quad::pack(leaf, child.first_index));
+                    let end = first + child.prim_count as usize;
+                    quads.extend(Quad::pack(
+                        &vertices[first..end],
+                        &original[first..end],
+                        child.first_index,
+                    ));
                 } else {
                     let index = nodes.len();
                     nodes.push(Node8::EMPTY);
@@ -181,9 +188,9 @@ impl Accel {
         self.traverse_with::<ANY_HIT, CERTAIN, Portable>(ray, stats)
     }
 
-    /// The traversal compiled with AVX enabled: its box test inlined as AVX instructions, and
-    /// the rest of it (the SSE triangle test, the scalar code) VEX-encoded, which runs the same
-    /// IEEE operations. No fused multiply-add: that is a separate feature, not enabled, and Rust
+    /// The traversal compiled with AVX enabled: its box test and its test of two triangle
+    /// groups inlined as AVX instructions, and the rest of it (the four-lane triangle test of a
+    /// leaf's last odd group, the scalar code) VEX-encoded, which runs the same IEEE operations. No fused multiply-add: that is a separate feature, not enabled, and Rust
     /// never contracts a multiplication and an addition on its own.
     ///
     /// # Safety
@@ -311,7 +318,7 @@ impl Accel {
     }
 
     /// Asks for the memory of every child the ray entered (an inner node's four cache lines, a
-    /// leaf's first group) before any of it is read. On large meshes the traversal waits mostly
+    /// leaf's first two groups) before any of it is read. On large meshes the traversal waits mostly
     /// on cache misses, one at a time: the next node's address is known only once its parent is
     /// tested, and a leaf's triangles only once its box is. Prefetching all of a node's entered
     /// children at once lets their misses overlap, and the leaf tests that come first hide
@@ -325,10 +332,13 @@ impl Accel {
             let index = node.index[lane] as usize;
             if node.count[lane] > 0 {
                 if let Some(quad) = self.wide.quads.get(index) {
+                    // A group is three whole lines (`Quad` is aligned to them); a leaf of five
+                    // or more triangles has a second group, tested in the same step with AVX.
+                    let groups = if node.count[lane] as usize > LANES { 2 } else { 1 };
                     let start = (quad as *const Quad).cast::<u8>();
-                    prefetch(start);
-                    prefetch(start.wrapping_add(64));
-                    prefetch(start.wrapping_add(128));
+                    for line in 0..3 * groups {
+                        prefetch(start.wrapping_add(64 * line));
+                    }
                 }
             } else if let Some(child) = self.wide.nodes.get(index) {
                 let start = (child as *const Node8).cast::<u8>();
@@ -360,37 +370,39 @@ impl Accel {
         let mut found = false;
         let mut g = 0;
         while g < groups {
-            // Only a leaf's last group is partial, so a pair's first group is full and the
-            // pair's lanes are entries `entry .. entry + 8` in order.
-            let (stopped, tested) = if B::PAIRS && g + 1 < groups {
-                let hits = B::intersect_pair(quad_ray, &quads[g], &quads[g + 1]);
-                let tested = quads[g].len + quads[g + 1].len;
-                g += 2;
-                let entry = quads[g - 2].entry;
-                (self.offer_lanes::<ANY_HIT, 8>(&hits, entry, sheared, closest, &mut found, stats), tested)
+            // Only a leaf's last group is partial, so a pair's first group is full: counting
+            // a pair's lanes up to a stop counts what testing its groups one by one counts.
+            let (stopped, step) = if B::PAIRS && g + 1 < groups {
+                let pair = &quads[g..g + 2];
+                let hits = B::intersect_pair(quad_ray, &pair[0], &pair[1]);
+                let stopped =
+                    self.offer_lanes::<ANY_HIT, 8>(&hits, pair, sheared, closest, &mut found, stats);
+                (stopped, pair)
             } else {
-                let hits = quad_ray.intersect(&quads[g]);
-                g += 1;
-                let entry = quads[g - 1].entry;
-                (self.offer_lanes::<ANY_HIT, LANES>(&hits, entry, sheared, closest, &mut found, stats), quads[g - 1].len)
+                let single = &quads[g..g + 1];
+                let hits = quad_ray.intersect(&single[0]);
+                let stopped = self
+                    .offer_lanes::<ANY_HIT, LANES>(&hits, single, sheared, closest, &mut found, stats);
+                (stopped, single)
             };
             if stopped {
                 return true;
             }
-            stats.triangles += u64::from(tested);
+            g += step.len();
+            stats.triangles += step.iter().map(|q| u64::from(q.len)).sum::<u64>();
         }
         found
     }
 
-    /// Offers the candidate lanes of `hits` (triangles `entry + lane`) to `closest`, lowest
-    /// lane first: a lane settled in SIMD with its hit, the others through the scalar test.
-    /// Sets `found` when one is kept; returns whether an any-hit query stops here, having
-    /// counted the lanes up to the stopping one as tested.
+    /// Offers the candidate lanes of `hits` (lane `i` is lane `i % 4` of `groups[i / 4]`) to
+    /// `closest`, lowest lane first: a lane settled in SIMD with its hit, the others through
+    /// the scalar test. Sets `found` when one is kept; returns whether an any-hit query stops
+    /// here, having counted the lanes up to the stopping one as tested.
     #[inline(always)]
     fn offer_lanes<const ANY_HIT: bool, const N: usize>(
         &self,
         hits: &LaneHits<N>,
-        entry: u32,
+        groups: &[Quad],
         sheared: &ShearedRay,
         closest: &mut Closest,
         found: &mut bool,
@@ -400,11 +412,14 @@ impl Accel {
         while candidates != 0 {
             let lane = candidates.trailing_zeros();
             candidates &= candidates - 1;
-            let k = (entry + lane) as usize;
+            let group = &groups[lane as usize / LANES];
+            let i = lane as usize % LANES;
+            let original = group.original[i];
             let kept = if hits.exact & (1 << lane) != 0 {
-                closest.offer_hit(hits.hit(lane as usize), self.original[k])
+                closest.offer_hit(hits.hit(lane as usize), original)
             } else {
-                closest.offer(sheared, &self.vertices[k], self.original[k])
+                let k = (group.entry as usize) + i;
+                closest.offer(sheared, &self.vertices[k], original)
             };
             if kept {
                 *found = true;
@@ -501,5 +516,63 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn leaves_of_five_to_eight_triangles_find_the_same_hits_through_avx_pairs_and_sse_groups() {
+        // Long thin slivers crossing a small cube: their boxes overlap so much that obvhs's
+        // collapse keeps leaves of up to eight, which the AVX traversal tests two groups at a
+        // time and the SSE one group by group.
+        let mut state = 0x0005_ca1e;
+        let mut next = || 2.0 * crate::geometry::build::tests::next(&mut state) - 1.0;
+        let triangles: Vec<Triangle> = (0..600)
+            .map(|_| {
+                let a = Vec3::new(next(), next(), next());
+                let d = Vec3::new(next(), next(), next()) * 3.0;
+                let e = Vec3::new(next(), next(), next()) * 0.05;
+                Triangle {
+                    p: [a - d, a + d, a + e],
+                    n: None,
+                    uv: None,
+                    material: 0,
+                }
+            })
+            .collect();
+        let mut avx = Accel::build(&triangles, BuildQuality::Medium);
+        let pairs = avx
+            .wide
+            .nodes
+            .iter()
+            .flat_map(|node| node.count)
+            .filter(|&c| c as usize > LANES)
+            .count();
+        assert!(pairs > 10, "only {pairs} leaves of more than four triangles");
+        if !avx.set_box_simd(BoxSimd::Avx) {
+            eprintln!("skipped the comparison: this processor has no AVX");
+            return;
+        }
+        let mut sse = avx.clone();
+        assert!(sse.set_box_simd(BoxSimd::Sse));
+        let (mut avx_stats, mut sse_stats) = (TraversalStats::default(), TraversalStats::default());
+        let mut hits = 0;
+        for i in 0..3000 {
+            let origin = Vec3::new(next(), next(), next()) * 4.0;
+            let aim = Vec3::new(next(), next(), next()) * 0.5;
+            let ray = Ray {
+                origin,
+                dir: aim - origin,
+                t_max: if i % 3 == 0 { 0.9 } else { f32::INFINITY },
+            };
+            let hit = avx.intersect(&ray, &mut avx_stats);
+            assert_eq!(hit, sse.intersect(&ray, &mut sse_stats), "{ray:?}");
+            assert_eq!(
+                avx.occluded(&ray, &mut avx_stats),
+                sse.occluded(&ray, &mut sse_stats),
+                "{ray:?}"
+            );
+            assert_eq!(avx_stats, sse_stats, "the same work, ray {i}");
+            hits += hit.is_some() as u32;
+        }
+        assert!(hits > 1000, "only {hits} hits");
     }
 }
