@@ -12,6 +12,8 @@
 //! - `build`: building the tree with obvhs, deterministically and without cracks.
 //! - `wide`: the tree collapsed into 8-wide nodes, and our robust traversal of it: what renders
 //!   use.
+//! - `leaf`: a leaf's triangles through the SIMD filters (four lanes, or eight with AVX) and
+//!   the scalar test on what they leave.
 //! - `memory`: the BVH's large arrays on transparent huge pages, where Linux offers them.
 //! - `node8`: the 8-wide node and its box test, in AVX where the processor has it and in SSE
 //!   where not, with the same results bit for bit ([`BoxSimd`]).
@@ -24,6 +26,7 @@
 
 mod build;
 mod bvh;
+mod leaf;
 mod memory;
 mod node8;
 mod offset;

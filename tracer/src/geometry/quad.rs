@@ -64,18 +64,22 @@ impl Quad {
         first_entry: u32,
     ) -> impl Iterator<Item = Quad> + 'a {
         let originals = original.chunks(LANES);
-        vertices.chunks(LANES).zip(originals).enumerate().map(move |(g, (chunk, ids))| {
-            let lane = |i: usize| chunk.get(i).unwrap_or(&chunk[0]);
-            let coordinate =
-                |v: usize, axis: usize| f32x4::new([0, 1, 2, 3].map(|i| lane(i)[v][axis]));
-            Quad {
-                p: [0, 1, 2].map(|v| [0, 1, 2].map(|axis| coordinate(v, axis))),
-                entry: first_entry + (g * LANES) as u32,
-                original: [0, 1, 2, 3].map(|i| ids.get(i).copied().unwrap_or(ids[0])),
-                valid: (1 << chunk.len()) - 1,
-                len: chunk.len() as u32,
-            }
-        })
+        vertices
+            .chunks(LANES)
+            .zip(originals)
+            .enumerate()
+            .map(move |(g, (chunk, ids))| {
+                let lane = |i: usize| chunk.get(i).unwrap_or(&chunk[0]);
+                let coordinate =
+                    |v: usize, axis: usize| f32x4::new([0, 1, 2, 3].map(|i| lane(i)[v][axis]));
+                Quad {
+                    p: [0, 1, 2].map(|v| [0, 1, 2].map(|axis| coordinate(v, axis))),
+                    entry: first_entry + (g * LANES) as u32,
+                    original: [0, 1, 2, 3].map(|i| ids.get(i).copied().unwrap_or(ids[0])),
+                    valid: (1 << chunk.len()) - 1,
+                    len: chunk.len() as u32,
+                }
+            })
     }
 }
 
@@ -320,7 +324,9 @@ mod tests {
         // The masks, and the hits of the lanes settled in SIMD: all that the traversal reads.
         let bits = |h: &LaneHits<8>| {
             let lanes = (0..8).filter(|&i| h.exact & (1 << i) != 0);
-            let hits = lanes.map(|i| h.hit(i)).map(|h| [h.t, h.t_error, h.b0, h.b1, h.b2]);
+            let hits = lanes
+                .map(|i| h.hit(i))
+                .map(|h| [h.t, h.t_error, h.b0, h.b1, h.b2]);
             let hits: Vec<u32> = hits.flatten().map(f32::to_bits).collect();
             (h.candidates, h.exact, hits)
         };
@@ -352,7 +358,9 @@ mod tests {
             let quads: Vec<Quad> = Quad::pack(&triangles, &ids, 0).collect();
             let four = quad_ray.intersect_pair(&quads[0], &quads[1]);
             // SAFETY: this processor has AVX (checked above).
-            let eight = unsafe { super::super::quad_avx::intersect_pair_avx(&quad_ray, &quads[0], &quads[1]) };
+            let eight = unsafe {
+                super::super::quad_avx::intersect_pair_avx(&quad_ray, &quads[0], &quads[1])
+            };
             assert_eq!(bits(&eight), bits(&four), "{triangles:?} by {ray:?}");
             exact += four.exact.count_ones();
         }
@@ -367,7 +375,10 @@ mod tests {
         assert_eq!(quads.len(), 2);
         assert_eq!((quads[0].entry, quads[0].valid), (10, 0b1111));
         assert_eq!((quads[1].entry, quads[1].valid), (14, 0b0011));
-        assert_eq!((quads[0].original, quads[1].original), ([20, 21, 22, 23], [24, 25, 24, 24]));
+        assert_eq!(
+            (quads[0].original, quads[1].original),
+            ([20, 21, 22, 23], [24, 25, 24, 24])
+        );
         let ray = Ray {
             origin: Vec3::new(0.25, 0.25, 1.0),
             dir: -Vec3::Z,

@@ -94,7 +94,10 @@ pub(super) unsafe fn intersect_pair_avx(ray: &QuadRay, a: &Quad, b: &Quad) -> La
         and(gt(det, zero), le(t_scaled, zero)),
     );
     // `outside | ((det == 0 | behind) & !zero_edge)`.
-    let missed = or(outside, _mm256_andnot_ps(zero_edge, or(eq(det, zero), behind)));
+    let missed = or(
+        outside,
+        _mm256_andnot_ps(zero_edge, or(eq(det, zero), behind)),
+    );
     let inv_det = _mm256_div_ps(splat(1.0), det);
     let t = mul(t_scaled, inv_det);
 
@@ -109,7 +112,10 @@ pub(super) unsafe fn intersect_pair_avx(ray: &QuadRay, a: &Quad, b: &Quad) -> La
     let delta_e = mul(
         splat(2.0),
         add(
-            add(mul(mul(splat(gamma(2)), max_xt), max_yt), mul(delta_y, max_xt)),
+            add(
+                mul(mul(splat(gamma(2)), max_xt), max_yt),
+                mul(delta_y, max_xt),
+            ),
             mul(delta_x, max_yt),
         ),
     );
@@ -119,7 +125,10 @@ pub(super) unsafe fn intersect_pair_avx(ray: &QuadRay, a: &Quad, b: &Quad) -> La
         mul(
             splat(3.0),
             add(
-                add(mul(mul(splat(gamma(3)), max_e), max_zt), mul(delta_e, max_zt)),
+                add(
+                    mul(mul(splat(gamma(3)), max_e), max_zt),
+                    mul(delta_e, max_zt),
+                ),
                 mul(delta_z, max_e),
             ),
         ),
@@ -139,6 +148,10 @@ pub(super) unsafe fn intersect_pair_avx(ray: &QuadRay, a: &Quad, b: &Quad) -> La
         exact,
         t: store(t),
         t_error: store(delta_t),
-        b: [store(mul(e0, inv_det)), store(mul(e1, inv_det)), store(mul(e2, inv_det))],
+        b: [
+            store(mul(e0, inv_det)),
+            store(mul(e1, inv_det)),
+            store(mul(e2, inv_det)),
+        ],
     }
 }
