@@ -5,9 +5,10 @@ Why this script exists: the tracer issue sets a target of being faster than the 
 would otherwise pick, at equal settings and with the same mean image (within 1% per channel). A
 speed figure means nothing unless both renderers drew the same picture, so this script
 
-1. reads each scene's tessera TOML (camera, OBJ file) and the OBJ/MTL it names, and builds the
-   same scene for Mitsuba from them: one mesh per MTL material, Kd as a two-sided diffuse
-   reflectance, Ke as a one-sided area light (see MTL_MAPPING below);
+1. reads each scene's tessera TOML (camera, OBJ file, a constant environment) and the OBJ/MTL
+   it names, and builds the same scene for Mitsuba from them: one mesh per MTL material, Kd (or
+   its `map_Kd` texture) as a two-sided diffuse reflectance, Ke as a one-sided area light (see
+   MTL_MAPPING below), `[environment] radiance` as a `constant` emitter;
 2. renders it with Mitsuba (each variant in a fresh process, so that its CPU-seconds are its
    own) and writes an EXR;
 3. runs `tessera bench` on the same TOMLs at the same size, samples and depth, which writes our EXR
@@ -44,10 +45,21 @@ from pathlib import Path
 # BSDFs are two-sided, so the diffuse goes in a `twosided` wrapper. `Ke` > 0 adds an `area`
 # emitter, which, like tessera's, emits on the winding normal's side only. Ns, Ni, Ka and illum
 # play no part for these materials in either renderer.
+#
+# Textures (Sponza): tessera's diffuse with `map_Kd` is the texture alone (albedo 1, Kd ignored),
+# decoded from sRGB to linear, looked up nearest with repeat wrapping, v = 0 the bottom row
+# (tracer/src/scene/texture.rs). Mitsuba's `bitmap` with `filter_type = nearest`,
+# `wrap_mode = repeat` and `raw = false` (sRGB decoded) does the same, with v = 0 the *top* row,
+# so the script hands Mitsuba (u, 1 - v). What cannot be matched exactly: the JPEG decoders
+# (Mitsuba's libjpeg against the `image` crate's) may round chroma upsampling differently, and a
+# texel boundary may fall one texel apart where `1 - v` rounds; both move means by far less than
+# the noise of a 64-spp Sponza.
 MTL_MAPPING = (
-    "Kd -> twosided(diffuse(reflectance = Kd)); Ke > 0 -> one-sided area emitter (radiance = Ke) on the "
-    "same mesh; Ns/Ni/Ka/illum unused (Ks = 0 everywhere); no vertex normals in these OBJs, so "
-    "both renderers shade with face normals"
+    "Kd -> twosided(diffuse(reflectance = Kd)); map_Kd -> twosided(diffuse(reflectance = bitmap(nearest, "
+    "repeat, sRGB-decoded, uv = (u, 1 - v)))), Kd ignored, as tessera does; Ke > 0 -> one-sided area "
+    "emitter (radiance = Ke) on the same mesh; Ns/Ni/Ka/illum/bump unused (Ks below Kd everywhere); no "
+    "vertex normals in these OBJs, so both renderers shade with face normals; [environment] radiance -> "
+    "constant emitter"
 )
 
 # How the script maps tessera's media onto Mitsuba (scenes/README.md, "Participating media"): a
@@ -66,6 +78,7 @@ DEFAULT_SCENES = [
     "scenes/shared/cornell-box-original.toml",
     "scenes/shared/cornell-bunny.toml",
     "scenes/shared/cornell-dragon.toml",
+    "scenes/shared/sponza.toml",
 ]
 
 
@@ -251,8 +264,11 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
     scene_toml = tomllib.loads(toml.read_text())
     camera = scene_toml["camera"]
     unsupported = set(camera) - {"position", "look_at", "up", "vfov"}
-    if unsupported or scene_toml.get("lights") or scene_toml.get("environment"):
-        raise SystemExit(f"{toml}: only a fixed camera and plain OBJ objects are translated for Mitsuba")
+    environment = scene_toml.get("environment", {})
+    if unsupported or scene_toml.get("lights") or set(environment) - {"radiance"}:
+        raise SystemExit(
+            f"{toml}: only a fixed camera, plain OBJ objects and a constant environment are translated for Mitsuba"
+        )
     media = {name: mitsuba_medium(spec) for name, spec in scene_toml.get("media", {}).items()}
     shapes = {}
     triangles = 0
@@ -262,18 +278,26 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
             continue
         if set(obj) != {"obj"}:
             raise SystemExit(f"{toml}: object {index} has keys other than obj, which this script does not translate")
-        for name, (positions, faces, kd, ke) in read_obj(toml.parent / obj["obj"]).items():
+        for name, (positions, texcoords, faces, kd, ke, texture) in read_obj(toml.parent / obj["obj"]).items():
             triangles += len(faces) // 3
             props = mi.Properties()
-            props["bsdf"] = mi.load_dict({"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": kd}}})
+            if texture is not None:
+                reflectance = {"type": "bitmap", "filename": str(texture), "filter_type": "nearest",
+                               "wrap_mode": "repeat", "raw": False}
+            else:
+                reflectance = {"type": "rgb", "value": kd}
+            props["bsdf"] = mi.load_dict({"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": reflectance}})
             if any(v > 0 for v in ke):
                 props["emitter"] = mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": ke}})
+            textured = texcoords is not None
             mesh = mi.Mesh(f"{index}-{name}", len(positions) // 3, len(faces) // 3, props=props,
-                           has_vertex_normals=False, has_vertex_texcoords=False)
+                           has_vertex_normals=False, has_vertex_texcoords=textured)
             params = mi.traverse(mesh)
             # The buffers' own types: drjit arrays in the llvm variants, scalar arrays in scalar_rgb.
             params["vertex_positions"] = type(params["vertex_positions"])(positions)
             params["faces"] = type(params["faces"])(faces)
+            if textured:
+                params["vertex_texcoords"] = type(params["vertex_texcoords"])(texcoords)
             params.update()
             shapes[f"shape-{index}-{name}"] = mesh
     description = {
@@ -292,6 +316,10 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
         },
         **shapes,
     }
+    if "radiance" in environment:
+        radiance = environment["radiance"]
+        radiance = [float(radiance)] * 3 if isinstance(radiance, (int, float)) else [float(c) for c in radiance]
+        description["environment"] = {"type": "constant", "radiance": {"type": "rgb", "value": radiance}}
     # Resident memory (KiB) before Mitsuba builds its scene, which holds this script's own
     # Python lists of the OBJ's vertices and faces, and after the scene and the render: the
     # growth is about what Mitsuba's scene (meshes and BVH) and render took.
@@ -383,12 +411,17 @@ def resident_kib():
 
 
 def read_obj(path):
-    """Triangles per `usemtl` material: {name: (flat positions, flat indices, Kd, Ke)}.
+    """Triangles per `usemtl` material: {name: (flat positions, flat uvs or None, flat indices, Kd, Ke,
+    texture path or None)}.
 
     Handles what the shared scenes use: CRLF endings, negative (relative) indices, `v/vt/vn`
-    references, and polygons, which are cut into fans as tessera's loader cuts them.
+    references, and polygons, which are cut into fans as tessera's loader cuts them. A vertex is
+    a (position, texture coordinate) pair, as in tessera's loader (tobj's single index), so that
+    faces meeting at a position with different `vt` keep their own; texture coordinates are kept
+    for a material only when it has a texture and every corner of its faces has one.
     """
     vertices = []
+    uvs = []
     groups = {}
     material = None
     materials = {}
@@ -399,10 +432,16 @@ def read_obj(path):
                 continue
             if words[0] == "v":
                 vertices.append((float(words[1]), float(words[2]), float(words[3])))
+            elif words[0] == "vt":
+                # `vt u [v [w]]`: a missing v is 0, as tessera reads it.
+                uvs.append((float(words[1]), float(words[2]) if len(words) > 2 else 0.0))
             elif words[0] == "f":
-                count = len(vertices)
-                ids = [int(w.split("/")[0]) for w in words[1:]]
-                ids = [i - 1 if i > 0 else count + i for i in ids]
+                corners = [w.split("/") for w in words[1:]]
+                resolve = lambda i, count: i - 1 if i > 0 else count + i
+                ids = [
+                    (resolve(int(c[0]), len(vertices)), resolve(int(c[1]), len(uvs)) if len(c) > 1 and c[1] else None)
+                    for c in corners
+                ]
                 tris = groups.setdefault(material, [])
                 for k in range(1, len(ids) - 1):
                     tris.extend((ids[0], ids[k], ids[k + 1]))
@@ -414,22 +453,32 @@ def read_obj(path):
     for name, tris in groups.items():
         if name not in materials:
             raise SystemExit(f"{path}: material {name!r} is not in its MTL files")
+        kd, ke, texture = materials[name]
+        textured = texture is not None and all(t is not None for _, t in tris)
         # Each material's mesh keeps only the vertices it uses.
         remap = {}
         positions = []
+        texcoords = [] if textured else None
         faces = []
-        for i in tris:
-            j = remap.get(i)
+        for i, t in tris:
+            key = (i, t) if textured else i
+            j = remap.get(key)
             if j is None:
-                j = remap[i] = len(remap)
+                j = remap[key] = len(remap)
                 positions.extend(vertices[i])
+                if textured:
+                    u, v = uvs[t]
+                    # Mitsuba's bitmap has v = 0 at the top row, tessera's at the bottom.
+                    texcoords.extend((u, 1.0 - v))
             faces.append(j)
-        kd, ke = materials[name]
-        meshes[name] = (positions, faces, kd, ke)
+        meshes[name] = (positions, texcoords, faces, kd, ke, texture if textured else None)
     return meshes
 
 
 def read_mtl(path):
+    """{name: (Kd, Ke, map_Kd path or None)}; the texture's file name is matched ignoring ASCII case
+    when it does not exist as written, as tessera's loader matches it (Sponza's MTL says
+    `00_SKAP.JPG` for `00_skap.JPG`)."""
     materials = {}
     name = None
     with open(path, encoding="utf-8", errors="replace") as f:
@@ -439,12 +488,25 @@ def read_mtl(path):
                 continue
             if words[0] == "newmtl":
                 name = " ".join(words[1:])
-                materials[name] = [[0.8, 0.8, 0.8], [0.0, 0.0, 0.0]]
+                materials[name] = [[0.8, 0.8, 0.8], [0.0, 0.0, 0.0], None]
             elif words[0] in ("Kd", "Ke") and name is not None:
                 values = [float(w) for w in words[1:4]]
                 values = values * 3 if len(values) == 1 else values
                 materials[name][0 if words[0] == "Kd" else 1] = values
-    return {k: (v[0], v[1]) for k, v in materials.items()}
+            elif words[0] == "map_Kd" and name is not None:
+                # With leading `-options` tessera takes the last word; `\` is read as `/`.
+                file = (words[-1] if words[1].startswith("-") else " ".join(words[1:])).replace("\\", "/")
+                materials[name][2] = find_ignoring_case(path.parent / file)
+    return {k: tuple(v) for k, v in materials.items()}
+
+
+def find_ignoring_case(path):
+    if path.exists():
+        return path
+    matches = [p for p in path.parent.iterdir() if p.name.lower() == path.name.lower()]
+    if not matches:
+        raise SystemExit(f"{path}: texture not found")
+    return sorted(matches)[0]
 
 
 if __name__ == "__main__":

@@ -1,10 +1,12 @@
 //! The 8-wide traversal against the binary one on a real scene: the same image (hashed, bit for
 //! bit), and the CPU time per ray of each, the best of several interleaved rounds.
 //!
-//! `cargo run --release -p tracer --example traversal_speed -- SCENE.toml [SIZE] [SPP] [ROUNDS] [wide]`
+//! `cargo run --release -p tracer --example traversal_speed -- SCENE.toml [SIZE] [SPP] [ROUNDS] [wide] [QUALITY]`
 //!
-//! With `wide` last, only the 8-wide traversal runs: for comparing two builds of it, binary
-//! against binary, where the binary traversal's rounds would only add time.
+//! With `wide`, only the 8-wide traversal runs: for comparing two builds of it, binary
+//! against binary, where the binary traversal's rounds would only add time. `QUALITY`
+//! (`fastest`, `fast`, `medium`, `slow`, `very-slow`) builds the tree at that quality instead of
+//! the default, and the tree's build time (thread CPU) is printed.
 //!
 //! Why thread CPU time and the best round: on a machine shared with other work a wall clock
 //! counts the other work too, and interference only ever adds time. The render runs as one tile
@@ -13,7 +15,7 @@
 //! bounces.
 
 use std::path::Path;
-use tracer::geometry::Traversal;
+use tracer::geometry::{Accel, BuildQuality, Traversal};
 use tracer::{FrameConfig, World, render_frame};
 
 /// This thread's CPU time in seconds, from the first field of `schedstat` (nanoseconds on CPU).
@@ -50,9 +52,25 @@ fn main() {
     scene.settings.max_depth = Some(7);
     scene.settings.width = size;
     scene.settings.height = size;
-    let mut world = World::prepare(scene, None);
-    println!("{path}: {size}x{size}, {spp} spp, {:?}", world.accel);
-    let wide_only = args.get(5).is_some_and(|a| a == "wide");
+    // A build quality among the trailing words (`fastest` ... `very-slow`), else the default.
+    let quality = args[2..]
+        .iter()
+        .find_map(|a| {
+            BuildQuality::ALL
+                .into_iter()
+                .find(|q| format!("{q:?}").eq_ignore_ascii_case(&a.replace('-', "")))
+        })
+        .unwrap_or_default();
+    let effects = tracer::Effects::of(&scene);
+    let start = thread_cpu_seconds();
+    let accel = Accel::build(&scene.triangles, quality);
+    let build = thread_cpu_seconds() - start;
+    let mut world = World::new(scene, accel, effects);
+    println!(
+        "{path}: {size}x{size}, {spp} spp, {quality:?} tree built in {build:.2} CPU-s, {:?}",
+        world.accel
+    );
+    let wide_only = args[2..].iter().any(|a| a == "wide");
     let traversals: &[Traversal] = if wide_only {
         &[Traversal::Robust]
     } else {

@@ -42,7 +42,7 @@ fn probe_ray(rng: &mut Rng, i: usize, axes: Option<[Vec3; 3]>) -> Ray {
     if let Some(axes) = axes {
         dir = axes[rng.index(3)];
     }
-    let t_max = if i % 3 == 0 {
+    let t_max = if i.is_multiple_of(3) {
         rng.range(0.5, 12.0)
     } else {
         f32::INFINITY

@@ -151,7 +151,7 @@ impl Accel {
             .map(|&k| kept[k as usize])
             .collect();
         let vertices: Vec<[Vec3; 3]> = original.iter().map(|&i| triangles[i as usize].p).collect();
-        let mut wide = Bvh8::collapse(&bvh, &vertices);
+        let mut wide = Bvh8::collapse(&bvh, &vertices, &original);
         // What the renderer's traversal and hits read, at random on large meshes.
         wide.nodes = on_huge_pages(wide.nodes);
         wide.quads = on_huge_pages(wide.quads);
@@ -245,14 +245,16 @@ impl Accel {
         }
     }
 
-    /// The instructions the wide traversal tests boxes with: AVX where this processor has it.
+    /// The instructions the wide traversal tests boxes and triangles with: AVX where this
+    /// processor has it.
     pub fn box_simd(&self) -> BoxSimd {
         self.wide.simd
     }
 
-    /// Makes the wide traversal test boxes with `simd`, if this processor runs it (returns
-    /// whether it does; if not, nothing changes). Every choice finds the same hits, bit for bit,
-    /// and counts the same work: a knob for tests and speed comparisons, not for images.
+    /// Makes the wide traversal test boxes and triangles with `simd`, if this processor runs
+    /// it (returns whether it does; if not, nothing changes). Every choice finds the same hits,
+    /// bit for bit, and counts the same work: a knob for tests and speed comparisons, not for
+    /// images.
     pub fn set_box_simd(&mut self, simd: BoxSimd) -> bool {
         let runs = match simd {
             BoxSimd::Sse => true,

@@ -12,6 +12,8 @@
 //! - `build`: building the tree with obvhs, deterministically and without cracks.
 //! - `wide`: the tree collapsed into 8-wide nodes, and our robust traversal of it: what renders
 //!   use.
+//! - `leaf`: a leaf's triangles through the SIMD filters (four lanes, or eight with AVX) and
+//!   the scalar test on what they leave.
 //! - `memory`: the BVH's large arrays on transparent huge pages, where Linux offers them.
 //! - `node8`: the 8-wide node and its box test, in AVX where the processor has it and in SSE
 //!   where not, with the same results bit for bit ([`BoxSimd`]).
@@ -21,16 +23,21 @@
 //!   boxes swept over their keyframe segments; rays taken into object space at their time, and
 //!   hits brought back with error bounds that keep spawned rays off the surface
 //!   ([`MotionAccel`], [`placed_point`]).
+//! - `quad_avx`: the same filter on two groups at once in AVX's eight lanes, where the
+//!   processor has them, with the same results bit for bit.
 //! - `traverse`: the same robust traversal over the binary tree, and obvhs's own, for
 //!   comparison ([`Traversal`]).
 
 mod build;
 mod bvh;
+mod leaf;
 mod memory;
 mod motion;
 mod node8;
 mod offset;
 mod quad;
+#[cfg(target_arch = "x86_64")]
+mod quad_avx;
 mod traverse;
 mod triangle;
 mod wide;

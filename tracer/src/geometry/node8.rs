@@ -20,6 +20,7 @@
 //! `tracer/tests/wide_traversal.rs` renders through both and compares.
 
 use super::Ray;
+use super::quad::{LaneHits, Quad, QuadRay};
 use super::traverse::FAR_SCALE;
 use wide::{CmpGt, CmpLe, CmpLt, f32x4};
 
@@ -83,18 +84,34 @@ pub(super) struct WideRay {
     far: [usize; 3],
 }
 
-/// Which instructions test a node's boxes. The traversal is written once, generic over this,
-/// and compiled once per implementation.
+/// Which instructions test a node's boxes, and a leaf's triangles eight at a time. The
+/// traversal is written once, generic over this, and compiled once per implementation.
 pub(super) trait BoxTest {
+    /// Whether [`BoxTest::intersect_pair`] tests two groups of four triangles in one step, so
+    /// that the traversal should hand it pairs. Where not, the traversal tests groups one by
+    /// one; either way the results are the same bits.
+    const PAIRS: bool;
+
     /// For each child of `node`, whether the ray enters its box within `(0, t_max]` (bit `i`)
     /// and the entry distance: lane by lane, the binary traversal's `SlabRay::enter`.
     fn enter(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDTH]);
+
+    /// The SIMD triangle test of two consecutive groups of a leaf, `a` in lanes 0 to 3 and `b`
+    /// in lanes 4 to 7: [`QuadRay::intersect_pair`], lane for lane.
+    fn intersect_pair(ray: &QuadRay, a: &Quad, b: &Quad) -> LaneHits<8>;
 }
 
 /// Two SSE steps of four lanes (plain code off x86-64): every machine can run it.
 pub(super) struct Portable;
 
 impl BoxTest for Portable {
+    const PAIRS: bool = false;
+
+    #[inline(always)]
+    fn intersect_pair(ray: &QuadRay, a: &Quad, b: &Quad) -> LaneHits<8> {
+        ray.intersect_pair(a, b)
+    }
+
     #[inline(always)]
     fn enter(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDTH]) {
         let half = |h: usize| {
@@ -135,6 +152,14 @@ pub(super) struct Avx;
 
 #[cfg(target_arch = "x86_64")]
 impl BoxTest for Avx {
+    const PAIRS: bool = true;
+
+    #[inline(always)]
+    fn intersect_pair(ray: &QuadRay, a: &Quad, b: &Quad) -> LaneHits<8> {
+        // SAFETY: as for `enter` below.
+        unsafe { super::quad_avx::intersect_pair_avx(ray, a, b) }
+    }
+
     #[inline(always)]
     fn enter(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDTH]) {
         // SAFETY: `Avx` is only used by `Accel::traverse_avx`, which runs only where

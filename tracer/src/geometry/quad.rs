@@ -33,34 +33,53 @@ use wide::{CmpEq, CmpGe, CmpGt, CmpLe, CmpLt, f32x4};
 /// Triangles per group: SSE's four f32 lanes.
 pub(super) const LANES: usize = 4;
 
-/// Four triangles of one leaf, coordinates in lanes.
+/// Four triangles of one leaf, coordinates in lanes: 192 bytes, three cache lines, aligned to
+/// them, so that a group never straddles a fourth line.
 #[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
 pub(super) struct Quad {
     /// `p[vertex][axis]`: lane `i` holds triangle `entry + i`'s vertex. Unused lanes repeat
     /// the group's first triangle and are masked out by `valid`.
-    p: [[f32x4; 3]; 3],
+    pub(super) p: [[f32x4; 3]; 3],
     /// The leaf entry (index into `Accel::vertices` and `Accel::original`) of lane 0.
     pub(super) entry: u32,
+    /// Each lane's input triangle (its `Accel::original`), which hits report: kept here, in
+    /// the cache lines the test has just read, rather than read from a separate array at
+    /// every candidate (on the dragon a cache miss of its own).
+    pub(super) original: [u32; LANES],
     /// Bit `i` set when lane `i` holds a triangle of the leaf; triangles fill the lowest lanes.
     pub(super) valid: u32,
     /// The number of triangles in the group (stored: counting bits is slow without `popcnt`).
     pub(super) len: u32,
 }
 
+const _: () = assert!(std::mem::size_of::<Quad>() == 192, "three cache lines");
+
 impl Quad {
-    /// The groups of the leaf whose triangles are `vertices`, in order.
-    pub(super) fn pack(vertices: &[[Vec3; 3]], first_entry: u32) -> impl Iterator<Item = Quad> {
-        vertices.chunks(LANES).enumerate().map(move |(g, chunk)| {
-            let lane = |i: usize| chunk.get(i).unwrap_or(&chunk[0]);
-            let coordinate =
-                |v: usize, axis: usize| f32x4::new([0, 1, 2, 3].map(|i| lane(i)[v][axis]));
-            Quad {
-                p: [0, 1, 2].map(|v| [0, 1, 2].map(|axis| coordinate(v, axis))),
-                entry: first_entry + (g * LANES) as u32,
-                valid: (1 << chunk.len()) - 1,
-                len: chunk.len() as u32,
-            }
-        })
+    /// The groups of the leaf whose triangles are `vertices`, in order, with `original`, their
+    /// input triangles (as many as `vertices`).
+    pub(super) fn pack<'a>(
+        vertices: &'a [[Vec3; 3]],
+        original: &'a [u32],
+        first_entry: u32,
+    ) -> impl Iterator<Item = Quad> + 'a {
+        let originals = original.chunks(LANES);
+        vertices
+            .chunks(LANES)
+            .zip(originals)
+            .enumerate()
+            .map(move |(g, (chunk, ids))| {
+                let lane = |i: usize| chunk.get(i).unwrap_or(&chunk[0]);
+                let coordinate =
+                    |v: usize, axis: usize| f32x4::new([0, 1, 2, 3].map(|i| lane(i)[v][axis]));
+                Quad {
+                    p: [0, 1, 2].map(|v| [0, 1, 2].map(|axis| coordinate(v, axis))),
+                    entry: first_entry + (g * LANES) as u32,
+                    original: [0, 1, 2, 3].map(|i| ids.get(i).copied().unwrap_or(ids[0])),
+                    valid: (1 << chunk.len()) - 1,
+                    len: chunk.len() as u32,
+                }
+            })
     }
 }
 
@@ -72,6 +91,9 @@ pub(super) struct QuadRay {
     sx: f32x4,
     sy: f32x4,
     sz: f32x4,
+    /// The same origin and shear as scalars (`sx`, `sy`, `sz`), which the eight-lane test of
+    /// `quad_avx.rs` splats into its own registers.
+    pub(super) scalars: [f32; 6],
 }
 
 impl QuadRay {
@@ -84,7 +106,13 @@ impl QuadRay {
             sx: f32x4::splat(sheared.sx),
             sy: f32x4::splat(sheared.sy),
             sz: f32x4::splat(sheared.sz),
+            scalars: [o.x, o.y, o.z, sheared.sx, sheared.sy, sheared.sz],
         }
+    }
+
+    /// Which input axes become x, y and z: the scalar test's permutation.
+    pub(super) fn axes(&self) -> [usize; 3] {
+        self.axes
     }
 
     /// The watertight test on the four triangles of `quad`, lane by lane, as far as it can be
@@ -108,6 +136,11 @@ impl QuadRay {
         let negative = e0.cmp_lt(zero) | e1.cmp_lt(zero) | e2.cmp_lt(zero);
         let positive = e0.cmp_gt(zero) | e1.cmp_gt(zero) | e2.cmp_gt(zero);
         let outside = negative & positive;
+        // Most tests end here: every triangle of the group is missed at the first step, and
+        // the rest (the division, the error bound) would decide nothing.
+        if !(outside.move_mask() as u32) & quad.valid == 0 {
+            return LaneHits::NONE;
+        }
         // Where an edge function is exactly zero the scalar test recomputes it in f64: those
         // lanes, unless already outside, are the scalar test's to decide.
         let zero_edge = e0.cmp_eq(zero) | e1.cmp_eq(zero) | e2.cmp_eq(zero);
@@ -149,21 +182,53 @@ impl QuadRay {
             b: [e0 * inv_det, e1 * inv_det, e2 * inv_det].map(f32x4::to_array),
         }
     }
+
+    /// [`QuadRay::intersect`] on two groups at once, `a` in lanes 0 to 3 and `b` in lanes 4
+    /// to 7: what the eight-lane test of `quad_avx.rs` computes, written as two four-lane
+    /// tests. Every machine can run it; the tests hold the AVX test to it, bit for bit.
+    pub(super) fn intersect_pair(&self, a: &Quad, b: &Quad) -> LaneHits<8> {
+        let (low, high) = (self.intersect(a), self.intersect(b));
+        let join = |x: [f32; LANES], y: [f32; LANES]| {
+            let mut out = [0.0; 8];
+            out[..LANES].copy_from_slice(&x);
+            out[LANES..].copy_from_slice(&y);
+            out
+        };
+        LaneHits {
+            candidates: low.candidates | high.candidates << LANES,
+            exact: low.exact | high.exact << LANES,
+            t: join(low.t, high.t),
+            t_error: join(low.t_error, high.t_error),
+            b: [0, 1, 2].map(|i| join(low.b[i], high.b[i])),
+        }
+    }
 }
 
 /// What [`QuadRay::intersect`] found out about four triangles.
-pub(super) struct QuadHits {
+pub(super) type QuadHits = LaneHits<LANES>;
+
+/// What a SIMD triangle test found out about `N` triangles, lane `i` for triangle `i`.
+pub(super) struct LaneHits<const N: usize> {
     /// Lanes the scalar test would not reject: bit `i` clear only when it certainly would.
     pub(super) candidates: u32,
     /// Of those, the lanes whose hit below is the scalar test's own result, up to its final
     /// `t <= t_max`; the other candidates need the scalar test.
     pub(super) exact: u32,
-    t: [f32; LANES],
-    t_error: [f32; LANES],
-    b: [[f32; LANES]; 3],
+    pub(super) t: [f32; N],
+    pub(super) t_error: [f32; N],
+    pub(super) b: [[f32; N]; 3],
 }
 
-impl QuadHits {
+impl<const N: usize> LaneHits<N> {
+    /// No candidate: every triangle certainly missed.
+    pub(super) const NONE: Self = LaneHits {
+        candidates: 0,
+        exact: 0,
+        t: [0.0; N],
+        t_error: [0.0; N],
+        b: [[0.0; N]; 3],
+    };
+
     /// Lane `lane`'s hit, valid when its bit of `exact` is set.
     #[inline(always)]
     pub(super) fn hit(&self, lane: usize) -> TriangleHit {
@@ -214,7 +279,7 @@ mod tests {
                 t_max: f32::INFINITY,
             };
             let sheared = ShearedRay::new(&ray);
-            let quad = Quad::pack(&triangles, 0)
+            let quad = Quad::pack(&triangles, &[0, 1, 2, 3], 0)
                 .next()
                 .expect("four triangles, one group");
             let found = QuadRay::new(&sheared).intersect(&quad);
@@ -248,12 +313,72 @@ mod tests {
     }
 
     #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn the_avx_pair_test_is_the_four_lane_test_bit_for_bit() {
+        if !crate::geometry::node8::avx_available() {
+            eprintln!("skipped: this processor has no AVX, so there is no eight-lane test to run");
+            return;
+        }
+        let mut state = 11;
+        let point = |s: &mut u64| Vec3::new(next(s), next(s), next(s));
+        // The masks, and the hits of the lanes settled in SIMD: all that the traversal reads.
+        let bits = |h: &LaneHits<8>| {
+            let lanes = (0..8).filter(|&i| h.exact & (1 << i) != 0);
+            let hits = lanes
+                .map(|i| h.hit(i))
+                .map(|h| [h.t, h.t_error, h.b0, h.b1, h.b2]);
+            let hits: Vec<u32> = hits.flatten().map(f32::to_bits).collect();
+            (h.candidates, h.exact, hits)
+        };
+        let mut exact = 0;
+        for round in 0..20_000 {
+            // Eight triangles (a second group of one to four), half of them through the ray's
+            // aim point, so that edge functions round to zero and lanes go to the scalar test.
+            let aim = point(&mut state) * 0.5;
+            let count = 5 + round % 4;
+            let triangles: Vec<[Vec3; 3]> = (0..count)
+                .map(|i| {
+                    let a = if i % 2 == 0 { aim } else { point(&mut state) };
+                    [a, point(&mut state), point(&mut state)]
+                })
+                .collect();
+            let origin = point(&mut state) * 4.0;
+            let dir = match state % 5 {
+                0 => Vec3::new(0.0, -0.0, 1.0) * origin.z.signum() * -1.0,
+                1 => Vec3::new(f32::MIN_POSITIVE, 1.0, -0.0),
+                _ => aim - origin,
+            };
+            let ray = Ray {
+                origin,
+                dir,
+                t_max: f32::INFINITY,
+            };
+            let quad_ray = QuadRay::new(&ShearedRay::new(&ray));
+            let ids: Vec<u32> = (0..count as u32).collect();
+            let quads: Vec<Quad> = Quad::pack(&triangles, &ids, 0).collect();
+            let four = quad_ray.intersect_pair(&quads[0], &quads[1]);
+            // SAFETY: this processor has AVX (checked above).
+            let eight = unsafe {
+                super::super::quad_avx::intersect_pair_avx(&quad_ray, &quads[0], &quads[1])
+            };
+            assert_eq!(bits(&eight), bits(&four), "{triangles:?} by {ray:?}");
+            exact += four.exact.count_ones();
+        }
+        // About 7,700 here: a sanity check that the comparison is not vacuous.
+        assert!(exact > 5_000, "only {exact} lanes settled in SIMD");
+    }
+
+    #[test]
     fn a_short_leaf_masks_its_unused_lanes() {
         let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
-        let quads: Vec<Quad> = Quad::pack(&[t; 6], 10).collect();
+        let quads: Vec<Quad> = Quad::pack(&[t; 6], &[20, 21, 22, 23, 24, 25], 10).collect();
         assert_eq!(quads.len(), 2);
         assert_eq!((quads[0].entry, quads[0].valid), (10, 0b1111));
         assert_eq!((quads[1].entry, quads[1].valid), (14, 0b0011));
+        assert_eq!(
+            (quads[0].original, quads[1].original),
+            ([20, 21, 22, 23], [24, 25, 24, 24])
+        );
         let ray = Ray {
             origin: Vec3::new(0.25, 0.25, 1.0),
             dir: -Vec3::Z,

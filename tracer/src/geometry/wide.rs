@@ -18,8 +18,9 @@
 //! bit.
 //!
 //! Leaves are the binary tree's leaves, the same runs of `Accel::vertices`, packed four triangles
-//! to a group for the SIMD triangle test of `quad.rs`; `Accel::vertices` stays for the scalar
-//! test, which settles what the SIMD one leaves.
+//! to a group for the SIMD triangle test of `quad.rs` (with AVX, a leaf's first two groups in one
+//! step of eight lanes, `quad_avx.rs`); `Accel::vertices` stays for the scalar test, which
+//! settles what the SIMD one leaves.
 
 use super::bvh::{Accel, Closest};
 #[cfg(target_arch = "x86_64")]
@@ -33,8 +34,9 @@ use glam::Vec3;
 use obvhs::bvh2::Bvh2;
 use std::mem::MaybeUninit;
 
-/// The instructions that test a node's boxes: AVX where the processor has it, else SSE (or
-/// plain code off x86-64). Either gives the same results bit for bit; only speed differs.
+/// The instructions that test a node's boxes and a leaf's triangles: AVX where the processor
+/// has it (eight boxes, and two groups of four triangles, per step), else SSE (or plain code
+/// off x86-64). Either gives the same results bit for bit; only speed differs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum BoxSimd {
     /// Two steps of four lanes: SSE2 on x86-64 (every x86-64 processor), plain code elsewhere.
@@ -79,8 +81,9 @@ impl Bvh8 {
     /// Collapses `bvh`: each node takes its binary node's two children, then repeatedly
     /// replaces the inner child with the largest surface area by its two children, until it has
     /// eight or only leaves. Deterministic: ties go to the first such child.
-    /// Leaves are packed into groups of four triangles from `vertices` (`Accel::vertices`).
-    pub(super) fn collapse(bvh: &Bvh2, vertices: &[[Vec3; 3]]) -> Bvh8 {
+    /// Leaves are packed into groups of four triangles from `vertices` (`Accel::vertices`),
+    /// with their input triangles from `original` (`Accel::original`).
+    pub(super) fn collapse(bvh: &Bvh2, vertices: &[[Vec3; 3]], original: &[u32]) -> Bvh8 {
         if bvh.nodes.is_empty() {
             return Bvh8::default();
         }
@@ -129,8 +132,12 @@ impl Bvh8 {
                         u32::try_from(quads.len()).expect("fewer groups than leaf entries");
                     node.count[lane] = u8::try_from(child.prim_count)
                         .expect("build.rs clamps leaves to 255 triangles");
-                    let leaf = &vertices[first..first + child.prim_count as usize];
-                    quads.extend(Quad::pack(leaf, child.first_index));
+                    let end = first + child.prim_count as usize;
+                    quads.extend(Quad::pack(
+                        &vertices[first..end],
+                        &original[first..end],
+                        child.first_index,
+                    ));
                 } else {
                     let index = nodes.len();
                     nodes.push(Node8::EMPTY);
@@ -181,9 +188,9 @@ impl Accel {
         self.traverse_with::<ANY_HIT, CERTAIN, Portable>(ray, stats)
     }
 
-    /// The traversal compiled with AVX enabled: its box test inlined as AVX instructions, and
-    /// the rest of it (the SSE triangle test, the scalar code) VEX-encoded, which runs the same
-    /// IEEE operations. No fused multiply-add: that is a separate feature, not enabled, and Rust
+    /// The traversal compiled with AVX enabled: its box test and its test of two triangle
+    /// groups inlined as AVX instructions, and the rest of it (the four-lane triangle test of a
+    /// leaf's last odd group, the scalar code) VEX-encoded, which runs the same IEEE operations. No fused multiply-add: that is a separate feature, not enabled, and Rust
     /// never contracts a multiplication and an addition on its own.
     ///
     /// # Safety
@@ -264,7 +271,7 @@ impl Accel {
                 if count > 0 {
                     // A nearer leaf may have moved the closest hit in front of this one.
                     if t <= cull(&closest)
-                        && self.test_leaf::<ANY_HIT>(
+                        && self.test_leaf::<ANY_HIT, B>(
                             node.index[lane],
                             count,
                             &sheared,
@@ -311,7 +318,7 @@ impl Accel {
     }
 
     /// Asks for the memory of every child the ray entered (an inner node's four cache lines, a
-    /// leaf's first group) before any of it is read. On large meshes the traversal waits mostly
+    /// leaf's first two groups) before any of it is read. On large meshes the traversal waits mostly
     /// on cache misses, one at a time: the next node's address is known only once its parent is
     /// tested, and a leaf's triangles only once its box is. Prefetching all of a node's entered
     /// children at once lets their misses overlap, and the leaf tests that come first hide
@@ -325,10 +332,17 @@ impl Accel {
             let index = node.index[lane] as usize;
             if node.count[lane] > 0 {
                 if let Some(quad) = self.wide.quads.get(index) {
+                    // A group is three whole lines (`Quad` is aligned to them); a leaf of five
+                    // or more triangles has a second group, tested in the same step with AVX.
+                    let groups = if node.count[lane] as usize > LANES {
+                        2
+                    } else {
+                        1
+                    };
                     let start = (quad as *const Quad).cast::<u8>();
-                    prefetch(start);
-                    prefetch(start.wrapping_add(64));
-                    prefetch(start.wrapping_add(128));
+                    for line in 0..3 * groups {
+                        prefetch(start.wrapping_add(64 * line));
+                    }
                 }
             } else if let Some(child) = self.wide.nodes.get(index) {
                 let start = (child as *const Node8).cast::<u8>();
@@ -337,48 +351,6 @@ impl Accel {
                 }
             }
         }
-    }
-
-    /// Tests the `count` triangles of the leaf whose groups start at `first`: the SIMD filter
-    /// four at a time, then the scalar test on the lanes it leaves. Returns whether any became
-    /// the closest hit (with `ANY_HIT`, stops at the first). Every triangle up to where it
-    /// stops counts as tested, filtered out or not.
-    #[inline(always)]
-    fn test_leaf<const ANY_HIT: bool>(
-        &self,
-        first: u32,
-        count: u32,
-        sheared: &ShearedRay,
-        quad_ray: &QuadRay,
-        closest: &mut Closest,
-        stats: &mut TraversalStats,
-    ) -> bool {
-        let groups = (count as usize).div_ceil(LANES);
-        let first = first as usize;
-        let mut found = false;
-        for quad in &self.wide.quads[first..first + groups] {
-            let quad_hits = quad_ray.intersect(quad);
-            let mut candidates = quad_hits.candidates;
-            while candidates != 0 {
-                let lane = candidates.trailing_zeros();
-                candidates &= candidates - 1;
-                let k = (quad.entry + lane) as usize;
-                let kept = if quad_hits.exact & (1 << lane) != 0 {
-                    closest.offer_hit(quad_hits.hit(lane as usize), self.original[k])
-                } else {
-                    closest.offer(sheared, &self.vertices[k], self.original[k])
-                };
-                if kept {
-                    found = true;
-                    if ANY_HIT {
-                        stats.triangles += u64::from(lane + 1);
-                        return true;
-                    }
-                }
-            }
-            stats.triangles += u64::from(quad.len);
-        }
-        found
     }
 }
 

@@ -1,0 +1,171 @@
+//! A leaf's triangles as the wide traversal tests them: the SIMD filter four at a time
+//! (`quad.rs`), or eight, two groups in one step, where the box test's instructions have the
+//! lanes (`quad_avx.rs`), then the scalar watertight test on the lanes it leaves.
+//!
+//! **Exactness.** Whatever the lanes, each candidate is offered to [`Closest`] lowest lane
+//! first, with the SIMD test's own hit where that is the scalar test's result, else through
+//! the scalar test; since [`Closest::offer`] keeps the closest hit with ties broken by
+//! triangle index, the order of offers never changes the result, and an any-hit query stops at
+//! the same triangle whether it came in a pair or a group. Counted work is the same too: a
+//! pair counts what its two groups count one by one.
+
+use super::TraversalStats;
+use super::bvh::{Accel, Closest};
+use super::node8::BoxTest;
+use super::quad::{LANES, LaneHits, Quad, QuadRay};
+use super::triangle::ShearedRay;
+
+impl Accel {
+    /// Tests the `count` triangles of the leaf whose groups start at `first`: the SIMD filter
+    /// four at a time (eight, two groups in one step, where `B` has the lanes), then the
+    /// scalar test on the lanes it leaves. Returns whether any became the closest hit (with
+    /// `ANY_HIT`, stops at the first). Every triangle up to where it stops counts as tested,
+    /// filtered out or not, so pairs count what groups one by one count.
+    #[inline(always)]
+    pub(super) fn test_leaf<const ANY_HIT: bool, B: BoxTest>(
+        &self,
+        first: u32,
+        count: u32,
+        sheared: &ShearedRay,
+        quad_ray: &QuadRay,
+        closest: &mut Closest,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        let groups = (count as usize).div_ceil(LANES);
+        let first = first as usize;
+        let quads = &self.wide.quads[first..first + groups];
+        let mut found = false;
+        let mut g = 0;
+        while g < groups {
+            // Only a leaf's last group is partial, so a pair's first group is full: counting
+            // a pair's lanes up to a stop counts what testing its groups one by one counts.
+            let (stopped, step) = if B::PAIRS && g + 1 < groups {
+                let pair = &quads[g..g + 2];
+                let hits = B::intersect_pair(quad_ray, &pair[0], &pair[1]);
+                let stopped = self
+                    .offer_lanes::<ANY_HIT, 8>(&hits, pair, sheared, closest, &mut found, stats);
+                (stopped, pair)
+            } else {
+                let single = &quads[g..g + 1];
+                let hits = quad_ray.intersect(&single[0]);
+                let stopped = self.offer_lanes::<ANY_HIT, LANES>(
+                    &hits, single, sheared, closest, &mut found, stats,
+                );
+                (stopped, single)
+            };
+            if stopped {
+                return true;
+            }
+            g += step.len();
+            stats.triangles += step.iter().map(|q| u64::from(q.len)).sum::<u64>();
+        }
+        found
+    }
+
+    /// Offers the candidate lanes of `hits` (lane `i` is lane `i % 4` of `groups[i / 4]`) to
+    /// `closest`, lowest lane first: a lane settled in SIMD with its hit, the others through
+    /// the scalar test. Sets `found` when one is kept; returns whether an any-hit query stops
+    /// here, having counted the lanes up to the stopping one as tested.
+    #[inline(always)]
+    fn offer_lanes<const ANY_HIT: bool, const N: usize>(
+        &self,
+        hits: &LaneHits<N>,
+        groups: &[Quad],
+        sheared: &ShearedRay,
+        closest: &mut Closest,
+        found: &mut bool,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        let mut candidates = hits.candidates;
+        while candidates != 0 {
+            let lane = candidates.trailing_zeros();
+            candidates &= candidates - 1;
+            let group = &groups[lane as usize / LANES];
+            let i = lane as usize % LANES;
+            let original = group.original[i];
+            let kept = if hits.exact & (1 << lane) != 0 {
+                closest.offer_hit(hits.hit(lane as usize), original)
+            } else {
+                let k = (group.entry as usize) + i;
+                closest.offer(sheared, &self.vertices[k], original)
+            };
+            if kept {
+                *found = true;
+                if ANY_HIT {
+                    stats.triangles += u64::from(lane + 1);
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{BoxSimd, BuildQuality, Ray};
+    use crate::scene::Triangle;
+    use glam::Vec3;
+
+    #[test]
+    fn leaves_of_five_to_eight_triangles_find_the_same_hits_through_avx_pairs_and_sse_groups() {
+        // Long thin slivers crossing a small cube: their boxes overlap so much that obvhs's
+        // collapse keeps leaves of up to eight, which the AVX traversal tests two groups at a
+        // time and the SSE one group by group.
+        let mut state = 0x0005_ca1e;
+        let mut next = || 2.0 * crate::geometry::build::tests::next(&mut state) - 1.0;
+        let triangles: Vec<Triangle> = (0..600)
+            .map(|_| {
+                let a = Vec3::new(next(), next(), next());
+                let d = Vec3::new(next(), next(), next()) * 3.0;
+                let e = Vec3::new(next(), next(), next()) * 0.05;
+                Triangle {
+                    p: [a - d, a + d, a + e],
+                    n: None,
+                    uv: None,
+                    material: 0,
+                }
+            })
+            .collect();
+        let mut avx = Accel::build(&triangles, BuildQuality::Medium);
+        let pairs = avx
+            .wide
+            .nodes
+            .iter()
+            .flat_map(|node| node.count)
+            .filter(|&c| c as usize > LANES)
+            .count();
+        assert!(
+            pairs > 10,
+            "only {pairs} leaves of more than four triangles"
+        );
+        if !avx.set_box_simd(BoxSimd::Avx) {
+            eprintln!("skipped the comparison: this processor has no AVX");
+            return;
+        }
+        let mut sse = avx.clone();
+        assert!(sse.set_box_simd(BoxSimd::Sse));
+        let (mut avx_stats, mut sse_stats) = (TraversalStats::default(), TraversalStats::default());
+        let mut hits = 0;
+        for i in 0..3000 {
+            let origin = Vec3::new(next(), next(), next()) * 4.0;
+            let aim = Vec3::new(next(), next(), next()) * 0.5;
+            let ray = Ray {
+                origin,
+                dir: aim - origin,
+                t_max: if i % 3 == 0 { 0.9 } else { f32::INFINITY },
+            };
+            let hit = avx.intersect(&ray, &mut avx_stats);
+            assert_eq!(hit, sse.intersect(&ray, &mut sse_stats), "{ray:?}");
+            assert_eq!(
+                avx.occluded(&ray, &mut avx_stats),
+                sse.occluded(&ray, &mut sse_stats),
+                "{ray:?}"
+            );
+            assert_eq!(avx_stats, sse_stats, "the same work, ray {i}");
+            hits += hit.is_some() as u32;
+        }
+        assert!(hits > 1000, "only {hits} hits");
+    }
+}
