@@ -7,7 +7,8 @@
 mod common;
 
 use common::{
-    frames, free_port, keygen, repo, run_ok, spawn_reading, tessera, wait_for, wait_success,
+    frames, free_port, keygen, repo, run_ok, spawn_reading, tessera, tiles_of, wait_for,
+    wait_success,
 };
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -290,22 +291,12 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
     }
 }
 
-/// The frames of `stats.json` in `out` in which `peer` rendered at least one tile.
-fn frames_rendered_by(out: &Path, peer: u32) -> Vec<u64> {
-    let stats: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
-    stats["frames"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|frame| {
-            frame["tiles"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .any(|tile| tile["peer"] == peer)
-        })
-        .map(|frame| frame["frame"].as_u64().unwrap())
+/// The frames (numbered from 0, as these renders are) in which `peer` rendered a tile.
+fn frames_rendered_by(out: &Path, peer: u64) -> Vec<u64> {
+    (0u64..)
+        .zip(tiles_of(out, peer))
+        .filter(|(_, tiles)| *tiles > 0)
+        .map(|(frame, _)| frame)
         .collect()
 }
 

@@ -11,7 +11,7 @@
 mod common;
 
 use common::slurm::Cluster;
-use common::{frames, keygen, render_alone, repo, spawn_reading, wait_for};
+use common::{frames, keygen, render_alone, repo, spawn_reading, tiles_of, wait_for};
 use runtime::slurm::{Env, Overrides, Role, Step, default_port};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -586,23 +586,4 @@ fn assert_frames_match(out: &Path, expected: Vec<(String, Vec<u8>)>) {
             out.display()
         );
     }
-}
-
-/// How many tiles peer `peer` rendered in each frame, from the owner's stats.json.
-fn tiles_of(out: &Path, peer: u64) -> Vec<usize> {
-    let stats: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
-    stats["frames"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|frame| {
-            frame["tiles"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .filter(|tile| tile["peer"] == peer)
-                .count()
-        })
-        .collect()
 }

@@ -134,3 +134,22 @@ pub fn wait_success(mut child: Child, what: &str, timeout: Duration) {
         std::thread::sleep(Duration::from_millis(50));
     }
 }
+
+/// How many tiles peer `peer` rendered in each frame, from the owner's stats.json.
+pub fn tiles_of(out: &Path, peer: u64) -> Vec<usize> {
+    let stats: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    stats["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|frame| {
+            frame["tiles"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter(|tile| tile["peer"] == peer)
+                .count()
+        })
+        .collect()
+}
