@@ -152,3 +152,11 @@ for variant in "relearn:" "static:$STATIC"; do
         --charts peers --gantt 64:pbt+steal:1024:12 --out $R/relearn/glass-$name
 done
 rm -f $R/relearn/synthetic-*/gantt.svg
+
+# 11. The seed's claims (sections 1 to 3) again with every default of today: interleaved deal,
+#     tiles cut on the way, backups, frames in flight, motion compensation, re-predicting
+#     pieces; every policy.
+$T simulate $GLASS $NET --peers 4,16,64,256 --tiles 1024,4096 --charts peers \
+    --out $R/defaults/glass
+$T simulate synthetic $NET --peers 16,64,256 --tiles 4096 --charts peers \
+    --out $R/defaults/synthetic
