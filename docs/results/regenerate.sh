@@ -160,3 +160,5 @@ $T simulate $GLASS $NET --peers 4,16,64,256 --tiles 1024,4096 --charts peers \
     --out $R/defaults/glass
 $T simulate synthetic $NET --peers 16,64,256 --tiles 4096 --charts peers \
     --out $R/defaults/synthetic
+$T simulate $GLASS $NET --peers 4,16,64 --tiles 16,64,256,1024,4096,16384 --charts tiles \
+    --out $R/defaults/glass-tiles
