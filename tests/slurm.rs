@@ -125,7 +125,8 @@ fn a_three_task_step_renders_what_one_peer_renders() {
 }
 
 /// `--expect 1` on a three-task step: task 0 starts with task 1 alone, and the render completes
-/// without task 2, which never comes; task 2's rank is still refused more than the step has.
+/// without task 2, which never comes. An `--expect` above the step's other tasks is refused,
+/// naming the flag.
 #[test]
 fn with_expect_task_zero_starts_without_the_tasks_that_never_come() {
     let dir = tempfile::tempdir().unwrap();

@@ -217,14 +217,7 @@ impl<C: Ord + Copy> Membership<C> {
             return;
         }
         self.started = true;
-        let addresses: Vec<PeerAddress> = self
-            .members
-            .iter()
-            .map(|(&peer, (_, remote))| PeerAddress {
-                peer,
-                addr: remote.clone(),
-            })
-            .collect();
+        let addresses = self.addresses();
         for (&peer, &(conn, _)) in &self.members {
             self.out.push_back(Action::Send {
                 conn,
@@ -239,14 +232,7 @@ impl<C: Ord + Copy> Membership<C> {
     /// `peer` became a member on `conn` after the render started: it learns where everyone
     /// is, everyone learns where it is, and it joins the frames.
     fn admit_late(&mut self, peer: PeerId, conn: C, remote: String) {
-        let addresses: Vec<PeerAddress> = self
-            .members
-            .iter()
-            .map(|(&peer, (_, remote))| PeerAddress {
-                peer,
-                addr: remote.clone(),
-            })
-            .collect();
+        let addresses = self.addresses();
         self.out.push_back(Action::Send {
             conn,
             message: Message::Peers { peers: addresses },
@@ -267,6 +253,17 @@ impl<C: Ord + Copy> Membership<C> {
 
     pub fn poll_action(&mut self) -> Option<Action<C>> {
         self.out.pop_front()
+    }
+
+    /// Where every member listens, in id order: what `Peers` tells.
+    fn addresses(&self) -> Vec<PeerAddress> {
+        self.members
+            .iter()
+            .map(|(&peer, (_, remote))| PeerAddress {
+                peer,
+                addr: remote.clone(),
+            })
+            .collect()
     }
 
     /// Whether `peer` is a member or is loading the scene on some connection.

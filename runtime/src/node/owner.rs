@@ -89,14 +89,15 @@ impl Owner {
         };
         let mut director = Director::new(me, job.partitioner, config);
         let mut checkpoints = job.checkpoint.map(Checkpoints::new);
-        // Results of the first frame kept by a stopped render, for its ledger.
+        // Results of the first frame kept by a stopped render, for its ledger. The director
+        // deals `job.first` first, cut into the checkpoint's tiles, so the first deal takes them.
         let mut kept = checkpoints
             .as_mut()
             .and_then(|c| c.plan.resume.take())
             .filter(|kept| kept.frame.0 == u64::from(job.first))
             .map(|kept| {
                 director.resume_with(kept.tiles);
-                (kept.frame, kept.results)
+                kept.results
             });
         let mut report = PeerReport::new();
         while membership.members() < expect {
@@ -108,13 +109,7 @@ impl Owner {
         while !director.is_finished() {
             let now = self.session.now();
             while let Some(deal) = director.poll_deal(now)? {
-                let done = match kept.take() {
-                    Some((frame, results)) if frame == deal.frame => results,
-                    other => {
-                        kept = other;
-                        Vec::new()
-                    }
-                };
+                let done = kept.take().unwrap_or_default();
                 self.session.core.resume_frame(
                     now,
                     deal.frame,
