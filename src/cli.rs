@@ -123,7 +123,7 @@ pub struct KeygenArgs {
 }
 
 /// Overrides of a scene's image settings, shared by every command that renders a scene as it
-/// is (`render`, `serve`, `bench`); applied by `render::load_scene`.
+/// is (`render`, `serve`, `bench`); applied by [`ImageArgs::apply`].
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct ImageArgs {
     /// Samples per pixel (default: the scene's).
@@ -136,6 +136,25 @@ pub struct ImageArgs {
     #[arg(long)]
     pub height: Option<u32>,
 }
+
+impl ImageArgs {
+    /// Overrides `settings` with the flags given, then checks the image is not empty.
+    pub fn apply(&self, settings: &mut tracer::scene::RenderSettings) -> anyhow::Result<()> {
+        settings.samples_per_pixel = self.spp.unwrap_or(settings.samples_per_pixel);
+        settings.width = self.width.unwrap_or(settings.width);
+        settings.height = self.height.unwrap_or(settings.height);
+        anyhow::ensure!(
+            settings.width > 0 && settings.height > 0,
+            "the image must be at least 1x1 pixels"
+        );
+        anyhow::ensure!(
+            settings.samples_per_pixel > 0,
+            "samples per pixel must be at least 1"
+        );
+        Ok(())
+    }
+}
+
 
 /// What to render and how; shared by `render` and `serve`.
 #[derive(Debug, clap::Args)]
@@ -254,11 +273,6 @@ pub fn flag_name<T: ValueEnum>(value: &T) -> String {
         .to_string()
 }
 
-/// The value the command line would read from `name`, if any.
-pub fn parse_flag<T: ValueEnum>(name: &str) -> Option<T> {
-    T::from_str(name, false).ok()
-}
-
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum BalancerKind {
     /// The Prediction Binary Tree: tiles sized by last frame's measured cost.
@@ -276,6 +290,15 @@ pub enum DealOrder {
     /// Tiles dealt in turn to the peer with the least predicted work: shares spread over the
     /// image and balanced in cost.
     Interleaved,
+}
+
+impl From<BalancerKind> for balancer::Kind {
+    fn from(kind: BalancerKind) -> Self {
+        match kind {
+            BalancerKind::Pbt => balancer::Kind::Pbt,
+            BalancerKind::Regular => balancer::Kind::Regular,
+        }
+    }
 }
 
 impl From<DealOrder> for balancer::Order {
@@ -300,13 +323,19 @@ pub enum EffectsChoice {
 mod tests {
     use super::*;
 
-    /// A deal has one name: the flag's spelling is the one the balancer's files use.
+    /// A deal and a balancer have one name each: the flag's spelling is the one the
+    /// balancer's files use, which `simulate --validate` reads back from `stats.json`.
     #[test]
-    fn deal_flags_are_spelled_as_the_balancer_serialises_them() {
+    fn deal_and_balancer_flags_are_spelled_as_the_balancer_serialises_them() {
         for deal in DealOrder::value_variants() {
             let serde =
                 serde_json::to_string(&balancer::Order::from(*deal)).expect("an enum serialises");
             assert_eq!(format!("\"{}\"", flag_name(deal)), serde);
+        }
+        for kind in BalancerKind::value_variants() {
+            let serde =
+                serde_json::to_string(&balancer::Kind::from(*kind)).expect("an enum serialises");
+            assert_eq!(format!("\"{}\"", flag_name(kind)), serde);
         }
     }
 }

@@ -1,7 +1,8 @@
-//! `tessera keygen`, `tessera peer` and `tessera slurm`: the commands of a real cluster
-//! besides `serve`.
+//! The commands of a real cluster: `tessera serve` (the frame owner), `tessera peer`, `tessera
+//! slurm` (one task of a SLURM step: task 0 serves, the others are peers) and `tessera keygen`.
 
 use crate::cli::{KeygenArgs, PeerArgs, ServeArgs, SlurmArgs};
+use crate::job;
 use anyhow::Context;
 use runtime::net::{ClusterCerts, PeerIdentity};
 use runtime::node;
@@ -10,6 +11,37 @@ use std::net::{Ipv4Addr, SocketAddr, ToSocketAddrs};
 use std::path::Path;
 use std::time::{Duration, Instant};
 use tokio::signal::unix::SignalKind;
+
+/// `tessera serve`: this process owns the frames (peer 0) and renders too; peers join it from
+/// other processes or machines: `--expect` of them before the first frame, any more later.
+pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
+    let identity = PeerIdentity::load(&args.certs, 0)
+        .with_context(|| format!("loading peer 0's certificate from {}", args.certs.display()))?;
+    let threads = args.job.threads.unwrap_or_else(job::available_threads);
+    let options = job::options(&args.job, threads);
+    anyhow::ensure!(
+        args.expect <= options.net.max_connections,
+        "--expect {}: a node accepts at most {} connections",
+        args.expect,
+        options.net.max_connections
+    );
+    job::execute(&args.job, args.expect + 1, threads, |job, sink| {
+        let tokio = job::tokio_runtime()?;
+        tokio.block_on(async {
+            let owner = node::Owner::bind(args.listen, &identity, options)?;
+            tracing::info!(
+                "listening on {}; waiting for {} peers",
+                owner.local_addr()?,
+                args.expect
+            );
+            let (peers, own) = owner.run(job, args.expect, sink).await?;
+            Ok(node::LocalRun {
+                peers,
+                timelines: vec![(runtime_core::wire::PeerId(0), own)],
+            })
+        })
+    })
+}
 
 pub fn keygen(args: &KeygenArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
@@ -93,7 +125,7 @@ pub fn slurm(mut args: SlurmArgs) -> anyhow::Result<()> {
                 "--expect {expect}: the step has only {peers} tasks besides task 0"
             );
             args.job.threads = threads;
-            crate::render::serve(&ServeArgs {
+            serve(&ServeArgs {
                 job: args.job,
                 listen: SocketAddr::from((Ipv4Addr::UNSPECIFIED, step.port)),
                 certs: args.certs,
@@ -154,13 +186,12 @@ fn join(
             certs.display()
         )
     })?;
-    let threads =
-        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let threads = threads.unwrap_or_else(job::available_threads);
     let options = node::Options {
         threads,
         ..node::Options::default()
     };
-    let tokio = crate::render::tokio_runtime()?;
+    let tokio = job::tokio_runtime()?;
     // SIGTERM is how SLURM (preemption, `scancel`, the end of a time limit) and cloud
     // machines about to be taken back ask a process to stop: the peer hands back what it
     // has not started and leaves, so the render loses nothing and waits for no timeout.

@@ -1,10 +1,13 @@
 //! `tessera`: the command line. Thin: it parses arguments, sets up logging and calls the crates.
 //!
 //! - `cli`: the argument definitions (clap); `--help` is generated from their doc comments.
-//! - `render`: `tessera render` (peers in this process) and `tessera serve` (the frame owner of a
-//!   cluster of processes): frames balanced by the PBT or a grid, stolen between peers.
-//! - `cluster`: `tessera keygen`, `tessera peer` and `tessera slurm` (one task of a SLURM step).
-//! - `report`: progress on a terminal, log lines elsewhere, the stats JSON and the tile-map PNGs.
+//! - `render`: `tessera render`, peers in this process: frames balanced by the PBT or a grid,
+//!   stolen between peers.
+//! - `cluster`: `tessera serve` (the frame owner of a cluster of processes), `tessera peer`,
+//!   `tessera slurm` (one task of a SLURM step) and `tessera keygen`.
+//! - `job`: what the commands that render frames share (no command of its own): the scene and
+//!   its overrides, the limits refused before rendering, the stats file and charts.
+//! - `progress`: progress on a terminal, log lines elsewhere.
 //! - `compare`: `tessera compare`, the error metrics of one image against another
 //!   ([`lab::compare`]).
 //! - `accuracy`: `tessera accuracy`, what accuracy costs in time, as a table and a plot
@@ -18,10 +21,9 @@ mod bench;
 mod cli;
 mod cluster;
 mod compare;
-mod frame_files;
+mod job;
+mod progress;
 mod render;
-mod report;
-mod resume;
 mod simulate;
 
 use clap::Parser;
@@ -55,7 +57,7 @@ fn run() -> anyhow::Result<()> {
         .init();
     match cli.command {
         cli::Command::Render(args) => render::run(&args),
-        cli::Command::Serve(args) => render::serve(&args),
+        cli::Command::Serve(args) => cluster::serve(&args),
         cli::Command::Peer(args) => cluster::peer(&args),
         cli::Command::Slurm(args) => cluster::slurm(args),
         cli::Command::Keygen(args) => cluster::keygen(&args),

@@ -2,17 +2,16 @@
 //!
 //! Thin: it parses lists and units, loads (or makes) the trace, runs the sweep through `sim`,
 //! writes its files and prints one line per run. Each run's balancer comes from
-//! `render::partitioner`, so `--tiles M` means here exactly what it means to `tessera render`.
-//! With `--validate STATS` it instead simulates the render a `--stats` file describes and
-//! compares the two, frame by frame.
+//! `balancer::Config::with_tiles`, so `--tiles M` means here exactly what it means to `tessera
+//! render`. With `--validate STATS` it instead simulates the render a `--stats` file describes
+//! and compares the two, frame by frame (`sim::validate`).
 
-use crate::cli::{BalancerKind, DealOrder, parse_flag};
-use crate::report::StatsFile;
+use crate::cli::DealOrder;
 use anyhow::{Context, bail};
-use sim::scenario::{self, DEFAULT_WORK_PER_SECOND, Scenario};
+use runtime_core::stats::StatsFile;
+use sim::scenario::{DEFAULT_WORK_PER_SECOND, Scenario};
 use sim::synthetic::HotSpot;
 use sim::{Crash, GanttChoice, Network, OwnerCosts, Policy, Sweep, Trace};
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -207,57 +206,20 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         tiles: args.tiles.clone(),
         base,
     };
-    let gantt = gantt_choice(args.gantt.as_deref(), &sweep, frames)?;
+    let gantt = GanttChoice::pick(args.gantt.as_deref(), &sweep, frames)?;
     let (width, height) = (trace.width(), trace.height());
     let started = Instant::now();
     let runs = sweep.run(
         &trace,
         |kind, tiles| {
-            let kind = match kind {
-                balancer::Kind::Pbt => BalancerKind::Pbt,
-                balancer::Kind::Regular => BalancerKind::Regular,
-            };
-            crate::render::partitioner(kind, tiles, args.deal, args.motion, width, height)
-                .map_err(|e| sim::Error::Scenario(format!("{e:#}")))
+            let config =
+                balancer::Config::with_tiles(kind, tiles, args.deal.into(), args.motion.0);
+            Ok(balancer::Partitioner::new(width, height, &config)?)
         },
         gantt,
     )?;
     let elapsed = started.elapsed().as_secs_f64();
-    println!(
-        "{:>14} {:>6} {:>6} {:>10} {:>8} {:>8} {:>11} {:>8} {:>10} {:>8} {:>9} {:>9}",
-        "policy",
-        "peers",
-        "tiles",
-        "efficiency",
-        "bound",
-        "idle",
-        "makespan s",
-        "steals",
-        "messages",
-        "wall s",
-        "link P",
-        "owner P"
-    );
-    // The owner limits: peers beyond which the owner's downlink (T1 x B / S) or its control
-    // loop, not rendering, sets the pace.
-    let limit = |p: Option<f64>| p.map_or("-".to_string(), |p| format!("{p:.0}"));
-    for r in &runs {
-        println!(
-            "{:>14} {:>6} {:>6} {:>10.4} {:>8.4} {:>8.4} {:>11.4} {:>8} {:>10} {:>8.2} {:>9} {:>9}",
-            r.policy.to_string(),
-            r.peers,
-            r.tiles,
-            r.efficiency,
-            r.bound_efficiency,
-            r.idle_fraction,
-            r.makespan,
-            r.steals,
-            r.messages,
-            r.wall_seconds,
-            limit(r.owner_link_limit),
-            limit(r.owner_cpu_limit)
-        );
-    }
+    print!("{}", sim::report::table(&runs));
     let title = format!(
         "{} ({}x{}, {frames} frames, tiles dealt {})",
         trace.header.source,
@@ -361,66 +323,6 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
     Ok(scenario)
 }
 
-fn gantt_choice(
-    spec: Option<&str>,
-    sweep: &Sweep,
-    frames: usize,
-) -> anyhow::Result<Option<GanttChoice>> {
-    let middle = (frames / 2) as u64;
-    let Some(spec) = spec else {
-        let peers = sweep
-            .peers
-            .iter()
-            .copied()
-            .filter(|&p| p <= 16)
-            .max()
-            .or(sweep.peers.iter().copied().min());
-        let both: Policy = "pbt+steal".parse().expect("a valid policy name");
-        let policy = if sweep.policies.contains(&both) {
-            Some(both)
-        } else {
-            sweep.policies.last().copied()
-        };
-        return Ok(match (peers, policy) {
-            (Some(peers), Some(policy)) => Some(GanttChoice {
-                peers,
-                policy,
-                tiles: sweep.tiles[0],
-                frame: middle,
-            }),
-            _ => None,
-        });
-    };
-    let parts: Vec<&str> = spec.split(':').collect();
-    let bad = || {
-        anyhow::anyhow!(
-            "--gantt {spec:?}: expected PEERS:POLICY:TILES[:FRAME], e.g. 16:pbt+steal:256"
-        )
-    };
-    let (peers, policy, tiles) = match parts.as_slice() {
-        [peers, policy, tiles] | [peers, policy, tiles, _] => (
-            peers.parse().map_err(|_| bad())?,
-            policy.parse().map_err(|_| bad())?,
-            tiles.parse().map_err(|_| bad())?,
-        ),
-        _ => return Err(bad()),
-    };
-    let frame = match parts.get(3) {
-        Some(frame) => frame.parse().map_err(|_| bad())?,
-        None => middle,
-    };
-    anyhow::ensure!(
-        sweep.combinations().contains(&(tiles, policy, peers)),
-        "--gantt {spec:?} names a run the sweep does not make (check --peers, --policy and --tiles)"
-    );
-    Ok(Some(GanttChoice {
-        peers,
-        policy,
-        tiles,
-        frame,
-    }))
-}
-
 /// The owner's modelled costs, as `--owner-costs` names them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum OwnerCostsChoice {
@@ -437,31 +339,6 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
         .with_context(|| format!("reading {}", stats_path.display()))?;
     let stats: StatsFile = serde_json::from_str(&text)
         .with_context(|| format!("{} is not a tessera stats file", stats_path.display()))?;
-    anyhow::ensure!(
-        !stats.frames.is_empty(),
-        "{} has no frames",
-        stats_path.display()
-    );
-    let Some(kind) = parse_flag::<BalancerKind>(&stats.balancer) else {
-        bail!(
-            "unknown balancer {:?} in {}",
-            stats.balancer,
-            stats_path.display()
-        );
-    };
-    let deal = match stats.deal.as_str() {
-        "" => DealOrder::Contiguous,
-        name => match parse_flag::<DealOrder>(name) {
-            Some(deal) => deal,
-            None => bail!("unknown deal {name:?} in {}", stats_path.display()),
-        },
-    };
-    // The render's own prediction, not this command's --motion: the tiles must be cut alike.
-    let motion = match stats.motion.as_str() {
-        "" => crate::cli::Motion(None),
-        text => crate::cli::parse_motion(text)
-            .map_err(|e| anyhow::anyhow!("motion in {}: {e}", stats_path.display()))?,
-    };
     let steal = match args.policy.as_slice() {
         [] => true,
         [policy] => policy.steal,
@@ -469,87 +346,21 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
             "--validate simulates one run: give at most one --policy (its balancer must be the render's)"
         ),
     };
-    // Rate: counted work over busy slot time, over the frames every peer reported.
-    let complete = || stats.frames.iter().filter(|f| f.peers.len() == stats.peers);
-    let busy: f64 = complete()
-        .flat_map(|f| f.peers.iter().map(|p| p.busy_seconds))
-        .sum();
-    let work: u64 = complete().map(|f| f.work).sum();
-    let rate = match args.rate {
-        Some(rate) => rate,
-        None if busy > 0.0 => work as f64 / busy,
-        None => bail!(
-            "{} has no frame with every peer's statistics: pass --rate",
-            stats_path.display()
-        ),
+    let given = sim::validate::Given {
+        steal,
+        rate: args.rate,
+        slots: args.slots,
+        frames: args.frames,
     };
-    let threads = stats
-        .frames
-        .iter()
-        .flat_map(|f| f.peers.first())
-        .map(|p| p.threads as usize)
-        .next();
-    let slots = args.slots.or(threads).unwrap_or(1);
-    let frames = stats.frames.len().min(args.frames.unwrap_or(usize::MAX));
-    let mut scenario = base_scenario(args, slots, rate)?;
-    scenario.peers = stats.peers;
-    // As the real runtime does: only stealing follows the flag, backups stay on.
-    scenario.core.steal = steal;
-    scenario.frames = Some(frames);
-    scenario.keep_assignments = true;
-    let tiles = stats.frames[0].tiles.len();
-    let partitioner =
-        crate::render::partitioner(kind, tiles, deal, motion, trace.width(), trace.height())?;
-    let run = scenario::run(trace, partitioner, &scenario)?;
-    let mut csv = String::from("frame,measured_s,simulated_s,ratio,tiles,same_initial_sets\n");
-    println!(
-        "simulating {} peers x {slots} slots, {} with{} stealing, {tiles} tiles, motion {motion}, at {rate:.4e} work/s per slot",
-        stats.peers,
-        stats.balancer,
-        if steal { "" } else { "out" }
-    );
-    println!(
-        "{:>6} {:>11} {:>12} {:>8} {:>13}",
-        "frame", "measured s", "simulated s", "ratio", "same sets"
-    );
-    let (mut agree, mut measured_total, mut simulated_total) = (0, 0.0, 0.0);
-    for (index, (real, simulated)) in stats
-        .frames
-        .iter()
-        .zip(&run.frames)
-        .enumerate()
-        .take(frames)
-    {
-        let mut real_sets: Vec<&crate::report::TileStats> = real.tiles.iter().collect();
-        real_sets.sort_by_key(|t| t.tile);
-        let dealt = &run.assignments[index];
-        let same = real_sets.len() == dealt.len()
-            && real_sets.iter().zip(dealt).all(|(t, (rect, peer))| {
-                t.rect == [rect.x, rect.y, rect.w, rect.h] && t.initial_peer == *peer
-            });
-        agree += usize::from(same);
-        measured_total += real.seconds;
-        simulated_total += simulated.makespan;
-        let ratio = simulated.makespan / real.seconds;
-        println!(
-            "{index:>6} {:>11.4} {:>12.4} {ratio:>8.3} {same:>13}",
-            real.seconds, simulated.makespan
-        );
-        let _ = writeln!(
-            csv,
-            "{index},{},{},{ratio},{},{same}",
-            real.seconds,
-            simulated.makespan,
-            real.tiles.len()
-        );
-    }
+    // Slots and rate are the validation's to choose: the base's are placeholders.
+    let base = base_scenario(args, 1, DEFAULT_WORK_PER_SECOND)?;
+    let validation = sim::validate::validate(trace, &stats, base, given)
+        .with_context(|| format!("simulating the render {} describes", stats_path.display()))?;
+    print!("{}", validation.table());
     std::fs::create_dir_all(&args.out)?;
     let path = args.out.join("validation.csv");
-    std::fs::write(&path, csv).with_context(|| format!("writing {}", path.display()))?;
-    println!(
-        "total: measured {measured_total:.3} s, simulated {simulated_total:.3} s, ratio {:.3}; initial tile sets identical in {agree} of {frames} frames; wrote {}",
-        simulated_total / measured_total,
-        path.display()
-    );
+    std::fs::write(&path, validation.csv())
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("{}; wrote {}", validation.totals(), path.display());
     Ok(())
 }

@@ -36,7 +36,9 @@ use serde::{Deserialize, Serialize};
 use crate::assign::{self, Assignment};
 use crate::{CostMap, Error, Pbt, Rect, Regular};
 
-/// One tile of the partition, with the cost predicted for the next frame.
+/// One tile of the partition, with the cost predicted for the next frame. Why a type of its own:
+/// it is all the balancer knows of a tile (no id, no peer, no pixels), so that the balancer stays
+/// apart from the wire and the tracer; the director numbers it into a `wire::TileSpec`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Tile {
     pub rect: Rect,
@@ -150,6 +152,24 @@ impl Default for Config {
 }
 
 impl Config {
+    /// A partition of about `tiles` tiles of either kind: `tiles` PBT leaves, or for the regular
+    /// grid the nearest k x k grid (k = round(sqrt(tiles)), at least 1), so that one tile count
+    /// means comparable tiles whichever the kind (`--tiles` of `tessera render` and `simulate`).
+    pub fn with_tiles(kind: Kind, tiles: usize, order: Order, motion: Option<u32>) -> Config {
+        let side = ((tiles as f64).sqrt().round() as u32).max(1);
+        Config {
+            kind,
+            leaves: tiles,
+            grid: Grid::Count {
+                columns: side,
+                rows: side,
+            },
+            order,
+            motion,
+            ..Config::default()
+        }
+    }
+
     /// Checks the knobs the chosen [`Kind`] reads.
     pub fn validate(&self) -> Result<(), Error> {
         if !(0.0..1.0).contains(&self.smoothing) {

@@ -84,7 +84,7 @@ fn a_render_over_lossy_links_gives_the_bits_of_one_peer() {
     let remote = lossy
         .iter()
         .flat_map(|f| &f.tiles)
-        .filter(|t| t.peer.0 != 0)
+        .filter(|t| t.peer != 0)
         .count();
     assert!(remote > 0, "peers 1 and 2 rendered nothing");
 }

@@ -21,6 +21,8 @@
 //! - [`sweep`]: many runs (peers x policies x tile counts), in parallel, and everything they
 //!   write: tables, charts, summary.
 //! - [`summary`]: the summary of a sweep in Markdown, organised by the seed's three claims.
+//! - [`validate`]: the simulator against a real render: the run a `stats.json` describes,
+//!   simulated on the render's own trace and compared frame by frame (`simulate --validate`).
 //! - [`plot`]: SVG charts: efficiency against peers and against tiles, and (`plot::gantt`)
 //!   the pictures of who rendered what when, shared with real renders (`tessera render
 //!   --gantt`): one frame in full, and a whole run's utilisation.
@@ -33,6 +35,7 @@ pub mod summary;
 pub mod sweep;
 pub mod synthetic;
 pub mod trace;
+pub mod validate;
 mod world;
 
 pub use network::Network;
@@ -69,7 +72,7 @@ pub enum Error {
     Director(#[from] runtime_core::director::DirectorError),
     #[error("frame {frame} stalled at {at:?}: nothing left to happen, {missing} tiles missing")]
     Stalled {
-        frame: u64,
+        frame: u32,
         at: std::time::Duration,
         missing: usize,
     },

@@ -35,7 +35,7 @@ use crate::{Error, Policy, Scenario};
 /// One frame of one run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FrameReport {
-    pub frame: u64,
+    pub frame: u32,
     pub tiles: usize,
     /// Peers the owner dealt tiles to.
     pub participants: usize,
@@ -123,7 +123,7 @@ pub struct RunReport {
     pub owner_cpu_limit: Option<f64>,
     pub frames: Vec<FrameReport>,
     /// The frame the scenario asked to draw, and every render of it.
-    pub gantt_frame: Option<u64>,
+    pub gantt_frame: Option<u32>,
     #[serde(skip)]
     pub gantt: Vec<GanttBar>,
     /// Each frame's tiles in partition order with the peer that started with each, if the
@@ -276,4 +276,45 @@ pub fn write_runs(dir: &Path, runs: &[RunReport]) -> Result<(), Error> {
 
 pub(crate) fn write(path: &Path, text: &str) -> Result<(), Error> {
     std::fs::write(path, text).map_err(|e| Error::io(path, e))
+}
+
+/// The table `tessera simulate` prints: a line per run. Its last two columns are the owner
+/// limits, the peer counts beyond which the owner's downlink (T1 x B / S) or its control loop,
+/// not rendering, sets the pace (`-` where there is none).
+pub fn table(runs: &[RunReport]) -> String {
+    let mut text = format!(
+        "{:>14} {:>6} {:>6} {:>10} {:>8} {:>8} {:>11} {:>8} {:>10} {:>8} {:>9} {:>9}\n",
+        "policy",
+        "peers",
+        "tiles",
+        "efficiency",
+        "bound",
+        "idle",
+        "makespan s",
+        "steals",
+        "messages",
+        "wall s",
+        "link P",
+        "owner P"
+    );
+    let limit = |p: Option<f64>| p.map_or("-".to_string(), |p| format!("{p:.0}"));
+    for r in runs {
+        let _ = writeln!(
+            text,
+            "{:>14} {:>6} {:>6} {:>10.4} {:>8.4} {:>8.4} {:>11.4} {:>8} {:>10} {:>8.2} {:>9} {:>9}",
+            r.policy.to_string(),
+            r.peers,
+            r.tiles,
+            r.efficiency,
+            r.bound_efficiency,
+            r.idle_fraction,
+            r.makespan,
+            r.steals,
+            r.messages,
+            r.wall_seconds,
+            limit(r.owner_link_limit),
+            limit(r.owner_cpu_limit)
+        );
+    }
+    text
 }

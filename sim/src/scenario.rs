@@ -69,7 +69,7 @@ pub struct Scenario {
     /// Frames to simulate; `None`: as many as the trace has (more repeat it from the start).
     pub frames: Option<usize>,
     /// The frame whose renders are kept for a Gantt chart.
-    pub gantt_frame: Option<u64>,
+    pub gantt_frame: Option<u32>,
     /// Keep every frame's initial assignment (tile rectangles and their peers) in the report,
     /// to compare with a real render's.
     pub keep_assignments: bool,
@@ -270,7 +270,10 @@ pub fn run(
     }
     let wall = Instant::now();
     let maps = trace.cost_maps()?;
-    let frames = scenario.frames.unwrap_or(maps.len()) as u64;
+    let frames = scenario.frames.unwrap_or(maps.len());
+    // Frames are numbered in a `u32` everywhere (the wire, the tracer, the trace's files).
+    let frames = u32::try_from(frames)
+        .map_err(|_| Error::Scenario(format!("{frames} frames: at most {} fit", u32::MAX)))?;
     let speeds = scenario.peer_speeds();
     let seconds_per_unit = 1.0 / scenario.work_per_second;
     let network = &scenario.network;
@@ -306,7 +309,7 @@ pub fn run(
     let mut crashed: BTreeMap<PeerId, Duration> = BTreeMap::new();
     // The crashed peers the director has been told have left.
     let mut left: BTreeSet<PeerId> = BTreeSet::new();
-    let mut plans: BTreeMap<u64, Plan> = BTreeMap::new();
+    let mut plans: BTreeMap<u32, Plan> = BTreeMap::new();
     let mut assignments = Vec::new();
     let mut steps = 0u64;
     let policy = Policy::of(&partitioner, &scenario.core);
@@ -428,14 +431,14 @@ pub fn run(
         .iter()
         .enumerate()
         .map(|(frame, plan)| {
-            let tally = &world.frames[&(frame as u64)];
+            let tally = &world.frames[&(frame as u32)];
             let (completed, _) = tally
                 .completed
                 .expect("invariant: the run loop waits for every frame to complete");
             let from = handed_over.max(tally.started);
             handed_over = handed_over.max(completed);
             let interval = handed_over.saturating_sub(from);
-            frame_report(frame as u64, plan, interval, &world, scenario)
+            frame_report(frame as u32, plan, interval, &world, scenario)
         })
         .collect();
     let mut report = RunReport::new(
@@ -525,7 +528,7 @@ fn feed(director: &mut Director, cluster: &mut Cluster<SimWorld>) -> Result<(), 
 }
 
 fn frame_report(
-    frame: u64,
+    frame: u32,
     plan: &Plan,
     interval: Duration,
     world: &SimWorld,

@@ -133,7 +133,74 @@ pub struct GanttChoice {
     pub peers: usize,
     pub policy: Policy,
     pub tiles: usize,
-    pub frame: u64,
+    pub frame: u32,
+}
+
+impl GanttChoice {
+    /// The run `spec` names as `PEERS:POLICY:TILES[:FRAME]` (the frame defaults to the middle
+    /// of `frames`); without a spec, the sweep's largest peer count up to 16 (else its
+    /// smallest), `pbt+steal` if swept (else the last policy), the first tile count and the
+    /// middle frame. A spec must name a run the sweep makes.
+    pub fn pick(spec: Option<&str>, sweep: &Sweep, frames: usize) -> Result<Option<Self>, Error> {
+        let middle = (frames / 2) as u32;
+        let Some(spec) = spec else {
+            let peers = sweep
+                .peers
+                .iter()
+                .copied()
+                .filter(|&p| p <= 16)
+                .max()
+                .or(sweep.peers.iter().copied().min());
+            let both = Policy {
+                kind: Kind::Pbt,
+                steal: true,
+            };
+            let policy = if sweep.policies.contains(&both) {
+                Some(both)
+            } else {
+                sweep.policies.last().copied()
+            };
+            return Ok(match (peers, policy, sweep.tiles.first()) {
+                (Some(peers), Some(policy), Some(&tiles)) => Some(GanttChoice {
+                    peers,
+                    policy,
+                    tiles,
+                    frame: middle,
+                }),
+                _ => None,
+            });
+        };
+        let bad = |why: &str| {
+            Error::Scenario(format!(
+                "--gantt {spec:?}: {why}"
+            ))
+        };
+        let expected = "expected PEERS:POLICY:TILES[:FRAME], e.g. 16:pbt+steal:256";
+        let parts: Vec<&str> = spec.split(':').collect();
+        let (peers, policy, tiles) = match parts.as_slice() {
+            [peers, policy, tiles] | [peers, policy, tiles, _] => (
+                peers.parse().map_err(|_| bad(expected))?,
+                policy.parse().map_err(|_| bad(expected))?,
+                tiles.parse().map_err(|_| bad(expected))?,
+            ),
+            _ => return Err(bad(expected)),
+        };
+        let frame = match parts.get(3) {
+            Some(frame) => frame.parse().map_err(|_| bad(expected))?,
+            None => middle,
+        };
+        if !sweep.combinations().contains(&(tiles, policy, peers)) {
+            return Err(bad(
+                "names a run the sweep does not make (check --peers, --policy and --tiles)",
+            ));
+        }
+        Ok(Some(GanttChoice {
+            peers,
+            policy,
+            tiles,
+            frame,
+        }))
+    }
 }
 
 impl Sweep {

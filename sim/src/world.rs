@@ -62,16 +62,16 @@ pub(crate) struct SimWorld {
     /// Speed factor of each peer, indexed by peer id.
     speeds: Vec<f64>,
     links: Links,
-    pub(crate) frames: BTreeMap<u64, Tally>,
+    pub(crate) frames: BTreeMap<u32, Tally>,
     /// Tiles each peer has started over the run, indexed by peer id (for crashes on an event).
     pub(crate) starts: Vec<u64>,
     /// The frame whose renders become Gantt bars, with its neighbours' (drawn in grey where
     /// they overlap it).
-    gantt_frame: Option<u64>,
+    gantt_frame: Option<u32>,
     pub(crate) gantt: Vec<GanttBar>,
     /// Pixels begun by some peer, per charted frame: a render of pixels all begun already is a
     /// duplicate on the chart.
-    begun: BTreeMap<u64, Vec<bool>>,
+    begun: BTreeMap<u32, Vec<bool>>,
     pub(crate) fingerprint: Fingerprint,
     /// The owner core's events not yet handed to the director.
     owner_events: Vec<Event>,
@@ -88,7 +88,7 @@ impl SimWorld {
         (seconds_per_unit, tile_overhead): (f64, f64),
         speeds: Vec<f64>,
         links: Links,
-        gantt_frame: Option<u64>,
+        gantt_frame: Option<u32>,
     ) -> Self {
         let peers = speeds.len();
         let block = maps.first().map_or(8, CostMap::block);
@@ -112,11 +112,11 @@ impl SimWorld {
     }
 
     /// The cost map that measures frame `frame`.
-    pub(crate) fn map(&self, frame: u64) -> &CostMap {
-        &self.maps[(frame % self.maps.len() as u64) as usize]
+    pub(crate) fn map(&self, frame: u32) -> &CostMap {
+        &self.maps[frame as usize % self.maps.len()]
     }
 
-    pub(crate) fn begin_frame(&mut self, frame: u64, now: Duration, initial: Vec<PeerId>) {
+    pub(crate) fn begin_frame(&mut self, frame: u32, now: Duration, initial: Vec<PeerId>) {
         let tally = Tally {
             started: now,
             tiles: initial.len(),
@@ -131,7 +131,7 @@ impl SimWorld {
         std::mem::take(&mut self.owner_events)
     }
 
-    fn tally(&mut self, frame: u64) -> Option<&mut Tally> {
+    fn tally(&mut self, frame: u32) -> Option<&mut Tally> {
         self.frames.get_mut(&frame)
     }
 }
@@ -257,7 +257,7 @@ impl World for SimWorld {
                 print.words(&[
                     2,
                     u64::from(peer.0),
-                    item.frame.0,
+                    u64::from(item.frame.0),
                     u64::from(item.tile.id.0),
                 ]);
             }
@@ -290,7 +290,7 @@ impl SimWorld {
                 rendered_by,
                 audit,
             } => {
-                print.words(&[10, frame.0, elapsed.as_nanos() as u64]);
+                print.words(&[10, u64::from(frame.0), elapsed.as_nanos() as u64]);
                 for peer in rendered_by {
                     print.word(u64::from(peer.0));
                 }
@@ -320,10 +320,10 @@ impl SimWorld {
             // The director's cue to deal: what it changes shows in the messages that follow.
             Event::FrameWaning { .. } => {}
             Event::PeerOverdue { frame, peer } => {
-                print.words(&[16, frame.0, u64::from(peer.0)]);
+                print.words(&[16, u64::from(frame.0), u64::from(peer.0)]);
             }
             Event::PeerStats { frame, peer, stats } => {
-                print.words(&[11, frame.0, u64::from(peer.0), stats.busy.as_nanos() as u64]);
+                print.words(&[11, u64::from(frame.0), u64::from(peer.0), stats.busy.as_nanos() as u64]);
             }
             Event::PeerFailed {
                 frame,
@@ -331,7 +331,7 @@ impl SimWorld {
                 reissued,
                 ..
             } => {
-                print.words(&[12, frame.0, u64::from(peer.0), *reissued as u64]);
+                print.words(&[12, u64::from(frame.0), u64::from(peer.0), *reissued as u64]);
                 if let Some(tally) = self.frames.get_mut(&frame.0) {
                     tally.failures += 1;
                 }
@@ -339,13 +339,13 @@ impl SimWorld {
             Event::FaultyPeer {
                 frame, peer, tile, ..
             } => {
-                print.words(&[13, frame.0, u64::from(peer.0), u64::from(tile.0)]);
+                print.words(&[13, u64::from(frame.0), u64::from(peer.0), u64::from(tile.0)]);
                 tracing::error!(%frame, %peer, %tile, "a simulated peer's result was refused");
                 if let Some(tally) = self.frames.get_mut(&frame.0) {
                     tally.faults += 1;
                 }
             }
-            Event::OwnerLost { frame } => print.words(&[14, frame.0]),
+            Event::OwnerLost { frame } => print.words(&[14, u64::from(frame.0)]),
             Event::PeerLeaving { peer } => print.words(&[17, u64::from(peer.0)]),
             Event::Left => print.word(18),
         }
@@ -353,7 +353,7 @@ impl SimWorld {
 }
 
 /// The frame a message belongs to, if it names one.
-fn message_frame(message: &Message) -> Option<u64> {
+fn message_frame(message: &Message) -> Option<u32> {
     match message {
         Message::Assign { frame, .. }
         | Message::StealRequest { frame, .. }
@@ -399,7 +399,7 @@ impl Fingerprint {
             let rect = r.rect;
             let words = [
                 20,
-                r.frame.0,
+                u64::from(r.frame.0),
                 u64::from(r.tile.0),
                 u64::from(rect.x),
                 u64::from(rect.y),

@@ -12,7 +12,9 @@ use serde::{Deserialize, Serialize};
 /// The side of a cost block, in pixels.
 pub const BLOCK_SIZE: u32 = 8;
 
-/// A rectangle of pixels: columns `x..x + w`, rows `y..y + h`.
+/// A rectangle of pixels: columns `x..x + w`, rows `y..y + h`. The tracer's own, as
+/// `balancer::Rect` is the balancer's, so that neither crate depends on the other; the one
+/// place that converts between them is `runtime::node::bundle` (`tracer_rect`, `balancer_rect`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub struct Rect {
     pub x: u32,
@@ -38,7 +40,8 @@ impl Rect {
     }
 }
 
-/// A rendered tile.
+/// A rendered tile. Why a type of its own: it is what the tracer makes of a rectangle, in the
+/// tracer's own terms (float pixels, path statistics); the runtime encodes it for the wire.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TileOutput {
     pub frame: u32,
@@ -49,7 +52,8 @@ pub struct TileOutput {
     pub stats: PathStats,
 }
 
-/// What a tile cost: counted work, overall and per block.
+/// What a tile cost: counted work, overall and per block. Why apart from [`TileOutput`]: it is
+/// the part that travels and is summed into a [`Film`]'s cost map without the pixels.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TileCost {
     pub rays: u64,

@@ -38,11 +38,11 @@ use crate::wire::{self, FrameId, PeerId, TileId, TileResult, TileSpec};
 #[derive(Clone, Debug, PartialEq)]
 pub struct Config {
     /// The frame count of the animation: frames are numbered from 0 to `frames - 1`.
-    pub frames: u64,
+    pub frames: u32,
     /// The first frame to deal. The frames before it are done already (a resumed render), so
     /// the director deals `first..frames`. Default 0. The balancer has then no costs of frame
     /// `first - 1` and cuts `first` as it would cut frame 0; pixels do not depend on tiles.
-    pub first: u64,
+    pub first: u32,
     /// How long after the last frame completes the director waits for participants'
     /// statistics before it finishes without them. Default 1 s: statistics are sent the moment
     /// a peer learns the frame is done, so this only matters for a peer that is dying.
@@ -176,7 +176,7 @@ pub struct Director {
     /// dealt nothing until it shows it is alive.
     overdue: BTreeSet<PeerId>,
     /// The next frame to deal.
-    next: u64,
+    next: u32,
     /// Frames dealt and running in the owner's core, oldest first.
     running: BTreeMap<FrameId, Running>,
     /// Frames complete but not yet handed to the driver, because an older one is still
@@ -189,7 +189,7 @@ pub struct Director {
     /// [`Config::doubt_error`]); `None` before any frame is measured.
     last_error: Option<f64>,
     /// The last frame whose measured costs the balancer took.
-    last_measured: Option<u64>,
+    last_measured: Option<u32>,
     /// Every frame is measured; waiting until this instant at most for the last statistics.
     closing: Option<Duration>,
     finished: bool,
@@ -354,10 +354,8 @@ impl Director {
     }
 
     /// How many frames after the measured frame `measured` the next one dealt is (at least 1).
-    fn ahead_of(&self, measured: u64) -> u32 {
-        u32::try_from(self.next.saturating_sub(measured))
-            .unwrap_or(u32::MAX)
-            .max(1)
+    fn ahead_of(&self, measured: u32) -> u32 {
+        self.next.saturating_sub(measured).max(1)
     }
 
     /// Whether the next frame's prediction is doubted (see [`Config::doubt_error`]).

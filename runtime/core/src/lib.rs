@@ -15,9 +15,12 @@
 //!   machine, so join/leave races are scripted, not timed.
 //! - [`wire`]: the messages peers exchange and their pure, bounded postcard encoding.
 //! - [`rng`]: the one seeded generator every deciding part draws from.
+//! - [`stats`]: what a render records (the `stats.json` schema, a frame's tiles and pieces,
+//!   each peer's timeline), written by the QUIC node's renders and read back by the simulator.
 
 pub mod director;
 pub mod membership;
 pub mod peer;
 pub mod rng;
+pub mod stats;
 pub mod wire;

@@ -27,7 +27,7 @@ use crate::peer::PeerStats;
 mod tests;
 
 /// The version of this protocol. Bump it on any change to [`Message`]'s layout.
-pub const PROTOCOL_VERSION: u32 = 4;
+pub const PROTOCOL_VERSION: u32 = 5;
 
 /// The smallest piece worth cutting a tile into, in pixels: one 8x8 block, the unit the tracer
 /// measures cost in. Below it a piece's transfer and per-piece overhead cost more than its work.
@@ -203,10 +203,12 @@ pub struct PeerId(pub u32);
 #[serde(transparent)]
 pub struct TileId(pub u32);
 
-/// A frame of an animation; frames are numbered upwards and never reused.
+/// A frame of an animation; frames are numbered upwards and never reused. A `u32`, as the
+/// tracer, the scene's frame count and every file number frames: one integer end to end, so
+/// no driver converts (protocol version 5; 4 carried a `u64`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(transparent)]
-pub struct FrameId(pub u64);
+pub struct FrameId(pub u32);
 
 macro_rules! display_id {
     ($($ty:ident => $prefix:literal),*) => {$(
@@ -273,7 +275,9 @@ impl Piece {
 
 /// Work to render: a leaf of the partition, or a piece of one, with the predictor's cost
 /// estimate (in the predictor's units; only ratios between estimates matter to the core).
-/// `rect` is the piece's own rectangle; `id` names the partition's tile it belongs to.
+/// `rect` is the piece's own rectangle; `id` names the partition's tile it belongs to. Why a type
+/// of its own: it is a `balancer::Tile` named for the wire (id, and which piece), the unit every
+/// queue, steal and re-issue moves.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TileSpec {
     pub id: TileId,
@@ -321,7 +325,8 @@ pub fn predicted_share(predicted: f64, whole: Rect, part: Rect) -> f64 {
 }
 
 /// A rendered tile: its pixels (see [`BYTES_PER_PIXEL`]) and its measured block cost map, both
-/// opaque to the scheduling core.
+/// opaque to the scheduling core. Why a type of its own: it is a tracer's `TileOutput` as bytes
+/// on the wire, which the core routes and compares without decoding.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TileResult {
     pub frame: FrameId,

@@ -24,10 +24,6 @@ pub enum BundleError {
     Empty,
     #[error(transparent)]
     Scene(#[from] SceneError),
-    /// A frame number past the tracer's (a `u32`, which its sampler hashes): rendering another
-    /// frame in its place would hand back the wrong pixels, so the tile is refused.
-    #[error("{0} is past the last frame the tracer can render ({max})", max = u32::MAX)]
-    FrameOutOfRange(runtime_core::wire::FrameId),
 }
 
 /// Reads every file `scene` was loaded from, hashed, the TOML first (as in `Scene::files`).
@@ -270,13 +266,6 @@ pub fn tracer_rect(rect: balancer::Rect) -> tracer::Rect {
     }
 }
 
-/// The tracer's frame number for the wire's. The wire numbers frames in a `u64`, the tracer (and
-/// a job's frame count) in a `u32`; this is the runtime's only conversion between them, and it
-/// fails rather than render another frame.
-pub fn tracer_frame(frame: runtime_core::wire::FrameId) -> Result<u32, BundleError> {
-    u32::try_from(frame.0).map_err(|_| BundleError::FrameOutOfRange(frame))
-}
-
 /// The balancer's rectangle for a tracer's; the inverse of [`tracer_rect`].
 pub fn balancer_rect(rect: tracer::Rect) -> balancer::Rect {
     balancer::Rect::new(rect.x, rect.y, rect.w, rect.h)
@@ -346,21 +335,6 @@ mod tests {
         }
         let edited = vec![scene_file("a.toml".into(), b"y".to_vec())];
         assert_ne!(render_hash(&edited, &params), base);
-    }
-
-    #[test]
-    fn a_frame_past_the_tracers_last_is_refused_not_clamped() {
-        use runtime_core::wire::FrameId;
-        assert_eq!(tracer_frame(FrameId(7)).unwrap(), 7);
-        assert_eq!(
-            tracer_frame(FrameId(u64::from(u32::MAX))).unwrap(),
-            u32::MAX
-        );
-        let past = FrameId(u64::from(u32::MAX) + 1);
-        assert!(matches!(
-            tracer_frame(past),
-            Err(BundleError::FrameOutOfRange(frame)) if frame == past
-        ));
     }
 
     #[test]

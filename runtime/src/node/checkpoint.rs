@@ -41,6 +41,54 @@ pub struct Checkpointing {
     pub resume: Option<Checkpoint>,
 }
 
+impl Checkpointing {
+    /// How the owner checkpoints a render into the folder `out` every `every` (`None`: none is
+    /// written), with, if `resume` asks for it, the checkpoint there of frame `first` of this
+    /// render (`render_hash`) to go on from. A checkpoint of another frame or render, or one
+    /// that does not read, is left to be overwritten and said so; the frame starts afresh.
+    /// `None` when there is nothing to write or resume.
+    pub fn for_render(
+        out: &Path,
+        every: Option<Duration>,
+        render_hash: &str,
+        first: u32,
+        resume: bool,
+    ) -> Option<Checkpointing> {
+        let path = out.join(FILE);
+        let kept = match resume {
+            true => match Checkpoint::read(&path) {
+                Ok(Some(kept)) if kept.render_hash == render_hash && kept.frame.0 == first => {
+                    Some(kept)
+                }
+                Ok(Some(kept)) => {
+                    tracing::info!(
+                        "--resume: {} is of {} or of other settings; frame {first} starts afresh",
+                        path.display(),
+                        kept.frame
+                    );
+                    None
+                }
+                Ok(None) => None,
+                Err(error) => {
+                    tracing::warn!("--resume: {error}; frame {first} starts afresh");
+                    None
+                }
+            },
+            false => None,
+        };
+        if every.is_none() && kept.is_none() {
+            return None;
+        }
+        Some(Checkpointing {
+            path,
+            // With checkpoints off, a kept one is still resumed from; none is written after it.
+            every,
+            render_hash: render_hash.to_owned(),
+            resume: kept,
+        })
+    }
+}
+
 /// The frame in progress, as far as the owner had it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Checkpoint {

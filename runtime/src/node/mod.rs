@@ -17,9 +17,9 @@ mod session;
 
 pub use owner::{Job, Owner, PeerReport};
 pub use peer::{Leave, PeerRun, run_peer};
-pub use session::LocalTile;
 
 use crate::net::{BindError, ClusterCerts, ConnectError};
+use runtime_core::stats::{LocalTile, TileStats};
 use runtime_core::wire::{PeerId, TileId};
 use std::net::{Ipv4Addr, SocketAddr};
 use std::time::Duration;
@@ -100,7 +100,8 @@ pub enum NodeError {
 pub struct CompletedFrame {
     pub frame: u32,
     pub film: Film,
-    pub tiles: Vec<TileRecord>,
+    /// Its pieces as the owner accepted them, in tile order (one per piece, `pieces` 1).
+    pub tiles: Vec<TileStats>,
     /// From starting the frame to its last tile, in seconds.
     pub seconds: f64,
     /// When the frame was handed over, in seconds since the owner started: frames overlap, so
@@ -109,20 +110,6 @@ pub struct CompletedFrame {
     pub rays: u64,
     /// How duplicate results (backups of stragglers, re-issued tiles) compared with the first.
     pub audit: runtime_core::peer::Audit,
-}
-
-/// One piece of a finished frame: a whole tile, or a part of one that was cut on the way.
-#[derive(Clone, Debug)]
-pub struct TileRecord {
-    pub tile: TileId,
-    pub rect: balancer::Rect,
-    pub predicted: f64,
-    /// Measured counted work.
-    pub measured: u64,
-    /// Who rendered it.
-    pub peer: PeerId,
-    /// Whose initial set it was in; differs from `peer` when it was stolen or re-issued.
-    pub initial: PeerId,
 }
 
 /// Where finished frames go (the CLI writes them to disk).

@@ -7,7 +7,8 @@
 use super::bundle;
 use super::checkpoint::{self, Checkpoint, Checkpointing};
 use super::session::{Session, Step};
-use super::{CompletedFrame, FrameSink, GOODBYE_BOUND, NodeError, Options, TileRecord};
+use super::{CompletedFrame, FrameSink, GOODBYE_BOUND, NodeError, Options};
+use runtime_core::stats::{LocalTile, TileStats};
 use crate::net::{CloseCode, PeerIdentity};
 use runtime_core::director::{self, Director, Piece};
 use runtime_core::membership::{Action, Membership, Refusal};
@@ -45,7 +46,7 @@ pub struct Owner {
 }
 
 /// Every peer's statistics for every frame, as the peers reported them.
-pub type PeerReport = BTreeMap<(u64, PeerId), PeerStats>;
+pub type PeerReport = BTreeMap<(u32, PeerId), PeerStats>;
 
 impl Owner {
     /// Binds the owner's endpoint. Must be called within a tokio runtime.
@@ -72,7 +73,7 @@ impl Owner {
         job: Job,
         expect: usize,
         sink: &mut dyn FrameSink,
-    ) -> Result<(PeerReport, Vec<super::LocalTile>), NodeError> {
+    ) -> Result<(PeerReport, Vec<LocalTile>), NodeError> {
         let (renderer, results) =
             super::session::Renderer::new(self.options.threads, job.world.clone())?;
         self.session.set_renderer(renderer, results);
@@ -83,8 +84,8 @@ impl Owner {
         );
         let mut membership = Membership::new(me, job.files, job.params);
         let config = director::Config {
-            frames: u64::from(job.frames),
-            first: u64::from(job.first),
+            frames: job.frames,
+            first: job.first,
             ..director::Config::default()
         };
         let mut director = Director::new(me, job.partitioner, config);
@@ -94,7 +95,7 @@ impl Owner {
         let mut kept = checkpoints
             .as_mut()
             .and_then(|c| c.plan.resume.take())
-            .filter(|kept| kept.frame.0 == u64::from(job.first))
+            .filter(|kept| kept.frame.0 == job.first)
             .map(|kept| {
                 director.resume_with(kept.tiles);
                 kept.results
@@ -241,7 +242,6 @@ impl Owner {
                 membership.handle_closed(now, conn);
             }
             Step::Stopped => return Err(NodeError::Stopped),
-            Step::Failed(error) => return Err(error),
         }
         self.apply(membership, director);
         Ok(())
@@ -388,14 +388,14 @@ fn assemble(
         }
         film.insert(rect, &pixels, &cost);
         rays += cost.rays;
-        records.push(TileRecord {
-            tile: result.tile,
-            rect: result.rect,
-            predicted: piece.predicted,
-            measured: cost.work,
-            peer: piece.peer,
-            initial: piece.initial,
-        });
+        records.push(TileStats::piece(
+            result.tile.0,
+            result.rect,
+            piece.predicted,
+            cost.work,
+            piece.peer.0,
+            piece.initial.0,
+        ));
     }
     let map = balancer::CostMap::from_counts(
         film.width,
@@ -403,9 +403,8 @@ fn assemble(
         tracer::BLOCK_SIZE,
         &film.block_work,
     )?;
-    let frame = bundle::tracer_frame(frame)?;
     let completed = CompletedFrame {
-        frame,
+        frame: frame.0,
         film,
         tiles: records,
         seconds: elapsed.as_secs_f64(),

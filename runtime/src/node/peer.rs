@@ -45,7 +45,7 @@ impl Leave {
 #[derive(Debug)]
 pub struct PeerRun {
     /// The tiles this peer rendered, with times since its own start (for the Gantt chart).
-    pub tiles: Vec<super::LocalTile>,
+    pub tiles: Vec<runtime_core::stats::LocalTile>,
     /// Whether it left when asked ([`Leave`]) rather than at the render's end.
     pub left: bool,
 }
@@ -262,10 +262,6 @@ pub async fn run_peer(
             }
             Step::Core(event) => tracing::debug!(?event, "core event"),
             Step::Stopped => break,
-            Step::Failed(error) => {
-                session.link.shutdown().await;
-                return Err(error);
-            }
         }
     }
     if left {

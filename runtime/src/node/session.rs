@@ -7,6 +7,7 @@ use crate::net::{
     CloseCode, CloseReason, ConnId, Event as NetEvent, Link, PeerCertificate, PeerIdentity,
 };
 use runtime_core::peer::{Core, Event as CoreEvent, WorkItem};
+use runtime_core::stats::LocalTile;
 use runtime_core::wire::{self, Message, PeerId};
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -53,14 +54,14 @@ impl Renderer {
         Ok((Self { pool, world, done }, results))
     }
 
-    /// Renders `item`, whose frame is the tracer's `frame` ([`bundle::tracer_frame`]).
-    fn submit(&self, item: WorkItem, frame: u32) {
+    /// Renders `item`.
+    fn submit(&self, item: WorkItem) {
         let world = self.world.clone();
         let done = self.done.clone();
         self.pool.spawn(move || {
             let started = Instant::now();
             let rect = bundle::tracer_rect(item.tile.rect);
-            let output = tracer::render_tile(&world, frame, rect);
+            let output = tracer::render_tile(&world, item.frame.0, rect);
             // The loop may be gone at shutdown; the tile is then simply not needed.
             let _ = done.send((item, output, started..Instant::now()));
         });
@@ -103,19 +104,6 @@ impl Peers {
     }
 }
 
-/// One tile or piece rendered here, for the Gantt charts.
-#[derive(Clone, Debug)]
-pub struct LocalTile {
-    pub frame: u64,
-    pub tile: u32,
-    /// The pixels rendered: the whole tile's, or a piece's.
-    pub rect: balancer::Rect,
-    /// Whether it was a piece of a cut tile rather than the whole tile.
-    pub piece: bool,
-    pub start: Duration,
-    pub end: Duration,
-}
-
 /// What one step of the loop produced that the role above it must handle.
 pub(crate) enum Step {
     /// A core event (frame complete, peer failed, ...).
@@ -133,8 +121,6 @@ pub(crate) enum Step {
     Closed { conn: ConnId, reason: CloseReason },
     /// The transport stopped.
     Stopped,
-    /// This peer cannot go on (work for a frame the tracer cannot render).
-    Failed(NodeError),
 }
 
 /// The machinery of one peer: core, link, renderer, timer.
@@ -240,12 +226,9 @@ impl Session {
             self.send(peer, &message);
         }
         while let Some(item) = self.core.poll_work() {
-            match (&self.renderer, bundle::tracer_frame(item.frame)) {
-                (Some(renderer), Ok(frame)) => renderer.submit(item, frame),
-                (Some(_), Err(error)) => self.pending.push_back(Step::Failed(error.into())),
-                (None, _) => {
-                    tracing::error!("the core handed out work before the scene was loaded")
-                }
+            match &self.renderer {
+                Some(renderer) => renderer.submit(item),
+                None => tracing::error!("the core handed out work before the scene was loaded"),
             }
         }
         while let Some(event) = self.core.poll_event() {

@@ -66,7 +66,7 @@ pub struct GanttBar {
     /// Seconds since the start of the run.
     pub start: f64,
     pub end: f64,
-    pub frame: u64,
+    pub frame: u32,
     pub kind: BarKind,
 }
 
@@ -74,7 +74,7 @@ pub struct GanttBar {
 /// since the start of the run.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameSpan {
-    pub frame: u64,
+    pub frame: u32,
     pub start: f64,
     pub end: f64,
 }
@@ -95,7 +95,7 @@ pub fn gantt_svg(
     title: &str,
     rows: u32,
     bars: &[GanttBar],
-    focus: u64,
+    focus: u32,
 ) -> Result<(), PlotError> {
     let error = error_at(path);
     let focused = || bars.iter().filter(|b| b.frame == focus);
@@ -429,7 +429,7 @@ fn place(free_at: &mut Vec<f64>, start: f64, end: f64) -> u32 {
 mod tests {
     use super::*;
 
-    fn bar(row: u32, start: f64, end: f64, frame: u64, kind: BarKind) -> GanttBar {
+    fn bar(row: u32, start: f64, end: f64, frame: u32, kind: BarKind) -> GanttBar {
         GanttBar {
             row,
             start,

@@ -1,12 +1,15 @@
 //! Charts as SVG files (plotters): the line charts of experiments (efficiency against peers,
 //! against tiles), here, and in [`gantt`] the charts of who rendered what when, shared by real
-//! renders (`tessera render --gantt`) and simulated ones.
+//! renders (`tessera render --gantt`) and simulated ones, and in `render` the charts of a real
+//! render from its statistics and its peers' timelines.
 //!
 //! Charts are SVG so that they diff as text, render in any browser and need no font files.
 
 mod gantt;
+mod render;
 
 pub use gantt::{BarKind, FrameSpan, GanttBar, gantt_svg, utilisation_svg};
+pub use render::render_charts;
 
 use plotters::prelude::*;
 use std::path::Path;

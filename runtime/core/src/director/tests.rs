@@ -123,7 +123,7 @@ fn cluster(peers: u32) -> Cluster {
     )
 }
 
-fn director(partitioner: Partitioner, peers: u32, frames: u64) -> Director {
+fn director(partitioner: Partitioner, peers: u32, frames: u32) -> Director {
     director_in_flight(
         partitioner,
         peers,
@@ -136,7 +136,7 @@ fn director(partitioner: Partitioner, peers: u32, frames: u64) -> Director {
 fn director_in_flight(
     partitioner: Partitioner,
     peers: u32,
-    frames: u64,
+    frames: u32,
     in_flight: usize,
 ) -> Director {
     let config = Config {
@@ -187,7 +187,7 @@ fn every_frame_deals_each_tile_once_and_completes_with_one_piece_per_tile() {
             else {
                 unreachable!("filtered above")
             };
-            assert_eq!(id.0, frame as u64);
+            assert_eq!(id.0, frame as u32);
             let ids: Vec<u32> = pieces.iter().map(|p| p.result.tile.0).collect();
             assert_eq!(ids, (0..16).collect::<Vec<_>>());
             for piece in pieces.iter() {
@@ -266,7 +266,7 @@ fn with_one_frame_in_flight_nothing_is_dealt_while_a_frame_runs_or_waits_for_its
 }
 
 /// The owner core's completion of `frame`, without results (for the director alone).
-fn completion(frame: u64) -> crate::peer::Event {
+fn completion(frame: u32) -> crate::peer::Event {
     match empty_completion() {
         crate::peer::Event::FrameComplete {
             elapsed,
@@ -344,10 +344,10 @@ fn the_next_frame_is_dealt_when_the_running_one_wanes_and_frames_are_handed_over
     assert!(director.poll_event().is_none());
     assert_eq!(frame_of(director.poll_deal(t).unwrap()), None);
     director.handle_core_event(t, completion(2)).unwrap();
-    let handed: Vec<u64> = std::iter::from_fn(|| director.poll_event())
+    let handed: Vec<u32> = std::iter::from_fn(|| director.poll_event())
         .map(|event| match event {
             Event::FrameComplete { frame, .. } => frame.0,
-            Event::Finished => u64::MAX,
+            Event::Finished => u32::MAX,
         })
         .collect();
     assert_eq!(handed, [2, 3]);
@@ -532,9 +532,9 @@ fn a_resumed_render_deals_from_its_first_frame() {
     let mut resumed = Director::new(OWNER, pbt(8), config.clone());
     resumed.handle_peer_joined(Duration::ZERO, PeerId(1));
     let (deals, events) = drive(&mut resumed, &mut cluster, &|_| halves(3));
-    let dealt: Vec<u64> = deals.iter().map(|d| d.frame.0).collect();
+    let dealt: Vec<u32> = deals.iter().map(|d| d.frame.0).collect();
     assert_eq!(dealt, [2, 3]);
-    let completed: Vec<u64> = events
+    let completed: Vec<u32> = events
         .iter()
         .filter_map(|e| match e {
             Event::FrameComplete { frame, .. } => Some(frame.0),
@@ -564,7 +564,7 @@ fn frames_dealt_ahead_are_predicted_where_a_moving_spot_will_be() {
     // measured (one in flight) or two (two in flight: the prediction is aimed further when the
     // frame is dealt). Without motion compensation it lags behind.
     const SIDE: u32 = 256;
-    let centre = |frame: u64| 4.0 + 3.0 * frame as f64;
+    let centre = |frame: u32| 4.0 + 3.0 * f64::from(frame);
     let measure = |frame: FrameId| {
         CostMap::from_fn(SIDE, SIDE, 8, |c, r| {
             let (dx, dy) = (f64::from(c) - centre(frame.0), f64::from(r) - 16.0);

@@ -33,7 +33,8 @@ use steal::Estimates;
 use worker::Worker;
 
 /// A tile for the local renderer. Render it and give the result to
-/// [`Core::handle_tile_rendered`].
+/// [`Core::handle_tile_rendered`]. Why a type of its own: a [`TileSpec`] travels inside a message
+/// that names its frame, but work handed to a renderer stands alone, so it carries the frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WorkItem {
     pub frame: FrameId,

@@ -635,7 +635,7 @@ pub fn synthetic_result(item: &WorkItem) -> TileResult {
     let mut pixels = Vec::with_capacity((rect.area() * BYTES_PER_PIXEL) as usize);
     for y in rect.y..rect.y + rect.h {
         for x in rect.x..rect.x + rect.w {
-            let seed = item.frame.0.wrapping_mul(31)
+            let seed = u64::from(item.frame.0).wrapping_mul(31)
                 ^ u64::from(x).wrapping_mul(131)
                 ^ u64::from(y).wrapping_mul(1_000_003);
             pixels.extend((0..BYTES_PER_PIXEL).map(|c| (seed.wrapping_add(c) % 251) as u8));

@@ -334,7 +334,7 @@ fn the_encoded_length_is_the_encodings() {
             costs: vec![0; cost_map_bytes(rect, 8) as usize],
         }),
         Message::StealRefuse {
-            frame: FrameId(u64::MAX),
+            frame: FrameId(u32::MAX),
         },
         Message::SceneReady,
     ];
@@ -344,4 +344,25 @@ fn the_encoded_length_is_the_encodings() {
     // Columns 3..16 and rows 5..12 touch two blocks of 8 each way.
     assert_eq!(cost_map_bytes(rect, 8), 16 + 8 * 4);
     assert_eq!(cost_map_bytes(Rect::new(0, 0, 8, 8), 8), 16 + 8);
+}
+
+/// Frames are `u32` end to end: a message naming a frame past `u32::MAX` (as protocol 4's `u64`
+/// could) does not decode, rather than reaching a renderer as another frame.
+#[test]
+fn a_frame_past_u32_does_not_decode() {
+    let largest = encode(&Message::StealRefuse {
+        frame: FrameId(u32::MAX),
+    });
+    let back = decode(&largest, &Limits::default()).expect("the largest frame decodes");
+    assert_eq!(
+        back,
+        Message::StealRefuse {
+            frame: FrameId(u32::MAX)
+        }
+    );
+    // The variant's tag, then u32::MAX + 1 as a varint: seven bits a byte, low bits first.
+    let zero = encode(&Message::StealRefuse { frame: FrameId(0) });
+    let mut past = zero[..zero.len() - 1].to_vec();
+    past.extend([0x80, 0x80, 0x80, 0x80, 0x10]);
+    assert!(decode(&past, &Limits::default()).is_err());
 }

@@ -128,8 +128,8 @@ async fn exchange(exchanges: usize) -> Result<StealRtt, LabError> {
     let mut request_bytes = 0;
     for i in 0..WARM_UP + exchanges {
         let request = wire::encode(&Message::StealRequest {
-            frame: FrameId(i as u64),
-            remaining: vec![(FrameId(i as u64), 0.0)],
+            frame: FrameId(i as u32),
+            remaining: vec![(FrameId(i as u32), 0.0)],
         });
         request_bytes = request.len();
         let started = Instant::now();
@@ -143,7 +143,7 @@ async fn exchange(exchanges: usize) -> Result<StealRtt, LabError> {
                 Event::Message {
                     message: Message::StealGrant { frame, .. },
                     ..
-                } if frame == FrameId(i as u64) => break,
+                } if frame == FrameId(i as u32) => break,
                 Event::Closed { reason, .. } => {
                     return Err(net(format!("the connection closed: {reason:?}")));
                 }

@@ -1,7 +1,7 @@
 //! `--resume`: which frames an earlier render of the same scene files and settings has already
 //! written, so that `render` and `serve` go on from the first one missing.
 //!
-//! Every frame's EXR carries the render hash (`runtime::node::bundle::render_hash`: the scene
+//! Every frame's EXR carries the render hash (`crate::node::bundle::render_hash`: the scene
 //! files and the render parameters) as the header attribute [`ATTRIBUTE`], whether or not
 //! `--resume` was given, so any render can be resumed. A frame counts as done only if its EXR
 //! exists, reads back whole and carries the hash of this render. Frames are written to a
@@ -38,7 +38,7 @@ pub fn remove_leftovers(out: &Path) -> std::io::Result<usize> {
         let name = name.to_string_lossy();
         let ours = name.starts_with("frame-")
             || name.starts_with("tiles-")
-            || name.starts_with(runtime::node::checkpoint::FILE);
+            || name.starts_with(crate::node::checkpoint::FILE);
         if ours && name.ends_with(tracer::output::TEMPORARY_SUFFIX) && entry.path().is_file() {
             std::fs::remove_file(entry.path())?;
             removed += 1;

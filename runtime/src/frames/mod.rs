@@ -1,5 +1,6 @@
-//! Writes finished frames' files (PNG preview, tile map, EXR) on a thread of their own, in
-//! frame order.
+//! The owner's output folder: each finished frame's files (PNG preview, tile map, EXR), written
+//! in frame order on a thread of their own, and ([`resume`]) which frames an earlier render of
+//! the same settings left done.
 //!
 //! The owner's loop also feeds its own rendering slots, and a frame's files take it 20 to 40 ms
 //! on the shipped 256x256 animation: written in the loop, the owner's thread idled that long at
@@ -8,15 +9,32 @@
 //! end, with the file's error; nothing is written after it, and `--resume` finds the frames
 //! before it whole (each file is written whole or not at all, the EXR last).
 
-use std::path::PathBuf;
+pub mod resume;
+
+use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::thread::JoinHandle;
 
-use anyhow::Context;
 use tracer::Film;
+use tracer::output::OutputError;
 
-use crate::report::{self, Progress};
-use crate::resume;
+/// Why a frame's files could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameFileError {
+    #[error(transparent)]
+    Output(#[from] OutputError),
+    #[error("{path}: {source}")]
+    TileMap {
+        path: PathBuf,
+        source: image::ImageError,
+    },
+    #[error("the preview has the wrong size")]
+    PreviewSize,
+    #[error("starting the thread that writes frames: {0}")]
+    Thread(std::io::Error),
+    #[error("the thread writing frames panicked")]
+    Panicked,
+}
 
 /// What every frame's files share.
 #[derive(Clone)]
@@ -28,25 +46,28 @@ pub struct Settings {
     pub render_hash: String,
 }
 
-/// One frame to write: its film, and its pieces' rectangles `[x, y, w, h]` and measured costs
-/// (for the tile map); `seconds` is what the progress line reports once it is written.
+/// One frame to write: its film, and its pieces' rectangles and measured costs (for the tile
+/// map); `seconds` is what is reported once it is written.
 pub struct Frame {
     pub frame: u32,
     pub seconds: f64,
     pub film: Film,
-    pub costs: Vec<([u32; 4], u64)>,
+    pub costs: Vec<(balancer::Rect, u64)>,
 }
+
+/// Told of each frame once its files are on disk: its number and its `seconds`.
+pub type Written = Box<dyn FnMut(u32, f64) + Send>;
 
 /// The writing thread and the way to it.
 pub struct Writer {
     frames: Option<mpsc::Sender<Frame>>,
-    thread: Option<JoinHandle<anyhow::Result<()>>>,
+    thread: Option<JoinHandle<Result<(), FrameFileError>>>,
 }
 
 impl Writer {
-    /// Starts the thread; it reports each frame to `progress` once its files are written, so
+    /// Starts the thread; it calls `written` for each frame once its files are written, so
     /// that "frame N done" means on disk.
-    pub fn start(settings: Settings, progress: Progress) -> anyhow::Result<Writer> {
+    pub fn start(settings: Settings, mut written: Written) -> Result<Writer, FrameFileError> {
         let (frames, inbox) = mpsc::channel::<Frame>();
         let thread = std::thread::Builder::new()
             .name("frame-files".into())
@@ -54,11 +75,11 @@ impl Writer {
                 // Stops at the first error: the sender then finds the channel closed.
                 inbox.iter().try_for_each(|frame| {
                     write(&settings, &frame)?;
-                    progress.frame_done(frame.frame, frame.seconds);
+                    written(frame.frame, frame.seconds);
                     Ok(())
                 })
             })
-            .context("starting the thread that writes frames")?;
+            .map_err(FrameFileError::Thread)?;
         Ok(Writer {
             frames: Some(frames),
             thread: Some(thread),
@@ -66,7 +87,7 @@ impl Writer {
     }
 
     /// Queues a frame; an error if an earlier frame's files could not be written.
-    pub fn send(&mut self, frame: Frame) -> anyhow::Result<()> {
+    pub fn send(&mut self, frame: Frame) -> Result<(), FrameFileError> {
         let sent = self
             .frames
             .as_ref()
@@ -79,13 +100,13 @@ impl Writer {
     }
 
     /// Waits until every queued frame is written; the first write's error if one failed.
-    pub fn finish(&mut self) -> anyhow::Result<()> {
+    pub fn finish(&mut self) -> Result<(), FrameFileError> {
         drop(self.frames.take());
         match self.thread.take() {
             None => Ok(()),
             Some(thread) => match thread.join() {
                 Ok(result) => result,
-                Err(_) => anyhow::bail!("the thread writing frames panicked"),
+                Err(_) => Err(FrameFileError::Panicked),
             },
         }
     }
@@ -99,7 +120,7 @@ impl Drop for Writer {
     }
 }
 
-fn write(settings: &Settings, frame: &Frame) -> anyhow::Result<()> {
+fn write(settings: &Settings, frame: &Frame) -> Result<(), FrameFileError> {
     let film = &frame.film;
     let name = |ext: &str| resume::frame_path(&settings.out, frame.frame, ext);
     tracer::output::write_png(
@@ -112,7 +133,7 @@ fn write(settings: &Settings, frame: &Frame) -> anyhow::Result<()> {
     if settings.tile_map {
         let preview = tracer::output::tone_map(&film.pixels, settings.exposure);
         let path = settings.out.join(format!("tiles-{:04}.png", frame.frame));
-        report::write_tile_map(&path, film.width, film.height, &preview, &frame.costs)?;
+        write_tile_map(&path, film.width, film.height, &preview, &frame.costs)?;
     }
     // The EXR goes last: `--resume` takes a frame whose EXR is there for done, so the previews
     // must be there before it.
@@ -126,6 +147,43 @@ fn write(settings: &Settings, frame: &Frame) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Draws the tile map of a frame: the tone-mapped image dimmed, each tile tinted from blue
+/// (cheap) to red (expensive) by its measured cost relative to the frame's most expensive tile,
+/// and tile borders in white.
+fn write_tile_map(
+    path: &Path,
+    width: u32,
+    height: u32,
+    preview: &[u8],
+    tiles: &[(balancer::Rect, u64)],
+) -> Result<(), FrameFileError> {
+    let mut image = image::RgbImage::from_raw(width, height, preview.to_vec())
+        .ok_or(FrameFileError::PreviewSize)?;
+    let max = tiles.iter().map(|t| t.1).max().unwrap_or(1).max(1) as f32;
+    for &(rect, measured) in tiles {
+        let (x0, y0, w, h) = (rect.x, rect.y, rect.w, rect.h);
+        let heat = measured as f32 / max;
+        let tint = [255.0 * heat, 64.0, 255.0 * (1.0 - heat)];
+        for y in y0..y0 + h {
+            for x in x0..x0 + w {
+                let border = x == x0 || y == y0 || x + 1 == x0 + w || y + 1 == y0 + h;
+                let pixel = image.get_pixel_mut(x, y);
+                pixel.0 = if border {
+                    [255, 255, 255]
+                } else {
+                    std::array::from_fn(|c| (0.35 * f32::from(pixel.0[c]) + 0.45 * tint[c]) as u8)
+                };
+            }
+        }
+    }
+    image
+        .save_with_format(path, image::ImageFormat::Png)
+        .map_err(|source| FrameFileError::TileMap {
+            path: path.to_owned(),
+            source,
+        })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -137,7 +195,7 @@ mod tests {
             frame,
             seconds: 0.0,
             film,
-            costs: vec![([0, 0, 4, 2], 7)],
+            costs: vec![(balancer::Rect::new(0, 0, 4, 2), 7)],
         }
     }
 
@@ -154,7 +212,7 @@ mod tests {
     fn every_frame_sent_is_written_by_finish() {
         let dir = tempfile::tempdir().unwrap();
         let mut writer =
-            Writer::start(settings(dir.path().to_path_buf()), Progress::new(5)).unwrap();
+            Writer::start(settings(dir.path().to_path_buf()), Box::new(|_, _| ())).unwrap();
         for f in 0..5 {
             writer.send(frame(f)).unwrap();
         }
@@ -177,7 +235,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         // A folder that does not exist: the first PNG cannot be written.
         let missing = dir.path().join("absent");
-        let mut writer = Writer::start(settings(missing.clone()), Progress::new(1)).unwrap();
+        let mut writer = Writer::start(settings(missing.clone()), Box::new(|_, _| ())).unwrap();
         let first = writer.send(frame(0));
         // The thread may or may not have failed yet; if not, finish reports it.
         let error = match first {
@@ -190,7 +248,7 @@ mod tests {
                 }
             }
         };
-        let text = format!("{error:#}");
+        let text = error.to_string();
         assert!(text.contains("absent"), "{text}");
         assert!(!missing.exists(), "nothing was written");
     }

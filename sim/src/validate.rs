@@ -1,0 +1,217 @@
+//! The simulator against a real render (`tessera simulate --validate STATS`): simulate the run a
+//! `stats.json` describes (its peers, threads, balancer, deal, motion and tiles) on the
+//! render's own cost trace, and compare frame by frame: frame times, simulated over measured,
+//! and whether every peer started each frame with the same tiles.
+//!
+//! Here rather than in the command because it is the simulator's claim about itself: the rate
+//! it assumes is measured from the render (counted work over busy slot time), and the tiles
+//! must be cut exactly as the render cut them, so the render's own settings win over the flags.
+
+use std::fmt::Write as _;
+
+use balancer::{Kind, Order, Partitioner};
+use runtime_core::stats::StatsFile;
+
+use crate::{Error, Scenario, Trace, scenario};
+
+/// What the flags of `simulate` say about a validation; `None` takes the render's.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Given {
+    /// Whether peers steal (the policy's); the render's balancer is taken in any case.
+    pub steal: bool,
+    /// Counted work per second of a slot (default: measured from the render's statistics).
+    pub rate: Option<f64>,
+    /// Rendering slots per peer (default: the render's threads per peer).
+    pub slots: Option<usize>,
+    /// Frames to compare, at most (default: all the file holds).
+    pub frames: Option<usize>,
+}
+
+/// One frame, measured and simulated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameComparison {
+    pub measured: f64,
+    pub simulated: f64,
+    pub tiles: usize,
+    /// Whether every tile was dealt to the same peer, cut the same way.
+    pub same_initial_sets: bool,
+}
+
+/// The comparison, with the settings it was simulated with.
+#[derive(Clone, Debug)]
+pub struct Validation {
+    pub peers: usize,
+    pub slots: usize,
+    pub balancer: String,
+    pub steal: bool,
+    pub tiles: usize,
+    pub motion: Option<u32>,
+    pub rate: f64,
+    /// The frames asked for: the file's, or fewer with [`Given::frames`].
+    pub asked: usize,
+    pub frames: Vec<FrameComparison>,
+}
+
+/// Simulates the render `stats` describes on `trace`, with `base`'s network and core settings.
+pub fn validate(
+    trace: &Trace,
+    stats: &StatsFile,
+    base: Scenario,
+    given: Given,
+) -> Result<Validation, Error> {
+    let bad = |what: String| Error::Scenario(what);
+    if stats.frames.is_empty() {
+        return Err(bad("the statistics have no frames".into()));
+    }
+    let kind: Kind = by_name(&stats.balancer)
+        .ok_or_else(|| bad(format!("unknown balancer {:?}", stats.balancer)))?;
+    let order: Order = match stats.deal.as_str() {
+        "" => Order::Contiguous,
+        name => by_name(name).ok_or_else(|| bad(format!("unknown deal {name:?}")))?,
+    };
+    // The render's own prediction, not the command's --motion: the tiles must be cut alike.
+    let motion = match stats.motion.as_str() {
+        "" | "off" => None,
+        text => match text.parse::<u32>() {
+            Ok(blocks) if blocks > 0 => Some(blocks),
+            _ => return Err(bad(format!("motion {text:?}: not a number of blocks, or off"))),
+        },
+    };
+    // Rate: counted work over busy slot time, over the frames every peer reported.
+    let complete = || stats.frames.iter().filter(|f| f.peers.len() == stats.peers);
+    let busy: f64 = complete()
+        .flat_map(|f| f.peers.iter().map(|p| p.busy_seconds))
+        .sum();
+    let work: u64 = complete().map(|f| f.work).sum();
+    let rate = match given.rate {
+        Some(rate) => rate,
+        None if busy > 0.0 => work as f64 / busy,
+        None => {
+            return Err(bad(
+                "the statistics have no frame with every peer's: pass --rate".into(),
+            ));
+        }
+    };
+    let threads = stats
+        .frames
+        .iter()
+        .flat_map(|f| f.peers.first())
+        .map(|p| p.threads as usize)
+        .next();
+    let slots = given.slots.or(threads).unwrap_or(1);
+    let frames = stats.frames.len().min(given.frames.unwrap_or(usize::MAX));
+    let mut scenario = Scenario {
+        slots,
+        work_per_second: rate,
+        peers: stats.peers,
+        frames: Some(frames),
+        keep_assignments: true,
+        ..base
+    };
+    // As the real runtime does: only stealing follows the flag, backups stay on.
+    scenario.core.steal = given.steal;
+    let tiles = stats.frames[0].tiles.len();
+    let config = balancer::Config::with_tiles(kind, tiles, order, motion);
+    let partitioner = Partitioner::new(trace.width(), trace.height(), &config)?;
+    let run = scenario::run(trace, partitioner, &scenario)?;
+    let compared = stats
+        .frames
+        .iter()
+        .zip(&run.frames)
+        .enumerate()
+        .take(frames)
+        .map(|(index, (real, simulated))| {
+            let mut real_sets: Vec<_> = real.tiles.iter().collect();
+            real_sets.sort_by_key(|t| t.tile);
+            let dealt = &run.assignments[index];
+            let same = real_sets.len() == dealt.len()
+                && real_sets
+                    .iter()
+                    .zip(dealt)
+                    .all(|(t, (rect, peer))| t.rect == *rect && t.initial_peer == *peer);
+            FrameComparison {
+                measured: real.seconds,
+                simulated: simulated.makespan,
+                tiles: real.tiles.len(),
+                same_initial_sets: same,
+            }
+        })
+        .collect();
+    Ok(Validation {
+        peers: stats.peers,
+        slots,
+        balancer: stats.balancer.clone(),
+        steal: given.steal,
+        tiles,
+        motion,
+        rate,
+        asked: frames,
+        frames: compared,
+    })
+}
+
+/// A balancer's or deal's value by the name its files and flags use.
+fn by_name<T: serde::de::DeserializeOwned>(name: &str) -> Option<T> {
+    serde_json::from_value(serde_json::Value::String(name.to_owned())).ok()
+}
+
+impl Validation {
+    /// What was simulated, and a table of the frames, as the command prints them.
+    pub fn table(&self) -> String {
+        let motion = self.motion.map_or("off".to_string(), |m| m.to_string());
+        let mut text = format!(
+            "simulating {} peers x {} slots, {} with{} stealing, {} tiles, motion {motion}, at {:.4e} work/s per slot\n",
+            self.peers,
+            self.slots,
+            self.balancer,
+            if self.steal { "" } else { "out" },
+            self.tiles,
+            self.rate
+        );
+        let _ = writeln!(
+            text,
+            "{:>6} {:>11} {:>12} {:>8} {:>13}",
+            "frame", "measured s", "simulated s", "ratio", "same sets"
+        );
+        for (index, f) in self.frames.iter().enumerate() {
+            let _ = writeln!(
+                text,
+                "{index:>6} {:>11.4} {:>12.4} {:>8.3} {:>13}",
+                f.measured,
+                f.simulated,
+                f.simulated / f.measured,
+                f.same_initial_sets
+            );
+        }
+        text
+    }
+
+    /// `validation.csv`: a row per frame.
+    pub fn csv(&self) -> String {
+        let mut csv = String::from("frame,measured_s,simulated_s,ratio,tiles,same_initial_sets\n");
+        for (index, f) in self.frames.iter().enumerate() {
+            let _ = writeln!(
+                csv,
+                "{index},{},{},{},{},{}",
+                f.measured,
+                f.simulated,
+                f.simulated / f.measured,
+                f.tiles,
+                f.same_initial_sets
+            );
+        }
+        csv
+    }
+
+    /// The totals: measured and simulated time, their ratio, and the frames dealt alike.
+    pub fn totals(&self) -> String {
+        let measured: f64 = self.frames.iter().map(|f| f.measured).sum();
+        let simulated: f64 = self.frames.iter().map(|f| f.simulated).sum();
+        let agree = self.frames.iter().filter(|f| f.same_initial_sets).count();
+        format!(
+            "total: measured {measured:.3} s, simulated {simulated:.3} s, ratio {:.3}; initial tile sets identical in {agree} of {} frames",
+            simulated / measured,
+            self.asked
+        )
+    }
+}

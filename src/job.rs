@@ -1,0 +1,361 @@
+//! What every command that renders a scene's frames shares (`render`, `serve`, and `slurm`'s
+//! task 0): the scene with the command line's overrides, the limits refused before rendering,
+//! the node's options, and [`execute`]: the frames written as they come, the statistics, the
+//! charts and a one-line summary.
+
+use crate::cli::{EffectsChoice, FrameArgs, flag_name};
+use crate::progress::Progress;
+use anyhow::Context;
+use runtime::frames::{self, resume};
+use runtime::node::{self, CompletedFrame, FrameSink, Job};
+use runtime_core::stats::{Accepted, FrameStats, PeerFrameStats, StatsFile, TileStats};
+use std::sync::Arc;
+use std::time::Instant;
+use tracer::{Effects, Scene, World};
+
+/// Refuses, before anything is rendered, settings that cannot work: more tiles than the image
+/// has pixels or than one message can assign, tiles whose results cannot fit
+/// in one message, and frame buffers larger than this machine's free memory. Each error names
+/// the flag and the limit; none of these may surface later as a peer failure.
+/// Returns the tile count to cut frames into: `--tiles`, or its default for this image.
+fn check_limits(
+    args: &FrameArgs,
+    settings: &tracer::scene::RenderSettings,
+) -> anyhow::Result<usize> {
+    let (width, height) = (u64::from(settings.width), u64::from(settings.height));
+    // The owner holds the frame's film (12 bytes a pixel) and every result until the frame is
+    // assembled (as much again), and writes an EXR and a PNG from the film.
+    let needed = width * height * (12 + 12 + 12 + 4);
+    if let Some(available) = available_memory() {
+        anyhow::ensure!(
+            needed <= available,
+            "--width {width} --height {height}: a frame needs about {} MiB, and this machine \
+             has {} MiB free",
+            needed >> 20,
+            available >> 20
+        );
+    }
+    // Tiles smaller than a cost block work (blocks then carry partial work), so the floor is a
+    // pixel per tile.
+    let pixels = width * height;
+    let tiles = match args.tiles {
+        Some(tiles) => tiles as u64,
+        None => (balancer::Config::default().leaves as u64).min(pixels),
+    };
+    anyhow::ensure!(
+        tiles <= pixels,
+        "--tiles {tiles}: the {width}x{height} image has only {pixels} pixels"
+    );
+    let limits = node::Options::default().limits;
+    let per_message = limits.max_tiles_per_message as u64;
+    anyhow::ensure!(
+        tiles <= per_message,
+        "--tiles {tiles}: at most {per_message} tiles (a peer's share travels in one message)"
+    );
+    // The first frame's tiles are cut by area, so its largest is about the image over the tile
+    // count (rounded up each way); its result must fit in one message.
+    let side = (tiles as f64).sqrt().max(1.0);
+    let largest = (width as f64 / side).ceil() * (height as f64 / side).ceil();
+    let result_bytes = largest * runtime_core::wire::BYTES_PER_PIXEL as f64;
+    anyhow::ensure!(
+        result_bytes <= limits.max_message_bytes as f64 / 2.0,
+        "--tiles {tiles}: tiles of about {largest:.0} pixels are too large to send \
+         (a result may be at most {} MiB); use more tiles",
+        limits.max_message_bytes >> 21
+    );
+    Ok(tiles as usize)
+}
+
+/// Free memory as the kernel estimates it (`MemAvailable`), where `/proc/meminfo` says.
+fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// Loads the scene, runs `drive` with a sink that writes frames, and writes the statistics,
+/// the Gantt chart and a one-line summary.
+pub fn execute(
+    args: &FrameArgs,
+    peers: usize,
+    threads: usize,
+    drive: impl FnOnce(Job, &mut Sink) -> anyhow::Result<node::LocalRun>,
+) -> anyhow::Result<()> {
+    let started = Instant::now();
+    // A trace feeds the simulator every frame's costs in order; a resumed render has only some.
+    anyhow::ensure!(
+        !(args.resume && args.trace.is_some()),
+        "--trace cannot be combined with --resume: a trace must hold every frame of the render"
+    );
+    let scene = load_scene(args)?;
+    let tiles = check_limits(args, &scene.settings)?;
+    let files = node::bundle::scene_files(&args.scene, &scene)?;
+    let params = node::bundle::params(&scene, args.effects == EffectsChoice::All);
+    let render_hash = node::bundle::render_hash(&files, &params);
+    let settings = scene.settings.clone();
+    let (first, missing) = if args.resume {
+        let removed = resume::remove_leftovers(&args.out)
+            .with_context(|| format!("removing half-written files in {}", args.out.display()))?;
+        if removed > 0 {
+            tracing::info!("--resume: removed {removed} half-written files of a stopped render");
+        }
+        let (first, why) = resume::first_missing(&args.out, settings.frames, &render_hash);
+        (first, Some(why))
+    } else {
+        (0, None)
+    };
+    let every = args.checkpoint_every;
+    anyhow::ensure!(
+        (0.0..1e9).contains(&every),
+        "--checkpoint-every {every}: must be a number of seconds, 0 (no checkpoints) or more"
+    );
+    let checkpoint = node::checkpoint::Checkpointing::for_render(
+        &args.out,
+        (every > 0.0).then(|| std::time::Duration::from_secs_f64(every)),
+        &render_hash,
+        first,
+        args.resume,
+    );
+    let world = Arc::new(prepare_world(scene, args.effects));
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let config =
+        balancer::Config::with_tiles(args.balancer.into(), tiles, args.deal.into(), args.motion.0);
+    let partitioner = balancer::Partitioner::new(settings.width, settings.height, &config)?;
+    let tiles = partitioner.tiles().len();
+    let progress = Progress::new(settings.frames - first);
+    progress.line(&format!(
+        "{}: {}x{}, {} spp, {} frames, {} triangles, effects {}; {} peers, {} threads here, {:?} balancer with {} tiles, stealing {}",
+        args.scene.display(),
+        settings.width,
+        settings.height,
+        settings.samples_per_pixel,
+        settings.frames,
+        world.scene.triangles.len(),
+        world.effects,
+        peers,
+        threads,
+        args.balancer,
+        tiles,
+        if args.no_steal { "off" } else { "on" },
+    ));
+    if let Some(why) = &missing {
+        progress.line(&resume::describe(first, settings.frames, why, &render_hash));
+    }
+    if let Some(kept) = checkpoint.as_ref().and_then(|c| c.resume.as_ref()) {
+        progress.line(&format!(
+            "--resume: frame {first} goes on from its checkpoint: {} results, {} of its {} tiles whole",
+            kept.results.len(),
+            kept.whole_tiles(),
+            kept.tiles.len()
+        ));
+    }
+    let ticks = progress.clone();
+    let writer = frames::Writer::start(
+        frames::Settings {
+            out: args.out.clone(),
+            exposure: args.exposure,
+            tile_map: args.tile_map,
+            render_hash: render_hash.clone(),
+        },
+        Box::new(move |frame, seconds| ticks.frame_done(frame, seconds)),
+    )?;
+    let mut sink = Sink {
+        progress,
+        stats: StatsFile {
+            scene: args.scene.display().to_string(),
+            width: settings.width,
+            height: settings.height,
+            samples_per_pixel: settings.samples_per_pixel,
+            balancer: flag_name(&args.balancer),
+            deal: flag_name(&args.deal),
+            motion: args.motion.to_string(),
+            effects: world.effects.to_string(),
+            peers,
+            render_hash,
+            first_frame: first,
+            frames: Vec::new(),
+        },
+        rays: 0,
+        trace: match &args.trace {
+            Some(_) => Some(sim::trace::Trace::new(
+                settings.width,
+                settings.height,
+                tracer::BLOCK_SIZE,
+                &args.scene.display().to_string(),
+            )?),
+            None => None,
+        },
+        accepted: Accepted::new(),
+        files: writer,
+    };
+    let job = Job {
+        world,
+        files,
+        params,
+        frames: settings.frames,
+        first,
+        partitioner,
+        checkpoint,
+    };
+    let render_started = Instant::now();
+    let run = drive(job, &mut sink);
+    // Every frame handed over is written before the render counts as done, or fails.
+    let written = sink.files.finish();
+    let run = run?;
+    written?;
+    let render_seconds = render_started.elapsed().as_secs_f64();
+    sink.progress.finish();
+    if first == settings.frames && missing.is_some() {
+        // Nothing was rendered: the statistics and chart of the render that made the frames
+        // are worth more than empty ones.
+        println!(
+            "all {} frames in {} were done already; stats.json and gantt.svg left as they were",
+            settings.frames,
+            args.out.display()
+        );
+        return Ok(());
+    }
+    let mut stats = sink.stats;
+    // Peers may join a served render after it started: count everyone who took part.
+    let took_part: std::collections::BTreeSet<_> =
+        run.peers.keys().map(|(_, peer)| *peer).collect();
+    stats.peers = stats.peers.max(took_part.len());
+    for ((frame, peer), peer_stats) in &run.peers {
+        if let Some(entry) = stats.frames.iter_mut().find(|f| f.frame == *frame) {
+            entry.peers.push(PeerFrameStats::new(peer.0, peer_stats));
+        }
+    }
+    if let (Some(path), Some(trace)) = (&args.trace, &sink.trace) {
+        trace.write(path)?;
+    }
+    let stats_path = args
+        .stats
+        .clone()
+        .unwrap_or_else(|| args.out.join("stats.json"));
+    let json = serde_json::to_vec_pretty(&stats)?;
+    std::fs::write(&stats_path, json)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", stats_path.display()))?;
+    let gantt_path = args
+        .gantt
+        .clone()
+        .unwrap_or_else(|| args.out.join("gantt.svg"));
+    let charts = sim::plot::render_charts(&gantt_path, &stats, &run.timelines, &sink.accepted)?;
+    println!(
+        "rendered {} frames of {}x{} with {} peers in {:.2} s ({:.2} s in all): {:.2} Mrays/s; frames, stats.json and gantt.svg (per-frame charts in {}) in {}",
+        settings.frames - first,
+        settings.width,
+        settings.height,
+        stats.peers,
+        render_seconds,
+        started.elapsed().as_secs_f64(),
+        sink.rays as f64 / render_seconds / 1e6,
+        charts.display(),
+        args.out.display(),
+    );
+    Ok(())
+}
+
+/// The node's options from the flags, with `threads` rendering threads per peer.
+pub fn options(args: &FrameArgs, threads: usize) -> node::Options {
+    let timeout = std::time::Duration::from_secs_f64(args.peer_timeout.max(0.1));
+    let defaults = node::Options::default();
+    node::Options {
+        threads,
+        core: runtime_core::peer::Config {
+            steal: !args.no_steal,
+            peer_timeout: timeout,
+            heartbeat_interval: timeout / 5,
+            ..runtime_core::peer::Config::default()
+        },
+        net: runtime::net::Config {
+            idle_timeout: timeout,
+            keep_alive: timeout / 5,
+            ..defaults.net.clone()
+        },
+        seed: args.seed.unwrap_or(0),
+        ..defaults
+    }
+}
+
+/// Every core this process may use.
+pub fn available_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Rendering runs on rayon pools; tokio only moves bytes and timers, so two workers suffice.
+pub fn tokio_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    Ok(tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?)
+}
+
+/// Writes each finished frame and keeps its statistics.
+pub struct Sink {
+    progress: Progress,
+    stats: StatsFile,
+    rays: u64,
+    /// Every frame's block costs, when `--trace` asks for them.
+    trace: Option<sim::trace::Trace>,
+    /// The results the owner kept, telling the Gantt charts which renders were duplicates.
+    accepted: Accepted,
+    /// Writes the frames' files off the owner's loop.
+    files: frames::Writer,
+}
+
+impl FrameSink for Sink {
+    fn frame(&mut self, done: CompletedFrame) -> Result<(), String> {
+        self.rays += done.rays;
+        if let Some(trace) = &mut self.trace {
+            trace
+                .push(done.film.block_work.clone())
+                .map_err(|e| e.to_string())?;
+        }
+        for t in &done.tiles {
+            self.accepted.insert((done.frame, t.peer, t.rect));
+        }
+        let mut frame = FrameStats {
+            frame: done.frame,
+            seconds: done.seconds,
+            completed_at: done.completed_at,
+            rays: done.rays,
+            work: done.tiles.iter().map(|t| t.measured).sum(),
+            tiles: TileStats::per_tile(&done.tiles),
+            duplicates_agreed: done.audit.agreed,
+            duplicates_disagreed: done.audit.disagreed,
+            ..FrameStats::default()
+        };
+        frame.summarise_leaves();
+        self.stats.frames.push(frame);
+        let costs = done.tiles.iter().map(|t| (t.rect, t.measured)).collect();
+        self.files
+            .send(frames::Frame {
+                frame: done.frame,
+                seconds: done.seconds,
+                film: done.film,
+                costs,
+            })
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// Loads the scene and applies the command line's overrides.
+pub fn load_scene(args: &FrameArgs) -> anyhow::Result<Scene> {
+    let mut scene = tracer::scene::load(&args.scene)?;
+    let s = &mut scene.settings;
+    s.frames = args.frames.unwrap_or(s.frames);
+    s.seed = args.seed.unwrap_or(s.seed);
+    args.image.apply(s)?;
+    Ok(scene)
+}
+
+/// Builds the BVH and the lights, with the effect set the flags ask for.
+pub fn prepare_world(scene: Scene, effects: EffectsChoice) -> World {
+    let effects = match effects {
+        EffectsChoice::Auto => None,
+        EffectsChoice::All => Some(Effects::ALL),
+    };
+    World::prepare(scene, effects)
+}
