@@ -155,7 +155,6 @@ impl ImageArgs {
     }
 }
 
-
 /// What to render and how; shared by `render` and `serve`.
 #[derive(Debug, clap::Args)]
 pub struct FrameArgs {

@@ -1,7 +1,6 @@
 //! What every command that renders a scene's frames shares (`render`, `serve`, and `slurm`'s
-//! task 0): the scene with the command line's overrides, the limits refused before rendering,
-//! the node's options, and [`execute`]: the frames written as they come, the statistics, the
-//! charts and a one-line summary.
+//! task 0): the scene with the command line's overrides, the node's options and limits, and
+//! [`execute`]: the frames written as they come, the statistics, the charts and a summary.
 
 use crate::cli::{EffectsChoice, FrameArgs, flag_name};
 use crate::progress::Progress;
@@ -12,67 +11,6 @@ use runtime_core::stats::{Accepted, FrameStats, PeerFrameStats, StatsFile, TileS
 use std::sync::Arc;
 use std::time::Instant;
 use tracer::{Effects, Scene, World};
-
-/// Refuses, before anything is rendered, settings that cannot work: more tiles than the image
-/// has pixels or than one message can assign, tiles whose results cannot fit
-/// in one message, and frame buffers larger than this machine's free memory. Each error names
-/// the flag and the limit; none of these may surface later as a peer failure.
-/// Returns the tile count to cut frames into: `--tiles`, or its default for this image.
-fn check_limits(
-    args: &FrameArgs,
-    settings: &tracer::scene::RenderSettings,
-) -> anyhow::Result<usize> {
-    let (width, height) = (u64::from(settings.width), u64::from(settings.height));
-    // The owner holds the frame's film (12 bytes a pixel) and every result until the frame is
-    // assembled (as much again), and writes an EXR and a PNG from the film.
-    let needed = width * height * (12 + 12 + 12 + 4);
-    if let Some(available) = available_memory() {
-        anyhow::ensure!(
-            needed <= available,
-            "--width {width} --height {height}: a frame needs about {} MiB, and this machine \
-             has {} MiB free",
-            needed >> 20,
-            available >> 20
-        );
-    }
-    // Tiles smaller than a cost block work (blocks then carry partial work), so the floor is a
-    // pixel per tile.
-    let pixels = width * height;
-    let tiles = match args.tiles {
-        Some(tiles) => tiles as u64,
-        None => (balancer::Config::default().leaves as u64).min(pixels),
-    };
-    anyhow::ensure!(
-        tiles <= pixels,
-        "--tiles {tiles}: the {width}x{height} image has only {pixels} pixels"
-    );
-    let limits = node::Options::default().limits;
-    let per_message = limits.max_tiles_per_message as u64;
-    anyhow::ensure!(
-        tiles <= per_message,
-        "--tiles {tiles}: at most {per_message} tiles (a peer's share travels in one message)"
-    );
-    // The first frame's tiles are cut by area, so its largest is about the image over the tile
-    // count (rounded up each way); its result must fit in one message.
-    let side = (tiles as f64).sqrt().max(1.0);
-    let largest = (width as f64 / side).ceil() * (height as f64 / side).ceil();
-    let result_bytes = largest * runtime_core::wire::BYTES_PER_PIXEL as f64;
-    anyhow::ensure!(
-        result_bytes <= limits.max_message_bytes as f64 / 2.0,
-        "--tiles {tiles}: tiles of about {largest:.0} pixels are too large to send \
-         (a result may be at most {} MiB); use more tiles",
-        limits.max_message_bytes >> 21
-    );
-    Ok(tiles as usize)
-}
-
-/// Free memory as the kernel estimates it (`MemAvailable`), where `/proc/meminfo` says.
-fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
 
 /// Loads the scene, runs `drive` with a sink that writes frames, and writes the statistics,
 /// the Gantt chart and a one-line summary.
@@ -89,7 +27,14 @@ pub fn execute(
         "--trace cannot be combined with --resume: a trace must hold every frame of the render"
     );
     let scene = load_scene(args)?;
-    let tiles = check_limits(args, &scene.settings)?;
+    // Refused before anything is rendered, naming the flag: none may surface as a peer failure.
+    let (width, height) = (scene.settings.width, scene.settings.height);
+    let tiles = node::Options::default()
+        .check_frame(width, height, args.tiles, node::limits::available_memory())
+        .map_err(|e| match e.tiles() {
+            Some(tiles) => anyhow::anyhow!("--tiles {tiles}: {e}"),
+            None => anyhow::anyhow!("--width {width} --height {height}: {e}"),
+        })?;
     let files = node::bundle::scene_files(&args.scene, &scene)?;
     let params = node::bundle::params(&scene, args.effects == EffectsChoice::All);
     let render_hash = node::bundle::render_hash(&files, &params);

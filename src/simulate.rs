@@ -212,8 +212,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let runs = sweep.run(
         &trace,
         |kind, tiles| {
-            let config =
-                balancer::Config::with_tiles(kind, tiles, args.deal.into(), args.motion.0);
+            let config = balancer::Config::with_tiles(kind, tiles, args.deal.into(), args.motion.0);
             Ok(balancer::Partitioner::new(width, height, &config)?)
         },
         gantt,

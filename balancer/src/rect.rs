@@ -12,7 +12,9 @@
 use serde::{Deserialize, Serialize};
 
 /// A rectangle of pixels: columns `x..x + w`, rows `y..y + h`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize,
+)]
 pub struct Rect {
     pub x: u32,
     pub y: u32,

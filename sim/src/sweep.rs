@@ -170,11 +170,7 @@ impl GanttChoice {
                 _ => None,
             });
         };
-        let bad = |why: &str| {
-            Error::Scenario(format!(
-                "--gantt {spec:?}: {why}"
-            ))
-        };
+        let bad = |why: &str| Error::Scenario(format!("--gantt {spec:?}: {why}"));
         let expected = "expected PEERS:POLICY:TILES[:FRAME], e.g. 16:pbt+steal:256";
         let parts: Vec<&str> = spec.split(':').collect();
         let (peers, policy, tiles) = match parts.as_slice() {

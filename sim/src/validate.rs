@@ -74,7 +74,11 @@ pub fn validate(
         "" | "off" => None,
         text => match text.parse::<u32>() {
             Ok(blocks) if blocks > 0 => Some(blocks),
-            _ => return Err(bad(format!("motion {text:?}: not a number of blocks, or off"))),
+            _ => {
+                return Err(bad(format!(
+                    "motion {text:?}: not a number of blocks, or off"
+                )));
+            }
         },
     };
     // Rate: counted work over busy slot time, over the frames every peer reported.

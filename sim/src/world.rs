@@ -323,7 +323,12 @@ impl SimWorld {
                 print.words(&[16, u64::from(frame.0), u64::from(peer.0)]);
             }
             Event::PeerStats { frame, peer, stats } => {
-                print.words(&[11, u64::from(frame.0), u64::from(peer.0), stats.busy.as_nanos() as u64]);
+                print.words(&[
+                    11,
+                    u64::from(frame.0),
+                    u64::from(peer.0),
+                    stats.busy.as_nanos() as u64,
+                ]);
             }
             Event::PeerFailed {
                 frame,

@@ -278,7 +278,10 @@ mod tests {
         assert_eq!(tiles[0], pieces[0]);
         assert_eq!(tiles[1].rect, Rect::new(4, 0, 4, 4));
         assert_eq!((tiles[1].predicted, tiles[1].measured), (1.0, 9));
-        assert_eq!((tiles[1].pieces, tiles[1].peer, tiles[1].initial_peer), (3, 1, 0));
+        assert_eq!(
+            (tiles[1].pieces, tiles[1].peer, tiles[1].initial_peer),
+            (3, 1, 0)
+        );
         let json = serde_json::to_string(&tiles[1]).expect("a tile serialises");
         assert!(json.contains("\"rect\":[4,0,4,4]"), "{json}");
         let back: TileStats = serde_json::from_str(&json).expect("and reads back");

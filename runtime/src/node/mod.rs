@@ -6,11 +6,13 @@
 //! - `session`: the event loop both share: link events, render results and the core's timer.
 //! - [`bundle`]: the scene's files and tiles' pixels and costs as the wire carries them.
 //! - [`checkpoint`]: the frame in progress kept on disk, for `--resume` within a frame.
+//! - [`limits`]: the image sizes and tile counts refused before anything is rendered.
 //! - [`run_local`]: several peers in one process over real QUIC on loopback, certificates made
 //!   in memory: the default of `tessera render`.
 
 pub mod bundle;
 pub mod checkpoint;
+pub mod limits;
 pub mod owner;
 pub mod peer;
 mod session;

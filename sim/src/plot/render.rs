@@ -27,7 +27,11 @@ pub fn render_charts(
     let initial: HashMap<(u32, u32), u32> = stats
         .frames
         .iter()
-        .flat_map(|f| f.tiles.iter().map(move |t| ((f.frame, t.tile), t.initial_peer)))
+        .flat_map(|f| {
+            f.tiles
+                .iter()
+                .map(move |t| ((f.frame, t.tile), t.initial_peer))
+        })
         .collect();
     let mut bars = Vec::new();
     for (peer, tiles) in timelines {
