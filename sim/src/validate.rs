@@ -219,3 +219,109 @@ impl Validation {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::HotSpot;
+    use runtime_core::stats::{FrameStats, PeerFrameStats, TileStats};
+
+    /// A render's statistics as the node writes them: `peers` peers of `threads` threads, every
+    /// frame cut into `tiles` tiles, `busy` slot-seconds each for `work` counted work a frame.
+    fn stats(balancer: &str, deal: &str, motion: &str) -> StatsFile {
+        let peers = 2;
+        let frame = |frame| FrameStats {
+            frame,
+            seconds: 0.5,
+            work: 3_000,
+            tiles: (0..16)
+                .map(|t| TileStats {
+                    tile: t,
+                    ..TileStats::default()
+                })
+                .collect(),
+            peers: (0..peers)
+                .map(|peer| PeerFrameStats {
+                    peer,
+                    threads: 3,
+                    busy_seconds: 1.5,
+                    ..PeerFrameStats::default()
+                })
+                .collect(),
+            ..FrameStats::default()
+        };
+        StatsFile {
+            balancer: balancer.into(),
+            deal: deal.into(),
+            motion: motion.into(),
+            peers: peers as usize,
+            frames: vec![frame(0), frame(1)],
+            ..StatsFile::default()
+        }
+    }
+
+    /// The render's settings win over the flags': its rate (work over busy slot time), its
+    /// threads, its tile count and its motion; what it names wrongly is refused by name.
+    #[test]
+    fn the_render_is_simulated_with_its_own_settings() {
+        let trace = HotSpot::parse("synthetic:32x32:2")
+            .unwrap()
+            .trace()
+            .unwrap();
+        let given = Given {
+            steal: true,
+            ..Given::default()
+        };
+        let v = validate(&trace, &stats("pbt", "", "off"), Scenario::default(), given).unwrap();
+        // 2 frames x 3,000 work over 2 frames x 2 peers x 1.5 s.
+        assert_eq!((v.rate, v.slots, v.tiles, v.motion), (1_000.0, 3, 16, None));
+        assert_eq!((v.asked, v.frames.len()), (2, 2));
+        assert!(
+            v.frames
+                .iter()
+                .all(|f| f.measured == 0.5 && f.simulated > 0.0)
+        );
+        // The tiles written above are empty rectangles: no frame was dealt alike.
+        assert!(v.frames.iter().all(|f| !f.same_initial_sets));
+        assert!(
+            v.totals().ends_with("identical in 0 of 2 frames"),
+            "{}",
+            v.totals()
+        );
+        assert_eq!(v.csv().lines().count(), 3);
+
+        let one = Given {
+            frames: Some(1),
+            slots: Some(1),
+            rate: Some(5.0),
+            ..given
+        };
+        let v = validate(
+            &trace,
+            &stats("regular", "round-robin", "4"),
+            Scenario::default(),
+            one,
+        );
+        let v = v.unwrap();
+        assert_eq!(
+            (v.rate, v.slots, v.motion, v.frames.len()),
+            (5.0, 1, Some(4), 1)
+        );
+
+        for (balancer, deal, motion, named) in [
+            ("fastest", "", "off", "fastest"),
+            ("pbt", "sideways", "off", "sideways"),
+            ("pbt", "", "-3", "-3"),
+        ] {
+            let error = validate(
+                &trace,
+                &stats(balancer, deal, motion),
+                Scenario::default(),
+                given,
+            )
+            .unwrap_err()
+            .to_string();
+            assert!(error.contains(named), "{error}");
+        }
+    }
+}
