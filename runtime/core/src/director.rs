@@ -116,7 +116,9 @@ impl Deal {
     }
 }
 
-/// One finished tile of a completed frame.
+/// One finished tile of a completed frame. Why a type of its own: it is the result the owner
+/// kept, still encoded, with who rendered it and what was predicted; the driver decodes and
+/// measures it into a `stats::TileStats`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Piece {
     pub result: TileResult,
