@@ -60,10 +60,12 @@ use crate::{Error, Order};
 /// order. Every peer has a run, possibly empty (more peers than tiles).
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Assignment {
+    /// Peer `p`'s tile indices, in the order it renders them; one run per peer.
     pub runs: Vec<Vec<usize>>,
 }
 
 impl Assignment {
+    /// How many peers the tiles were dealt to, counting those dealt nothing.
     pub fn peers(&self) -> usize {
         self.runs.len()
     }

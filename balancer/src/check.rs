@@ -18,31 +18,63 @@ use crate::Rect;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PartitionError {
     #[error("tile {index} ({rect:?}) has no pixels")]
-    Empty { index: usize, rect: Rect },
-    #[error("tile {index} ({rect:?}) reaches outside the {width}x{height} image")]
-    OutOfBounds {
+    /// A tile of zero width or height, which would render nothing and hide a gap.
+    Empty {
+        /// The tile's place in the list.
         index: usize,
+        /// The empty rectangle.
         rect: Rect,
+    },
+    #[error("tile {index} ({rect:?}) reaches outside the {width}x{height} image")]
+    /// A tile with pixels beyond the image's right or bottom edge.
+    OutOfBounds {
+        /// The tile's place in the list.
+        index: usize,
+        /// The offending rectangle.
+        rect: Rect,
+        /// The image's width in pixels.
         width: u32,
+        /// The image's height in pixels.
         height: u32,
     },
     #[error("tile {index} ({rect:?}) is longer than {max_aspect} times its width plus one pixel")]
+    /// A tile more elongated than the halving tree allows, which would make its cost poorly predicted.
     Aspect {
+        /// The tile's place in the list.
         index: usize,
+        /// The offending rectangle.
         rect: Rect,
+        /// The largest ratio of long to short side the check was asked to allow.
         max_aspect: f64,
     },
     #[error("{found} tiles where {expected} were expected")]
-    Count { expected: usize, found: usize },
+    /// The list holds a different number of tiles than the caller asked for.
+    Count {
+        /// The number of tiles asked for.
+        expected: usize,
+        /// The number of tiles in the list.
+        found: usize,
+    },
     #[error("tiles {first} ({first_rect:?}) and {second} ({second_rect:?}) overlap")]
+    /// Two tiles share pixels, which would render them twice.
     Overlap {
+        /// The place of the earlier tile in the list.
         first: usize,
+        /// The earlier tile's rectangle.
         first_rect: Rect,
+        /// The place of the later tile in the list.
         second: usize,
+        /// The later tile's rectangle.
         second_rect: Rect,
     },
     #[error("the tiles cover {covered} of the image's {total} pixels")]
-    Gap { covered: u64, total: u64 },
+    /// The tiles leave pixels of the image uncovered.
+    Gap {
+        /// Pixels the tiles cover.
+        covered: u64,
+        /// Pixels in the image.
+        total: u64,
+    },
 }
 
 /// Checks that `tiles` cover the `width` x `height` image exactly (no gap, no overlap), that

@@ -23,7 +23,9 @@ use crate::{CostMap, Error};
 /// A global translation of the cost landscape per frame, in blocks.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Motion {
+    /// Columns of blocks the landscape moves right per frame (negative: left).
     pub dx: f64,
+    /// Rows of blocks the landscape moves down per frame (negative: up).
     pub dy: f64,
 }
 

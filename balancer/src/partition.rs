@@ -41,7 +41,9 @@ use crate::{CostMap, Error, Pbt, Rect, Regular};
 /// apart from the wire and the tracer; the director numbers it into a `wire::TileSpec`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Tile {
+    /// The pixels of the tile.
     pub rect: Rect,
+    /// Its cost predicted for the frame being dealt, in the cost map's units.
     pub predicted: f64,
 }
 
@@ -104,10 +106,20 @@ pub enum Kind {
 #[serde(rename_all = "snake_case")]
 pub enum Grid {
     /// `columns x rows` tiles whose sides differ by at most one pixel.
-    Count { columns: u32, rows: u32 },
+    Count {
+        /// Tiles across the image.
+        columns: u32,
+        /// Tiles down the image.
+        rows: u32,
+    },
     /// Tiles of `width x height` pixels from the top-left corner, partial at the right and
     /// bottom edges.
-    Size { width: u32, height: u32 },
+    Size {
+        /// A tile's width in pixels.
+        width: u32,
+        /// A tile's height in pixels.
+        height: u32,
+    },
 }
 
 impl Default for Grid {
@@ -194,7 +206,9 @@ impl Config {
 /// Any balancer, behind one surface.
 #[derive(Clone, Debug)]
 pub enum Partitioner {
+    /// The Prediction Binary Tree, cutting by predicted cost.
     Pbt(Pbt),
+    /// The fixed grid, the baseline the PBT is measured against.
     Regular(Regular),
 }
 
@@ -207,6 +221,7 @@ impl Partitioner {
         })
     }
 
+    /// The width in pixels of the image being partitioned.
     pub fn width(&self) -> u32 {
         match self {
             Partitioner::Pbt(pbt) => pbt.width(),
@@ -214,6 +229,7 @@ impl Partitioner {
         }
     }
 
+    /// The height in pixels of the image being partitioned.
     pub fn height(&self) -> u32 {
         match self {
             Partitioner::Pbt(pbt) => pbt.height(),

@@ -16,13 +16,18 @@ use serde::{Deserialize, Serialize};
     Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize,
 )]
 pub struct Rect {
+    /// The leftmost column.
     pub x: u32,
+    /// The top row.
     pub y: u32,
+    /// The width in pixels.
     pub w: u32,
+    /// The height in pixels.
     pub h: u32,
 }
 
 impl Rect {
+    /// A rectangle from its top-left corner and its size.
     pub fn new(x: u32, y: u32, w: u32, h: u32) -> Self {
         Self { x, y, w, h }
     }
@@ -32,10 +37,12 @@ impl Rect {
         Self::new(0, 0, width, height)
     }
 
+    /// The number of pixels, widened so that a large image cannot overflow it.
     pub fn area(&self) -> u64 {
         u64::from(self.w) * u64::from(self.h)
     }
 
+    /// True when the rectangle holds no pixel (zero width or height).
     pub fn is_empty(&self) -> bool {
         self.w == 0 || self.h == 0
     }
@@ -50,10 +57,12 @@ impl Rect {
         u64::from(self.y) + u64::from(self.h)
     }
 
+    /// The longer of width and height, the side the halving tree cuts across.
     pub fn long_side(&self) -> u32 {
         self.w.max(self.h)
     }
 
+    /// The shorter of width and height, which bounds the tile's aspect ratio.
     pub fn short_side(&self) -> u32 {
         self.w.min(self.h)
     }

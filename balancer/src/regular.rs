@@ -106,10 +106,12 @@ impl Regular {
         Regular { order, ..self }
     }
 
+    /// The width in pixels of the image the grid covers.
     pub fn width(&self) -> u32 {
         self.width
     }
 
+    /// The height in pixels of the image the grid covers.
     pub fn height(&self) -> u32 {
         self.height
     }

@@ -1,6 +1,9 @@
 //! Property tests of the PBT over random images (including 1xN strips and images far wider
 //! than 2:1), leaf counts and cost maps (including zero and 1e30 costs).
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 mod common;
 
 use std::collections::HashSet;

@@ -130,10 +130,12 @@ impl CostMap {
         })
     }
 
+    /// The image's width in pixels (not in blocks).
     pub fn width(&self) -> u32 {
         self.width
     }
 
+    /// The image's height in pixels (not in blocks).
     pub fn height(&self) -> u32 {
         self.height
     }

@@ -124,10 +124,12 @@ impl Pbt {
         Ok(pbt)
     }
 
+    /// The width in pixels of the image the tree covers.
     pub fn width(&self) -> u32 {
         self.width
     }
 
+    /// The height in pixels of the image the tree covers.
     pub fn height(&self) -> u32 {
         self.height
     }

@@ -2,7 +2,8 @@
 //! references restate the specification directly (recursion over [`Rect::halves`], brute-force
 //! sums) rather than calling the code under test.
 
-#![allow(dead_code)]
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(dead_code, clippy::unwrap_used)]
 
 use balancer::{CostMap, Rect};
 use proptest::prelude::*;
