@@ -98,6 +98,7 @@ impl Default for Config {
 /// One frame as dealt: what the driver starts in the owner's core.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Deal {
+    /// The frame these tiles belong to.
     pub frame: FrameId,
     /// The partition's tiles, by tile id.
     pub tiles: Vec<balancer::Tile>,
@@ -121,6 +122,7 @@ impl Deal {
 /// measures it into a `stats::TileStats`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Piece {
+    /// The accepted result, still as the wire carries it.
     pub result: TileResult,
     /// Who rendered it (sent the accepted result).
     pub peer: PeerId,
@@ -137,8 +139,11 @@ pub enum Event {
     /// in tile order (a tile that was cut on the way by its pieces, in tree order). The driver
     /// measures them and calls [`Director::handle_measured`].
     FrameComplete {
+        /// The frame that is complete.
         frame: FrameId,
+        /// Time from the frame's deal to its last piece, on the driver's clock.
         elapsed: Duration,
+        /// Every piece of the frame, in the order described above.
         pieces: Vec<Piece>,
         /// How the frame's duplicate results compared with the first.
         audit: Audit,
@@ -152,15 +157,30 @@ pub enum Event {
 #[derive(Debug, thiserror::Error)]
 pub enum DirectorError {
     #[error(transparent)]
+    /// The balancer refused to cut or learn, e.g. a cost map of the wrong size.
     Balancer(#[from] balancer::Error),
     #[error(
         "frame {frame}: {faults} faulty results; a peer keeps sending results that cannot be right"
     )]
-    Faulty { frame: FrameId, faults: usize },
+    /// Too many results of one frame failed their checks to go on trusting the cluster.
+    Faulty {
+        /// The frame the faults arrived in.
+        frame: FrameId,
+        /// How many faulty results it had.
+        faults: usize,
+    },
     #[error("{frame} was measured, but it is not the frame waiting for its measurement")]
-    NotWaiting { frame: FrameId },
+    /// The driver measured a frame the director was not waiting on, a bug in the driver.
+    NotWaiting {
+        /// The frame measured.
+        frame: FrameId,
+    },
     #[error("{frame} was dealt twice")]
-    DealtTwice { frame: FrameId },
+    /// The driver started a frame's deal a second time, a bug in the driver.
+    DealtTwice {
+        /// The frame dealt twice.
+        frame: FrameId,
+    },
 }
 
 /// The frame owner's state machine. See the module documentation.
@@ -237,6 +257,7 @@ impl Director {
         director
     }
 
+    /// The balancer that cuts the frames, for drivers that report its tree or grid.
     pub fn partitioner(&self) -> &Partitioner {
         &self.partitioner
     }
@@ -549,10 +570,12 @@ impl Director {
         self.closing.filter(|_| !self.finished)
     }
 
+    /// The next thing the driver must act on, if any; call until `None` after each `handle_*`.
     pub fn poll_event(&mut self) -> Option<Event> {
         self.events.pop_front()
     }
 
+    /// True once the director has reported [`Event::Finished`]: every frame handed over, or closing done.
     pub fn is_finished(&self) -> bool {
         self.finished
     }

@@ -27,23 +27,32 @@ use crate::wire::{Message, PROTOCOL_VERSION, PeerAddress, PeerId, RenderParams, 
 /// What the driver must do.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Action<C> {
+    /// Send `message` to the other side of `conn`.
     Send {
+        /// The connection to send on.
         conn: C,
+        /// What to send.
         message: Message,
     },
     /// Close `conn` for `refusal`, telling the other side `reason`.
     Close {
+        /// The connection to close.
         conn: C,
+        /// Why it is refused, for the driver's log and counters.
         refusal: Refusal,
+        /// The text the other side is told.
         reason: String,
     },
     /// `peer` on `conn` is a member: bind the two, tell the core and the director.
     Joined {
+        /// The new member's id.
         peer: PeerId,
+        /// The connection it is reached on.
         conn: C,
     },
     /// Member `peer` is gone: tell the core and the director.
     Left {
+        /// The member that left.
         peer: PeerId,
     },
 }
@@ -129,6 +138,7 @@ impl<C: Ord + Copy> Membership<C> {
         self.members.len()
     }
 
+    /// True once [`Membership::start`] has run, after which members joining or leaving are reported.
     pub fn is_started(&self) -> bool {
         self.started
     }
@@ -251,6 +261,7 @@ impl<C: Ord + Copy> Membership<C> {
         self.out.push_back(Action::Joined { peer, conn });
     }
 
+    /// The next thing the driver must do, if any; call until `None` after each `handle_*`.
     pub fn poll_action(&mut self) -> Option<Action<C>> {
         self.out.pop_front()
     }

@@ -18,6 +18,7 @@ impl SplitMix {
         SplitMix(SplitMix(seed ^ salted).next_u64())
     }
 
+    /// The next number of the stream, advancing it.
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;

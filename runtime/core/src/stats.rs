@@ -19,9 +19,13 @@ use crate::peer::PeerStats;
 #[derive(Debug, Default, Serialize, Deserialize)]
 #[serde(default)]
 pub struct StatsFile {
+    /// The scene file rendered, as given on the command line.
     pub scene: String,
+    /// The image's width in pixels.
     pub width: u32,
+    /// The image's height in pixels.
     pub height: u32,
+    /// Samples traced per pixel.
     pub samples_per_pixel: u32,
     /// `pbt` or `regular`.
     pub balancer: String,
@@ -33,6 +37,7 @@ pub struct StatsFile {
     pub motion: String,
     /// The light-transport effects the render paid for (see `tracer::Effects`).
     pub effects: String,
+    /// Peers that took part when the render started.
     pub peers: usize,
     /// The render's identity: a hash of the scene files and the render settings
     /// (`runtime::node::bundle::render_hash`), also in every frame's EXR header. Empty in files
@@ -41,6 +46,7 @@ pub struct StatsFile {
     /// The first frame this run rendered: 0, or with `--resume` the first frame missing. The
     /// frames before it were done already and have no entry in `frames`.
     pub first_frame: u32,
+    /// The frames this run rendered, in order.
     pub frames: Vec<FrameStats>,
 }
 
@@ -48,12 +54,14 @@ pub struct StatsFile {
 #[derive(Debug, Default, Serialize, Deserialize)]
 #[serde(default)]
 pub struct FrameStats {
+    /// The frame's number in the animation.
     pub frame: u32,
     /// Wall time from the first tile handed out to the last tile received, in seconds.
     pub seconds: f64,
     /// When the frame was complete, in seconds since the render started (0 in older files).
     /// Frames overlap, so the difference between two frames' is what each added to the render.
     pub completed_at: f64,
+    /// Rays traced for the frame, of every kind.
     pub rays: u64,
     /// Counted work of the whole frame (the tracer's deterministic cost unit).
     pub work: u64,
@@ -61,12 +69,14 @@ pub struct FrameStats {
     pub leaf_cost_variance: f64,
     /// Largest measured leaf cost divided by the mean: 1 is a perfect partition.
     pub leaf_cost_max_over_mean: f64,
+    /// Every tile's record, in tile order.
     pub tiles: Vec<TileStats>,
     /// Each peer's own account of the frame.
     pub peers: Vec<PeerFrameStats>,
     /// Duplicate results (backups of stragglers, re-issued tiles) the owner compared with the
     /// first and found bit-identical, and found different: a free audit of determinism.
     pub duplicates_agreed: u32,
+    /// Results that differed from the first: a peer is broken, as rendering is deterministic.
     pub duplicates_disagreed: u32,
 }
 
@@ -75,18 +85,27 @@ pub struct FrameStats {
 #[derive(Debug, Default, Serialize, Deserialize)]
 #[serde(default)]
 pub struct PeerFrameStats {
+    /// The peer's id.
     pub peer: u32,
+    /// Its rendering threads (slots).
     pub threads: u32,
+    /// Slot-seconds spent rendering.
     pub busy_seconds: f64,
+    /// Slot-seconds not rendering.
     pub idle_seconds: f64,
+    /// Tiles and pieces it rendered.
     pub tiles_rendered: u32,
     /// Tiles this peer took from others.
     pub tiles_stolen: u32,
     /// Tiles this peer gave to thieves.
     pub tiles_given: u32,
+    /// Steal requests it sent as a thief.
     pub steal_requests_sent: u32,
+    /// Of those, refused or unanswered in time.
     pub steal_requests_refused: u32,
+    /// Bytes it sent, as its driver counted them.
     pub bytes_sent: u64,
+    /// Bytes it received, as its driver counted them.
     pub bytes_received: u64,
 }
 
@@ -229,7 +248,9 @@ impl FrameStats {
 /// owner's (the one result kept, measured).
 #[derive(Clone, Debug)]
 pub struct LocalTile {
+    /// The frame it belongs to.
     pub frame: u32,
+    /// The tile's id in that frame.
     pub tile: u32,
     /// The pixels rendered: the whole tile's, or a piece's.
     pub rect: Rect,
@@ -237,6 +258,7 @@ pub struct LocalTile {
     pub piece: bool,
     /// Since the peer started.
     pub start: Duration,
+    /// When it finished, since the peer started.
     pub end: Duration,
 }
 

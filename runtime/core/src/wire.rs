@@ -69,17 +69,30 @@ pub fn cost_map_bytes(rect: Rect, block: u32) -> u64 {
 pub enum Message {
     /// First message of the dialing side. Must stay variant 0 with `version` first.
     Hello {
+        /// The protocol version the sender speaks ([`PROTOCOL_VERSION`]).
         version: u32,
+        /// The id the sender claims, checked against its certificate by the driver.
         peer: PeerId,
+        /// How many tiles the sender renders at once.
         slots: u32,
     },
     /// Reply to `Hello`. Must stay variant 1 with `version` first.
-    Welcome { version: u32, peer: PeerId },
+    Welcome {
+        /// The protocol version the owner speaks.
+        version: u32,
+        /// The id the owner gives the sender.
+        peer: PeerId,
+    },
     /// Where the other peers listen, so that peers can steal from each other directly.
-    Peers { peers: Vec<PeerAddress> },
+    Peers {
+        /// Every member's listening address.
+        peers: Vec<PeerAddress>,
+    },
     /// The scene's files; the receiver checks each file's hash before loading it.
     Scene {
+        /// Every file the scene needs, with its hash.
         files: Vec<SceneFile>,
+        /// The settings every peer renders with.
         params: RenderParams,
     },
     /// The receiver has loaded the scene and can take tiles.
@@ -89,31 +102,46 @@ pub enum Message {
     /// `render_pixels` is the largest piece the receiver hands its renderer at once: larger
     /// tiles are rendered half by half, so that what is not yet rendered can still be stolen.
     Assign {
+        /// The frame dealt.
         frame: FrameId,
+        /// Every participant of the frame, whom the receiver may steal from.
         peers: Vec<PeerId>,
+        /// The receiver's initial tiles.
         tiles: Vec<TileSpec>,
+        /// The largest piece, in pixels, the receiver renders at once.
         render_pixels: u64,
     },
     /// A thief asks for work of frames up to `frame`, the newest it works on; `remaining` is
     /// the predicted work it still holds of each frame it works on, oldest first (at most
     /// [`MAX_FRAMES_IN_FLIGHT`]), so that a victim can even out the oldest frame first.
     StealRequest {
+        /// The frame the thief asks for work of.
         frame: FrameId,
+        /// The thief's remaining predicted work per frame, oldest first.
         remaining: Vec<(FrameId, f64)>,
     },
     /// The victim's answer: tiles from the far end of its queue.
     StealGrant {
+        /// The frame the tiles belong to.
         frame: FrameId,
+        /// The tiles or pieces given.
         tiles: Vec<TileSpec>,
     },
     /// The victim's answer when giving would not pay for the transfer.
-    StealRefuse { frame: FrameId },
+    StealRefuse {
+        /// The frame asked about.
+        frame: FrameId,
+    },
     /// A thief tells the owner which tiles it took from `victim`, so the owner's ledger knows
     /// who holds them. `stolen` counts the grants the thief has received this frame.
     StealNotice {
+        /// The frame the tiles belong to.
         frame: FrameId,
+        /// The peer the tiles were taken from.
         victim: PeerId,
+        /// The tiles or pieces taken.
         tiles: Vec<(TileId, Piece)>,
+        /// Grants the thief received this frame, so the owner can order notices.
         stolen: u32,
     },
     /// A peer's report to the owner: alive, and idle (holding no work of the frame) or not.
@@ -121,20 +149,36 @@ pub enum Message {
     /// the `TileDone`s it has sent this frame, so that the owner, whose messages may arrive in
     /// any order, can tell a current idle report from one overtaken by events.
     Status {
+        /// The frame reported on.
         frame: FrameId,
+        /// True when the sender has no work of the frame left.
         idle: bool,
+        /// Tiles of the frame the sender was assigned.
         assigned: u32,
+        /// Steal grants of the frame the sender received.
         stolen: u32,
+        /// `TileDone`s of the frame the sender sent.
         done: u32,
     },
     /// A finished tile, sent to the owner by whoever rendered it.
     TileDone(TileResult),
     /// The owner has every tile of `frame`; peers drop what is left of it.
-    FrameDone { frame: FrameId },
+    FrameDone {
+        /// The frame complete.
+        frame: FrameId,
+    },
     /// A peer's statistics for `frame`, sent to the owner after `FrameDone`.
-    FrameStats { frame: FrameId, stats: PeerStats },
+    FrameStats {
+        /// The frame the statistics cover up to.
+        frame: FrameId,
+        /// What the peer counted.
+        stats: PeerStats,
+    },
     /// The sender is closing the connection.
-    Goodbye { reason: GoodbyeReason },
+    Goodbye {
+        /// Why it is closing.
+        reason: GoodbyeReason,
+    },
     /// A peer tells the owner that it is leaving the render (it was asked to stop, as SLURM and
     /// cloud preemption ask, with SIGTERM): it takes no more work, gives away none, and closes
     /// once the tiles in its renderer are rendered and sent. The owner re-issues everything else
@@ -280,9 +324,13 @@ impl Piece {
 /// queue, steal and re-issue moves.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TileSpec {
+    /// The tile's id in its frame.
     pub id: TileId,
+    /// Which part of the tile this is: the whole, or a node of its halving tree.
     pub piece: Piece,
+    /// The pixels of this tile or piece.
     pub rect: Rect,
+    /// Its share of the tile's predicted cost (see [`predicted_share`]).
     pub predicted: f64,
 }
 
@@ -329,14 +377,19 @@ pub fn predicted_share(predicted: f64, whole: Rect, part: Rect) -> f64 {
 /// on the wire, which the core routes and compares without decoding.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TileResult {
+    /// The frame the tile belongs to.
     pub frame: FrameId,
+    /// The tile's id in that frame.
     pub tile: TileId,
     /// Which part of the tile `rect` is.
     pub piece: Piece,
+    /// The pixels rendered.
     pub rect: Rect,
     #[serde(with = "serde_bytes")]
+    /// The pixels as the tracer encodes them, [`BYTES_PER_PIXEL`] bytes each.
     pub pixels: Vec<u8>,
     #[serde(with = "serde_bytes")]
+    /// The measured cost of each block of the rectangle, encoded by the tracer.
     pub costs: Vec<u8>,
 }
 
@@ -344,9 +397,12 @@ pub struct TileResult {
 /// hash of `bytes`, computed and checked by the drivers (blake3 by convention).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SceneFile {
+    /// The file's path relative to the scene, with `/` separators.
     pub name: String,
+    /// The content hash of `bytes`.
     pub hash: [u8; 32],
     #[serde(with = "serde_bytes")]
+    /// The file's contents.
     pub bytes: Vec<u8>,
 }
 
@@ -354,11 +410,17 @@ pub struct SceneFile {
 /// overrides): every peer must render with exactly these, or its pixels would differ.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct RenderParams {
+    /// The image's width in pixels.
     pub width: u32,
+    /// The image's height in pixels.
     pub height: u32,
+    /// Samples traced per pixel.
     pub samples_per_pixel: u32,
+    /// The longest path, if overridden; `None` keeps the scene's.
     pub max_depth: Option<u32>,
+    /// The bounce after which paths may end by Russian roulette, if overridden.
     pub russian_roulette_depth: Option<u32>,
+    /// The seed of every pixel's sample stream.
     pub seed: u64,
     /// Every light-transport effect forced on (`--effects all`) rather than the scene's set.
     pub all_effects: bool,
@@ -367,7 +429,9 @@ pub struct RenderParams {
 /// Where a peer listens, as a socket address string (`"10.0.0.7:4433"`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PeerAddress {
+    /// The peer listening.
     pub peer: PeerId,
+    /// Its socket address, as text.
     pub addr: String,
 }
 
@@ -408,21 +472,43 @@ impl Default for Limits {
 #[derive(Debug, thiserror::Error)]
 pub enum WireError {
     #[error("message of {len} bytes exceeds the limit of {max}")]
-    TooLong { len: usize, max: usize },
+    /// A message longer than the decoder accepts, refused before decoding.
+    TooLong {
+        /// The message's length in bytes.
+        len: usize,
+        /// The longest accepted.
+        max: usize,
+    },
     #[error("malformed message: {0}")]
+    /// The bytes are not a message postcard can decode.
     Malformed(#[from] postcard::Error),
     #[error("{0} trailing bytes after the message")]
+    /// Bytes left over after a whole message, which a well-formed sender never leaves.
     Trailing(usize),
     #[error("peer speaks protocol version {theirs}, we speak {ours}")]
-    VersionMismatch { theirs: u32, ours: u32 },
+    /// The other side speaks another protocol version.
+    VersionMismatch {
+        /// The version it speaks.
+        theirs: u32,
+        /// The version this build speaks.
+        ours: u32,
+    },
     #[error("{what}: {len} exceeds the limit of {max}")]
+    /// A list or buffer in the message exceeds its bound.
     Limit {
+        /// What exceeded its bound.
         what: &'static str,
+        /// Its length.
         len: u64,
+        /// The bound.
         max: u64,
     },
     #[error("invalid {what}")]
-    Invalid { what: &'static str },
+    /// A value in the message breaks a rule of the protocol.
+    Invalid {
+        /// What broke it.
+        what: &'static str,
+    },
 }
 
 /// Encodes a message. Pure; never fails.

@@ -1,6 +1,9 @@
 //! The scheduling core driven directly: an owner and a few peers in virtual time
 //! (`runtime_core::peer::testing::Cluster`), every message through the wire encoding, no sockets.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 use std::collections::BTreeMap;
 use std::time::Duration;
 

@@ -97,7 +97,9 @@ pub const RELEARN_BOUND: f64 = 16.0;
 /// still decides when it is forgotten.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Speculation {
+    /// How many times its predicted time a tile may go without progress before it is overdue.
     pub factor: f64,
+    /// The least time without progress that makes a tile overdue, whatever its prediction.
     pub min_wait: Duration,
 }
 

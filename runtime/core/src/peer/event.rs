@@ -13,8 +13,11 @@ pub enum Event {
     /// overlapping: by tile id, and within a tile its pieces in tree order (one whole-tile
     /// result for a tile that never was cut).
     FrameComplete {
+        /// The frame that is complete.
         frame: FrameId,
+        /// Time from the frame's start in this core to its last result.
         elapsed: Duration,
+        /// The accepted results, in the order described above.
         results: Vec<TileResult>,
         /// Who sent each of `results`, in the same order (for statistics and Gantt charts).
         rendered_by: Vec<PeerId>,
@@ -24,37 +27,62 @@ pub enum Event {
     /// (Owner) `frame` is near its end: a participant has run out of its work, or at most
     /// [`Config::waning`](crate::peer::Config::waning) of its predicted cost is still missing.
     /// Reported once per frame, the director's cue to deal the next frame early.
-    FrameWaning { frame: FrameId },
+    FrameWaning {
+        /// The frame that wanes.
+        frame: FrameId,
+    },
     /// (Owner) `peer` made no progress on its work of `frame` for long past its prediction,
     /// and that work was backed up on idle peers. It is not declared failed (it may resume),
     /// but the director deals it nothing more until it is heard of again.
-    PeerOverdue { frame: FrameId, peer: PeerId },
+    PeerOverdue {
+        /// The frame whose work was backed up.
+        frame: FrameId,
+        /// The peer that stalled.
+        peer: PeerId,
+    },
     /// (Owner) a participant's statistics for `frame`, its own included.
     PeerStats {
+        /// The frame the statistics cover up to.
         frame: FrameId,
+        /// The participant they are from.
         peer: PeerId,
+        /// What it counted.
         stats: PeerStats,
     },
     /// (Owner) a participant is gone for the rest of `frame`; `reissued` of its tiles went to
     /// live peers. After a `Silent` failure the driver should close the connection.
     PeerFailed {
+        /// The frame it is gone from.
         frame: FrameId,
+        /// The participant that is gone.
         peer: PeerId,
+        /// How it was found gone.
         reason: Failure,
+        /// How many of its tiles were re-issued to live peers.
         reissued: usize,
     },
     /// (Owner) `peer` sent something that cannot be right. Its result was not used.
     FaultyPeer {
+        /// The frame the result was for.
         frame: FrameId,
+        /// The peer that sent it.
         peer: PeerId,
+        /// The tile the result claimed to be.
         tile: TileId,
+        /// What was wrong with it.
         fault: Fault,
     },
     /// (Peer) the owner of `frame` is gone; this peer dropped the frame.
-    OwnerLost { frame: FrameId },
+    OwnerLost {
+        /// The frame dropped.
+        frame: FrameId,
+    },
     /// (Owner) `peer` is leaving the render: it is dealt nothing more. Its connection closes
     /// once its last tiles are in; the driver reports that as usual.
-    PeerLeaving { peer: PeerId },
+    PeerLeaving {
+        /// The peer that is leaving.
+        peer: PeerId,
+    },
     /// (Peer) this peer was leaving and has sent the last of its results: the driver may say
     /// goodbye and close.
     Left,
@@ -87,7 +115,10 @@ pub enum Failure {
 pub enum Fault {
     /// A second result of the tile whose pixels differ from the accepted one (from `first`).
     /// Rendering is deterministic, so one of the two peers is broken; the first is kept.
-    Mismatch { first: PeerId },
+    Mismatch {
+        /// The peer whose result was accepted first.
+        first: PeerId,
+    },
     /// The tile is not part of the frame.
     UnknownTile,
     /// The result's rectangle is not the tile's.
@@ -102,6 +133,7 @@ pub enum Fault {
 /// `FrameDone`: a peer's reports add up to its whole run, each moment counted once.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PeerStats {
+    /// Tiles the peer renders at once (its rendering threads), the factor of every slot-time.
     pub slots: u32,
     /// From the peer's previous report (or first `Assign`) to the frame's `FrameDone`.
     pub wall: Duration,
@@ -109,18 +141,24 @@ pub struct PeerStats {
     pub busy: Duration,
     /// Slot-time not rendering: `wall * slots - busy`.
     pub idle: Duration,
+    /// Tiles and pieces the peer rendered, stolen or not.
     pub tiles_rendered: u32,
     /// Tiles received in steal grants.
     pub tiles_stolen: u32,
     /// Tiles given away in steal grants.
     pub tiles_given: u32,
+    /// Steal requests the peer sent as a thief.
     pub steal_requests_sent: u32,
     /// Of the requests sent: refused, or unanswered in time.
     pub steal_requests_refused: u32,
+    /// Steal requests the peer answered as a victim.
     pub steal_requests_received: u32,
+    /// Protocol messages the core sent, of any kind.
     pub messages_sent: u64,
+    /// Protocol messages the core received, of any kind.
     pub messages_received: u64,
     /// Reported by the driver, which sees the bytes (see `Core::record_bytes`).
     pub bytes_sent: u64,
+    /// Reported by the driver, like `bytes_sent`.
     pub bytes_received: u64,
 }

@@ -37,7 +37,9 @@ use worker::Worker;
 /// that names its frame, but work handed to a renderer stands alone, so it carries the frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WorkItem {
+    /// The frame the tile belongs to.
     pub frame: FrameId,
+    /// The tile or piece to render.
     pub tile: TileSpec,
 }
 
@@ -45,23 +47,43 @@ pub struct WorkItem {
 #[derive(Debug, thiserror::Error)]
 pub enum ProtocolError {
     #[error("{kind} belongs to the connection's driver, not the scheduling core")]
-    NotForCore { kind: &'static str },
+    /// A message the driver should have handled itself (handshake, scene, goodbye) reached the core.
+    NotForCore {
+        /// The message's kind.
+        kind: &'static str,
+    },
     #[error("{kind} for {frame}, which this peer does not own")]
-    NotOwner { kind: &'static str, frame: FrameId },
+    /// A message only a frame's owner may receive came for a frame this peer does not own.
+    NotOwner {
+        /// The message's kind.
+        kind: &'static str,
+        /// The frame it named.
+        frame: FrameId,
+    },
 }
 
 /// Why the owner could not start a frame.
 #[derive(Debug, thiserror::Error)]
 pub enum FrameError {
     #[error("{frame} is not newer than {newest}, which this peer has already seen")]
-    NotNewer { frame: FrameId, newest: FrameId },
+    /// Frames are started in increasing order; this one is not.
+    NotNewer {
+        /// The frame asked for.
+        frame: FrameId,
+        /// The newest frame already started.
+        newest: FrameId,
+    },
     #[error("{0} is not connected")]
+    /// The deal names a peer this core has no connection to.
     UnknownPeer(PeerId),
     #[error("{0} is assigned twice")]
+    /// The deal gives one tile id twice.
     DuplicateTile(TileId),
     #[error("{0} has an invalid rectangle or predicted cost")]
+    /// A tile with an empty rectangle or a predicted cost that is not finite and non-negative.
     InvalidTile(TileId),
     #[error("a frame needs at least one tile")]
+    /// The deal has no tiles, so the frame could never complete.
     NoTiles,
 }
 
@@ -92,10 +114,12 @@ impl Core {
         }
     }
 
+    /// The id of the peer this core schedules for.
     pub fn id(&self) -> PeerId {
         self.worker.me
     }
 
+    /// The policy the core was built with.
     pub fn config(&self) -> &Config {
         &self.config
     }
@@ -290,6 +314,7 @@ impl Core {
         self.worker.poll_work()
     }
 
+    /// The next event for the driver, if any; call until `None` after each `handle_*`.
     pub fn poll_event(&mut self) -> Option<Event> {
         self.out.events.pop_front()
     }

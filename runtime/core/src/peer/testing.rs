@@ -26,7 +26,9 @@ use crate::wire::{self, BYTES_PER_PIXEL, FrameId, Message, PeerId, TileResult, T
 
 /// What the simulated renderer of a peer makes of a tile, and how long it takes.
 pub struct Rendered {
+    /// How long the render takes in virtual time.
     pub duration: Duration,
+    /// What the render sends to the owner.
     pub result: TileResult,
 }
 
@@ -61,31 +63,45 @@ pub trait World {
 /// How one message crosses the network.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Transit {
+    /// How long the message takes to arrive.
     pub delay: Duration,
+    /// Its size on the wire, counted in the peers' statistics.
     pub bytes: u64,
 }
 
 /// One output of a core, as a [`World`] sees it.
 #[derive(Debug)]
 pub enum Seen<'a> {
+    /// A core sent a message.
     Sent {
+        /// The sender.
         from: PeerId,
+        /// The addressee.
         to: PeerId,
+        /// The message as sent.
         message: &'a Message,
     },
     /// The core handed `item` to its renderer (just before [`World::render`] is asked).
     Started {
+        /// The peer whose core handed out the work.
         peer: PeerId,
+        /// The work handed out.
         item: &'a WorkItem,
     },
+    /// A core reported an event.
     Event {
+        /// The peer whose core reported it.
         peer: PeerId,
+        /// The event.
         event: Event,
     },
     /// A core refused a message; a real driver would close the connection.
     Refused {
+        /// The peer whose core refused it.
         peer: PeerId,
+        /// The sender of the refused message.
         from: PeerId,
+        /// Why it was refused.
         error: ProtocolError,
     },
 }
@@ -93,22 +109,34 @@ pub enum Seen<'a> {
 /// One thing that happens to one peer at one instant.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Happening {
+    /// A message arrives.
     Deliver {
+        /// The sender.
         from: PeerId,
+        /// The addressee, whose core handles it.
         to: PeerId,
+        /// The message, decoded from its encoding as a driver would.
         message: Message,
         /// Its size, as [`World::transit`] counted it.
         bytes: u64,
     },
+    /// A peer's renderer finishes a tile.
     Rendered {
+        /// The peer whose renderer finished.
         peer: PeerId,
+        /// What it rendered.
         result: TileResult,
     },
+    /// A peer learns that another is gone, as a closed connection tells a driver.
     Lost {
+        /// The peer that learns it.
         peer: PeerId,
+        /// The peer that is gone.
         lost: PeerId,
     },
+    /// A peer's core reaches the time it asked to be woken at.
     Timeout {
+        /// The peer woken.
         peer: PeerId,
     },
 }
@@ -116,27 +144,44 @@ pub enum Happening {
 /// The log of a run, in order.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Record {
+    /// A message was sent.
     Sent {
+        /// When, in virtual time.
         at: Duration,
+        /// The sender.
         from: PeerId,
+        /// The addressee.
         to: PeerId,
+        /// The message.
         message: Message,
     },
+    /// A core handed work to its renderer.
     Started {
+        /// When, in virtual time.
         at: Duration,
+        /// The peer whose core handed it out.
         peer: PeerId,
+        /// The work.
         item: WorkItem,
     },
+    /// A core reported an event.
     Event {
+        /// When, in virtual time.
         at: Duration,
+        /// The peer whose core reported it.
         peer: PeerId,
+        /// The event.
         event: Event,
     },
     /// A core refused a message with a `ProtocolError`; a real driver would close the connection.
     Refused {
+        /// When, in virtual time.
         at: Duration,
+        /// The peer whose core refused it.
         peer: PeerId,
+        /// The sender of the refused message.
         from: PeerId,
+        /// The error's text, so that records compare equal across runs.
         error: String,
     },
 }
@@ -230,6 +275,7 @@ impl Cluster<Scripted> {
         Self::with_world(config, peers, seed, world)
     }
 
+    /// Everything that happened so far, in order, for tests to read.
     pub fn trace(&self) -> &[Record] {
         &self.world.trace
     }
@@ -281,18 +327,22 @@ impl<W: World> Cluster<W> {
         cluster
     }
 
+    /// The current virtual time.
     pub fn now(&self) -> Duration {
         self.now
     }
 
+    /// Peer `peer`'s core, for tests that inspect its state; panics for an unknown peer.
     pub fn core(&self, peer: PeerId) -> &Core {
         &self.nodes[&peer].core
     }
 
+    /// The world the cluster runs in.
     pub fn world(&self) -> &W {
         &self.world
     }
 
+    /// The world the cluster runs in, for tests that change it mid-run.
     pub fn world_mut(&mut self) -> &mut W {
         &mut self.world
     }
