@@ -50,33 +50,50 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     #[error("{path}: {source}")]
+    /// A file could not be read or written.
     Io {
+        /// The file.
         path: PathBuf,
+        /// What the system said.
         source: std::io::Error,
     },
     #[error("{path}, line {line}: {message}")]
+    /// A line of a trace file is malformed.
     Trace {
+        /// The trace file.
         path: PathBuf,
+        /// The line, counting from 1.
         line: usize,
+        /// What is wrong with it.
         message: String,
     },
     #[error("invalid trace: {0}")]
+    /// A trace whose contents do not fit together (no blocks, wrong block counts); the text says how.
     BadTrace(String),
     #[error("invalid scenario: {0}")]
+    /// A scenario with a value out of range; the text names it.
     Scenario(String),
     #[error(transparent)]
+    /// The balancer refused to cut or learn.
     Balancer(#[from] balancer::Error),
     #[error("starting a frame: {0}")]
+    /// A core refused a frame the simulated owner started, a bug the run reports rather than hides.
     Frame(#[from] runtime_core::peer::FrameError),
     #[error(transparent)]
+    /// The director refused a step, a bug the run reports rather than hides.
     Director(#[from] runtime_core::director::DirectorError),
     #[error("frame {frame} stalled at {at:?}: nothing left to happen, {missing} tiles missing")]
+    /// The run ran out of things to happen with tiles still missing: the cores deadlocked.
     Stalled {
+        /// The frame that stalled.
         frame: u32,
+        /// The virtual time it stalled at.
         at: std::time::Duration,
+        /// Its tiles still missing.
         missing: usize,
     },
     #[error(transparent)]
+    /// A chart could not be drawn.
     Plot(#[from] plot::PlotError),
 }
 

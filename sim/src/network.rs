@@ -60,6 +60,7 @@ impl Default for Network {
 }
 
 impl Network {
+    /// Checks that every value is in its range; the error says which is not.
     pub fn validate(&self) -> Result<(), String> {
         if !(0.0..=1.0).contains(&self.link_spread) {
             return Err("link spread must be in [0, 1]".into());

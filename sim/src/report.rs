@@ -35,18 +35,27 @@ use crate::{Error, Policy, Scenario};
 /// One frame of one run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FrameReport {
+    /// The frame's number.
     pub frame: u32,
+    /// Tiles the frame was cut into.
     pub tiles: usize,
     /// Peers the owner dealt tiles to.
     pub participants: usize,
     /// Their speed factors times their slots.
     pub capacity: f64,
+    /// The frame's interval, in virtual seconds (see the module documentation).
     pub makespan: f64,
+    /// The frame's work, in slot-seconds of a speed-1 peer.
     pub work: f64,
+    /// The work of its most expensive tile.
     pub largest_tile: f64,
+    /// No schedule of this partition can take less time than this.
     pub lower_bound: f64,
+    /// Work over capacity times makespan: 1 is perfect.
     pub efficiency: f64,
+    /// The efficiency a run reaching the lower bound would have.
     pub bound_efficiency: f64,
+    /// The share of slot time spent not rendering.
     pub idle_fraction: f64,
     /// Pieces handed to renderers: `tiles`, plus the extra pieces of tiles cut on the way, plus
     /// any rendered twice (re-issued after a failure, or backed up).
@@ -59,12 +68,15 @@ pub struct FrameReport {
     pub duplicates_agreed: u32,
     /// The owner's completion covered every tile exactly once, in tile order.
     pub results_ok: bool,
+    /// Steal requests sent by all peers in the frame.
     pub steal_requests: u64,
     /// Steal requests answered with tiles, and the tiles they moved.
     pub grants: u64,
+    /// Tiles moved by those grants.
     pub stolen_tiles: u64,
     /// Messages of this frame sent by all peers, and their bytes.
     pub messages: u64,
+    /// Bytes of those messages.
     pub bytes: u64,
     /// Peers the owner declared failed during the frame.
     pub failures: u64,
@@ -72,6 +84,7 @@ pub struct FrameReport {
     pub faults: u64,
     /// What the balancer's update after this frame did (PBT leaves split and merged).
     pub splits: usize,
+    /// PBT sibling pairs merged by the same update.
     pub merges: usize,
     /// Bytes of the tile results that reached the owner over the network (every result,
     /// duplicates included; not the owner's own).
@@ -87,25 +100,41 @@ pub struct FrameReport {
 /// One run: its configuration, its frames and its totals.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunReport {
+    /// How frames were cut, and whether peers stole.
     pub policy: Policy,
+    /// Peers, the owner included.
     pub peers: usize,
+    /// Tiles each peer renders at once.
     pub slots: usize,
     /// Tiles of the first frame (the PBT's leaf count, or the grid's cells).
     pub tiles: usize,
+    /// The seed of the run's randomness (victims, jitter, loss).
     pub seed: u64,
+    /// The network's one-way latency, in milliseconds.
     pub latency_ms: f64,
+    /// Each link's bandwidth; `None` for unlimited.
     pub bandwidth_bytes_per_second: Option<f64>,
+    /// The probability that a transmission is lost and resent.
     pub loss: f64,
+    /// Counted work a speed-1 slot renders per second, which turns work into time.
     pub work_per_second: f64,
+    /// The fixed cost of rendering one tile, in milliseconds.
     pub tile_overhead_ms: f64,
     /// Totals over all frames (see the module documentation).
     pub makespan: f64,
+    /// Work of all frames.
     pub work: f64,
+    /// Total work over the sum of capacity times makespan.
     pub efficiency: f64,
+    /// The efficiency a run reaching every frame's lower bound would have.
     pub bound_efficiency: f64,
+    /// The share of slot time spent not rendering, over all frames.
     pub idle_fraction: f64,
+    /// Steal requests answered with tiles, over all frames.
     pub steals: u64,
+    /// Messages sent, over all frames.
     pub messages: u64,
+    /// Bytes sent, over all frames.
     pub bytes: u64,
     /// A hash of every output of every core in order, with its time: equal for equal runs.
     pub fingerprint: String,
@@ -121,10 +150,12 @@ pub struct RunReport {
     /// The owner-CPU limit: T1 over the owner's control-loop seconds to deal and receive a whole
     /// frame. `None` for a free owner.
     pub owner_cpu_limit: Option<f64>,
+    /// Each frame's report, in order.
     pub frames: Vec<FrameReport>,
     /// The frame the scenario asked to draw, and every render of it.
     pub gantt_frame: Option<u32>,
     #[serde(skip)]
+    /// The bars of the Gantt chart of `gantt_frame`, for drawing only (not saved).
     pub gantt: Vec<GanttBar>,
     /// Each frame's tiles in partition order with the peer that started with each, if the
     /// scenario asked to keep them.

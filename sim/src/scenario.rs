@@ -50,6 +50,7 @@ pub struct Scenario {
     pub slots: usize,
     /// The scheduling policy every core runs.
     pub core: Config,
+    /// Latency, bandwidth, loss and failure detection between peers.
     pub network: Network,
     /// Speed factors, dealt to peers in turn: peer `p` renders at `speeds[p % len]` times the
     /// rate. Empty means all 1.
@@ -136,7 +137,9 @@ const OWNER_PER_DEALT_NS: u64 = 380;
 /// `Network::loss_detection` later.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Crash {
+    /// The peer that crashes (never 0, the owner).
     pub peer: u32,
+    /// When it crashes.
     pub when: CrashWhen,
 }
 
@@ -151,6 +154,7 @@ pub enum CrashWhen {
 }
 
 impl Crash {
+    /// Peer `peer` crashes at virtual time `at`.
     pub fn at(peer: u32, at: Duration) -> Self {
         Self {
             peer,
@@ -158,6 +162,7 @@ impl Crash {
         }
     }
 
+    /// Peer `peer` crashes as it starts its `tile`-th tile of the run (counting from 1).
     pub fn starting(peer: u32, tile: u64) -> Self {
         Self {
             peer,

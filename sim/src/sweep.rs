@@ -24,7 +24,9 @@ use crate::{Error, Scenario, Trace, scenario, summary};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(into = "String", try_from = "String")]
 pub struct Policy {
+    /// How frames are cut: PBT or regular grid.
     pub kind: Kind,
+    /// Whether peers steal work from each other.
     pub steal: bool,
 }
 
@@ -120,8 +122,11 @@ impl TryFrom<String> for Policy {
 /// The runs of an experiment: the cross product of `peers`, `policies` and `tiles`.
 #[derive(Clone, Debug)]
 pub struct Sweep {
+    /// Peer counts to run, the owner included.
     pub peers: Vec<usize>,
+    /// Policies to run.
     pub policies: Vec<Policy>,
+    /// Tile counts of the first frame to run.
     pub tiles: Vec<usize>,
     /// Everything else; its `peers` and `core.steal` are set per run.
     pub base: Scenario,
@@ -130,9 +135,13 @@ pub struct Sweep {
 /// Which run to draw as a Gantt chart, and which of its frames.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct GanttChoice {
+    /// The run's peer count.
     pub peers: usize,
+    /// The run's policy.
     pub policy: Policy,
+    /// The run's tile count.
     pub tiles: usize,
+    /// The frame of the run to draw.
     pub frame: u32,
 }
 

@@ -15,8 +15,11 @@ use crate::{Error, Trace};
 /// A Gaussian hot spot orbiting the image centre on a cheap background.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HotSpot {
+    /// The image's width in pixels.
     pub width: u32,
+    /// The image's height in pixels.
     pub height: u32,
+    /// How many frames the spot orbits for.
     pub frames: u32,
     /// Side of a cost block in pixels.
     pub block_size: u32,

@@ -40,8 +40,11 @@ const FORMAT: &str = "tessera-trace";
 pub struct Header {
     /// Always `"tessera-trace"`, so that a wrong file is named as such.
     pub format: String,
+    /// The format's version ([`VERSION`]); a reader refuses others.
     pub version: u32,
+    /// The image's width in pixels.
     pub width: u32,
+    /// The image's height in pixels.
     pub height: u32,
     /// Side of a cost block in pixels (the tracer's `BLOCK_SIZE`, 8).
     pub block_size: u32,
@@ -52,18 +55,23 @@ pub struct Header {
 /// One frame: counted work per block, row-major.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FrameCosts {
+    /// The frame's number in the animation.
     pub frame: u32,
+    /// Counted work of each block.
     pub blocks: Vec<u64>,
 }
 
 /// A whole trace, in memory.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trace {
+    /// The image and its block grid.
     pub header: Header,
+    /// Every frame's costs, in order.
     pub frames: Vec<FrameCosts>,
 }
 
 impl Header {
+    /// A header for the current [`VERSION`]; refuses an image with no blocks.
     pub fn new(width: u32, height: u32, block_size: u32, source: &str) -> Result<Self, Error> {
         if width == 0 || height == 0 || block_size == 0 {
             return Err(Error::BadTrace(format!(
@@ -191,10 +199,12 @@ impl Trace {
         Ok(())
     }
 
+    /// The image's width in pixels.
     pub fn width(&self) -> u32 {
         self.header.width
     }
 
+    /// The image's height in pixels.
     pub fn height(&self) -> u32 {
         self.header.height
     }

@@ -30,8 +30,11 @@ pub struct Given {
 /// One frame, measured and simulated.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrameComparison {
+    /// The frame's time in the real render, in seconds.
     pub measured: f64,
+    /// The frame's makespan in the simulation, in virtual seconds.
     pub simulated: f64,
+    /// Tiles the frame was cut into.
     pub tiles: usize,
     /// Whether every tile was dealt to the same peer, cut the same way.
     pub same_initial_sets: bool,
@@ -40,15 +43,23 @@ pub struct FrameComparison {
 /// The comparison, with the settings it was simulated with.
 #[derive(Clone, Debug)]
 pub struct Validation {
+    /// Peers, the owner included, as in the render.
     pub peers: usize,
+    /// Rendering slots per peer.
     pub slots: usize,
+    /// The balancer, as the render named it.
     pub balancer: String,
+    /// Whether peers stole.
     pub steal: bool,
+    /// Tiles of the first frame, as in the render.
     pub tiles: usize,
+    /// The render's motion search radius in blocks per frame; `None` for none.
     pub motion: Option<u32>,
+    /// Counted work per second of a slot.
     pub rate: f64,
     /// The frames asked for: the file's, or fewer with [`Given::frames`].
     pub asked: usize,
+    /// Each frame compared, in order.
     pub frames: Vec<FrameComparison>,
 }
 

@@ -1,6 +1,9 @@
 //! The simulator end to end: determinism, no tile lost or doubled under any policy or fault,
 //! the reported efficiency within its bounds, and a case small enough to work out by hand.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 use std::time::Duration;
 
 use balancer::{Config, Grid, Kind, Partitioner};

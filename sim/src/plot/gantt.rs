@@ -65,8 +65,11 @@ pub struct GanttBar {
     pub row: u32,
     /// Seconds since the start of the run.
     pub start: f64,
+    /// Seconds since the start of the run at which the render finished.
     pub end: f64,
+    /// The frame the tile belongs to, which picks the bar's colour.
     pub frame: u32,
+    /// What kind of render it was, which picks the bar's pattern.
     pub kind: BarKind,
 }
 
@@ -74,8 +77,11 @@ pub struct GanttBar {
 /// since the start of the run.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameSpan {
+    /// The frame.
     pub frame: u32,
+    /// When its first tile started.
     pub start: f64,
+    /// When it was complete.
     pub end: f64,
 }
 

@@ -16,6 +16,7 @@ use std::path::Path;
 
 #[derive(Debug, thiserror::Error)]
 #[error("drawing {path}: {message}")]
+/// A chart that could not be drawn: the file, and what the drawing library said.
 pub struct PlotError {
     path: String,
     message: String,
@@ -32,6 +33,7 @@ fn error_at(path: &Path) -> impl Fn(&dyn std::fmt::Display) -> PlotError + '_ {
 /// One line of a [`lines_svg`] chart.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Series {
+    /// The legend's text for the line.
     pub label: String,
     /// (x, y) points, drawn in order.
     pub points: Vec<(f64, f64)>,
