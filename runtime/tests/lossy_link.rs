@@ -2,6 +2,9 @@
 //! dropped (5%), duplicated (1%), delayed and reordered by `net::lossy` from a seed. QUIC must
 //! hide all of it: a multi-peer render over such links gives the same bits as one peer alone.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 use runtime::net::{self, ClusterCerts, ConnectError, Expect, Link, lossy::Impairment};
 use runtime::node::{self, CompletedFrame, FrameSink, Job};
 use std::net::{Ipv4Addr, SocketAddr};

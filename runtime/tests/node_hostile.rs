@@ -2,6 +2,9 @@
 //! sends garbage, or lies about who it is, loses its connection; the owner goes on and the render
 //! completes with the honest peer.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 use runtime::net::{self, CloseReason, ClusterCerts, Event, Expect, Link};
 use runtime::node::{self, CompletedFrame, FrameSink, Job, Owner};
 use runtime_core::wire::{self, Message, PROTOCOL_VERSION, PeerId};

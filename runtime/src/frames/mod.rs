@@ -22,25 +22,35 @@ use tracer::output::OutputError;
 #[derive(Debug, thiserror::Error)]
 pub enum FrameFileError {
     #[error(transparent)]
+    /// The PNG preview or the EXR could not be written.
     Output(#[from] OutputError),
     #[error("{path}: {source}")]
+    /// The tile map could not be written.
     TileMap {
+        /// The tile map's file.
         path: PathBuf,
+        /// What the image library said.
         source: image::ImageError,
     },
     #[error("the preview has the wrong size")]
+    /// The film's pixels do not fill its width and height, a bug in whoever built it.
     PreviewSize,
     #[error("starting the thread that writes frames: {0}")]
+    /// The system refused to start the writing thread.
     Thread(std::io::Error),
     #[error("the thread writing frames panicked")]
+    /// The writing thread panicked, so whether the last frames are on disk is unknown.
     Panicked,
 }
 
 /// What every frame's files share.
 #[derive(Clone)]
 pub struct Settings {
+    /// The folder the frames are written into; it must exist.
     pub out: PathBuf,
+    /// The factor linear pixels are multiplied by before the PNG's tone mapping.
     pub exposure: f32,
+    /// Whether each frame's tile map (`tiles-NNNN.png`) is drawn too.
     pub tile_map: bool,
     /// The render's identity, written into every EXR's header (`resume::ATTRIBUTE`).
     pub render_hash: String,
@@ -49,9 +59,13 @@ pub struct Settings {
 /// One frame to write: its film, and its pieces' rectangles and measured costs (for the tile
 /// map); `seconds` is what is reported once it is written.
 pub struct Frame {
+    /// The frame's number, which names its files.
     pub frame: u32,
+    /// The frame's render time, handed to [`Written`] once its files are on disk.
     pub seconds: f64,
+    /// The assembled pixels.
     pub film: Film,
+    /// Each piece's rectangle and measured cost, which the tile map draws.
     pub costs: Vec<(balancer::Rect, u64)>,
 }
 

@@ -67,21 +67,46 @@ pub struct PeerCertificate(CertificateDer<'static>);
 #[derive(Debug, thiserror::Error)]
 pub enum CertError {
     #[error("generating certificates: {0}")]
+    /// rcgen could not make a key or a certificate.
     Generate(#[from] rcgen::Error),
     #[error("{}: {source}", path.display())]
-    Io { path: PathBuf, source: io::Error },
-    #[error("{}: already exists; refusing to overwrite a cluster's keys", path.display())]
-    Exists { path: PathBuf },
-    #[error("{}: no usable PEM {what}: {problem}", path.display())]
-    Pem {
+    /// A key or certificate file could not be read or written.
+    Io {
+        /// The file.
         path: PathBuf,
+        /// What the system said.
+        source: io::Error,
+    },
+    #[error("{}: already exists; refusing to overwrite a cluster's keys", path.display())]
+    /// A file to write is there already, and may be another cluster's only copy of its keys.
+    Exists {
+        /// The file.
+        path: PathBuf,
+    },
+    #[error("{}: no usable PEM {what}: {problem}", path.display())]
+    /// A file holds no PEM item of the kind expected.
+    Pem {
+        /// The file.
+        path: PathBuf,
+        /// The kind of item expected (certificate or key).
         what: &'static str,
+        /// What was wrong.
         problem: String,
     },
     #[error("the certificate of peer {index} was not issued by this CA: {problem}")]
-    NotIssuedByCa { index: u32, problem: String },
+    /// A peer's certificate does not chain to the cluster's CA.
+    NotIssuedByCa {
+        /// The peer's index.
+        index: u32,
+        /// What the verifier said.
+        problem: String,
+    },
     #[error("the certificate of peer {index} does not name {}", peer_name(*index))]
-    WrongPeer { index: u32 },
+    /// A peer's certificate is for another peer's name.
+    WrongPeer {
+        /// The peer whose certificate it should be.
+        index: u32,
+    },
 }
 
 impl ClusterCerts {

@@ -35,7 +35,9 @@ pub struct ConnId(u64);
 /// Who opened a connection.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Direction {
+    /// The other side dialled this node.
     Inbound,
+    /// This node dialled the other side.
     Outbound,
 }
 
@@ -53,15 +55,29 @@ pub enum Expect {
 pub enum Event<M> {
     /// A handshake succeeded: the peer holds a certificate of the cluster CA.
     Connected {
+        /// The connection's id, which later events and sends name.
         conn: ConnId,
+        /// The other side's address.
         remote: SocketAddr,
+        /// Who dialled.
         direction: Direction,
+        /// The other side's certificate, which says which peer it is.
         certificate: PeerCertificate,
     },
     /// A whole message arrived and decoded.
-    Message { conn: ConnId, message: M },
+    Message {
+        /// The connection it arrived on.
+        conn: ConnId,
+        /// The decoded message.
+        message: M,
+    },
     /// The connection is gone; nothing more will come from it, and sends to it fail.
-    Closed { conn: ConnId, reason: CloseReason },
+    Closed {
+        /// The connection that is gone.
+        conn: ConnId,
+        /// Who closed it, and why.
+        reason: CloseReason,
+    },
 }
 
 /// Why a connection ended.
@@ -70,7 +86,12 @@ pub enum CloseReason {
     /// This node closed it, with this code.
     Local(CloseCode),
     /// The peer closed it; `code` is one of [`CloseCode`] from a tessera peer.
-    Remote { code: u64, reason: String },
+    Remote {
+        /// The application close code.
+        code: u64,
+        /// The text the peer gave.
+        reason: String,
+    },
     /// Nothing heard for the idle timeout: the peer is presumed dead.
     TimedOut,
     /// The QUIC or TLS layer failed.
@@ -81,10 +102,13 @@ pub enum CloseReason {
 #[derive(Debug, thiserror::Error)]
 pub enum BindError {
     #[error(transparent)]
+    /// The link's configuration is invalid.
     Config(#[from] ConfigError),
     #[error(transparent)]
+    /// The TLS configuration could not be built from the certificates.
     Tls(#[from] TlsError),
     #[error("binding the UDP socket: {0}")]
+    /// The UDP socket could not be bound.
     Io(#[from] io::Error),
 }
 
@@ -92,10 +116,13 @@ pub enum BindError {
 #[derive(Debug, thiserror::Error)]
 pub enum ConnectError {
     #[error("cannot connect: {0}")]
+    /// quinn refused to start the connection (an invalid address or server name, or a stopped endpoint).
     Invalid(#[from] quinn::ConnectError),
     #[error("handshake failed: {0}")]
+    /// The QUIC or TLS handshake failed, e.g. a certificate of another cluster.
     Handshake(#[from] ConnectionError),
     #[error("the server presented no certificate")]
+    /// The handshake ended without the server's certificate, which the link needs to know who it is.
     NoCertificate,
 }
 
@@ -103,14 +130,24 @@ pub enum ConnectError {
 #[derive(Debug, thiserror::Error)]
 pub enum SendError {
     #[error("no open connection {0}")]
+    /// The connection is closed or was never opened.
     UnknownConnection(ConnId),
     #[error("message of {len} bytes is over the limit of {max}")]
-    TooLarge { len: usize, max: usize },
+    /// The encoded message is longer than the link's limit.
+    TooLarge {
+        /// The message's length in bytes.
+        len: usize,
+        /// The limit.
+        max: usize,
+    },
     #[error("connection lost: {0}")]
+    /// The connection was lost while sending.
     Connection(#[from] ConnectionError),
     #[error("writing the message: {0}")]
+    /// The stream could not be written.
     Write(#[from] WriteError),
     #[error("stream closed before the message was finished")]
+    /// The stream was closed before the message was finished.
     ClosedStream(#[from] ClosedStream),
 }
 

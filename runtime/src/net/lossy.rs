@@ -59,10 +59,12 @@ impl Default for Impairment {
 /// delay.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Fate {
+    /// When each copy is sent, after the datagram was handed over; empty when it is dropped.
     pub delays: Vec<Duration>,
 }
 
 impl Fate {
+    /// True when no copy of the datagram is sent.
     pub fn dropped(&self) -> bool {
         self.delays.is_empty()
     }

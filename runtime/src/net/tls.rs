@@ -31,10 +31,13 @@ pub const ALPN: &[u8] = b"tessera/1";
 #[derive(Debug, thiserror::Error)]
 pub enum TlsError {
     #[error("TLS configuration: {0}")]
+    /// rustls refused the configuration.
     Rustls(#[from] rustls::Error),
     #[error("client certificate verifier: {0}")]
+    /// The verifier of client certificates could not be built from the CA.
     Verifier(#[from] VerifierBuilderError),
     #[error("QUIC needs TLS_AES_128_GCM_SHA256: {0}")]
+    /// The TLS configuration lacks the cipher suite QUIC's initial packets need.
     Quic(#[from] NoInitialCipherSuite),
 }
 

@@ -14,15 +14,24 @@ use tracer::{Scene, TileCost, TileOutput};
 #[derive(Debug, thiserror::Error)]
 pub enum BundleError {
     #[error("{path}: {source}")]
+    /// A scene file could not be read.
     Read {
+        /// The file, as the scene names it.
         path: String,
+        /// What the system said.
         source: std::io::Error,
     },
     #[error("scene file {name} does not match its hash")]
-    HashMismatch { name: String },
+    /// A received scene file is not what its hash says, so the peer refuses to render it.
+    HashMismatch {
+        /// The file, as the scene names it.
+        name: String,
+    },
     #[error("the scene has no files")]
+    /// A scene was shipped without any file.
     Empty,
     #[error(transparent)]
+    /// The scene's files do not load (the tracer's error names file and line).
     Scene(#[from] SceneError),
 }
 

@@ -92,7 +92,9 @@ impl Checkpointing {
 /// The frame in progress, as far as the owner had it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Checkpoint {
+    /// The render it belongs to (`bundle::render_hash`); a checkpoint of another render is refused.
     pub render_hash: String,
+    /// The frame in progress.
     pub frame: FrameId,
     /// The frame's tiles as dealt, in order.
     pub tiles: Vec<balancer::Tile>,
@@ -104,15 +106,25 @@ pub struct Checkpoint {
 #[derive(Debug, thiserror::Error)]
 pub enum CheckpointError {
     #[error("reading {path}: {source}")]
+    /// The checkpoint file could not be read.
     Read {
+        /// The file.
         path: PathBuf,
+        /// What the system said.
         source: std::io::Error,
     },
     #[error("{path} is not a tessera checkpoint of this version")]
-    NotACheckpoint { path: PathBuf },
-    #[error("{path} does not decode: {source}")]
-    Decode {
+    /// The file lacks a checkpoint's header, or has another version's.
+    NotACheckpoint {
+        /// The file.
         path: PathBuf,
+    },
+    #[error("{path} does not decode: {source}")]
+    /// The file has a checkpoint's header but its body does not decode.
+    Decode {
+        /// The file.
+        path: PathBuf,
+        /// What postcard said.
         source: postcard::Error,
     },
 }

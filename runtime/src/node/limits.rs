@@ -10,26 +10,43 @@ use runtime_core::wire::BYTES_PER_PIXEL;
 pub enum LimitError {
     /// The owner cannot hold a frame.
     #[error("a frame needs about {needed_mib} MiB, and this machine has {available_mib} MiB free")]
-    Memory { needed_mib: u64, available_mib: u64 },
+    Memory {
+        /// Memory a frame needs, in MiB.
+        needed_mib: u64,
+        /// Memory free on this machine, in MiB.
+        available_mib: u64,
+    },
     /// More tiles than pixels.
     #[error("the {width}x{height} image has only {pixels} pixels")]
     MorePixels {
+        /// The tile count asked for.
         tiles: u64,
+        /// The image's width in pixels.
         width: u64,
+        /// The image's height in pixels.
         height: u64,
+        /// The image's pixels.
         pixels: u64,
     },
     /// More tiles than one message can deal (a peer's share travels in one).
     #[error("at most {most} tiles (a peer's share travels in one message)")]
-    PerMessage { tiles: u64, most: u64 },
+    PerMessage {
+        /// The tile count asked for.
+        tiles: u64,
+        /// The most one message can carry.
+        most: u64,
+    },
     /// A first frame's tile whose result would not fit in one message.
     #[error(
         "tiles of about {pixels:.0} pixels are too large to send (a result may be at most \
          {most_mib} MiB); use more tiles"
     )]
     TooLarge {
+        /// The tile count asked for.
         tiles: u64,
+        /// Pixels of the largest tile of the first frame.
         pixels: f64,
+        /// The largest result a message may carry, in MiB.
         most_mib: usize,
     },
 }

@@ -37,8 +37,11 @@ const GOODBYE_BOUND: Duration = Duration::from_secs(2);
 pub struct Options {
     /// Rendering threads, and so the tiles the core keeps in flight.
     pub threads: usize,
+    /// The scheduling core's policy: prefetch, stealing, timeouts.
     pub core: runtime_core::peer::Config,
+    /// The QUIC link's settings.
     pub net: crate::net::Config,
+    /// The bounds every received message is decoded under.
     pub limits: runtime_core::wire::Limits,
     /// Seeds victim choice (mixed with the peer id by the core).
     pub seed: u64,
@@ -70,37 +73,52 @@ impl Default for Options {
 #[derive(Debug, thiserror::Error)]
 pub enum NodeError {
     #[error(transparent)]
+    /// The node's endpoint could not be bound.
     Bind(#[from] BindError),
     #[error(transparent)]
+    /// A peer could not connect to the owner or to another peer.
     Connect(#[from] ConnectError),
     #[error(transparent)]
+    /// The cluster's certificates could not be made or read.
     Certs(#[from] crate::net::CertError),
     #[error(transparent)]
+    /// A file or socket operation failed.
     Io(#[from] std::io::Error),
     #[error(transparent)]
+    /// The scene could not be bundled, or a received one could not be loaded.
     Bundle(#[from] bundle::BundleError),
     #[error(transparent)]
+    /// The core refused a frame the owner started.
     Frame(#[from] runtime_core::peer::FrameError),
     #[error(transparent)]
+    /// The balancer refused to cut or learn.
     Balancer(#[from] balancer::Error),
     #[error(transparent)]
+    /// The director refused a step.
     Director(#[from] runtime_core::director::DirectorError),
     #[error("{0} came back with malformed pixels or costs")]
+    /// A result's pixels or costs do not decode, so the frame cannot be assembled.
     BadTile(TileId),
     #[error("the transport stopped")]
+    /// The link's endpoint stopped before the render was done.
     Stopped,
     #[error("the frame owner was lost ({0}); the render is incomplete")]
+    /// A peer lost the frame owner before the render was done.
     OwnerLost(crate::net::CloseReason),
     #[error("writing a frame: {0}")]
+    /// The [`FrameSink`] refused a frame; the text is its error.
     Sink(String),
     #[error("a peer task failed: {0}")]
+    /// A peer of an in-process cluster failed; the text is its error.
     Peer(String),
 }
 
 /// One finished frame, as the owner assembled it.
 #[derive(Debug)]
 pub struct CompletedFrame {
+    /// The frame's number.
     pub frame: u32,
+    /// The assembled pixels.
     pub film: Film,
     /// Its pieces as the owner accepted them, in tile order (one per piece, `pieces` 1).
     pub tiles: Vec<TileStats>,
@@ -109,6 +127,7 @@ pub struct CompletedFrame {
     /// When the frame was handed over, in seconds since the owner started: frames overlap, so
     /// the time between two frames' hand-overs is what each adds to the render.
     pub completed_at: f64,
+    /// Rays traced for the frame, of every kind.
     pub rays: u64,
     /// How duplicate results (backups of stragglers, re-issued tiles) compared with the first.
     pub audit: runtime_core::peer::Audit,
@@ -116,11 +135,13 @@ pub struct CompletedFrame {
 
 /// Where finished frames go (the CLI writes them to disk).
 pub trait FrameSink: Send {
+    /// Takes one finished frame, in frame order; an error stops the render with [`NodeError::Sink`].
     fn frame(&mut self, frame: CompletedFrame) -> Result<(), String>;
 }
 
 /// What an in-process cluster run reports.
 pub struct LocalRun {
+    /// Every peer's statistics for every frame.
     pub peers: PeerReport,
     /// Tiles each peer rendered, with times since its own start (for the Gantt chart).
     pub timelines: Vec<(PeerId, Vec<LocalTile>)>,

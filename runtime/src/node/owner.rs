@@ -22,6 +22,7 @@ use tracer::{Film, World};
 
 /// What the owner renders.
 pub struct Job {
+    /// The loaded scene, which the owner's own rendering threads trace.
     pub world: Arc<World>,
     /// The scene's files, hashed, shipped to every peer.
     pub files: Vec<SceneFile>,
@@ -31,6 +32,7 @@ pub struct Job {
     pub frames: u32,
     /// The first frame to render: those before it are done already (`--resume`). Usually 0.
     pub first: u32,
+    /// The balancer that cuts every frame, its tree carried from frame to frame.
     pub partitioner: balancer::Partitioner,
     /// Whether and where the frame in progress is checkpointed, and a checkpoint to resume
     /// the first frame from.
@@ -62,6 +64,7 @@ impl Owner {
         })
     }
 
+    /// The address the owner listens on, which peers dial.
     pub fn local_addr(&self) -> std::io::Result<SocketAddr> {
         self.session.link.local_addr()
     }

@@ -20,6 +20,7 @@ use tokio::sync::watch;
 pub struct Leave(Option<watch::Receiver<bool>>);
 
 impl Leave {
+    /// A request that never comes, for a peer nobody will ask to leave.
     pub fn never() -> Self {
         Self(None)
     }

@@ -18,24 +18,66 @@ pub const MAX_HOSTS: usize = 1 << 20;
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum HostlistError {
     #[error("the host list is empty")]
+    /// No host at all.
     Empty,
     #[error("an empty host name at offset {at} (two commas, or a comma at an end)")]
-    EmptyName { at: usize },
+    /// A host name with no characters.
+    EmptyName {
+        /// Where, in bytes from the list's start.
+        at: usize,
+    },
     #[error("`[` at offset {at} is never closed")]
-    Unclosed { at: usize },
+    /// A bracket group that never ends.
+    Unclosed {
+        /// Where it opens, in bytes from the list's start.
+        at: usize,
+    },
     #[error("`]` at offset {at} closes no `[`")]
-    Unopened { at: usize },
+    /// A closing bracket with no group open.
+    Unopened {
+        /// Where, in bytes from the list's start.
+        at: usize,
+    },
     #[error("`[` at offset {at} inside another bracket group")]
-    Nested { at: usize },
+    /// A bracket group opened inside another, which SLURM never writes.
+    Nested {
+        /// Where, in bytes from the list's start.
+        at: usize,
+    },
     #[error("{found:?} at offset {at} cannot be part of a host name")]
-    BadCharacter { found: char, at: usize },
+    /// A character no host name has.
+    BadCharacter {
+        /// The character.
+        found: char,
+        /// Where, in bytes from the list's start.
+        at: usize,
+    },
     #[error("an empty entry in the bracket group at offset {at}")]
-    EmptyRange { at: usize },
+    /// Nothing between two commas of a bracket group.
+    EmptyRange {
+        /// Where the group opens, in bytes from the list's start.
+        at: usize,
+    },
     #[error("{text:?} in the bracket group at offset {at} is not a number or a range lo-hi")]
-    BadNumber { text: String, at: usize },
+    /// An entry of a bracket group that is neither a number nor a range.
+    BadNumber {
+        /// The entry.
+        text: String,
+        /// Where the group opens, in bytes from the list's start.
+        at: usize,
+    },
     #[error("the range {lo}-{hi} in the bracket group at offset {at} runs backwards")]
-    Backwards { lo: String, hi: String, at: usize },
+    /// A range whose end is below its start.
+    Backwards {
+        /// The range's start, as written.
+        lo: String,
+        /// The range's end, as written.
+        hi: String,
+        /// Where the group opens, in bytes from the list's start.
+        at: usize,
+    },
     #[error("the host list names more than {MAX_HOSTS} hosts")]
+    /// The list expands to more hosts than a step can have, which bounds the memory an expansion may take.
     TooMany,
 }
 

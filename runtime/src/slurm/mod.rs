@@ -65,9 +65,15 @@ pub struct Step {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Role {
     /// Rank 0: own the frames, waiting for `peers` others.
-    Owner { peers: usize },
+    Owner {
+        /// How many peers will join.
+        peers: usize,
+    },
     /// Rank K >= 1: join the owner as peer K.
-    Peer { index: u32 },
+    Peer {
+        /// This task's peer index, its SLURM rank.
+        index: u32,
+    },
 }
 
 /// Why a task cannot place itself in its step.
@@ -77,36 +83,59 @@ pub enum SlurmError {
         "not inside a SLURM step: {} not set (run it as a task of `srun`)",
         missing_list(.0)
     )]
+    /// Variables every SLURM step sets are unset: this is not a task of a step.
     Missing(Vec<&'static str>),
     #[error("{name}={value:?}: {reason}")]
+    /// A variable's value does not parse.
     Invalid {
+        /// The variable.
         name: &'static str,
+        /// Its value.
         value: String,
+        /// What was wrong with it.
         reason: &'static str,
     },
     #[error("{name}={value:?}: {source}")]
+    /// A variable's host list does not expand.
     Hostlist {
+        /// The variable.
         name: &'static str,
+        /// Its value.
         value: String,
+        /// Why it does not expand.
         source: HostlistError,
     },
     #[error("SLURM_PROCID={rank} but the step has only {tasks} tasks")]
-    RankOutOfRange { rank: u32, tasks: u32 },
+    /// This task's rank is not below the step's task count.
+    RankOutOfRange {
+        /// This task's rank.
+        rank: u32,
+        /// The step's task count.
+        tasks: u32,
+    },
     #[error(
         "the step has {0} task: a cluster needs the owner and at least one peer (srun -n 2 or \
          more); `tessera render` renders on one node"
     )]
+    /// A step of one task cannot hold an owner and a peer.
     TooFewTasks(u32),
     #[error(
         "SLURM_DISTRIBUTION={0:?}: with an arbitrary layout task 0 may run on any node; name \
          its host with --owner"
     )]
+    /// With an arbitrary task layout the owner's host cannot be known from the environment.
     ArbitraryLayout(String),
     #[error(
         "task 0 runs on {here} but the step's first node is {first}: peers would dial the wrong \
          node; name the owner's host with --owner"
     )]
-    OwnerElsewhere { here: String, first: String },
+    /// Task 0 is not on the step's first node, which the other tasks would dial.
+    OwnerElsewhere {
+        /// The host task 0 runs on.
+        here: String,
+        /// The step's first node.
+        first: String,
+    },
 }
 
 fn missing_list(names: &[&'static str]) -> String {
@@ -212,6 +241,7 @@ impl Step {
         })
     }
 
+    /// What this task is in the cluster: the owner (rank 0) or peer K (rank K).
     pub fn role(&self) -> Role {
         match self.rank {
             0 => Role::Owner {
