@@ -17,16 +17,16 @@ use crate::Rect;
 /// list given to [`check_partition`].
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PartitionError {
-    #[error("tile {index} ({rect:?}) has no pixels")]
     /// A tile of zero width or height, which would render nothing and hide a gap.
+    #[error("tile {index} ({rect:?}) has no pixels")]
     Empty {
         /// The tile's place in the list.
         index: usize,
         /// The empty rectangle.
         rect: Rect,
     },
-    #[error("tile {index} ({rect:?}) reaches outside the {width}x{height} image")]
     /// A tile with pixels beyond the image's right or bottom edge.
+    #[error("tile {index} ({rect:?}) reaches outside the {width}x{height} image")]
     OutOfBounds {
         /// The tile's place in the list.
         index: usize,
@@ -37,8 +37,9 @@ pub enum PartitionError {
         /// The image's height in pixels.
         height: u32,
     },
+    /// A tile more elongated than the halving tree allows, which would make its cost poorly
+    /// predicted.
     #[error("tile {index} ({rect:?}) is longer than {max_aspect} times its width plus one pixel")]
-    /// A tile more elongated than the halving tree allows, which would make its cost poorly predicted.
     Aspect {
         /// The tile's place in the list.
         index: usize,
@@ -47,16 +48,16 @@ pub enum PartitionError {
         /// The largest ratio of long to short side the check was asked to allow.
         max_aspect: f64,
     },
-    #[error("{found} tiles where {expected} were expected")]
     /// The list holds a different number of tiles than the caller asked for.
+    #[error("{found} tiles where {expected} were expected")]
     Count {
         /// The number of tiles asked for.
         expected: usize,
         /// The number of tiles in the list.
         found: usize,
     },
-    #[error("tiles {first} ({first_rect:?}) and {second} ({second_rect:?}) overlap")]
     /// Two tiles share pixels, which would render them twice.
+    #[error("tiles {first} ({first_rect:?}) and {second} ({second_rect:?}) overlap")]
     Overlap {
         /// The place of the earlier tile in the list.
         first: usize,
@@ -67,8 +68,8 @@ pub enum PartitionError {
         /// The later tile's rectangle.
         second_rect: Rect,
     },
-    #[error("the tiles cover {covered} of the image's {total} pixels")]
     /// The tiles leave pixels of the image uncovered.
+    #[error("the tiles cover {covered} of the image's {total} pixels")]
     Gap {
         /// Pixels the tiles cover.
         covered: u64,

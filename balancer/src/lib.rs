@@ -42,46 +42,46 @@ pub use regular::Regular;
 /// [`check_partition`] is a [`PartitionError`] instead: that is a verdict, not a failure.)
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Error {
-    #[error("a {width}x{height} image has no pixels to partition")]
     /// The image to partition has zero width or height.
+    #[error("a {width}x{height} image has no pixels to partition")]
     EmptyImage {
         /// The requested width in pixels.
         width: u32,
         /// The requested height in pixels.
         height: u32,
     },
-    #[error("the block size of a cost map must be at least one pixel")]
     /// A cost map was asked for with blocks of zero pixels, which could never cover an image.
+    #[error("the block size of a cost map must be at least one pixel")]
     ZeroBlock,
-    #[error("{found} block costs given, but the block grid has {expected} blocks")]
     /// The costs given do not match the number of blocks the map's grid has.
+    #[error("{found} block costs given, but the block grid has {expected} blocks")]
     BlockCount {
         /// Blocks in the grid.
         expected: usize,
         /// Costs given.
         found: usize,
     },
-    #[error("cost {value} for pixels {rect:?}: costs must be finite and non-negative")]
     /// A measured cost is NaN, infinite or negative, which no prediction could use.
+    #[error("cost {value} for pixels {rect:?}: costs must be finite and non-negative")]
     InvalidCost {
         /// The cost given.
         value: f64,
         /// The pixels it was given for.
         rect: Rect,
     },
-    #[error("predicted cost {value} of tile {index}: costs must be finite and non-negative")]
     /// A tile's predicted cost is NaN, infinite or negative, so it cannot be dealt fairly.
+    #[error("predicted cost {value} of tile {index}: costs must be finite and non-negative")]
     InvalidTileCost {
         /// The tile's index in the partition.
         index: usize,
         /// The predicted cost.
         value: f64,
     },
-    #[error("the costs add up to more than the largest finite f64")]
     /// The sum of all costs is not a finite f64, so summed-area tables would be meaningless.
+    #[error("the costs add up to more than the largest finite f64")]
     Overflow,
-    #[error("{rect:?} lies outside the {width}x{height} image")]
     /// A rectangle asked about reaches beyond the image.
+    #[error("{rect:?} lies outside the {width}x{height} image")]
     OutOfBounds {
         /// The rectangle asked about.
         rect: Rect,
@@ -90,22 +90,22 @@ pub enum Error {
         /// The image's height in pixels.
         height: u32,
     },
-    #[error("the cost map covers {found:?} pixels but the partition covers {expected:?}")]
     /// A cost map measured for one image size was given to a partition of another.
+    #[error("the cost map covers {found:?} pixels but the partition covers {expected:?}")]
     MapSize {
         /// The partition's image size, width by height.
         expected: (u32, u32),
         /// The cost map's image size, width by height.
         found: (u32, u32),
     },
-    #[error("invalid config: {0}")]
     /// A configuration value outside its range; the text names the field and the rule.
+    #[error("invalid config: {0}")]
     Config(&'static str),
-    #[error("cannot assign tiles to zero peers")]
     /// Tiles were to be dealt among no peers at all.
+    #[error("cannot assign tiles to zero peers")]
     NoPeers,
-    #[error("invalid peer weights: {0}")]
     /// Peer weights that cannot share out work (not one per peer, negative or not finite, or
     /// summing to zero); the text says which.
+    #[error("invalid peer weights: {0}")]
     Weights(&'static str),
 }

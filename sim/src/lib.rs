@@ -49,16 +49,16 @@ use std::path::PathBuf;
 /// What can go wrong reading a trace, running a scenario or writing its results.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{path}: {source}")]
     /// A file could not be read or written.
+    #[error("{path}: {source}")]
     Io {
         /// The file.
         path: PathBuf,
         /// What the system said.
         source: std::io::Error,
     },
-    #[error("{path}, line {line}: {message}")]
     /// A line of a trace file is malformed.
+    #[error("{path}, line {line}: {message}")]
     Trace {
         /// The trace file.
         path: PathBuf,
@@ -67,23 +67,24 @@ pub enum Error {
         /// What is wrong with it.
         message: String,
     },
+    /// A trace whose contents do not fit together (no blocks, wrong block counts); the text says
+    /// how.
     #[error("invalid trace: {0}")]
-    /// A trace whose contents do not fit together (no blocks, wrong block counts); the text says how.
     BadTrace(String),
-    #[error("invalid scenario: {0}")]
     /// A scenario with a value out of range; the text names it.
+    #[error("invalid scenario: {0}")]
     Scenario(String),
-    #[error(transparent)]
     /// The balancer refused to cut or learn.
-    Balancer(#[from] balancer::Error),
-    #[error("starting a frame: {0}")]
-    /// A core refused a frame the simulated owner started, a bug the run reports rather than hides.
-    Frame(#[from] runtime_core::peer::FrameError),
     #[error(transparent)]
+    Balancer(#[from] balancer::Error),
+    /// A core refused a frame the simulated owner started, a bug the run reports rather than hides.
+    #[error("starting a frame: {0}")]
+    Frame(#[from] runtime_core::peer::FrameError),
     /// The director refused a step, a bug the run reports rather than hides.
+    #[error(transparent)]
     Director(#[from] runtime_core::director::DirectorError),
-    #[error("frame {frame} stalled at {at:?}: nothing left to happen, {missing} tiles missing")]
     /// The run ran out of things to happen with tiles still missing: the cores deadlocked.
+    #[error("frame {frame} stalled at {at:?}: nothing left to happen, {missing} tiles missing")]
     Stalled {
         /// The frame that stalled.
         frame: u32,
@@ -92,8 +93,8 @@ pub enum Error {
         /// Its tiles still missing.
         missing: usize,
     },
-    #[error(transparent)]
     /// A chart could not be drawn.
+    #[error(transparent)]
     Plot(#[from] plot::PlotError),
 }
 

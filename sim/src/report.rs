@@ -154,8 +154,8 @@ pub struct RunReport {
     pub frames: Vec<FrameReport>,
     /// The frame the scenario asked to draw, and every render of it.
     pub gantt_frame: Option<u32>,
-    #[serde(skip)]
     /// The bars of the Gantt chart of `gantt_frame`, for drawing only (not saved).
+    #[serde(skip)]
     pub gantt: Vec<GanttBar>,
     /// Each frame's tiles in partition order with the peer that started with each, if the
     /// scenario asked to keep them.

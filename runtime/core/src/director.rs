@@ -156,27 +156,27 @@ pub enum Event {
 /// Why the director stopped the render.
 #[derive(Debug, thiserror::Error)]
 pub enum DirectorError {
-    #[error(transparent)]
     /// The balancer refused to cut or learn, e.g. a cost map of the wrong size.
+    #[error(transparent)]
     Balancer(#[from] balancer::Error),
+    /// Too many results of one frame failed their checks to go on trusting the cluster.
     #[error(
         "frame {frame}: {faults} faulty results; a peer keeps sending results that cannot be right"
     )]
-    /// Too many results of one frame failed their checks to go on trusting the cluster.
     Faulty {
         /// The frame the faults arrived in.
         frame: FrameId,
         /// How many faulty results it had.
         faults: usize,
     },
-    #[error("{frame} was measured, but it is not the frame waiting for its measurement")]
     /// The driver measured a frame the director was not waiting on, a bug in the driver.
+    #[error("{frame} was measured, but it is not the frame waiting for its measurement")]
     NotWaiting {
         /// The frame measured.
         frame: FrameId,
     },
-    #[error("{frame} was dealt twice")]
     /// The driver started a frame's deal a second time, a bug in the driver.
+    #[error("{frame} was dealt twice")]
     DealtTwice {
         /// The frame dealt twice.
         frame: FrameId,
@@ -575,7 +575,8 @@ impl Director {
         self.events.pop_front()
     }
 
-    /// True once the director has reported [`Event::Finished`]: every frame handed over, or closing done.
+    /// True once the director has reported [`Event::Finished`]: every frame handed over, or closing
+    /// done.
     pub fn is_finished(&self) -> bool {
         self.finished
     }

@@ -138,7 +138,8 @@ impl<C: Ord + Copy> Membership<C> {
         self.members.len()
     }
 
-    /// True once [`Membership::start`] has run, after which members joining or leaving are reported.
+    /// True once [`Membership::start`] has run, after which members joining or leaving are
+    /// reported.
     pub fn is_started(&self) -> bool {
         self.started
     }

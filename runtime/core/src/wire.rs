@@ -385,11 +385,11 @@ pub struct TileResult {
     pub piece: Piece,
     /// The pixels rendered.
     pub rect: Rect,
-    #[serde(with = "serde_bytes")]
     /// The pixels as the tracer encodes them, [`BYTES_PER_PIXEL`] bytes each.
-    pub pixels: Vec<u8>,
     #[serde(with = "serde_bytes")]
+    pub pixels: Vec<u8>,
     /// The measured cost of each block of the rectangle, encoded by the tracer.
+    #[serde(with = "serde_bytes")]
     pub costs: Vec<u8>,
 }
 
@@ -401,8 +401,8 @@ pub struct SceneFile {
     pub name: String,
     /// The content hash of `bytes`.
     pub hash: [u8; 32],
-    #[serde(with = "serde_bytes")]
     /// The file's contents.
+    #[serde(with = "serde_bytes")]
     pub bytes: Vec<u8>,
 }
 
@@ -471,30 +471,30 @@ impl Default for Limits {
 /// Why bytes did not decode to an acceptable [`Message`].
 #[derive(Debug, thiserror::Error)]
 pub enum WireError {
-    #[error("message of {len} bytes exceeds the limit of {max}")]
     /// A message longer than the decoder accepts, refused before decoding.
+    #[error("message of {len} bytes exceeds the limit of {max}")]
     TooLong {
         /// The message's length in bytes.
         len: usize,
         /// The longest accepted.
         max: usize,
     },
-    #[error("malformed message: {0}")]
     /// The bytes are not a message postcard can decode.
+    #[error("malformed message: {0}")]
     Malformed(#[from] postcard::Error),
-    #[error("{0} trailing bytes after the message")]
     /// Bytes left over after a whole message, which a well-formed sender never leaves.
+    #[error("{0} trailing bytes after the message")]
     Trailing(usize),
-    #[error("peer speaks protocol version {theirs}, we speak {ours}")]
     /// The other side speaks another protocol version.
+    #[error("peer speaks protocol version {theirs}, we speak {ours}")]
     VersionMismatch {
         /// The version it speaks.
         theirs: u32,
         /// The version this build speaks.
         ours: u32,
     },
-    #[error("{what}: {len} exceeds the limit of {max}")]
     /// A list or buffer in the message exceeds its bound.
+    #[error("{what}: {len} exceeds the limit of {max}")]
     Limit {
         /// What exceeded its bound.
         what: &'static str,
@@ -503,8 +503,8 @@ pub enum WireError {
         /// The bound.
         max: u64,
     },
-    #[error("invalid {what}")]
     /// A value in the message breaks a rule of the protocol.
+    #[error("invalid {what}")]
     Invalid {
         /// What broke it.
         what: &'static str,

@@ -21,25 +21,25 @@ use tracer::output::OutputError;
 /// Why a frame's files could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum FrameFileError {
-    #[error(transparent)]
     /// The PNG preview or the EXR could not be written.
+    #[error(transparent)]
     Output(#[from] OutputError),
-    #[error("{path}: {source}")]
     /// The tile map could not be written.
+    #[error("{path}: {source}")]
     TileMap {
         /// The tile map's file.
         path: PathBuf,
         /// What the image library said.
         source: image::ImageError,
     },
-    #[error("the preview has the wrong size")]
     /// The film's pixels do not fill its width and height, a bug in whoever built it.
+    #[error("the preview has the wrong size")]
     PreviewSize,
-    #[error("starting the thread that writes frames: {0}")]
     /// The system refused to start the writing thread.
+    #[error("starting the thread that writes frames: {0}")]
     Thread(std::io::Error),
-    #[error("the thread writing frames panicked")]
     /// The writing thread panicked, so whether the last frames are on disk is unknown.
+    #[error("the thread writing frames panicked")]
     Panicked,
 }
 

@@ -66,25 +66,25 @@ pub struct PeerCertificate(CertificateDer<'static>);
 /// Why certificates could not be made, written or loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum CertError {
-    #[error("generating certificates: {0}")]
     /// rcgen could not make a key or a certificate.
+    #[error("generating certificates: {0}")]
     Generate(#[from] rcgen::Error),
-    #[error("{}: {source}", path.display())]
     /// A key or certificate file could not be read or written.
+    #[error("{}: {source}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// What the system said.
         source: io::Error,
     },
-    #[error("{}: already exists; refusing to overwrite a cluster's keys", path.display())]
     /// A file to write is there already, and may be another cluster's only copy of its keys.
+    #[error("{}: already exists; refusing to overwrite a cluster's keys", path.display())]
     Exists {
         /// The file.
         path: PathBuf,
     },
-    #[error("{}: no usable PEM {what}: {problem}", path.display())]
     /// A file holds no PEM item of the kind expected.
+    #[error("{}: no usable PEM {what}: {problem}", path.display())]
     Pem {
         /// The file.
         path: PathBuf,
@@ -93,16 +93,16 @@ pub enum CertError {
         /// What was wrong.
         problem: String,
     },
-    #[error("the certificate of peer {index} was not issued by this CA: {problem}")]
     /// A peer's certificate does not chain to the cluster's CA.
+    #[error("the certificate of peer {index} was not issued by this CA: {problem}")]
     NotIssuedByCa {
         /// The peer's index.
         index: u32,
         /// What the verifier said.
         problem: String,
     },
-    #[error("the certificate of peer {index} does not name {}", peer_name(*index))]
     /// A peer's certificate is for another peer's name.
+    #[error("the certificate of peer {index} does not name {}", peer_name(*index))]
     WrongPeer {
         /// The peer whose certificate it should be.
         index: u32,

@@ -101,53 +101,55 @@ pub enum CloseReason {
 /// Why a [`Link`] could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum BindError {
-    #[error(transparent)]
     /// The link's configuration is invalid.
-    Config(#[from] ConfigError),
     #[error(transparent)]
+    Config(#[from] ConfigError),
     /// The TLS configuration could not be built from the certificates.
+    #[error(transparent)]
     Tls(#[from] TlsError),
-    #[error("binding the UDP socket: {0}")]
     /// The UDP socket could not be bound.
+    #[error("binding the UDP socket: {0}")]
     Io(#[from] io::Error),
 }
 
 /// Why an outgoing connection failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ConnectError {
+    /// quinn refused to start the connection (an invalid address or server name, or a stopped
+    /// endpoint).
     #[error("cannot connect: {0}")]
-    /// quinn refused to start the connection (an invalid address or server name, or a stopped endpoint).
     Invalid(#[from] quinn::ConnectError),
-    #[error("handshake failed: {0}")]
     /// The QUIC or TLS handshake failed, e.g. a certificate of another cluster.
+    #[error("handshake failed: {0}")]
     Handshake(#[from] ConnectionError),
+    /// The handshake ended without the server's certificate, which the link needs to know who it
+    /// is.
     #[error("the server presented no certificate")]
-    /// The handshake ended without the server's certificate, which the link needs to know who it is.
     NoCertificate,
 }
 
 /// Why a message was not sent.
 #[derive(Debug, thiserror::Error)]
 pub enum SendError {
-    #[error("no open connection {0}")]
     /// The connection is closed or was never opened.
+    #[error("no open connection {0}")]
     UnknownConnection(ConnId),
-    #[error("message of {len} bytes is over the limit of {max}")]
     /// The encoded message is longer than the link's limit.
+    #[error("message of {len} bytes is over the limit of {max}")]
     TooLarge {
         /// The message's length in bytes.
         len: usize,
         /// The limit.
         max: usize,
     },
-    #[error("connection lost: {0}")]
     /// The connection was lost while sending.
+    #[error("connection lost: {0}")]
     Connection(#[from] ConnectionError),
-    #[error("writing the message: {0}")]
     /// The stream could not be written.
+    #[error("writing the message: {0}")]
     Write(#[from] WriteError),
-    #[error("stream closed before the message was finished")]
     /// The stream was closed before the message was finished.
+    #[error("stream closed before the message was finished")]
     ClosedStream(#[from] ClosedStream),
 }
 

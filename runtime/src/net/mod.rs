@@ -161,22 +161,22 @@ impl Default for Config {
 /// A [`Config`] that cannot work.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    #[error("max_message_bytes {0} is over the 4-byte length header's limit of u32::MAX")]
     /// The message limit does not fit the 4-byte length header.
+    #[error("max_message_bytes {0} is over the 4-byte length header's limit of u32::MAX")]
     MessageTooLarge(usize),
-    #[error("idle_timeout {0:?} is out of QUIC's range")]
     /// The idle timeout is too long for QUIC's variable-length integer.
+    #[error("idle_timeout {0:?} is out of QUIC's range")]
     IdleTimeout(Duration),
-    #[error("keep_alive {keep_alive:?} must be shorter than idle_timeout {idle_timeout:?}")]
     /// Keep-alives as rare as the idle timeout would let a healthy connection time out.
+    #[error("keep_alive {keep_alive:?} must be shorter than idle_timeout {idle_timeout:?}")]
     KeepAlive {
         /// The keep-alive interval asked for.
         keep_alive: Duration,
         /// The idle timeout asked for.
         idle_timeout: Duration,
     },
-    #[error("{0} must be at least 1")]
     /// A count that must be positive is zero; the text names it.
+    #[error("{0} must be at least 1")]
     Zero(&'static str),
 }
 

@@ -30,14 +30,14 @@ pub const ALPN: &[u8] = b"tessera/1";
 /// Why a TLS configuration could not be built from an identity.
 #[derive(Debug, thiserror::Error)]
 pub enum TlsError {
-    #[error("TLS configuration: {0}")]
     /// rustls refused the configuration.
+    #[error("TLS configuration: {0}")]
     Rustls(#[from] rustls::Error),
-    #[error("client certificate verifier: {0}")]
     /// The verifier of client certificates could not be built from the CA.
+    #[error("client certificate verifier: {0}")]
     Verifier(#[from] VerifierBuilderError),
-    #[error("QUIC needs TLS_AES_128_GCM_SHA256: {0}")]
     /// The TLS configuration lacks the cipher suite QUIC's initial packets need.
+    #[error("QUIC needs TLS_AES_128_GCM_SHA256: {0}")]
     Quic(#[from] NoInitialCipherSuite),
 }
 

@@ -13,25 +13,25 @@ use tracer::{Scene, TileCost, TileOutput};
 /// Why a scene could not be shipped or received.
 #[derive(Debug, thiserror::Error)]
 pub enum BundleError {
-    #[error("{path}: {source}")]
     /// A scene file could not be read.
+    #[error("{path}: {source}")]
     Read {
         /// The file, as the scene names it.
         path: String,
         /// What the system said.
         source: std::io::Error,
     },
-    #[error("scene file {name} does not match its hash")]
     /// A received scene file is not what its hash says, so the peer refuses to render it.
+    #[error("scene file {name} does not match its hash")]
     HashMismatch {
         /// The file, as the scene names it.
         name: String,
     },
-    #[error("the scene has no files")]
     /// A scene was shipped without any file.
+    #[error("the scene has no files")]
     Empty,
-    #[error(transparent)]
     /// The scene's files do not load (the tracer's error names file and line).
+    #[error(transparent)]
     Scene(#[from] SceneError),
 }
 

@@ -105,22 +105,22 @@ pub struct Checkpoint {
 /// Why a checkpoint file could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckpointError {
-    #[error("reading {path}: {source}")]
     /// The checkpoint file could not be read.
+    #[error("reading {path}: {source}")]
     Read {
         /// The file.
         path: PathBuf,
         /// What the system said.
         source: std::io::Error,
     },
-    #[error("{path} is not a tessera checkpoint of this version")]
     /// The file lacks a checkpoint's header, or has another version's.
+    #[error("{path} is not a tessera checkpoint of this version")]
     NotACheckpoint {
         /// The file.
         path: PathBuf,
     },
-    #[error("{path} does not decode: {source}")]
     /// The file has a checkpoint's header but its body does not decode.
+    #[error("{path} does not decode: {source}")]
     Decode {
         /// The file.
         path: PathBuf,

@@ -72,44 +72,44 @@ impl Default for Options {
 /// Why a node stopped before the render was done.
 #[derive(Debug, thiserror::Error)]
 pub enum NodeError {
-    #[error(transparent)]
     /// The node's endpoint could not be bound.
+    #[error(transparent)]
     Bind(#[from] BindError),
-    #[error(transparent)]
     /// A peer could not connect to the owner or to another peer.
+    #[error(transparent)]
     Connect(#[from] ConnectError),
-    #[error(transparent)]
     /// The cluster's certificates could not be made or read.
+    #[error(transparent)]
     Certs(#[from] crate::net::CertError),
-    #[error(transparent)]
     /// A file or socket operation failed.
+    #[error(transparent)]
     Io(#[from] std::io::Error),
-    #[error(transparent)]
     /// The scene could not be bundled, or a received one could not be loaded.
+    #[error(transparent)]
     Bundle(#[from] bundle::BundleError),
-    #[error(transparent)]
     /// The core refused a frame the owner started.
+    #[error(transparent)]
     Frame(#[from] runtime_core::peer::FrameError),
-    #[error(transparent)]
     /// The balancer refused to cut or learn.
-    Balancer(#[from] balancer::Error),
     #[error(transparent)]
+    Balancer(#[from] balancer::Error),
     /// The director refused a step.
+    #[error(transparent)]
     Director(#[from] runtime_core::director::DirectorError),
-    #[error("{0} came back with malformed pixels or costs")]
     /// A result's pixels or costs do not decode, so the frame cannot be assembled.
+    #[error("{0} came back with malformed pixels or costs")]
     BadTile(TileId),
-    #[error("the transport stopped")]
     /// The link's endpoint stopped before the render was done.
+    #[error("the transport stopped")]
     Stopped,
-    #[error("the frame owner was lost ({0}); the render is incomplete")]
     /// A peer lost the frame owner before the render was done.
+    #[error("the frame owner was lost ({0}); the render is incomplete")]
     OwnerLost(crate::net::CloseReason),
-    #[error("writing a frame: {0}")]
     /// The [`FrameSink`] refused a frame; the text is its error.
+    #[error("writing a frame: {0}")]
     Sink(String),
-    #[error("a peer task failed: {0}")]
     /// A peer of an in-process cluster failed; the text is its error.
+    #[error("a peer task failed: {0}")]
     Peer(String),
 }
 
@@ -135,7 +135,8 @@ pub struct CompletedFrame {
 
 /// Where finished frames go (the CLI writes them to disk).
 pub trait FrameSink: Send {
-    /// Takes one finished frame, in frame order; an error stops the render with [`NodeError::Sink`].
+    /// Takes one finished frame, in frame order; an error stops the render with
+    /// [`NodeError::Sink`].
     fn frame(&mut self, frame: CompletedFrame) -> Result<(), String>;
 }
 

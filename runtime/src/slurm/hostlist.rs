@@ -17,57 +17,57 @@ pub const MAX_HOSTS: usize = 1 << 20;
 /// Why a host list does not parse. Positions are byte offsets into the list, from 0.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum HostlistError {
-    #[error("the host list is empty")]
     /// No host at all.
+    #[error("the host list is empty")]
     Empty,
-    #[error("an empty host name at offset {at} (two commas, or a comma at an end)")]
     /// A host name with no characters.
+    #[error("an empty host name at offset {at} (two commas, or a comma at an end)")]
     EmptyName {
         /// Where, in bytes from the list's start.
         at: usize,
     },
-    #[error("`[` at offset {at} is never closed")]
     /// A bracket group that never ends.
+    #[error("`[` at offset {at} is never closed")]
     Unclosed {
         /// Where it opens, in bytes from the list's start.
         at: usize,
     },
-    #[error("`]` at offset {at} closes no `[`")]
     /// A closing bracket with no group open.
+    #[error("`]` at offset {at} closes no `[`")]
     Unopened {
         /// Where, in bytes from the list's start.
         at: usize,
     },
-    #[error("`[` at offset {at} inside another bracket group")]
     /// A bracket group opened inside another, which SLURM never writes.
+    #[error("`[` at offset {at} inside another bracket group")]
     Nested {
         /// Where, in bytes from the list's start.
         at: usize,
     },
-    #[error("{found:?} at offset {at} cannot be part of a host name")]
     /// A character no host name has.
+    #[error("{found:?} at offset {at} cannot be part of a host name")]
     BadCharacter {
         /// The character.
         found: char,
         /// Where, in bytes from the list's start.
         at: usize,
     },
-    #[error("an empty entry in the bracket group at offset {at}")]
     /// Nothing between two commas of a bracket group.
+    #[error("an empty entry in the bracket group at offset {at}")]
     EmptyRange {
         /// Where the group opens, in bytes from the list's start.
         at: usize,
     },
-    #[error("{text:?} in the bracket group at offset {at} is not a number or a range lo-hi")]
     /// An entry of a bracket group that is neither a number nor a range.
+    #[error("{text:?} in the bracket group at offset {at} is not a number or a range lo-hi")]
     BadNumber {
         /// The entry.
         text: String,
         /// Where the group opens, in bytes from the list's start.
         at: usize,
     },
-    #[error("the range {lo}-{hi} in the bracket group at offset {at} runs backwards")]
     /// A range whose end is below its start.
+    #[error("the range {lo}-{hi} in the bracket group at offset {at} runs backwards")]
     Backwards {
         /// The range's start, as written.
         lo: String,
@@ -76,8 +76,9 @@ pub enum HostlistError {
         /// Where the group opens, in bytes from the list's start.
         at: usize,
     },
+    /// The list expands to more hosts than a step can have, which bounds the memory an expansion
+    /// may take.
     #[error("the host list names more than {MAX_HOSTS} hosts")]
-    /// The list expands to more hosts than a step can have, which bounds the memory an expansion may take.
     TooMany,
 }
 

@@ -79,14 +79,14 @@ pub enum Role {
 /// Why a task cannot place itself in its step.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SlurmError {
+    /// Variables every SLURM step sets are unset: this is not a task of a step.
     #[error(
         "not inside a SLURM step: {} not set (run it as a task of `srun`)",
         missing_list(.0)
     )]
-    /// Variables every SLURM step sets are unset: this is not a task of a step.
     Missing(Vec<&'static str>),
-    #[error("{name}={value:?}: {reason}")]
     /// A variable's value does not parse.
+    #[error("{name}={value:?}: {reason}")]
     Invalid {
         /// The variable.
         name: &'static str,
@@ -95,8 +95,8 @@ pub enum SlurmError {
         /// What was wrong with it.
         reason: &'static str,
     },
-    #[error("{name}={value:?}: {source}")]
     /// A variable's host list does not expand.
+    #[error("{name}={value:?}: {source}")]
     Hostlist {
         /// The variable.
         name: &'static str,
@@ -105,31 +105,31 @@ pub enum SlurmError {
         /// Why it does not expand.
         source: HostlistError,
     },
-    #[error("SLURM_PROCID={rank} but the step has only {tasks} tasks")]
     /// This task's rank is not below the step's task count.
+    #[error("SLURM_PROCID={rank} but the step has only {tasks} tasks")]
     RankOutOfRange {
         /// This task's rank.
         rank: u32,
         /// The step's task count.
         tasks: u32,
     },
+    /// A step of one task cannot hold an owner and a peer.
     #[error(
         "the step has {0} task: a cluster needs the owner and at least one peer (srun -n 2 or \
          more); `tessera render` renders on one node"
     )]
-    /// A step of one task cannot hold an owner and a peer.
     TooFewTasks(u32),
+    /// With an arbitrary task layout the owner's host cannot be known from the environment.
     #[error(
         "SLURM_DISTRIBUTION={0:?}: with an arbitrary layout task 0 may run on any node; name \
          its host with --owner"
     )]
-    /// With an arbitrary task layout the owner's host cannot be known from the environment.
     ArbitraryLayout(String),
+    /// Task 0 is not on the step's first node, which the other tasks would dial.
     #[error(
         "task 0 runs on {here} but the step's first node is {first}: peers would dial the wrong \
          node; name the owner's host with --owner"
     )]
-    /// Task 0 is not on the step's first node, which the other tasks would dial.
     OwnerElsewhere {
         /// The host task 0 runs on.
         here: String,

@@ -14,9 +14,9 @@ pub use render::render_charts;
 use plotters::prelude::*;
 use std::path::Path;
 
+/// A chart that could not be drawn: the file, and what the drawing library said.
 #[derive(Debug, thiserror::Error)]
 #[error("drawing {path}: {message}")]
-/// A chart that could not be drawn: the file, and what the drawing library said.
 pub struct PlotError {
     path: String,
     message: String,

@@ -46,14 +46,15 @@ pub struct WorkItem {
 /// A message the core cannot accept. The driver should close the connection it came on.
 #[derive(Debug, thiserror::Error)]
 pub enum ProtocolError {
+    /// A message the driver should have handled itself (handshake, scene, goodbye) reached the
+    /// core.
     #[error("{kind} belongs to the connection's driver, not the scheduling core")]
-    /// A message the driver should have handled itself (handshake, scene, goodbye) reached the core.
     NotForCore {
         /// The message's kind.
         kind: &'static str,
     },
-    #[error("{kind} for {frame}, which this peer does not own")]
     /// A message only a frame's owner may receive came for a frame this peer does not own.
+    #[error("{kind} for {frame}, which this peer does not own")]
     NotOwner {
         /// The message's kind.
         kind: &'static str,
@@ -65,25 +66,25 @@ pub enum ProtocolError {
 /// Why the owner could not start a frame.
 #[derive(Debug, thiserror::Error)]
 pub enum FrameError {
-    #[error("{frame} is not newer than {newest}, which this peer has already seen")]
     /// Frames are started in increasing order; this one is not.
+    #[error("{frame} is not newer than {newest}, which this peer has already seen")]
     NotNewer {
         /// The frame asked for.
         frame: FrameId,
         /// The newest frame already started.
         newest: FrameId,
     },
-    #[error("{0} is not connected")]
     /// The deal names a peer this core has no connection to.
+    #[error("{0} is not connected")]
     UnknownPeer(PeerId),
-    #[error("{0} is assigned twice")]
     /// The deal gives one tile id twice.
+    #[error("{0} is assigned twice")]
     DuplicateTile(TileId),
-    #[error("{0} has an invalid rectangle or predicted cost")]
     /// A tile with an empty rectangle or a predicted cost that is not finite and non-negative.
+    #[error("{0} has an invalid rectangle or predicted cost")]
     InvalidTile(TileId),
-    #[error("a frame needs at least one tile")]
     /// The deal has no tiles, so the frame could never complete.
+    #[error("a frame needs at least one tile")]
     NoTiles,
 }
 
