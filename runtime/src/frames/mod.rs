@@ -21,17 +21,9 @@ use tracer::output::OutputError;
 /// Why a frame's files could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum FrameFileError {
-    /// The PNG preview or the EXR could not be written.
+    /// A frame's PNG preview, its tile map or its EXR could not be written.
     #[error(transparent)]
     Output(#[from] OutputError),
-    /// The tile map could not be written.
-    #[error("{path}: {source}")]
-    TileMap {
-        /// The tile map's file.
-        path: PathBuf,
-        /// What the image library said.
-        source: image::ImageError,
-    },
     /// The film's pixels do not fill its width and height, a bug in whoever built it.
     #[error("the preview has the wrong size")]
     PreviewSize,
@@ -147,7 +139,8 @@ fn write(settings: &Settings, frame: &Frame) -> Result<(), FrameFileError> {
     if settings.tile_map {
         let preview = tracer::output::tone_map(&film.pixels, settings.exposure);
         let path = settings.out.join(format!("tiles-{:04}.png", frame.frame));
-        write_tile_map(&path, film.width, film.height, &preview, &frame.costs)?;
+        let map = draw_tile_map(film.width, film.height, &preview, &frame.costs)?;
+        write_tile_map(&path, &map)?;
     }
     // The EXR goes last: `--resume` takes a frame whose EXR is there for done, so the previews
     // must be there before it.
@@ -164,13 +157,12 @@ fn write(settings: &Settings, frame: &Frame) -> Result<(), FrameFileError> {
 /// Draws the tile map of a frame: the tone-mapped image dimmed, each tile tinted from blue
 /// (cheap) to red (expensive) by its measured cost relative to the frame's most expensive tile,
 /// and tile borders in white.
-fn write_tile_map(
-    path: &Path,
+fn draw_tile_map(
     width: u32,
     height: u32,
     preview: &[u8],
     tiles: &[(balancer::Rect, u64)],
-) -> Result<(), FrameFileError> {
+) -> Result<image::RgbImage, FrameFileError> {
     let mut image = image::RgbImage::from_raw(width, height, preview.to_vec())
         .ok_or(FrameFileError::PreviewSize)?;
     let max = tiles.iter().map(|t| t.1).max().unwrap_or(1).max(1) as f32;
@@ -190,12 +182,29 @@ fn write_tile_map(
             }
         }
     }
-    image
-        .save_with_format(path, image::ImageFormat::Png)
-        .map_err(|source| FrameFileError::TileMap {
-            path: path.to_owned(),
-            source,
-        })
+    Ok(image)
+}
+
+/// Writes a drawn tile map as a PNG through `tracer::output::write_png`, so that, like every
+/// other image of a frame, it is written to a temporary name and renamed: a reader, or an owner
+/// killed midway, never leaves half a tile map under its real name.
+fn write_tile_map(path: &Path, map: &image::RgbImage) -> Result<(), FrameFileError> {
+    // The tracer's temporary-name-and-rename writer is private to it, and `write_png` is its one
+    // public way in; it takes linear pixels and tone-maps them. So the map's bytes are handed
+    // over as the linear values that tone-map back to exactly those bytes.
+    let linear = linear_from_srgb_bytes(map.as_raw());
+    tracer::output::write_png(path, map.width(), map.height(), &linear, 1.0)?;
+    Ok(())
+}
+
+/// The linear pixels that `tracer::output::tone_map` at exposure 1 turns back into `bytes`
+/// (three per pixel): each byte's sRGB decoding, exact for all 256 values (tested).
+fn linear_from_srgb_bytes(bytes: &[u8]) -> Vec<[f32; 3]> {
+    let linear = |b: u8| tracer::output::srgb_to_linear(f32::from(b) / 255.0);
+    bytes
+        .chunks_exact(3)
+        .map(|p| [linear(p[0]), linear(p[1]), linear(p[2])])
+        .collect()
 }
 
 #[cfg(test)]
@@ -265,5 +274,41 @@ mod tests {
         let text = error.to_string();
         assert!(text.contains("absent"), "{text}");
         assert!(!missing.exists(), "nothing was written");
+    }
+
+    #[test]
+    fn every_byte_survives_the_tone_map_of_the_tile_map_writer() {
+        let bytes: Vec<u8> = (0..=255).flat_map(|b| [b, 255 - b, b / 2]).collect();
+        let back = tracer::output::tone_map(&linear_from_srgb_bytes(&bytes), 1.0);
+        assert_eq!(back, bytes);
+    }
+
+    #[test]
+    fn the_tile_map_is_written_as_drawn_under_a_temporary_name_then_renamed() {
+        let dir = tempfile::tempdir().unwrap();
+        let film = frame(0).film;
+        let preview = tracer::output::tone_map(&film.pixels, 1.0);
+        let costs = [
+            (balancer::Rect::new(0, 0, 3, 2), 7),
+            (balancer::Rect::new(3, 0, 1, 2), 2),
+        ];
+        let map = draw_tile_map(4, 2, &preview, &costs).unwrap();
+        let path = dir.path().join("tiles-0000.png");
+        write_tile_map(&path, &map).unwrap();
+        let read = image::open(&path).unwrap().into_rgb8();
+        assert_eq!(read.as_raw(), map.as_raw());
+        let partial = dir.path().join(format!(
+            "tiles-0000.png{}",
+            tracer::output::TEMPORARY_SUFFIX
+        ));
+        assert!(!partial.exists(), "the temporary file was renamed");
+
+        // Where the temporary name cannot be written, the real name is left untouched: the
+        // map goes nowhere else first.
+        let blocked = dir.path().join("tiles-0001.png");
+        let temporary = format!("tiles-0001.png{}", tracer::output::TEMPORARY_SUFFIX);
+        std::fs::create_dir(dir.path().join(temporary)).unwrap();
+        assert!(write_tile_map(&blocked, &map).is_err());
+        assert!(!blocked.exists(), "nothing under the real name");
     }
 }
