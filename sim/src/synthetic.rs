@@ -19,7 +19,7 @@ pub struct HotSpot {
     pub width: u32,
     /// The image's height in pixels.
     pub height: u32,
-    /// How many frames the spot orbits for.
+    /// How many frames the trace holds.
     pub frames: u32,
     /// Side of a cost block in pixels.
     pub block_size: u32,

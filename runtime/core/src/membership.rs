@@ -38,7 +38,7 @@ pub enum Action<C> {
     Close {
         /// The connection to close.
         conn: C,
-        /// Why it is refused, for the driver's log and counters.
+        /// Why it is refused, which the driver maps to a close code.
         refusal: Refusal,
         /// The text the other side is told.
         reason: String,

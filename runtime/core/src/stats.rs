@@ -37,7 +37,7 @@ pub struct StatsFile {
     pub motion: String,
     /// The light-transport effects the render paid for (see `tracer::Effects`).
     pub effects: String,
-    /// Peers that took part when the render started.
+    /// How many peers the render was started with.
     pub peers: usize,
     /// The render's identity: a hash of the scene files and the render settings
     /// (`runtime::node::bundle::render_hash`), also in every frame's EXR header. Empty in files

@@ -78,9 +78,9 @@ pub enum Message {
     },
     /// Reply to `Hello`. Must stay variant 1 with `version` first.
     Welcome {
-        /// The protocol version the owner speaks.
+        /// The protocol version the replier speaks.
         version: u32,
-        /// The id the owner gives the sender.
+        /// The replier's own id, which the dialler checks is the peer it meant to reach.
         peer: PeerId,
     },
     /// Where the other peers listen, so that peers can steal from each other directly.
@@ -141,7 +141,7 @@ pub enum Message {
         victim: PeerId,
         /// The tiles or pieces taken.
         tiles: Vec<(TileId, Piece)>,
-        /// Grants the thief received this frame, so the owner can order notices.
+        /// The grants the thief has received this frame.
         stolen: u32,
     },
     /// A peer's report to the owner: alive, and idle (holding no work of the frame) or not.

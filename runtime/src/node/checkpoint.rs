@@ -92,7 +92,8 @@ impl Checkpointing {
 /// The frame in progress, as far as the owner had it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Checkpoint {
-    /// The render it belongs to (`bundle::render_hash`); a checkpoint of another render is refused.
+    /// The render it belongs to (`bundle::render_hash`); a checkpoint of another render is not
+    /// resumed from.
     pub render_hash: String,
     /// The frame in progress.
     pub frame: FrameId,
