@@ -729,10 +729,12 @@ fn shared_sponza_reads_its_textures_despite_the_case_of_their_names() {
         "{:?}",
         scene.files
     );
-    assert!(scene.textures.iter().all(|t| {
-        t.texels()
-            .all(|c| c.is_finite() && c.max_element() <= 1.0)
-    }));
+    assert!(
+        scene
+            .textures
+            .iter()
+            .all(|t| t.texels().all(|c| c.is_finite() && c.max_element() <= 1.0))
+    );
 }
 
 proptest! {
