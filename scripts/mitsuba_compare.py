@@ -133,6 +133,7 @@ def main():
         "mtl_mapping": MTL_MAPPING,
         "media_mapping": MEDIA_MAPPING,
         "cores": os.cpu_count(),
+        "processor": processor(),
         "load_before": load_before,
         "load_after": os.getloadavg(),
         "rows": rows,
@@ -200,6 +201,20 @@ def compare(tessera, ours, theirs, tolerance):
     }
 
 
+def processor():
+    """The processor's model name and the SIMD features that decide speed here: drjit's LLVM
+    backend compiles for the machine it runs on (AVX-512 where present), tessera picks AVX at
+    run time, so figures from machines with different features must not be read side by side."""
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return "unknown processor"
+    model = next((l.split(":", 1)[1].strip() for l in info.splitlines() if l.startswith("model name")), "unknown")
+    flags = next((l.split(":", 1)[1].split() for l in info.splitlines() if l.startswith("flags")), [])
+    simd = [f for f in ("avx", "avx2", "fma", "avx512f", "avx512vl") if f in flags]
+    return f"{model}; {' '.join(simd) or 'no AVX'}"
+
+
 def describe(r):
     if "error" in r:
         return "error: " + r["error"]
@@ -211,7 +226,8 @@ def markdown(report):
     lines = [
         f"{s['size']}x{s['size']}, {s['spp']} spp, at most {s['segments']} path segments "
         f"(Mitsuba max_depth {s['segments']}, tessera --max-depth {s['tessera_max_depth']}); "
-        f"{report['cores']} cores, load average {fmt_load(report['load_before'])} before, "
+        f"{report['cores']} cores ({report.get('processor', 'processor not recorded')}), "
+        f"load average {fmt_load(report['load_before'])} before, "
         f"{fmt_load(report['load_after'])} after.",
         "",
         "| scene | triangles | renderer | build + render CPU-s | wall s | mean R / G / B | tessera vs Mitsuba, per channel |",

@@ -125,10 +125,9 @@ impl World {
         // Every hit reads its triangle, at random on large meshes: huge pages spare most of
         // those reads a page-table walk (`geometry/memory.rs`).
         scene.triangles = on_huge_pages(scene.triangles);
-        // So does every hit on a textured surface read a texel: on Sponza that read missed the
-        // caches often enough to take 14% of the render's samples, in textures of up to 8.6 MB.
+        // So does every hit on a textured surface read a texel (`scene/texture.rs`).
         for texture in &mut scene.textures {
-            texture.texels = on_huge_pages(std::mem::take(&mut texture.texels));
+            texture.on_huge_pages();
         }
         let lights = Lights::new(&scene, &effects);
         let first = u32::try_from(scene.triangles.len())

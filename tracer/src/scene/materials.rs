@@ -243,22 +243,12 @@ impl<'a> MaterialTable<'a> {
     }
 }
 
-/// Decodes a PNG or JPEG to linear RGB: colour images store sRGB-encoded values, and shading
-/// needs linear reflectances. Alpha is ignored.
+/// Decodes a PNG or JPEG to its sRGB bytes, which [`Texture`] reads as linear RGB: colour
+/// images store sRGB-encoded values, and shading needs linear reflectances. Alpha is ignored.
 fn decode_texture(bytes: &[u8]) -> Result<Texture, image::ImageError> {
     let image = image::load_from_memory(bytes)?.into_rgb8();
-    let to_linear: Vec<f32> = (0..=255u8)
-        .map(|v| crate::output::srgb_to_linear(f32::from(v) / 255.0))
-        .collect();
-    let texels = image
-        .pixels()
-        .map(|p| Vec3::from(p.0.map(|c| to_linear[c as usize])))
-        .collect();
-    Ok(Texture {
-        width: image.width(),
-        height: image.height(),
-        texels,
-    })
+    let (width, height) = (image.width(), image.height());
+    Ok(Texture::from_srgb8(width, height, image.into_raw()))
 }
 
 /// The `[media.NAME]` tables, resolved by name where a `medium` key uses them; each enters

@@ -1,6 +1,6 @@
 //! The in-memory scene: what the loader produces and the integrator consumes.
 //!
-//! Everything is resolved (materials by index, textures decoded to linear RGB), and placed in
+//! Everything is resolved (materials by index, textures decoded, read as linear RGB), and placed in
 //! world space but for moving objects, which keep object space and a track (`motion.rs`), so
 //! that rendering never touches the filesystem. The loader ([`load`]) reads a TOML scene
 //! file and the OBJ/MTL meshes and textures it references through a [`SceneFiles`] source, so the
