@@ -48,6 +48,9 @@ pub struct Config {
     pub steal_rtt: usize,
     /// Print JSON instead of text.
     pub json: bool,
+    /// Which wavelengths paths sample: RGB until dispersive glass (the default), or spectral
+    /// from the camera on, to measure what the always-spectral pipeline costs.
+    pub spectral: tracer::spectrum::SpectralSampling,
 }
 
 /// Everything one `tessera bench` run measured.
@@ -55,6 +58,8 @@ pub struct Config {
 pub struct Report {
     /// Rendering threads.
     pub threads: usize,
+    /// The wavelength sampling measured (`rgb`: the default, specialised pipeline).
+    pub spectral: &'static str,
     /// The machine's load average (1, 5, 15 minutes) before and after, so a reader can tell a
     /// quiet machine from one shared with other work.
     pub load_before: Option<[f64; 3]>,
@@ -138,6 +143,7 @@ pub fn run(args: &Config) -> Result<Report, LabError> {
     }
     let mut report = Report {
         threads,
+        spectral: args.spectral.name(),
         load_before: load_average(),
         load_after: None,
         scenes: Vec::new(),
@@ -177,8 +183,9 @@ pub fn run(args: &Config) -> Result<Report, LabError> {
             })
         };
         println!(
-            "{} threads; load average before {}, after {}; {} scenes measured, {} skipped",
+            "{} threads, wavelengths {}; load average before {}, after {}; {} scenes measured, {} skipped",
             threads,
+            report.spectral,
             load(report.load_before),
             load(report.load_after),
             report.scenes.len(),
@@ -221,6 +228,7 @@ fn bench_scene(
     if let Some(depth) = args.max_depth {
         world.scene.settings.max_depth = Some(depth);
     }
+    world.spectral = args.spectral;
     let full_depth = world.scene.settings.max_depth;
 
     world.scene.settings.max_depth = Some(0);
