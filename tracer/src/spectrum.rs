@@ -351,7 +351,12 @@ mod tests {
     fn the_bands_are_a_partition_of_unity_in_zero_one() {
         for i in 0..=3000 {
             let b = basis(LAMBDA_MIN + i as f32 * 0.1);
-            assert_eq!(b.x + b.y + b.z, 1.0, "at {} nm", LAMBDA_MIN + i as f32 * 0.1);
+            assert_eq!(
+                b.x + b.y + b.z,
+                1.0,
+                "at {} nm",
+                LAMBDA_MIN + i as f32 * 0.1
+            );
             assert!(b.min_element() >= 0.0 && b.max_element() <= 1.0);
         }
         assert_eq!(basis(450.0), Vec3::Z);

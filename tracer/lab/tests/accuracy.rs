@@ -160,7 +160,10 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             "an always-spectral render gave the RGB render's bits: {row:?}"
         );
         let bias = number(row, "mean_bias").abs();
-        assert!(bias < 0.05, "a spectral white furnace is off by {bias}: {row:?}");
+        assert!(
+            bias < 0.05,
+            "a spectral white furnace is off by {bias}: {row:?}"
+        );
     }
     // The binary tree opens other nodes than the 4-wide one, never another hit.
     let binary = rows

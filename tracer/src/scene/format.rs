@@ -456,10 +456,12 @@ checked_type!(Sellmeier, Vec<f32>, |v| {
     };
     glass.check().map(|()| glass)
 });
-checked_type!(GlassName, String, |v| Dispersion::named(&v).ok_or_else(|| {
-    let names: Vec<_> = GLASSES.iter().map(|(n, _)| format!("\"{n}\"")).collect();
-    format!("unknown glass \"{v}\": use one of {}", names.join(", "))
-}));
+checked_type!(GlassName, String, |v| Dispersion::named(&v).ok_or_else(
+    || {
+        let names: Vec<_> = GLASSES.iter().map(|(n, _)| format!("\"{n}\"")).collect();
+        format!("unknown glass \"{v}\": use one of {}", names.join(", "))
+    }
+));
 checked_type!(Anisotropy, f32, |v| in_range(
     v,
     |v| v > -1.0 && v < 1.0,
