@@ -21,6 +21,9 @@ pub enum Dispersion {
     Sellmeier { b: [f32; 3], c: [f32; 3] },
 }
 
+/// What the scene format says of a number that is not finite.
+const NOT_FINITE: &str = "must be finite numbers (one overflows 32-bit floats or is nan/inf)";
+
 /// The glasses a scene may name (`glass = "NAME"`), with their Sellmeier coefficients.
 pub const GLASSES: [(&str, Dispersion); 3] = [
     // Schott N-BK7, the common borosilicate crown: n_d 1.5168, Abbe number 64.17.
@@ -53,6 +56,46 @@ impl Dispersion {
     /// The named glass of [`GLASSES`], if any.
     pub fn named(name: &str) -> Option<Dispersion> {
         GLASSES.iter().find(|(n, _)| *n == name).map(|(_, d)| *d)
+    }
+
+    /// Cauchy's `[A, B]` as a scene gives it, checked: two finite numbers, B not negative
+    /// (normal dispersion: blue bends more), an index of at least 1 ([`Dispersion::check`]).
+    pub fn cauchy(v: &[f32]) -> Result<Dispersion, String> {
+        let &[a, b] = v else {
+            return Err(format!("must be two numbers `[A, B]`, not {}", v.len()));
+        };
+        if !a.is_finite() || !b.is_finite() {
+            return Err(NOT_FINITE.to_owned());
+        }
+        if b < 0.0 {
+            return Err(format!(
+                "B = {b} must not be negative (glass disperses normally: blue bends more)"
+            ));
+        }
+        let glass = Dispersion::Cauchy { a, b };
+        glass.check().map(|()| glass)
+    }
+
+    /// Sellmeier's `[B1, B2, B3, C1, C2, C3]` as a scene gives them, checked: six finite
+    /// numbers, none negative, and [`Dispersion::check`].
+    pub fn sellmeier(v: &[f32]) -> Result<Dispersion, String> {
+        let &[b1, b2, b3, c1, c2, c3] = v else {
+            return Err(format!(
+                "must be six numbers `[B1, B2, B3, C1, C2, C3]`, not {}",
+                v.len()
+            ));
+        };
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(NOT_FINITE.to_owned());
+        }
+        if v.iter().any(|&x| x < 0.0) {
+            return Err("no coefficient may be negative".to_owned());
+        }
+        let glass = Dispersion::Sellmeier {
+            b: [b1, b2, b3],
+            c: [c1, c2, c3],
+        };
+        glass.check().map(|()| glass)
     }
 
     /// The index of refraction at `nanometres`.

@@ -422,40 +422,8 @@ checked_type!(Ior, f32, |v| in_range(
     |v| v >= 1.0,
     "must be at least 1"
 ));
-checked_type!(Cauchy, Vec<f32>, |v| {
-    let &[a, b] = v.as_slice() else {
-        return Err(format!("must be two numbers `[A, B]`, not {}", v.len()));
-    };
-    if !a.is_finite() || !b.is_finite() {
-        return Err(not_finite());
-    }
-    if b < 0.0 {
-        return Err(format!(
-            "B = {b} must not be negative (glass disperses normally: blue bends more)"
-        ));
-    }
-    let glass = Dispersion::Cauchy { a, b };
-    glass.check().map(|()| glass)
-});
-checked_type!(Sellmeier, Vec<f32>, |v| {
-    let &[b1, b2, b3, c1, c2, c3] = v.as_slice() else {
-        return Err(format!(
-            "must be six numbers `[B1, B2, B3, C1, C2, C3]`, not {}",
-            v.len()
-        ));
-    };
-    if v.iter().any(|x| !x.is_finite()) {
-        return Err(not_finite());
-    }
-    if v.iter().any(|&x| x < 0.0) {
-        return Err("no coefficient may be negative".to_owned());
-    }
-    let glass = Dispersion::Sellmeier {
-        b: [b1, b2, b3],
-        c: [c1, c2, c3],
-    };
-    glass.check().map(|()| glass)
-});
+checked_type!(Cauchy, Vec<f32>, |v| Dispersion::cauchy(&v));
+checked_type!(Sellmeier, Vec<f32>, |v| Dispersion::sellmeier(&v));
 checked_type!(GlassName, String, |v| Dispersion::named(&v).ok_or_else(
     || {
         let names: Vec<_> = GLASSES.iter().map(|(n, _)| format!("\"{n}\"")).collect();
