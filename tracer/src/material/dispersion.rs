@@ -30,7 +30,7 @@ pub const GLASSES: [(&str, Dispersion); 3] = [
     (
         "bk7",
         Dispersion::Sellmeier {
-            b: [1.039_612_1, 0.231_792_34, 1.010_469_5],
+            b: [1.039_612, 0.231_792_34, 1.010_469_5],
             c: [0.006_000_698_7, 0.020_017_914, 103.560_65],
         },
     ),
@@ -39,7 +39,7 @@ pub const GLASSES: [(&str, Dispersion); 3] = [
         "fused-silica",
         Dispersion::Sellmeier {
             b: [0.696_166_3, 0.407_942_6, 0.897_479_4],
-            c: [0.004_679_148, 0.013_512_06, 97.934_00],
+            c: [0.004_679_148, 0.013_512_06, 97.934],
         },
     ),
     // Schott N-SF11, a dense flint: n_d 1.78472, Abbe number 25.68, the classic prism glass.
@@ -47,7 +47,7 @@ pub const GLASSES: [(&str, Dispersion); 3] = [
         "sf11",
         Dispersion::Sellmeier {
             b: [1.737_597, 0.313_747_35, 1.898_781],
-            c: [0.013_188_707, 0.062_306_814, 155.236_29],
+            c: [0.013_188_707, 0.062_306_814, 155.236_3],
         },
     ),
 ];

@@ -406,6 +406,7 @@ mod tests {
             out: None,
             steal_rtt: 0,
             json: true,
+            spectral: tracer::spectrum::SpectralSampling::default(),
         }
     }
 
