@@ -393,6 +393,7 @@ fn load_average() -> Option<[f64; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tracer::spectrum::SpectralSampling;
 
     fn args() -> Config {
         Config {
@@ -406,7 +407,7 @@ mod tests {
             out: None,
             steal_rtt: 0,
             json: true,
-            spectral: tracer::spectrum::SpectralSampling::default(),
+            spectral: SpectralSampling::default(),
         }
     }
 
@@ -436,6 +437,36 @@ mod tests {
             measured.paths.rays
         );
         assert_eq!(measured.paths.max_depth, Some(8));
+    }
+
+    #[test]
+    fn the_spectral_knob_renders_other_pixels_from_the_same_camera_rays() {
+        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/furnace/furnace.toml");
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let mut images = Vec::new();
+        let mut primary = Vec::new();
+        for spectral in [SpectralSampling::Auto, SpectralSampling::Hero] {
+            let out = dir.path().join(spectral.name());
+            std::fs::create_dir_all(&out).expect("an output folder");
+            let config = Config {
+                out: Some(out.clone()),
+                spectral,
+                ..args()
+            };
+            let measured = bench_scene(&scene, &config, &pool())
+                .expect("the furnace loads")
+                .expect("nothing absent");
+            primary.push(measured.primary.rays);
+            images.push(std::fs::read(out.join("furnace.exr")).expect("the image"));
+        }
+        assert_eq!(
+            primary[0], primary[1],
+            "one camera ray per sample either way"
+        );
+        assert_ne!(
+            images[0], images[1],
+            "the always-spectral render is another estimate"
+        );
     }
 
     #[test]
