@@ -5,7 +5,8 @@
 //!   every direction (radiance over n^2 is invariant along a path through clear glass, and
 //!   outside n = 1), whatever the index, so whatever the wavelength. For dispersive glasses
 //!   (catalogue, Cauchy, Sellmeier), with paths that turn spectral at the glass (the default)
-//!   and with paths spectral from the camera (three hero wavelengths, and one).
+//!   and with paths spectral from the camera (three hero wavelengths, and one); and with a
+//!   medium inside that scatters without absorbing, which keeps the furnace at 1.
 //! - The round trip from RGB to spectra and back: a coloured emitter seen directly, and a
 //!   coloured diffuse floor under a white sky (its radiance is its albedo), rendered by the
 //!   always-spectral pipeline, have their RGB values as means: the bands sum to one and the
@@ -66,6 +67,20 @@ fn dispersive_glass_in_a_white_furnace_is_white() {
             let what = format!("{index}, {}", sampling.name());
             assert_close(&what, mean_and_error(&out), Vec3::ONE, 0.01);
         }
+    }
+}
+
+#[test]
+fn a_chromatic_medium_that_only_scatters_inside_dispersive_glass_stays_white() {
+    // Scattering without absorption keeps the furnace at 1; the medium differs per channel, so
+    // each wavelength sees its band's coefficient and the flights' spectral MIS mixes them.
+    let toml = furnace("glass = \"sf11\"\nmedium = \"fog\"")
+        + "[media.fog]\nsigma_s = [0.4, 1.0, 2.0]\ng = 0.3\n";
+    for sampling in [SpectralSampling::Auto, SpectralSampling::Hero] {
+        let out = render(&toml, sampling);
+        assert!(out.stats.medium_scatters > 0 && out.stats.spectral_paths > 0);
+        let what = format!("fog in flint, {}", sampling.name());
+        assert_close(&what, mean_and_error(&out), Vec3::ONE, 0.01);
     }
 }
 
