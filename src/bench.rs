@@ -29,6 +29,11 @@ pub struct BenchArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Wavelengths: `rgb` (RGB until dispersive glass, the default), or spectral from the
+    /// camera on with three hero wavelengths (`spectral-hero`, what an always-spectral renderer
+    /// pays) or one (`spectral-single`).
+    #[arg(long, default_value = "rgb", value_parser = ["rgb", "spectral-hero", "spectral-single"])]
+    pub spectral: String,
 }
 
 /// Measures as the flags say; the image overrides are applied with `tessera render`'s checks.
@@ -42,6 +47,10 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         out: args.out.clone(),
         steal_rtt: args.steal_rtt,
         json: args.json,
+        spectral: tracer::spectrum::SpectralSampling::ALL
+            .into_iter()
+            .find(|s| s.name() == args.spectral)
+            .unwrap_or_default(),
     })?;
     Ok(())
 }

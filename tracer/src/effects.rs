@@ -51,6 +51,13 @@
 //!   flight's two random numbers come from a stream of their own ([`crate::sampler`]). That
 //!   forced pipeline is what a renderer that always tracks media pays: a flight per ray, and
 //!   closest-hit shadow rays instead of any-hit ones.
+//! - `dispersion`: a used material is glass whose index depends on the wavelength. Paths are RGB
+//!   until they meet such a surface, and only there turn spectral ([`crate::spectrum`]), drawing
+//!   their wavelengths from a stream of their own. Forced on in a scene without it, the
+//!   integrator asks each surface whether it is dispersive, none is, and no path turns: the
+//!   same numbers, the same bits. The always-spectral pipeline that the specialisation saves is
+//!   not this flag but [`crate::spectrum::SpectralSampling::Hero`], a knob of `tessera bench`
+//!   and `tessera accuracy`.
 //!
 //! Not done, on purpose: "no shadow rays when nothing can block" beyond the case where nothing
 //! emits. A shadow ray can be skipped exactly only if the occlusion test would certainly say
@@ -100,6 +107,9 @@ pub struct Effects {
     pub media: bool,
     /// The shutter is open for a while and something moves: each sample has a time of its own.
     pub motion_blur: bool,
+    /// Some glass disperses (its index depends on the wavelength): paths that meet it turn
+    /// spectral.
+    pub dispersion: bool,
 }
 
 impl Effects {
@@ -119,6 +129,7 @@ impl Effects {
         shading_normals: true,
         media: true,
         motion_blur: true,
+        dispersion: true,
     };
 
     /// The effects `scene` needs. Only materials that some triangle uses count.
@@ -156,13 +167,16 @@ impl Effects {
             diffuse,
             specular_reflection: used(|b| matches!(b, Bsdf::Mirror { .. })),
             glossy_reflection,
-            refraction: used(|b| matches!(b, Bsdf::Dielectric { .. })),
+            refraction: used(|b| {
+                matches!(b, Bsdf::Dielectric { .. } | Bsdf::DispersiveGlass { .. })
+            }),
             textures: used(
                 |b| matches!(b, Bsdf::Diffuse { albedo, texture: Some(_) } if *albedo != Vec3::ZERO),
             ),
             shading_normals: scene.all_triangles().any(|t| t.n.is_some()),
             media,
             motion_blur: scene.shutter.is_open() && scene.moves(),
+            dispersion: used(Bsdf::is_dispersive),
         }
     }
 
@@ -188,6 +202,7 @@ impl Effects {
             (self.shading_normals, "shading-normals"),
             (self.media, "media"),
             (self.motion_blur, "motion-blur"),
+            (self.dispersion, "dispersion"),
         ];
         flags
             .into_iter()

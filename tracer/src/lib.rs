@@ -12,6 +12,8 @@
 //!   and moving objects, traced in their own space at each sample's time.
 //! - [`material`]: the closed set of materials ([`Material`]) and their BSDFs in a local frame.
 //! - [`effects`]: the light-transport effects a scene calls for, so absent ones cost nothing.
+//! - [`spectrum`]: spectral paths, only where dispersive glass is met: hero wavelengths from a
+//!   stream of their own, RGB to spectrum and back, and what a spectral path sees of RGB values.
 //! - [`medium`]: homogeneous participating media (absorption, Henyey-Greenstein scattering),
 //!   their free-flight sampling (spectral MIS over the RGB channels) and transmittance.
 //! - [`lights`]: area, point and environment lights and their power-proportional sampling.
@@ -37,6 +39,7 @@ pub mod medium;
 pub mod output;
 pub mod sampler;
 pub mod scene;
+pub mod spectrum;
 pub mod tile;
 
 pub use material::Material;

@@ -11,7 +11,8 @@
 //! moved every bounce's block, so every image rendered before the lens existed would have changed
 //! its bits. A pinhole camera never draws them, and its images are the same bits as before.
 //! The sample's time within the shutter ([`PixelSampler::time`]) has a stream of its own for the
-//! same reason.
+//! same reason, and so do the wavelengths of a path that turns spectral at dispersive glass
+//! ([`PixelSampler::wavelength`], [`crate::spectrum`]).
 
 use glam::Vec2;
 
@@ -86,6 +87,18 @@ impl PixelSampler {
         time.next_1d()
     }
 
+    /// The number that places a spectral path's wavelengths, in [0, 1): one dimension in the
+    /// wavelengths' own stream, the same whenever it is asked for and independent of every
+    /// other number, so paths that stay RGB, which never ask, draw what they always drew.
+    pub fn wavelength(&self) -> f32 {
+        let mut wavelength = PixelSampler {
+            key: mix(self.key ^ WAVELENGTH_STREAM),
+            dimension: 0,
+            bounce: 0,
+        };
+        wavelength.next_1d()
+    }
+
     /// The channel choice and the free-flight distance of the current bounce's segment through
     /// a medium, in [0, 1)^2: a pair in the medium stream of this bounce, independent of every
     /// other number and the same however often it is asked for.
@@ -105,6 +118,8 @@ const LENS_STREAM: u64 = 0x1e45_0000_0000_0001;
 const MEDIUM_STREAM: u64 = 0x3ed1_0000_0000_0002;
 /// Tells the time's stream from the others, as [`LENS_STREAM`] does.
 const TIME_STREAM: u64 = 0x71e0_0000_0000_0003;
+/// Tells the wavelengths' stream from the others, as [`LENS_STREAM`] does.
+const WAVELENGTH_STREAM: u64 = 0x3a5e_0000_0000_0004;
 
 /// The SplitMix64 finaliser: a bijection on u64 with full avalanche.
 fn mix(mut z: u64) -> u64 {
@@ -196,6 +211,26 @@ mod tests {
         let n = 20_000;
         let mean = (0..n)
             .map(|i| f64::from(PixelSampler::new(3, 1, i % 101, i / 101, i % 7).time()))
+            .sum::<f64>()
+            / f64::from(n);
+        assert!((mean - 0.5).abs() < 0.01, "mean {mean}");
+    }
+
+    #[test]
+    fn the_wavelength_stream_is_fixed_and_apart_from_the_others() {
+        let s = PixelSampler::new(1, 0, 0, 0, 0);
+        let w = s.wavelength();
+        let mut t = s.clone();
+        let main: Vec<f32> = (0..64).map(|_| t.next_1d()).collect();
+        assert_eq!(t.wavelength(), w, "drawing other numbers moves nothing");
+        assert!(!main.contains(&w));
+        assert!(w != s.time() && w != s.lens().x && w != s.lens().y && w != s.medium().x);
+        let mut u = PixelSampler::new(1, 0, 0, 0, 0);
+        let _ = u.wavelength();
+        assert_eq!(u.next_1d(), main[0], "drawing it shifts no main number");
+        let n = 20_000;
+        let mean = (0..n)
+            .map(|i| f64::from(PixelSampler::new(3, 1, i % 101, i / 101, i % 7).wavelength()))
             .sum::<f64>()
             / f64::from(n);
         assert!((mean - 0.5).abs() < 0.01, "mean {mean}");

@@ -223,6 +223,7 @@ fn no_shipped_scene_is_past_the_limit() {
         "furnace",
         "point-in-sphere",
         "glass-cluster-pan",
+        "prism",
     ] {
         let files = tracer::scene::DiskFiles {
             root: std::path::Path::new(scenes).join(name),

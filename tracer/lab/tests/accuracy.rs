@@ -148,10 +148,23 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             count("bvh"),
             count("traversal"),
             count("offset"),
-            count("environment")
+            count("environment"),
+            count("spectral")
         ],
-        [3, 6, 6, 5, 3, 2, 3]
+        [3, 6, 6, 5, 3, 2, 3, 3]
     );
+    // The furnace is white: the spectral rungs differ from the RGB one by noise alone.
+    for row in rows.iter().filter(|r| r["knob"] == "spectral").skip(1) {
+        assert!(
+            row["note"].starts_with("differs"),
+            "an always-spectral render gave the RGB render's bits: {row:?}"
+        );
+        let bias = number(row, "mean_bias").abs();
+        assert!(
+            bias < 0.05,
+            "a spectral white furnace is off by {bias}: {row:?}"
+        );
+    }
     // The binary tree opens other nodes than the 4-wide one, never another hit.
     let binary = rows
         .iter()
@@ -190,6 +203,7 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
         "## Traversal",
         "## Spawn offset",
         "## Environment sampling",
+        "## Wavelength sampling",
     ] {
         assert!(
             markdown.contains(section),

@@ -19,6 +19,10 @@
 //! (where rays meet the static and the moving geometry at the path's time, and the local
 //! geometry at a hit).
 //!
+//! Dispersion ([`crate::spectrum`]): a path is RGB until it meets dispersive glass, where it
+//! turns spectral; from then on every RGB value it meets goes through its [`PathSpectrum`],
+//! which is the identity, with no arithmetic, on an RGB path.
+//!
 //! Motion: a path has one time (`radiance`'s `time`, drawn per sample where the scene has
 //! motion blur), and every ray of it meets the moving objects where they are then.
 //!
@@ -37,6 +41,7 @@ use crate::material::{Bsdf, Frame};
 use crate::medium::{Flight, hero_channel, mean_ratio, sample_henyey_greenstein};
 use crate::sampler::PixelSampler;
 use crate::scene::Scene;
+use crate::spectrum::{PathSpectrum, SpectralSampling};
 use glam::{Vec2, Vec3};
 use hits::Surface;
 use scatter::{BounceNumbers, Phase, Scatterer, SurfaceScatter};
@@ -57,6 +62,9 @@ pub struct World {
     /// Where secondary rays start: off the error bound of each hit point (the default), or the
     /// fixed-ULP offset for comparison.
     pub offset: OffsetMethod,
+    /// Which wavelengths paths sample: RGB until dispersive glass (the default), or spectral
+    /// from the camera on (comparison knobs, [`SpectralSampling`]).
+    pub spectral: SpectralSampling,
 }
 
 /// Per-sample counters: the counted work that becomes a tile's cost, and the effect counters the
@@ -82,6 +90,8 @@ pub struct PathStats {
     pub flights: u64,
     /// Of those, the ones that scattered in the medium (and were shaded there).
     pub medium_scatters: u64,
+    /// Paths that ended spectral (met dispersive glass, or sampled wavelengths from the start).
+    pub spectral_paths: u64,
 }
 
 impl PathStats {
@@ -97,6 +107,7 @@ impl PathStats {
         self.invalid_samples += other.invalid_samples;
         self.flights += other.flights;
         self.medium_scatters += other.medium_scatters;
+        self.spectral_paths += other.spectral_paths;
     }
 
     /// The deterministic cost of the work counted here, in abstract units of about one BVH node
@@ -145,6 +156,7 @@ impl World {
             effects,
             traversal: Traversal::Robust,
             offset: OffsetMethod::default(),
+            spectral: SpectralSampling::default(),
         }
     }
 
@@ -182,7 +194,7 @@ impl World {
         let effects = &self.effects;
         let mut ray = ray;
         let mut radiance = Vec3::ZERO;
-        let mut beta = Vec3::ONE;
+        let (mut spectrum, mut beta) = PathSpectrum::start(self.spectral, sampler);
         // The density of the direction the last bounce sampled, and whether it was a delta lobe;
         // the camera ray counts as specular (nothing else could have found what it hits).
         let mut last_pdf = 0.0f32;
@@ -210,7 +222,7 @@ impl World {
                 let t_end = found.map_or(f32::INFINITY, |h| h.t * length);
                 let u = sampler.medium();
                 let hero = *hero.get_or_insert_with(|| hero_channel(u.x));
-                let in_medium = self.flight_medium(medium, found.is_none());
+                let in_medium = &spectrum.medium(self.flight_medium(medium, found.is_none()));
                 match in_medium.sample_flight(t_end, hero, u.y) {
                     Flight::Pass {
                         weight,
@@ -246,7 +258,7 @@ impl World {
                                 * self.direct_light(
                                     &phase,
                                     &at,
-                                    medium,
+                                    (medium, &spectrum),
                                     moment,
                                     (u.light_choice, u.light),
                                     stats,
@@ -279,7 +291,9 @@ impl World {
                         let light_pdf = self.lights.environment_pdf(&self.scene, ray.dir);
                         power_heuristic(last_pdf, light_pdf)
                     };
-                    radiance += self.weighed(beta, ratio) * environment.radiance(ray.dir) * weight;
+                    radiance += self.weighed(beta, ratio)
+                        * spectrum.of(environment.radiance(ray.dir))
+                        * weight;
                 }
                 break;
             };
@@ -303,13 +317,16 @@ impl World {
                             .triangle_pdf(hit.triangle, last_point, surface.at.p);
                     power_heuristic(last_pdf, light_pdf)
                 };
-                radiance += self.weighed(beta, ratio) * material.emission * weight;
+                radiance += self.weighed(beta, ratio) * spectrum.of(material.emission) * weight;
             }
             if settings.max_depth.is_some_and(|max| depth >= max) {
                 break;
             }
 
-            let bsdf = self.resolve(&material.bsdf, &surface);
+            if effects.dispersion && material.bsdf.is_dispersive() {
+                spectrum.disperse(sampler, &mut beta, &mut radiance);
+            }
+            let bsdf = spectrum.bsdf(self.resolve(&material.bsdf, &surface));
             let frame = Frame::from_normal(surface.shading_normal);
             let wo = frame.to_local(-ray.dir);
             let u = BounceNumbers::draw(sampler);
@@ -324,7 +341,7 @@ impl World {
                     * self.direct_light(
                         &scatter,
                         &surface.at,
-                        medium,
+                        (medium, &spectrum),
                         moment,
                         (u.light_choice, u.light),
                         stats,
@@ -354,16 +371,20 @@ impl World {
             }
             ray = spawn_ray(&surface.at, wi, self.offset);
         }
-        radiance
+        if spectrum.is_spectral() {
+            stats.spectral_paths += 1;
+        }
+        spectrum.finish(radiance)
     }
 
     /// One light sample seen from `at` in `medium` through `scatter` (a BSDF or a phase
-    /// function), weighted by multiple importance sampling against the scatterer's own sampling.
+    /// function), weighted by multiple importance sampling against the scatterer's own sampling,
+    /// at the wavelengths of `spectrum`.
     fn direct_light(
         &self,
         scatter: &impl Scatterer,
         at: &SurfacePoint,
-        medium: Option<u32>,
+        (medium, spectrum): (Option<u32>, &PathSpectrum),
         moment: &Moment,
         (u_choice, u): (f32, Vec2),
         stats: &mut PathStats,
@@ -386,7 +407,7 @@ impl World {
             if transmittance == Vec3::ZERO {
                 return Vec3::ZERO;
             }
-            transmittance
+            spectrum.channels(transmittance)
         } else if self.occluded(&shadow, moment, &mut stats.traversal) {
             return Vec3::ZERO;
         } else {
@@ -397,7 +418,7 @@ impl World {
         } else {
             power_heuristic(light.pdf, scatter.pdf(light.wi))
         };
-        f * light.radiance * (weight / light.pdf) * transmittance
+        f * spectrum.of(light.radiance) * (weight / light.pdf) * transmittance
     }
 
     /// What a path of throughput `beta` and spectral ratios `ratio` contributes per unit of

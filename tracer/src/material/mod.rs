@@ -23,14 +23,17 @@
 //!   and `pdf` are zero and `sample` returns `None`. No input direction produces NaN or infinity.
 //!
 //! Module map: `frame` (the shading basis), `microfacet` (GGX conductors), `dielectric` (Fresnel
-//! equations and smooth glass); Lambertian diffuse and the perfect mirror are short enough to
+//! equations and smooth glass), `dispersion` (indices that depend on the wavelength: Cauchy,
+//! Sellmeier, named glasses); Lambertian diffuse and the perfect mirror are short enough to
 //! live here.
 
 mod dielectric;
+mod dispersion;
 mod frame;
 mod microfacet;
 
 pub use dielectric::{fresnel_dielectric, fresnel_schlick};
+pub use dispersion::{Dispersion, GLASSES};
 pub use frame::Frame;
 pub use microfacet::MIN_ALPHA;
 
@@ -70,6 +73,11 @@ pub enum Bsdf {
     /// Smooth glass: Fresnel reflection and refraction with index `ior` (outside is vacuum), and a
     /// transmission `tint`.
     Dielectric { ior: f32, tint: Vec3 },
+    /// Smooth glass whose index depends on the wavelength (`dispersion`), with a transmission
+    /// `tint`. A path that meets it turns spectral (`crate::spectrum`), which resolves it into
+    /// the [`Bsdf::Dielectric`] of its wavelength; unresolved, it samples as the glass of its
+    /// index at the d line ([`Dispersion::ior_d`]).
+    DispersiveGlass { dispersion: Dispersion, tint: Vec3 },
     /// An index-matched boundary: light passes straight through, unchanged. It only marks
     /// where a medium begins ([`Material::interior`]); the integrator crosses it without
     /// counting a scattering event, and shadow rays pass it too.
@@ -106,7 +114,10 @@ impl Bsdf {
                 Some((wo, wi)) => Ggx::new(f0, alpha).eval(wo, wi),
                 None => Vec3::ZERO,
             },
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Interface => Vec3::ZERO,
+            Bsdf::Mirror { .. }
+            | Bsdf::Dielectric { .. }
+            | Bsdf::DispersiveGlass { .. }
+            | Bsdf::Interface => Vec3::ZERO,
         }
     }
 
@@ -123,7 +134,10 @@ impl Bsdf {
                 Some((wo, wi)) => Ggx::new(f0, alpha).pdf(wo, wi),
                 None => 0.0,
             },
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Interface => 0.0,
+            Bsdf::Mirror { .. }
+            | Bsdf::Dielectric { .. }
+            | Bsdf::DispersiveGlass { .. }
+            | Bsdf::Interface => 0.0,
         }
     }
 
@@ -165,6 +179,9 @@ impl Bsdf {
                 })
             }
             Bsdf::Dielectric { ior, tint } => sample_dielectric(ior, tint, wo, u_choice),
+            Bsdf::DispersiveGlass { dispersion, tint } => {
+                sample_dielectric(dispersion.ior_d(), tint, wo, u_choice)
+            }
             Bsdf::Interface => Some(BsdfSample {
                 wi: -wo,
                 weight: Vec3::ONE,
@@ -180,13 +197,24 @@ impl Bsdf {
     pub fn is_delta(&self) -> bool {
         matches!(
             self,
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Interface
+            Bsdf::Mirror { .. }
+                | Bsdf::Dielectric { .. }
+                | Bsdf::DispersiveGlass { .. }
+                | Bsdf::Interface
         )
     }
 
     /// Whether light can pass through the surface (the path may change sides).
     pub fn has_transmission(&self) -> bool {
-        matches!(self, Bsdf::Dielectric { .. } | Bsdf::Interface)
+        matches!(
+            self,
+            Bsdf::Dielectric { .. } | Bsdf::DispersiveGlass { .. } | Bsdf::Interface
+        )
+    }
+
+    /// Whether the index depends on the wavelength: a path that meets it must turn spectral.
+    pub fn is_dispersive(&self) -> bool {
+        matches!(self, Bsdf::DispersiveGlass { .. })
     }
 
     /// The texture that still has to be resolved into the albedo, if any.

@@ -7,6 +7,7 @@
 //! loader with the spans kept here. The format is documented key by key in `scenes/README.md`.
 
 use super::error::{SceneError, line_of};
+use crate::material::{Dispersion, GLASSES};
 use glam::Vec3;
 use serde::Deserialize;
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
@@ -201,6 +202,10 @@ pub(crate) struct MaterialSpec {
     pub texture: Option<Spanned<String>>,
     pub reflectance: Option<Reflectance>,
     pub ior: Option<Ior>,
+    /// A dispersive glass's index: Cauchy's `[A, B]`, Sellmeier's six coefficients, or a name.
+    pub cauchy: Option<Cauchy>,
+    pub sellmeier: Option<Sellmeier>,
+    pub glass: Option<GlassName>,
     pub tint: Option<Reflectance>,
     pub roughness: Option<Roughness>,
     pub emission: Option<Radiance>,
@@ -331,6 +336,16 @@ pub(crate) struct Fov(pub f32);
 /// An index of refraction, at least 1.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Ior(pub f32);
+/// Cauchy's `[A, B]` (B in um^2): an index of at least 1 over the rendered wavelengths.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Cauchy(pub Dispersion);
+/// Sellmeier's `[B1, B2, B3, C1, C2, C3]` (C in um^2): not negative, no pole among the rendered
+/// wavelengths, an index of at least 1 over them.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Sellmeier(pub Dispersion);
+/// The name of a catalogue glass ([`GLASSES`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GlassName(pub Dispersion);
 /// A Henyey-Greenstein asymmetry in (-1, 1).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Anisotropy(pub f32);
@@ -406,6 +421,14 @@ checked_type!(Ior, f32, |v| in_range(
     v,
     |v| v >= 1.0,
     "must be at least 1"
+));
+checked_type!(Cauchy, Vec<f32>, |v| Dispersion::cauchy(&v));
+checked_type!(Sellmeier, Vec<f32>, |v| Dispersion::sellmeier(&v));
+checked_type!(GlassName, String, |v| Dispersion::named(&v).ok_or_else(
+    || {
+        let names: Vec<_> = GLASSES.iter().map(|(n, _)| format!("\"{n}\"")).collect();
+        format!("unknown glass \"{v}\": use one of {}", names.join(", "))
+    }
 ));
 checked_type!(Anisotropy, f32, |v| in_range(
     v,

@@ -150,7 +150,18 @@ impl<'a> MaterialTable<'a> {
         let (type_name, allowed): (&str, &[&str]) = match kind {
             MaterialKind::Diffuse => ("diffuse", &["albedo", "texture", "emission"]),
             MaterialKind::Mirror => ("mirror", &["reflectance", "emission"]),
-            MaterialKind::Glass => ("glass", &["ior", "tint", "medium", "emission"]),
+            MaterialKind::Glass => (
+                "glass",
+                &[
+                    "ior",
+                    "cauchy",
+                    "sellmeier",
+                    "glass",
+                    "tint",
+                    "medium",
+                    "emission",
+                ],
+            ),
             MaterialKind::Metal => ("metal", &["reflectance", "roughness", "emission"]),
             MaterialKind::Emissive => ("emissive", &["albedo", "emission"]),
             MaterialKind::Interface => ("interface", &["medium"]),
@@ -160,6 +171,9 @@ impl<'a> MaterialTable<'a> {
             ("texture", spec.texture.is_some()),
             ("reflectance", spec.reflectance.is_some()),
             ("ior", spec.ior.is_some()),
+            ("cauchy", spec.cauchy.is_some()),
+            ("sellmeier", spec.sellmeier.is_some()),
+            ("glass", spec.glass.is_some()),
             ("tint", spec.tint.is_some()),
             ("roughness", spec.roughness.is_some()),
             ("medium", spec.medium.is_some()),
@@ -191,10 +205,31 @@ impl<'a> MaterialTable<'a> {
             MaterialKind::Mirror => Bsdf::Mirror {
                 reflectance: spec.reflectance.map_or(Vec3::ONE, |r| r.0),
             },
-            MaterialKind::Glass => Bsdf::Dielectric {
-                ior: spec.ior.map_or(1.5, |i| i.0),
-                tint: spec.tint.map_or(Vec3::ONE, |t| t.0),
-            },
+            MaterialKind::Glass => {
+                let tint = spec.tint.map_or(Vec3::ONE, |t| t.0);
+                let indices = [
+                    ("ior", spec.ior.map(|_| None)),
+                    ("cauchy", spec.cauchy.map(|c| Some(c.0))),
+                    ("sellmeier", spec.sellmeier.map(|s| Some(s.0))),
+                    ("glass", spec.glass.map(|g| Some(g.0))),
+                ];
+                let mut given = indices.iter().filter(|(_, v)| v.is_some());
+                match (given.next(), given.next()) {
+                    (Some((a, _)), Some((b, _))) => {
+                        return Err(err(&format!(
+                            "give one index (`ior`, `cauchy`, `sellmeier` or `glass`), not both `{a}` and `{b}`"
+                        )));
+                    }
+                    (Some((_, Some(Some(dispersion)))), None) => Bsdf::DispersiveGlass {
+                        dispersion: *dispersion,
+                        tint,
+                    },
+                    _ => Bsdf::Dielectric {
+                        ior: spec.ior.map_or(1.5, |i| i.0),
+                        tint,
+                    },
+                }
+            }
             MaterialKind::Metal => Bsdf::Conductor {
                 f0: spec.reflectance.map_or(Vec3::splat(0.9), |r| r.0),
                 alpha: spec.roughness.map_or(0.2, |r| r.0),

@@ -15,6 +15,7 @@ use tracer::geometry::{Accel, BuildQuality, OffsetMethod, Traversal};
 use tracer::lights::{EnvironmentSampling, Lights};
 use tracer::output::RgbImage;
 use tracer::scene::RenderSettings;
+use tracer::spectrum::SpectralSampling;
 use tracer::{FrameConfig, World};
 
 /// The side of the square tiles a frame is cut into.
@@ -358,6 +359,30 @@ impl<'a> Bench<'a> {
             rows.push(row);
         }
         self.world.lights = Lights::new(&self.world.scene, &self.world.effects);
+        rows
+    }
+
+    /// Wavelengths sampled as each [`SpectralSampling`] choice says, at `spp`: RGB until
+    /// dispersive glass (the default), spectral from the camera with three hero wavelengths,
+    /// with one. All unbiased for the same image; they differ in noise and time.
+    pub fn spectral_ladder(&mut self, spp: u32) -> Vec<Row> {
+        let settings = RenderSettings {
+            samples_per_pixel: spp,
+            ..self.baseline.clone()
+        };
+        let mut rows = Vec::new();
+        let mut first_image = None;
+        for sampling in SpectralSampling::ALL {
+            self.world.spectral = sampling;
+            let (mut row, image) =
+                self.measure(Knob::Spectral, sampling.name().to_owned(), settings.clone());
+            match &first_image {
+                None => first_image = Some(image),
+                Some(first) => row.note = difference_note(&image, first, "the RGB render's image"),
+            }
+            rows.push(row);
+        }
+        self.world.spectral = SpectralSampling::default();
         rows
     }
 

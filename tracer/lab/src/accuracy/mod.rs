@@ -133,11 +133,14 @@ pub enum Knob {
     /// The environment sampled by importance (a map by luminance), uniformly, or by BSDF
     /// sampling alone (no MIS).
     Environment,
+    /// Wavelengths: RGB until dispersive glass (the default), or spectral from the camera on,
+    /// with three hero wavelengths or one (`tracer::spectrum::SpectralSampling`).
+    Spectral,
 }
 
 impl Knob {
     /// Every knob, in the order the report shows them.
-    pub const ALL: [Knob; 7] = [
+    pub const ALL: [Knob; 8] = [
         Knob::Spp,
         Knob::Depth,
         Knob::Roulette,
@@ -145,6 +148,7 @@ impl Knob {
         Knob::Traversal,
         Knob::Offset,
         Knob::Environment,
+        Knob::Spectral,
     ];
 
     /// The knob's name in the CSV, the report and on the command line.
@@ -157,6 +161,7 @@ impl Knob {
             Knob::Traversal => "traversal",
             Knob::Offset => "offset",
             Knob::Environment => "environment",
+            Knob::Spectral => "spectral",
         }
     }
 }
@@ -256,6 +261,7 @@ pub fn run(args: &Config) -> Result<(), LabError> {
                 bench.offset_ladder(args.knob_spp)
             }
             Knob::Environment => bench.environment_ladder(args.knob_spp),
+            Knob::Spectral => bench.spectral_ladder(args.knob_spp),
         });
     }
     let run = report::Run {

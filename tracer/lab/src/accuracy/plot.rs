@@ -144,7 +144,9 @@ fn label(row: &Row) -> String {
             .settings
             .russian_roulette_depth
             .map_or("off".to_owned(), |d| format!("rr {d}")),
-        Knob::Bvh | Knob::Traversal | Knob::Offset | Knob::Environment => row.setting.clone(),
+        Knob::Bvh | Knob::Traversal | Knob::Offset | Knob::Environment | Knob::Spectral => {
+            row.setting.clone()
+        }
     }
 }
 
@@ -157,5 +159,6 @@ fn colour(knob: Knob) -> RGBColor {
         Knob::Traversal => RGBColor(148, 103, 189),
         Knob::Offset => RGBColor(140, 86, 75),
         Knob::Environment => RGBColor(23, 190, 207),
+        Knob::Spectral => RGBColor(188, 189, 34),
     }
 }

@@ -368,6 +368,26 @@ pub fn markdown(run: &Run) -> String {
             })
             .collect(),
     );
+    table(
+        format!(
+            "Wavelength sampling, at {} spp (RGB until dispersive glass, the default; or spectral from \
+             the camera on, with three hero wavelengths or one; in a scene without dispersion the \
+             spectral rungs are what an always-spectral renderer pays)",
+            run.knob_spp
+        ),
+        &format!("wavelengths | {COMMON} | {versus_head} | image"),
+        run.rows_of(Knob::Spectral)
+            .map(|r| {
+                format!(
+                    "{} | {} | {} | {}",
+                    r.setting,
+                    common(r),
+                    versus(r),
+                    image(r)
+                )
+            })
+            .collect(),
+    );
     if let Source::Rendered { .. } | Source::Cached = run.reference.source {
         let _ = writeln!(
             md,

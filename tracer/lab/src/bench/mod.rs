@@ -48,6 +48,9 @@ pub struct Config {
     pub steal_rtt: usize,
     /// Print JSON instead of text.
     pub json: bool,
+    /// Which wavelengths paths sample: RGB until dispersive glass (the default), or spectral
+    /// from the camera on, to measure what the always-spectral pipeline costs.
+    pub spectral: tracer::spectrum::SpectralSampling,
 }
 
 /// Everything one `tessera bench` run measured.
@@ -55,6 +58,8 @@ pub struct Config {
 pub struct Report {
     /// Rendering threads.
     pub threads: usize,
+    /// The wavelength sampling measured (`rgb`: the default, specialised pipeline).
+    pub spectral: &'static str,
     /// The machine's load average (1, 5, 15 minutes) before and after, so a reader can tell a
     /// quiet machine from one shared with other work.
     pub load_before: Option<[f64; 3]>,
@@ -138,6 +143,7 @@ pub fn run(args: &Config) -> Result<Report, LabError> {
     }
     let mut report = Report {
         threads,
+        spectral: args.spectral.name(),
         load_before: load_average(),
         load_after: None,
         scenes: Vec::new(),
@@ -177,8 +183,9 @@ pub fn run(args: &Config) -> Result<Report, LabError> {
             })
         };
         println!(
-            "{} threads; load average before {}, after {}; {} scenes measured, {} skipped",
+            "{} threads, wavelengths {}; load average before {}, after {}; {} scenes measured, {} skipped",
             threads,
+            report.spectral,
             load(report.load_before),
             load(report.load_after),
             report.scenes.len(),
@@ -221,6 +228,7 @@ fn bench_scene(
     if let Some(depth) = args.max_depth {
         world.scene.settings.max_depth = Some(depth);
     }
+    world.spectral = args.spectral;
     let full_depth = world.scene.settings.max_depth;
 
     world.scene.settings.max_depth = Some(0);
@@ -385,6 +393,7 @@ fn load_average() -> Option<[f64; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tracer::spectrum::SpectralSampling;
 
     fn args() -> Config {
         Config {
@@ -398,6 +407,7 @@ mod tests {
             out: None,
             steal_rtt: 0,
             json: true,
+            spectral: SpectralSampling::default(),
         }
     }
 
@@ -427,6 +437,36 @@ mod tests {
             measured.paths.rays
         );
         assert_eq!(measured.paths.max_depth, Some(8));
+    }
+
+    #[test]
+    fn the_spectral_knob_renders_other_pixels_from_the_same_camera_rays() {
+        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/furnace/furnace.toml");
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let mut images = Vec::new();
+        let mut primary = Vec::new();
+        for spectral in [SpectralSampling::Auto, SpectralSampling::Hero] {
+            let out = dir.path().join(spectral.name());
+            std::fs::create_dir_all(&out).expect("an output folder");
+            let config = Config {
+                out: Some(out.clone()),
+                spectral,
+                ..args()
+            };
+            let measured = bench_scene(&scene, &config, &pool())
+                .expect("the furnace loads")
+                .expect("nothing absent");
+            primary.push(measured.primary.rays);
+            images.push(std::fs::read(out.join("furnace.exr")).expect("the image"));
+        }
+        assert_eq!(
+            primary[0], primary[1],
+            "one camera ray per sample either way"
+        );
+        assert_ne!(
+            images[0], images[1],
+            "the always-spectral render is another estimate"
+        );
     }
 
     #[test]
