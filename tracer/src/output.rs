@@ -132,6 +132,12 @@ pub fn write_png(
     let bytes = tone_map(pixels, exposure);
     let image = image::RgbImage::from_raw(width, height, bytes)
         .expect("tone_map returns three bytes per pixel of a width x height image");
+    write_png_rgb8(path, &image)
+}
+
+/// Writes an image already in 8-bit sRGB (a drawn chart or tile map) as a PNG, through the same
+/// temporary name and rename as every other image, so a reader never sees half of it.
+pub fn write_png_rgb8(path: &Path, image: &image::RgbImage) -> Result<(), OutputError> {
     write_then_rename(path, |tmp| {
         image
             .save_with_format(tmp, image::ImageFormat::Png)

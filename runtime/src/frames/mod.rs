@@ -185,26 +185,12 @@ fn draw_tile_map(
     Ok(image)
 }
 
-/// Writes a drawn tile map as a PNG through `tracer::output::write_png`, so that, like every
+/// Writes a drawn tile map as a PNG through the tracer's image writer, so that, like every
 /// other image of a frame, it is written to a temporary name and renamed: a reader, or an owner
 /// killed midway, never leaves half a tile map under its real name.
 fn write_tile_map(path: &Path, map: &image::RgbImage) -> Result<(), FrameFileError> {
-    // The tracer's temporary-name-and-rename writer is private to it, and `write_png` is its one
-    // public way in; it takes linear pixels and tone-maps them. So the map's bytes are handed
-    // over as the linear values that tone-map back to exactly those bytes.
-    let linear = linear_from_srgb_bytes(map.as_raw());
-    tracer::output::write_png(path, map.width(), map.height(), &linear, 1.0)?;
+    tracer::output::write_png_rgb8(path, map)?;
     Ok(())
-}
-
-/// The linear pixels that `tracer::output::tone_map` at exposure 1 turns back into `bytes`
-/// (three per pixel): each byte's sRGB decoding, exact for all 256 values (tested).
-fn linear_from_srgb_bytes(bytes: &[u8]) -> Vec<[f32; 3]> {
-    let linear = |b: u8| tracer::output::srgb_to_linear(f32::from(b) / 255.0);
-    bytes
-        .chunks_exact(3)
-        .map(|p| [linear(p[0]), linear(p[1]), linear(p[2])])
-        .collect()
 }
 
 #[cfg(test)]
@@ -274,13 +260,6 @@ mod tests {
         let text = error.to_string();
         assert!(text.contains("absent"), "{text}");
         assert!(!missing.exists(), "nothing was written");
-    }
-
-    #[test]
-    fn every_byte_survives_the_tone_map_of_the_tile_map_writer() {
-        let bytes: Vec<u8> = (0..=255).flat_map(|b| [b, 255 - b, b / 2]).collect();
-        let back = tracer::output::tone_map(&linear_from_srgb_bytes(&bytes), 1.0);
-        assert_eq!(back, bytes);
     }
 
     #[test]
