@@ -36,6 +36,14 @@
 //! glibc's `expf`/`logf` a processor gets at run time (glibc picks FMA variants where the
 //! processor has FMA). The phase function's azimuth uses [`crate::math::sin_cos`], as the BSDFs
 //! do, for the same reason.
+//!
+//! The methods above are the default; `tracking.rs` holds the others a render can ask for
+//! ([`MediaSampling`]: a per-flight channel mixture, delta tracking with null collisions, ratio
+//! tracking for shadow rays), for `tessera accuracy` to measure, and says why the default is this.
+
+mod tracking;
+
+pub use tracking::{FlightSampling, MediaSampling, ShadowTransmittance, Stream};
 
 use crate::material::Frame;
 use glam::{Vec2, Vec3};

@@ -213,6 +213,8 @@ fn shipped_scenes_render_the_same_bits_specialised_or_forced() {
         ("glass-cluster-pan/glass-cluster-pan.toml", 13),
         ("cornell-blur/cornell-blur.toml", 0),
         ("cornell-blur/cornell-blur.toml", 12),
+        ("fog-window/fog-window.toml", 0),
+        ("fog-window/fog-window.toml", 11),
     ] {
         let scene = shipped(name, 24, 20, 4);
         assert_ne!(

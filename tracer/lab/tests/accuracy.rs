@@ -148,9 +148,10 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             count("bvh"),
             count("traversal"),
             count("offset"),
-            count("environment")
+            count("environment"),
+            count("media")
         ],
-        [3, 6, 6, 5, 3, 2, 3]
+        [3, 6, 6, 5, 3, 2, 3, 6]
     );
     // The binary tree opens other nodes than the 4-wide one, never another hit.
     let binary = rows
@@ -166,6 +167,13 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
         assert!(
             row["note"].starts_with("bit-identical"),
             "environment sampling changed an image without an environment: {row:?}"
+        );
+    }
+    // Nor has it media: no flight or shadow ray meets one, however they would be sampled.
+    for row in rows.iter().filter(|r| r["knob"] == "media").skip(1) {
+        assert!(
+            row["note"].starts_with("bit-identical"),
+            "media sampling changed an image without media: {row:?}"
         );
     }
     for row in rows.iter().filter(|r| r["knob"] == "bvh") {
@@ -190,6 +198,7 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
         "## Traversal",
         "## Spawn offset",
         "## Environment sampling",
+        "## Media sampling",
     ] {
         assert!(
             markdown.contains(section),

@@ -212,7 +212,7 @@ impl World {
                 let u = sampler.medium();
                 let hero = *hero.get_or_insert_with(|| hero_channel(u.x));
                 let in_medium = self.flight_medium(medium, found.is_none());
-                match in_medium.sample_flight(t_end, hero, u.y) {
+                match in_medium.sample_flight_with(&settings.media, t_end, hero, u) {
                     Flight::Pass {
                         weight,
                         ratio: flight_ratio,
@@ -383,7 +383,9 @@ impl World {
         // through, and passes index-matched interfaces (`scatter.rs`). A vacuum lets exactly 1
         // through, and `x * 1` is `x`, so the product below keeps its bits either way.
         let transmittance = if self.effects.media {
-            let transmittance = self.transmittance(shadow, &light, medium, moment, stats);
+            let numbers = [u_choice, u.x, u.y];
+            let transmittance =
+                self.transmittance(shadow, &light, medium, moment, &numbers, stats);
             if transmittance == Vec3::ZERO {
                 return Vec3::ZERO;
             }

@@ -12,7 +12,7 @@ use super::World;
 use crate::geometry::{Moment, Ray};
 use crate::lights::LightSample;
 use crate::material::{Bsdf, Frame, Material};
-use crate::medium::{Medium, henyey_greenstein};
+use crate::medium::{Medium, Stream, henyey_greenstein};
 use crate::sampler::PixelSampler;
 use glam::{Vec2, Vec3};
 
@@ -118,7 +118,9 @@ impl World {
 
     /// What reaches `shadow`'s start from `light` through the media along it, per channel:
     /// zero when a surface other than an index-matched interface blocks it, else the product
-    /// of each segment's transmittance between interfaces, starting in `medium`.
+    /// of each segment's transmittance between interfaces, starting in `medium`. Ratio
+    /// tracking ([`crate::medium::MediaSampling`]) draws from a stream keyed by the light
+    /// sample's `numbers`; the closed form draws nothing.
     ///
     /// Each segment asks for the closest *certain* blocker, so that with no interface in the
     /// way the answer is blocked exactly when [`crate::geometry::Accel::occluded_with`] would
@@ -130,8 +132,11 @@ impl World {
         light: &LightSample,
         medium: Option<u32>,
         moment: &Moment,
+        numbers: &[f32],
         stats: &mut super::PathStats,
     ) -> Vec3 {
+        let sampling = &self.scene.settings.media;
+        let mut stream = Stream::new(numbers);
         let mut shadow = shadow;
         let mut medium = medium;
         let mut transmittance = Vec3::ONE;
@@ -141,7 +146,7 @@ impl World {
             let escapes = end == f32::INFINITY;
             transmittance *= self
                 .flight_medium(medium, escapes)
-                .transmittance(end * shadow.dir.length());
+                .transmittance_with(sampling, end * shadow.dir.length(), &mut stream);
             let Some(hit) = blocker else {
                 return transmittance;
             };

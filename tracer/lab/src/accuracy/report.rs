@@ -368,6 +368,26 @@ pub fn markdown(run: &Run) -> String {
             })
             .collect(),
     );
+    table(
+        format!(
+            "Media sampling, at {} spp (free flights: analytic by a hero channel, a per-flight \
+             channel mixture, or delta tracking; shadow rays: closed-form transmittance or ratio \
+             tracking; xN: the trackers' majorant over the largest extinction)",
+            run.knob_spp
+        ),
+        &format!("flights+shadows | {COMMON} | {versus_head} | image"),
+        run.rows_of(Knob::Media)
+            .map(|r| {
+                format!(
+                    "{} | {} | {} | {}",
+                    r.setting,
+                    common(r),
+                    versus(r),
+                    image(r)
+                )
+            })
+            .collect(),
+    );
     if let Source::Rendered { .. } | Source::Cached = run.reference.source {
         let _ = writeln!(
             md,
