@@ -233,10 +233,10 @@ fn in_a_room_with_every_kind_of_medium_each_choice_agrees_with_the_default() {
 
 #[test]
 fn without_media_every_choice_keeps_the_bits_with_media_forced_on() {
-    let plain = ROOM
-        .replace(", medium = \"fog\"", "")
-        .replace("type = \"interface\"\n    medium = \"smoke\"", "type = \"diffuse\"")
-        .replace("type = \"glass\"\n    medium = \"tint\"", "type = \"glass\"");
+    // The room's walls and light, with a diffuse ball and a plain glass: no medium anywhere.
+    let walls = &ROOM[..ROOM.find("[materials.ball]").expect("the room has a ball")];
+    let plain = walls.replace(", medium = \"fog\"", "")
+        + "[materials.ball]\ntype = \"diffuse\"\n[materials.gem]\ntype = \"glass\"\n";
     let auto = render(&load(&plain, MediaSampling::default()), None, 0);
     assert!(!Effects::of(&load(&plain, MediaSampling::default())).media);
     for sampling in MediaSampling::LADDER {
