@@ -11,8 +11,8 @@ The map, in tessera's orientation (scenes/README.md, "Environment maps": +y up, 
 straight up, the centre column along +z, three quarters across along +x):
 - the sky: a blue zenith fading to a pale horizon, radiance about 0.3 to 1;
 - the ground below the horizon: a dull brown, 0.08;
-- the sun: a disc of 4 degrees' radius around SUN (the direction towards it: low in the west,
-  -x, slightly behind the room's back wall, +z), warm white at radiance 100. Its disc covers a
+- the sun: a disc of 5 degrees' radius around SUN (the direction towards it: low in the west,
+  -x, slightly behind the room's back wall, +z), warm white at radiance 150. Its disc covers a
   few dozen texels, so importance sampling finds it and BSDF sampling can still hit it.
 
 Usage (from the repository root): python3 scenes/fog-window/make_sky.py
@@ -24,9 +24,9 @@ import zlib
 from pathlib import Path
 
 WIDTH, HEIGHT = 128, 64
-SUN = (-1.0, 0.75, 0.35)
-SUN_RADIUS_DEGREES = 4.0
-SUN_RADIANCE = (100.0, 92.0, 80.0)
+SUN = (-1.0, 0.8, 0.8)
+SUN_RADIUS_DEGREES = 5.0
+SUN_RADIANCE = (150.0, 140.0, 120.0)
 LINES_PER_BLOCK = 16  # ZIP_COMPRESSION's block height
 
 
