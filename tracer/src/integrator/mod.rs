@@ -52,6 +52,9 @@ pub struct World {
     pub motion: MotionAccel,
     pub lights: Lights,
     pub effects: Effects,
+    /// Whether some material is an index-matched interface, the one surface shadow rays pass
+    /// (`scatter.rs`); taken from the scene's materials when the world is made.
+    pub interfaces: bool,
     /// How rays meet the BVH: our robust traversal (the default), or obvhs's own for comparison.
     pub traversal: Traversal,
     /// Where secondary rays start: off the error bound of each hit point (the default), or the
@@ -131,6 +134,7 @@ impl World {
             texture.texels = on_huge_pages(std::mem::take(&mut texture.texels));
         }
         let lights = Lights::new(&scene, &effects);
+        let interfaces = scene.materials.iter().any(|m| m.bsdf == Bsdf::Interface);
         let first = u32::try_from(scene.triangles.len())
             .expect("fewer than 2^32 triangles: Hit::triangle is a u32");
         let motion = MotionAccel::build(
@@ -143,6 +147,7 @@ impl World {
             accel,
             motion,
             lights,
+            interfaces,
             effects,
             traversal: Traversal::Robust,
             offset: OffsetMethod::default(),

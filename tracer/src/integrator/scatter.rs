@@ -137,6 +137,21 @@ impl World {
     ) -> Vec3 {
         let sampling = &self.scene.settings.media;
         let mut stream = Stream::new(numbers);
+        if !self.interfaces {
+            // No surface lets the ray through, so the loop below would stop at its first
+            // blocker with zero, or cross one medium to the end: the any-hit query tells which,
+            // for less than the closest certain blocker costs, and the same bits come out (the
+            // loop's product starts at exactly 1). What `--effects all` saves in a scene without
+            // media, and a scene of fog or tinted glass alone.
+            if self.occluded(&shadow, moment, &mut stats.traversal) {
+                return Vec3::ZERO;
+            }
+            let escapes = shadow.t_max == f32::INFINITY;
+            let length = shadow.t_max * shadow.dir.length();
+            return self
+                .flight_medium(medium, escapes)
+                .transmittance_with(sampling, length, &mut stream);
+        }
         let mut shadow = shadow;
         let mut medium = medium;
         let mut transmittance = Vec3::ONE;
