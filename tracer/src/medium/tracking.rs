@@ -30,8 +30,11 @@
 //! collision without its null collisions (with a majorant equal to `sigma_t` they never happen,
 //! and a looser one only adds work), for one logarithm; the closed-form transmittance is ratio
 //! tracking's mean with no variance at all and no random number. The trackers only pay where
-//! density varies in space, which this renderer does not model. `docs/accuracy/media/` measures
-//! the difference on the smoke box.
+//! density varies in space, which this renderer does not model. Measured (`docs/accuracy/
+//! README.md`, "Sampling participating media"): on the smoke box and the fog box no other choice
+//! was more efficient beyond noise; ratio tracking with the tight majorant, a roulette on
+//! transmittance, saved 6 % of the smoke box's work for 16 % more relMSE. And only the default
+//! keeps the bits of every image rendered before the knob existed.
 //!
 //! **Random numbers.** The analytic choices need the two numbers of the bounce's medium stream
 //! ([`crate::sampler::PixelSampler::medium`]); the trackers need one or two per tentative
