@@ -67,8 +67,14 @@ fn an_emitter_behind_a_scattering_slab_arrives_with_exp_of_minus_sigma_t_d() {
     let coefficients: [(&str, [f32; 3]); 4] = [
         ("albedo = 0.5\ndensity = 1.2", [1.2; 3]),
         ("albedo = 0.9\ndensity = 0.4\ng = 0.8", [0.4; 3]),
-        ("sigma_a = [0.1, 0.4, 0.9]\nsigma_s = [0.6, 0.3, 0.05]", [0.7, 0.7, 0.95]),
-        ("sigma_a = [0.05, 0.5, 0]\nsigma_s = [0, 0.4, 1.6]", [0.05, 0.9, 1.6]),
+        (
+            "sigma_a = [0.1, 0.4, 0.9]\nsigma_s = [0.6, 0.3, 0.05]",
+            [0.7, 0.7, 0.95],
+        ),
+        (
+            "sigma_a = [0.05, 0.5, 0]\nsigma_s = [0, 0.4, 1.6]",
+            [0.05, 0.9, 1.6],
+        ),
     ];
     for sampling in MediaSampling::LADDER {
         for thickness in [0.5f32, 1.5] {
@@ -215,7 +221,12 @@ fn in_a_room_with_every_kind_of_medium_each_choice_agrees_with_the_default() {
     let (mean, se) = mean_and_error(&default);
     for sampling in &MediaSampling::LADDER[1..] {
         let out = render(&load(ROOM, *sampling), None, 0);
-        assert_ne!(out.pixels, default.pixels, "{}: a different estimator", sampling.name());
+        assert_ne!(
+            out.pixels,
+            default.pixels,
+            "{}: a different estimator",
+            sampling.name()
+        );
         let (other, other_se) = mean_and_error(&out);
         for c in 0..3 {
             // Both renders' errors (they share the main random stream, so this is generous).
@@ -241,7 +252,10 @@ fn without_media_every_choice_keeps_the_bits_with_media_forced_on() {
     assert!(!Effects::of(&load(&plain, MediaSampling::default())).media);
     for sampling in MediaSampling::LADDER {
         let forced = render(&load(&plain, sampling), Some(Effects::ALL), 0);
-        assert!(forced.stats.flights > 0, "media forced on: a flight per ray");
+        assert!(
+            forced.stats.flights > 0,
+            "media forced on: a flight per ray"
+        );
         assert_eq!(forced.pixels, auto.pixels, "{}", sampling.name());
     }
 }

@@ -389,8 +389,7 @@ impl World {
         // through, and `x * 1` is `x`, so the product below keeps its bits either way.
         let transmittance = if self.effects.media {
             let numbers = [u_choice, u.x, u.y];
-            let transmittance =
-                self.transmittance(shadow, &light, medium, moment, &numbers, stats);
+            let transmittance = self.transmittance(shadow, &light, medium, moment, &numbers, stats);
             if transmittance == Vec3::ZERO {
                 return Vec3::ZERO;
             }

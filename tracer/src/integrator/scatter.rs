@@ -148,9 +148,11 @@ impl World {
             }
             let escapes = shadow.t_max == f32::INFINITY;
             let length = shadow.t_max * shadow.dir.length();
-            return self
-                .flight_medium(medium, escapes)
-                .transmittance_with(sampling, length, &mut stream);
+            return self.flight_medium(medium, escapes).transmittance_with(
+                sampling,
+                length,
+                &mut stream,
+            );
         }
         let mut shadow = shadow;
         let mut medium = medium;
@@ -159,9 +161,11 @@ impl World {
             let blocker = self.closest_certain(&shadow, moment, &mut stats.traversal);
             let end = blocker.map_or(shadow.t_max, |h| h.t);
             let escapes = end == f32::INFINITY;
-            transmittance *= self
-                .flight_medium(medium, escapes)
-                .transmittance_with(sampling, end * shadow.dir.length(), &mut stream);
+            transmittance *= self.flight_medium(medium, escapes).transmittance_with(
+                sampling,
+                end * shadow.dir.length(),
+                &mut stream,
+            );
             let Some(hit) = blocker else {
                 return transmittance;
             };

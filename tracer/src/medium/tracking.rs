@@ -95,11 +95,27 @@ impl MediaSampling {
     /// trackers together, with the tightest majorant and with one four times looser.
     pub const LADDER: [MediaSampling; 6] = [
         Self::new(FlightSampling::Hero, ShadowTransmittance::ClosedForm, 1.0),
-        Self::new(FlightSampling::Mixture, ShadowTransmittance::ClosedForm, 1.0),
+        Self::new(
+            FlightSampling::Mixture,
+            ShadowTransmittance::ClosedForm,
+            1.0,
+        ),
         Self::new(FlightSampling::Delta, ShadowTransmittance::ClosedForm, 1.0),
-        Self::new(FlightSampling::Hero, ShadowTransmittance::RatioTracking, 1.0),
-        Self::new(FlightSampling::Delta, ShadowTransmittance::RatioTracking, 1.0),
-        Self::new(FlightSampling::Delta, ShadowTransmittance::RatioTracking, 4.0),
+        Self::new(
+            FlightSampling::Hero,
+            ShadowTransmittance::RatioTracking,
+            1.0,
+        ),
+        Self::new(
+            FlightSampling::Delta,
+            ShadowTransmittance::RatioTracking,
+            1.0,
+        ),
+        Self::new(
+            FlightSampling::Delta,
+            ShadowTransmittance::RatioTracking,
+            4.0,
+        ),
     ];
 
     pub const fn new(flights: FlightSampling, shadows: ShadowTransmittance, majorant: f32) -> Self {
@@ -245,11 +261,11 @@ impl Medium {
         }
         let mut t = 0.0f32;
         loop {
-            t += -ln(1.0 - stream.next()) / majorant;
+            t += -ln(1.0 - stream.next_1d()) / majorant;
             if t >= t_end {
                 return Flight::Pass { weight, ratio };
             }
-            if stream.next() < p {
+            if stream.next_1d() < p {
                 return Flight::Scatter {
                     distance: t,
                     weight: weight * self.sigma_s / (majorant * p),
@@ -277,7 +293,7 @@ impl Medium {
         let mut transmittance = Vec3::ONE;
         let mut t = 0.0f32;
         loop {
-            t += -ln(1.0 - stream.next()) / majorant;
+            t += -ln(1.0 - stream.next_1d()) / majorant;
             if t >= distance {
                 return transmittance;
             }
@@ -308,7 +324,7 @@ impl Stream {
     }
 
     /// The next number, uniform in [0, 1) with spacing 2^-24.
-    pub fn next(&mut self) -> f32 {
+    pub fn next_1d(&mut self) -> f32 {
         self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
         (mix(self.state) >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
     }
@@ -343,12 +359,12 @@ mod tests {
                 let mut stream = Stream::new(&[scale, distance]);
                 for _ in 0..n {
                     let t = medium.ratio_track(distance, scale, &mut stream);
-                    for c in 0..3 {
-                        sum[c] += f64::from(t[c]);
+                    for (sum, t) in sum.iter_mut().zip(t.to_array()) {
+                        *sum += f64::from(t);
                     }
                 }
-                for c in 0..3 {
-                    let mean = sum[c] / f64::from(n);
+                for (c, sum) in sum.into_iter().enumerate() {
+                    let mean = sum / f64::from(n);
                     let exact = (-f64::from(medium.sigma_t()[c] * distance)).exp();
                     // Each estimate is in [0, 1]: its standard error is at most 0.5 / sqrt(n).
                     assert!(
