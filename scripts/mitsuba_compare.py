@@ -19,6 +19,8 @@ speed figure means nothing unless both renderers drew the same picture, so this 
 Participating media: a scene may also hold procedural spheres (`shape = "sphere"`) whose
 material is an `interface` or `glass` with a `medium` (MEDIA_MAPPING below); such scenes are
 rendered by Mitsuba's `volpath` instead of `path`. `scenes/shared/cornell-box-smoke.toml` is one.
+Global fog (`[camera] medium`) becomes the medium of Mitsuba's sensor, where its camera rays start
+(`scenes/shared/cornell-box-fog.toml`).
 
 Depth: Mitsuba's `max_depth` counts path segments (1 shows emitters only), ours counts bounces as
 pbrt does (0 shows emitters only), so Mitsuba `max_depth = 8` is our `--max-depth 7`.
@@ -68,10 +70,14 @@ MTL_MAPPING = (
 # take g > 0 as forward scattering); a sphere whose material is `interface` becomes Mitsuba's
 # analytic `sphere` with a `null` BSDF and that medium as `interior`, `glass` a `dielectric`
 # (int_ior = ior, ext_ior = 1). Our sphere is an icosphere (20,480 faces at subdivisions 5,
-# 0.03 % less area than the sphere), Mitsuba's the exact sphere.
+# 0.03 % less area than the sphere), Mitsuba's the exact sphere. `[camera] medium` (global fog)
+# becomes the sensor's `medium`: both renderers start camera rays in it, and since the meshes
+# name no media, a ray that reflects stays in it (Mitsuba changes a ray's medium only at shapes
+# with an interior or exterior medium, tessera only at glass and interfaces).
 MEDIA_MAPPING = (
     "[media] -> homogeneous(sigma_t = sigma_a + sigma_s, albedo = sigma_s / sigma_t, phase hg(g)); "
-    "sphere with interface -> sphere(null BSDF, interior = medium); with glass -> sphere(dielectric(int_ior), interior)"
+    "sphere with interface -> sphere(null BSDF, interior = medium); with glass -> sphere(dielectric(int_ior), interior); "
+    "[camera] medium -> the sensor's medium"
 )
 
 DEFAULT_SCENES = [
@@ -279,7 +285,7 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
     mi.set_variant(variant)
     scene_toml = tomllib.loads(toml.read_text())
     camera = scene_toml["camera"]
-    unsupported = set(camera) - {"position", "look_at", "up", "vfov"}
+    unsupported = set(camera) - {"position", "look_at", "up", "vfov", "medium"}
     environment = scene_toml.get("environment", {})
     if unsupported or scene_toml.get("lights") or set(environment) - {"radiance"}:
         raise SystemExit(
@@ -332,6 +338,8 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
         },
         **shapes,
     }
+    if "medium" in camera:
+        description["sensor"]["medium"] = media[camera["medium"]]
     if "radiance" in environment:
         radiance = environment["radiance"]
         radiance = [float(radiance)] * 3 if isinstance(radiance, (int, float)) else [float(c) for c in radiance]

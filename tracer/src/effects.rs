@@ -42,15 +42,16 @@
 //!   per sample (refractions); the BSDF is a closed enum, so no code of an absent material runs.
 //! - `media`: a used material binds a medium that is not vacuum, the camera starts in one, or a
 //!   used material is an index-matched interface. Only then does every ray sample a free flight
-//!   through the medium it is in and every shadow ray find its closest blocker to pass
-//!   interfaces and take the transmittance ([`crate::medium`]). With media forced on in a scene
+//!   through the medium it is in and every shadow ray take the transmittance
+//!   ([`crate::medium`]), finding its closest blocker to pass interfaces where the scene has any
+//!   (without one, the any-hit query answers the same). With media forced on in a scene
 //!   without them, every ray is in [`crate::medium::Medium::VACUUM`]: its flights pass with
 //!   weight exactly 1 (beta times 1 is beta), its transmittance is exactly 1, and the closest
 //!   certain blocker exists exactly when the any-hit query finds one
 //!   ([`crate::geometry::Accel::intersect_certain_with`]), so the bits do not move; the free
 //!   flight's two random numbers come from a stream of their own ([`crate::sampler`]). That
-//!   forced pipeline is what a renderer that always tracks media pays: a flight per ray, and
-//!   closest-hit shadow rays instead of any-hit ones.
+//!   forced pipeline is what a renderer that always tracks media pays: a flight per ray, and,
+//!   in scenes with an interface, closest-hit shadow rays instead of any-hit ones.
 //! - `dispersion`: a used material is glass whose index depends on the wavelength. Paths are RGB
 //!   until they meet such a surface, and only there turn spectral ([`crate::spectrum`]), drawing
 //!   their wavelengths from a stream of their own. Forced on in a scene without it, the

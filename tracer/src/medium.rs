@@ -36,6 +36,14 @@
 //! glibc's `expf`/`logf` a processor gets at run time (glibc picks FMA variants where the
 //! processor has FMA). The phase function's azimuth uses [`crate::math::sin_cos`], as the BSDFs
 //! do, for the same reason.
+//!
+//! The methods above are the default; `tracking.rs` holds the others a render can ask for
+//! ([`MediaSampling`]: a per-flight channel mixture, delta tracking with null collisions, ratio
+//! tracking for shadow rays), for `tessera accuracy` to measure, and says why the default is this.
+
+mod tracking;
+
+pub use tracking::{FlightSampling, MediaSampling, ShadowTransmittance, Stream};
 
 use crate::material::Frame;
 use glam::{Vec2, Vec3};
@@ -111,6 +119,14 @@ impl Medium {
     /// with `u_distance` in [0, 1).
     pub fn sample_flight(&self, t_end: f32, hero: usize, u_distance: f32) -> Flight {
         let sigma_t = self.sigma_t();
+        if sigma_t == Vec3::ZERO {
+            // A vacuum: what the general case below computes (transmittance 1 over density 1),
+            // without its divisions; every ray of a forced pipeline in a scene without media.
+            return Flight::Pass {
+                weight: Vec3::ONE,
+                ratio: Vec3::ONE,
+            };
+        }
         let s = sigma_t[hero];
         // `1 - u` is exact for the sampler's 24-bit numbers and never 0, so `ln` is finite.
         let distance = if s > 0.0 {

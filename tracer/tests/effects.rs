@@ -214,6 +214,8 @@ fn shipped_scenes_render_the_same_bits_specialised_or_forced() {
         ("cornell-blur/cornell-blur.toml", 0),
         ("cornell-blur/cornell-blur.toml", 12),
         ("prism/prism.toml", 0),
+        ("fog-window/fog-window.toml", 0),
+        ("fog-window/fog-window.toml", 11),
     ] {
         let scene = shipped(name, 24, 20, 4);
         assert_ne!(

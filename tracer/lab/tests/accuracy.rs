@@ -149,9 +149,10 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             count("traversal"),
             count("offset"),
             count("environment"),
-            count("spectral")
+            count("spectral"),
+            count("media")
         ],
-        [3, 6, 6, 5, 3, 2, 3, 3]
+        [3, 6, 6, 5, 3, 2, 3, 3, 6]
     );
     // The furnace is white: the spectral rungs differ from the RGB one by noise alone.
     for row in rows.iter().filter(|r| r["knob"] == "spectral").skip(1) {
@@ -181,6 +182,13 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             "environment sampling changed an image without an environment: {row:?}"
         );
     }
+    // Nor has it media: no flight or shadow ray meets one, however they would be sampled.
+    for row in rows.iter().filter(|r| r["knob"] == "media").skip(1) {
+        assert!(
+            row["note"].starts_with("bit-identical"),
+            "media sampling changed an image without media: {row:?}"
+        );
+    }
     for row in rows.iter().filter(|r| r["knob"] == "bvh") {
         assert!(
             row["note"].starts_with("bit-identical"),
@@ -204,6 +212,7 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
         "## Spawn offset",
         "## Environment sampling",
         "## Wavelength sampling",
+        "## Media sampling",
     ] {
         assert!(
             markdown.contains(section),

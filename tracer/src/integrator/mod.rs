@@ -57,6 +57,9 @@ pub struct World {
     pub motion: MotionAccel,
     pub lights: Lights,
     pub effects: Effects,
+    /// Whether some material is an index-matched interface, the one surface shadow rays pass
+    /// (`scatter.rs`); taken from the scene's materials when the world is made.
+    pub interfaces: bool,
     /// How rays meet the BVH: our robust traversal (the default), or obvhs's own for comparison.
     pub traversal: Traversal,
     /// Where secondary rays start: off the error bound of each hit point (the default), or the
@@ -141,6 +144,7 @@ impl World {
             texture.on_huge_pages();
         }
         let lights = Lights::new(&scene, &effects);
+        let interfaces = scene.materials.iter().any(|m| m.bsdf == Bsdf::Interface);
         let first = u32::try_from(scene.triangles.len())
             .expect("fewer than 2^32 triangles: Hit::triangle is a u32");
         let motion = MotionAccel::build(
@@ -153,6 +157,7 @@ impl World {
             accel,
             motion,
             lights,
+            interfaces,
             effects,
             traversal: Traversal::Robust,
             offset: OffsetMethod::default(),
@@ -223,7 +228,7 @@ impl World {
                 let u = sampler.medium();
                 let hero = *hero.get_or_insert_with(|| hero_channel(u.x));
                 let in_medium = &spectrum.medium(self.flight_medium(medium, found.is_none()));
-                match in_medium.sample_flight(t_end, hero, u.y) {
+                match in_medium.sample_flight_with(&settings.media, t_end, hero, u) {
                     Flight::Pass {
                         weight,
                         ratio: flight_ratio,
@@ -403,7 +408,8 @@ impl World {
         // through, and passes index-matched interfaces (`scatter.rs`). A vacuum lets exactly 1
         // through, and `x * 1` is `x`, so the product below keeps its bits either way.
         let transmittance = if self.effects.media {
-            let transmittance = self.transmittance(shadow, &light, medium, moment, stats);
+            let numbers = [u_choice, u.x, u.y];
+            let transmittance = self.transmittance(shadow, &light, medium, moment, &numbers, stats);
             if transmittance == Vec3::ZERO {
                 return Vec3::ZERO;
             }

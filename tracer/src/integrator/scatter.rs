@@ -12,7 +12,7 @@ use super::World;
 use crate::geometry::{Moment, Ray};
 use crate::lights::LightSample;
 use crate::material::{Bsdf, Frame, Material};
-use crate::medium::{Medium, henyey_greenstein};
+use crate::medium::{Medium, Stream, henyey_greenstein};
 use crate::sampler::PixelSampler;
 use glam::{Vec2, Vec3};
 
@@ -118,7 +118,9 @@ impl World {
 
     /// What reaches `shadow`'s start from `light` through the media along it, per channel:
     /// zero when a surface other than an index-matched interface blocks it, else the product
-    /// of each segment's transmittance between interfaces, starting in `medium`.
+    /// of each segment's transmittance between interfaces, starting in `medium`. Ratio
+    /// tracking ([`crate::medium::MediaSampling`]) draws from a stream keyed by the light
+    /// sample's `numbers`; the closed form draws nothing.
     ///
     /// Each segment asks for the closest *certain* blocker, so that with no interface in the
     /// way the answer is blocked exactly when [`crate::geometry::Accel::occluded_with`] would
@@ -130,8 +132,28 @@ impl World {
         light: &LightSample,
         medium: Option<u32>,
         moment: &Moment,
+        numbers: &[f32],
         stats: &mut super::PathStats,
     ) -> Vec3 {
+        let sampling = &self.scene.settings.media;
+        let mut stream = Stream::new(numbers);
+        if !self.interfaces {
+            // No surface lets the ray through, so the loop below would stop at its first
+            // blocker with zero, or cross one medium to the end: the any-hit query tells which,
+            // for less than the closest certain blocker costs, and the same bits come out (the
+            // loop's product starts at exactly 1). What `--effects all` saves in a scene without
+            // media, and a scene of fog or tinted glass alone.
+            if self.occluded(&shadow, moment, &mut stats.traversal) {
+                return Vec3::ZERO;
+            }
+            let escapes = shadow.t_max == f32::INFINITY;
+            let length = shadow.t_max * shadow.dir.length();
+            return self.flight_medium(medium, escapes).transmittance_with(
+                sampling,
+                length,
+                &mut stream,
+            );
+        }
         let mut shadow = shadow;
         let mut medium = medium;
         let mut transmittance = Vec3::ONE;
@@ -139,9 +161,11 @@ impl World {
             let blocker = self.closest_certain(&shadow, moment, &mut stats.traversal);
             let end = blocker.map_or(shadow.t_max, |h| h.t);
             let escapes = end == f32::INFINITY;
-            transmittance *= self
-                .flight_medium(medium, escapes)
-                .transmittance(end * shadow.dir.length());
+            transmittance *= self.flight_medium(medium, escapes).transmittance_with(
+                sampling,
+                end * shadow.dir.length(),
+                &mut stream,
+            );
             let Some(hit) = blocker else {
                 return transmittance;
             };

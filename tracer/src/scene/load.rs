@@ -434,5 +434,6 @@ fn render_settings(
         russian_roulette_depth: r.russian_roulette_depth.value,
         seed: r.seed,
         frames: r.frames.map_or(last_key.saturating_add(1), |f| f.0),
+        media: crate::medium::MediaSampling::default(),
     }
 }

@@ -28,7 +28,7 @@ pub use texture::Texture;
 
 use crate::environment::Environment;
 use crate::material::Material;
-use crate::medium::Medium;
+use crate::medium::{MediaSampling, Medium};
 use glam::{Vec2, Vec3};
 
 /// A scene ready to render.
@@ -73,6 +73,9 @@ pub struct RenderSettings {
     pub russian_roulette_depth: Option<u32>,
     pub seed: u64,
     pub frames: u32,
+    /// How media are sampled: a comparison knob for `tessera accuracy`, not in the scene format;
+    /// the default is what every image is rendered with ([`MediaSampling`]).
+    pub media: MediaSampling,
 }
 
 /// One triangle with its shading attributes.

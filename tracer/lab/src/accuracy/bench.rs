@@ -162,11 +162,11 @@ pub fn fastest_time(first: f64, timing: Timing, mut again: impl FnMut() -> f64) 
 
 /// The world being measured, the pool it renders on and the reference it is measured against.
 pub struct Bench<'a> {
-    world: World,
+    pub(super) world: World,
     pool: &'a rayon::ThreadPool,
     reference: &'a Reference,
     /// The settings every rung starts from (`world.scene.settings` on entry).
-    baseline: RenderSettings,
+    pub(super) baseline: RenderSettings,
     timing: Timing,
 }
 
@@ -388,7 +388,7 @@ impl<'a> Bench<'a> {
 
     /// Renders with `settings` and measures the image against the reference; returns the image
     /// too, for ladders that compare rungs with each other.
-    fn measure(
+    pub(super) fn measure(
         &mut self,
         knob: Knob,
         setting: String,
@@ -435,7 +435,7 @@ impl<'a> Bench<'a> {
 }
 
 /// "identical to WHAT", or how much `image` differs from `other`.
-fn difference_note(image: &RgbImage, other: &RgbImage, what: &str) -> String {
+pub(super) fn difference_note(image: &RgbImage, other: &RgbImage, what: &str) -> String {
     let bits = |i: &RgbImage| {
         i.pixels
             .iter()

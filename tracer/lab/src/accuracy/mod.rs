@@ -14,6 +14,7 @@
 //!
 //! - `bench`: the timed render of a whole frame, and the one-knob-at-a-time ladders.
 //! - `reference`: the reference image: analytic, cached, or rendered and cached.
+//! - `media`: the media knob's ladder (free flights and shadow rays through participating media).
 //! - `leaks`: robust against obvhs's traversal on a closed sphere, and the two spawn offsets on
 //!   the sphere far from the origin: leaks and self-hits.
 //! - `report`: accuracy.csv and accuracy.md; `plot`: accuracy.svg.
@@ -24,6 +25,7 @@ pub mod bench;
 mod curve;
 mod findings;
 mod leaks;
+mod media;
 mod plot;
 pub mod reference;
 mod report;
@@ -136,6 +138,9 @@ pub enum Knob {
     /// Wavelengths: RGB until dispersive glass (the default), or spectral from the camera on,
     /// with three hero wavelengths or one (`tracer::spectrum::SpectralSampling`).
     Spectral,
+    /// Participating media sampled analytically by a hero channel (the default), by a
+    /// per-flight channel mixture, or by delta and ratio tracking with a grey majorant.
+    Media,
 }
 
 impl Knob {
@@ -149,6 +154,7 @@ impl Knob {
         Knob::Offset,
         Knob::Environment,
         Knob::Spectral,
+        Knob::Media,
     ];
 
     /// The knob's name in the CSV, the report and on the command line.
@@ -162,6 +168,7 @@ impl Knob {
             Knob::Offset => "offset",
             Knob::Environment => "environment",
             Knob::Spectral => "spectral",
+            Knob::Media => "media",
         }
     }
 }
@@ -197,6 +204,7 @@ pub fn run(args: &Config) -> Result<(), LabError> {
         russian_roulette_depth: Some(scene_settings.russian_roulette_depth.unwrap_or(3)),
         seed: args.seed.unwrap_or(scene_settings.seed),
         frames: 1,
+        media: tracer::medium::MediaSampling::default(),
     };
     let files_hash = reference::hash_scene_files(&args.scene, &scene.files)?;
     let (threads, pool) = crate::pool(args.threads)?;
@@ -262,6 +270,7 @@ pub fn run(args: &Config) -> Result<(), LabError> {
             }
             Knob::Environment => bench.environment_ladder(args.knob_spp),
             Knob::Spectral => bench.spectral_ladder(args.knob_spp),
+            Knob::Media => bench.media_ladder(args.knob_spp),
         });
     }
     let run = report::Run {

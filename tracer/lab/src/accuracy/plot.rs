@@ -101,7 +101,7 @@ fn draw(path: &Path, run: &Run) -> Result<(), Box<dyn std::error::Error>> {
             });
         // The BVH and traversal rungs sit on top of each other (same image, similar time): their
         // labels would be a smudge, and the legend and the tables name them.
-        if matches!(knob, Knob::Spp | Knob::Depth | Knob::Roulette) {
+        if matches!(knob, Knob::Spp | Knob::Depth | Knob::Roulette | Knob::Media) {
             chart.draw_series(points.iter().map(|(x, y, text)| {
                 Text::new(
                     text.clone(),
@@ -144,7 +144,12 @@ fn label(row: &Row) -> String {
             .settings
             .russian_roulette_depth
             .map_or("off".to_owned(), |d| format!("rr {d}")),
-        Knob::Bvh | Knob::Traversal | Knob::Offset | Knob::Environment | Knob::Spectral => {
+        Knob::Bvh
+        | Knob::Traversal
+        | Knob::Offset
+        | Knob::Environment
+        | Knob::Spectral
+        | Knob::Media => {
             row.setting.clone()
         }
     }
@@ -160,5 +165,6 @@ fn colour(knob: Knob) -> RGBColor {
         Knob::Offset => RGBColor(140, 86, 75),
         Knob::Environment => RGBColor(23, 190, 207),
         Knob::Spectral => RGBColor(188, 189, 34),
+        Knob::Media => RGBColor(127, 127, 127),
     }
 }

@@ -349,45 +349,42 @@ pub fn markdown(run: &Run) -> String {
             })
             .collect(),
     );
-    table(
-        format!(
-            "Environment sampling, at {} spp (next-event estimation of the environment: by \
-             importance, uniformly over the sphere, or not at all, leaving it to BSDF sampling)",
-            run.knob_spp
+    // The sampling knobs share one table shape: the setting, the common columns, the comparison
+    // with the ladder's first rung, and how its image differs.
+    let sampling = [
+        (
+            Knob::Environment,
+            "Environment sampling",
+            "next-event estimation of the environment: by importance, uniformly over the sphere, \
+             or not at all, leaving it to BSDF sampling",
+            "environment sampling",
         ),
-        &format!("environment sampling | {COMMON} | {versus_head} | image"),
-        run.rows_of(Knob::Environment)
-            .map(|r| {
-                format!(
-                    "{} | {} | {} | {}",
-                    r.setting,
-                    common(r),
-                    versus(r),
-                    image(r)
-                )
-            })
-            .collect(),
-    );
-    table(
-        format!(
-            "Wavelength sampling, at {} spp (RGB until dispersive glass, the default; or spectral from \
-             the camera on, with three hero wavelengths or one; in a scene without dispersion the \
-             spectral rungs are what an always-spectral renderer pays)",
-            run.knob_spp
+        (
+            Knob::Spectral,
+            "Wavelength sampling",
+            "RGB until dispersive glass, the default; or spectral from the camera on, with three \
+             hero wavelengths or one; in a scene without dispersion the spectral rungs are what an \
+             always-spectral renderer pays",
+            "wavelengths",
         ),
-        &format!("wavelengths | {COMMON} | {versus_head} | image"),
-        run.rows_of(Knob::Spectral)
-            .map(|r| {
-                format!(
-                    "{} | {} | {} | {}",
-                    r.setting,
-                    common(r),
-                    versus(r),
-                    image(r)
-                )
-            })
-            .collect(),
-    );
+        (
+            Knob::Media,
+            "Media sampling",
+            "free flights: analytic by a hero channel, a per-flight channel mixture, or delta \
+             tracking; shadow rays: closed-form transmittance or ratio tracking; xN: the \
+             trackers' majorant over the largest extinction",
+            "flights+shadows",
+        ),
+    ];
+    for (knob, title, what, column) in sampling {
+        table(
+            format!("{title}, at {} spp ({what})", run.knob_spp),
+            &format!("{column} | {COMMON} | {versus_head} | image"),
+            run.rows_of(knob)
+                .map(|r| format!("{} | {} | {} | {}", r.setting, common(r), versus(r), image(r)))
+                .collect(),
+        );
+    }
     if let Source::Rendered { .. } | Source::Cached = run.reference.source {
         let _ = writeln!(
             md,
