@@ -145,7 +145,7 @@ pub enum Knob {
 
 impl Knob {
     /// Every knob, in the order the report shows them.
-    pub const ALL: [Knob; 8] = [
+    pub const ALL: [Knob; 9] = [
         Knob::Spp,
         Knob::Depth,
         Knob::Roulette,
