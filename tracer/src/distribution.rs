@@ -50,10 +50,13 @@ impl Distribution1D {
         })
     }
 
+    /// The number of cells, one per value of the function.
     pub fn len(&self) -> usize {
         self.func.len()
     }
 
+    /// Always false for a distribution [`Distribution1D::new`] made (it refuses an empty
+    /// function); here because clippy pairs it with `len`.
     pub fn is_empty(&self) -> bool {
         self.func.is_empty()
     }
@@ -149,10 +152,12 @@ impl Distribution2D {
         (f64::from(distribution.func[x]) / self.marginal.integral) as f32
     }
 
+    /// Cells per row: the tabulated function's width.
     pub fn width(&self) -> usize {
         self.width
     }
 
+    /// The number of rows: the tabulated function's height.
     pub fn height(&self) -> usize {
         self.rows.len()
     }

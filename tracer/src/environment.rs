@@ -27,7 +27,10 @@ pub enum Environment {
 /// A lat-long environment map, already multiplied by its scale.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EnvironmentMap {
+    /// Texels around the horizon, a full turn of azimuth; the middle column looks along +z
+    /// before the map's rotation, the first and last along -z.
     pub width: u32,
+    /// Texels from the top (+y) to the bottom (-y) pole, each row a band of equal polar angle.
     pub height: u32,
     /// Linear RGB radiance, row-major, top row (+y) first; finite and non-negative.
     pub texels: Vec<Vec3>,
@@ -151,7 +154,9 @@ fn sin_theta(dir: Vec3) -> f32 {
 /// A sampled direction towards the environment.
 #[derive(Clone, Copy, Debug)]
 pub struct EnvironmentSample {
+    /// The direction towards the environment, unit length, in world space.
     pub wi: Vec3,
+    /// The environment's radiance arriving along `-wi`, per RGB channel.
     pub radiance: Vec3,
     /// Density in solid angle (not including the choice of the environment among lights).
     pub pdf: f32,

@@ -67,12 +67,24 @@ pub struct Medium {
 pub enum Flight {
     /// It scatters at `distance` from the segment's start.
     Scatter {
+        /// How far along the segment it scatters, in the scene's units of length.
         distance: f32,
+        /// The factor of the path's throughput, per channel: `sigma_s T` of the channel over the
+        /// hero's density of scattering here (absorption is carried, never sampled).
         weight: Vec3,
+        /// The factor of the path's density ratios, per channel: the channel's density of
+        /// this flight over the hero's.
         ratio: Vec3,
     },
     /// It reaches the segment's end (the surface hit, or infinity).
-    Pass { weight: Vec3, ratio: Vec3 },
+    Pass {
+        /// The factor of the path's throughput, per channel: the channel's transmittance over
+        /// the hero's probability of passing.
+        weight: Vec3,
+        /// The factor of the path's density ratios, per channel: the channel's probability of
+        /// passing over the hero's.
+        ratio: Vec3,
+    },
 }
 
 /// The hero channel a number `u` in [0, 1) picks, each with probability 1/3.

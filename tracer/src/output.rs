@@ -8,22 +8,42 @@ use std::path::{Path, PathBuf};
 /// An image of linear RGB pixels, row-major, top row first.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RgbImage {
+    /// The width in pixels.
     pub width: u32,
+    /// The height in pixels.
     pub height: u32,
+    /// `width` x `height` pixels, linear RGB, unscaled (as the EXR file holds them).
     pub pixels: Vec<[f32; 3]>,
 }
 
+/// Why an image could not be written or read; every variant names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
+    /// The file system refused: renaming the finished temporary file over the real name.
     #[error("{path}: {source}")]
     Io {
+        /// The file the image was meant for.
         path: PathBuf,
+        /// What the operating system said.
         source: std::io::Error,
     },
+    /// The OpenEXR library could not write or read the file, or a header attribute was not
+    /// plain text.
     #[error("{path}: {message}")]
-    Exr { path: PathBuf, message: String },
+    Exr {
+        /// The EXR file written or read.
+        path: PathBuf,
+        /// The OpenEXR library's message, or ours for an attribute it cannot hold.
+        message: String,
+    },
+    /// The image library could not encode or save a PNG.
     #[error("{path}: {message}")]
-    Png { path: PathBuf, message: String },
+    Png {
+        /// The PNG file meant.
+        path: PathBuf,
+        /// The image library's message.
+        message: String,
+    },
 }
 
 /// Writes `pixels` (`width` x `height`, linear RGB) as a 32-bit float RGB OpenEXR file.

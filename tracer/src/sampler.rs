@@ -33,6 +33,8 @@ pub struct PixelSampler {
 }
 
 impl PixelSampler {
+    /// The stream of sample `sample` of pixel (`x`, `y`) of frame `frame` under `seed`: a pure
+    /// function of the five, so a pixel's value never depends on who renders it or when.
     pub fn new(seed: u64, frame: u32, x: u32, y: u32, sample: u32) -> Self {
         let mut key = mix(seed ^ 0x7e55_e7a0_0000_0000);
         key = mix(key ^ u64::from(frame));
@@ -59,6 +61,7 @@ impl PixelSampler {
         (bits >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
     }
 
+    /// The next two numbers as a point in [0, 1)^2, x drawn first.
     pub fn next_2d(&mut self) -> Vec2 {
         let x = self.next_1d();
         Vec2::new(x, self.next_1d())

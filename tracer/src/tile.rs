@@ -17,13 +17,18 @@ pub const BLOCK_SIZE: u32 = 8;
 /// place that converts between them is `runtime::node::bundle` (`tracer_rect`, `balancer_rect`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub struct Rect {
+    /// The leftmost column, counted from the image's left edge.
     pub x: u32,
+    /// The top row, counted from the image's top edge (row 0 is the top of the image).
     pub y: u32,
+    /// The width in pixels; 0 makes an empty rectangle.
     pub w: u32,
+    /// The height in pixels; 0 makes an empty rectangle.
     pub h: u32,
 }
 
 impl Rect {
+    /// The number of pixels, as `u64` because a whole large image overflows `u32` pixels.
     pub fn area(&self) -> u64 {
         u64::from(self.w) * u64::from(self.h)
     }
@@ -44,11 +49,15 @@ impl Rect {
 /// tracer's own terms (float pixels, path statistics); the runtime encodes it for the wire.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TileOutput {
+    /// The animation frame rendered, counted from 0.
     pub frame: u32,
+    /// Where the tile lies in the frame, and so how `pixels` is laid out.
     pub rect: Rect,
     /// Linear RGB, row-major within the rectangle.
     pub pixels: Vec<[f32; 3]>,
+    /// The counted work of the tile, overall and per cost block.
     pub cost: TileCost,
+    /// What the tile's paths did (rays, hits, shadow rays, ...), summed over its pixels.
     pub stats: PathStats,
 }
 
@@ -56,7 +65,9 @@ pub struct TileOutput {
 /// the part that travels and is summed into a [`Film`]'s cost map without the pixels.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TileCost {
+    /// Rays traced for the tile: closest-hit rays (camera and bounces) plus shadow rays.
     pub rays: u64,
+    /// The tile's counted work ([`PathStats::work`]), the sum of `blocks`.
     pub work: u64,
     /// Work per block for the blocks [`Rect::blocks`] names, row-major; only this tile's pixels
     /// are counted, so partial blocks carry partial work.
@@ -136,17 +147,24 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
 /// A whole frame being assembled from tiles: pixels and the per-block cost map.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Film {
+    /// The image width in pixels.
     pub width: u32,
+    /// The image height in pixels.
     pub height: u32,
+    /// Linear RGB, row-major over the whole image, top row first; black until inserted.
     pub pixels: Vec<[f32; 3]>,
     /// Counted work per block, row-major over `blocks_x` x `blocks_y` blocks.
     pub block_work: Vec<u64>,
+    /// Block columns: the width divided by [`BLOCK_SIZE`], rounded up (the last may be partial).
     pub blocks_x: u32,
+    /// Block rows: the height divided by [`BLOCK_SIZE`], rounded up (the last may be partial).
     pub blocks_y: u32,
+    /// The path statistics of the tiles inserted so far, summed by whoever assembles the film.
     pub stats: PathStats,
 }
 
 impl Film {
+    /// A black film of `width` x `height` pixels with no work counted yet.
     pub fn new(width: u32, height: u32) -> Self {
         let blocks_x = width.div_ceil(BLOCK_SIZE);
         let blocks_y = height.div_ceil(BLOCK_SIZE);

@@ -8,6 +8,9 @@
 //! construction (a closed emitter of radiance E with albedo 0 looks like E from every direction,
 //! exactly), or from the unmodified scene, never from the code under test.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use tracer::{Effects, FrameConfig, World, render_frame};

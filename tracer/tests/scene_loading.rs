@@ -5,6 +5,9 @@
 //! Expected counts of the shared scenes come from their PROVENANCE.md files and an independent
 //! count, not from the loader.
 
+// Test code: an unwrap that fails is a failed test, with its place in the output.
+#![allow(clippy::unwrap_used)]
+
 use glam::{Vec2, Vec3};
 use proptest::prelude::*;
 use std::path::{Path, PathBuf};

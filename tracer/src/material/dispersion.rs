@@ -16,9 +16,19 @@
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Dispersion {
     /// `n = a + b / l^2`, `l` in micrometres.
-    Cauchy { a: f32, b: f32 },
+    Cauchy {
+        /// The index the glass tends to at long wavelengths.
+        a: f32,
+        /// How much the index rises towards the blue, in square micrometres.
+        b: f32,
+    },
     /// `n^2 = 1 + sum b_i l^2 / (l^2 - c_i)`, `l` and `sqrt(c_i)` in micrometres.
-    Sellmeier { b: [f32; 3], c: [f32; 3] },
+    Sellmeier {
+        /// The strengths of the three absorption resonances (dimensionless).
+        b: [f32; 3],
+        /// The squares of the three resonances' wavelengths, in square micrometres.
+        c: [f32; 3],
+    },
 }
 
 /// What the scene format says of a number that is not finite.

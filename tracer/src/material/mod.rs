@@ -47,6 +47,7 @@ use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4};
 pub struct Material {
     /// The MTL name (or the override's name), for messages and statistics.
     pub name: String,
+    /// How the surface scatters light that reaches it.
     pub bsdf: Bsdf,
     /// Emitted radiance from the front face (the winding normal's side); zero when not a light.
     pub emission: Vec3,
@@ -63,21 +64,44 @@ pub enum Bsdf {
     /// Lambertian reflection; `texture` (an index into `Scene::textures`) multiplies `albedo`.
     /// The BSDF methods ignore `texture`: the integrator resolves it first with
     /// [`Bsdf::with_texture_value`].
-    Diffuse { albedo: Vec3, texture: Option<u32> },
+    Diffuse {
+        /// The share of light reflected per RGB channel, each in [0, 1] for energy to be kept.
+        albedo: Vec3,
+        /// The texture whose value multiplies `albedo` at the hit's texture coordinates.
+        texture: Option<u32>,
+    },
     /// A perfect specular reflector.
-    Mirror { reflectance: Vec3 },
+    Mirror {
+        /// The share of light reflected per RGB channel, the same at every angle.
+        reflectance: Vec3,
+    },
     /// A rough conductor: GGX microfacets with Schlick Fresnel from `f0`, roughness `alpha` in (0, 1].
     /// `alpha` is clamped to [[`MIN_ALPHA`], 1]; the lobe stays a (very narrow) GGX lobe, never a
     /// delta, so use [`Bsdf::Mirror`] for an ideal mirror.
-    Conductor { f0: Vec3, alpha: f32 },
+    Conductor {
+        /// Reflectance at normal incidence per RGB channel, Schlick's Fresnel term's start.
+        f0: Vec3,
+        /// GGX roughness (the square of perceptual roughness): near 0 polished, 1 very rough.
+        alpha: f32,
+    },
     /// Smooth glass: Fresnel reflection and refraction with index `ior` (outside is vacuum), and a
     /// transmission `tint`.
-    Dielectric { ior: f32, tint: Vec3 },
+    Dielectric {
+        /// Index of refraction of the glass relative to vacuum, above 1 for real glass.
+        ior: f32,
+        /// Transmittance per RGB channel applied to every refracted path, each in [0, 1].
+        tint: Vec3,
+    },
     /// Smooth glass whose index depends on the wavelength (`dispersion`), with a transmission
     /// `tint`. A path that meets it turns spectral (`crate::spectrum`), which resolves it into
     /// the [`Bsdf::Dielectric`] of its wavelength; unresolved, it samples as the glass of its
     /// index at the d line ([`Dispersion::ior_d`]).
-    DispersiveGlass { dispersion: Dispersion, tint: Vec3 },
+    DispersiveGlass {
+        /// How the index of refraction depends on the wavelength.
+        dispersion: Dispersion,
+        /// Transmittance per RGB channel applied to every refracted path, each in [0, 1].
+        tint: Vec3,
+    },
     /// An index-matched boundary: light passes straight through, unchanged. It only marks
     /// where a medium begins ([`Material::interior`]); the integrator crosses it without
     /// counting a scattering event, and shadow rays pass it too.

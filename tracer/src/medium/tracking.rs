@@ -50,7 +50,9 @@ use glam::{Vec2, Vec3};
 /// is the analytic pair, what every image of this renderer was made with.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MediaSampling {
+    /// How a path samples the distance to its next scattering event in a medium.
     pub flights: FlightSampling,
+    /// How a shadow ray estimates the transmittance of the media between a point and a light.
     pub shadows: ShadowTransmittance,
     /// The trackers' grey majorant, as a multiple (at least 1) of the medium's largest channel
     /// extinction: 1 is the tightest that keeps null coefficients non-negative.
@@ -118,6 +120,8 @@ impl MediaSampling {
         ),
     ];
 
+    /// The sampling of these three choices; a `const fn` so that [`MediaSampling::LADDER`] can
+    /// be a constant.
     pub const fn new(flights: FlightSampling, shadows: ShadowTransmittance, majorant: f32) -> Self {
         MediaSampling {
             flights,

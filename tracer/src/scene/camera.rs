@@ -15,8 +15,13 @@ use std::f32::consts::FRAC_PI_4;
 /// A pinhole (`aperture_radius` zero) or thin-lens camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
+    /// The eye (the lens's centre), in world space.
     pub position: Vec3,
+    /// A point in world space the camera looks at; only the direction to it matters.
     pub look_at: Vec3,
+    /// Which way is up in the image: the world-space direction that, made perpendicular to the
+    /// view direction, points to the top row. Need not be unit length; must not be parallel
+    /// to the view direction.
     pub up: Vec3,
     /// Vertical field of view in degrees.
     pub vfov_degrees: f32,
@@ -29,7 +34,9 @@ pub struct Camera {
 /// A camera pose at a frame; the track interpolates linearly between keys.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraKey {
+    /// The frame at which the camera has exactly this pose.
     pub frame: u32,
+    /// The pose at that frame.
     pub camera: Camera,
 }
 
@@ -50,12 +57,14 @@ impl CameraTrack {
         Some(Self { keys })
     }
 
+    /// A camera that never moves: one key, at frame 0, held for every frame.
     pub fn fixed(camera: Camera) -> Self {
         Self {
             keys: vec![CameraKey { frame: 0, camera }],
         }
     }
 
+    /// The keys, sorted by frame, at least one.
     pub fn keys(&self) -> &[CameraKey] {
         &self.keys
     }
@@ -120,6 +129,8 @@ pub struct CameraRays {
 }
 
 impl Camera {
+    /// What generating rays for an image of `width` x `height` pixels needs, computed once per
+    /// camera pose rather than per ray: the view's axes, the image plane's extent, the lens.
     pub fn rays(&self, width: u32, height: u32) -> CameraRays {
         let forward = (self.look_at - self.position).normalize();
         let right = forward.cross(self.up).normalize();

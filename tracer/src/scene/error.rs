@@ -14,21 +14,32 @@ pub enum SceneError {
     /// A file the scene needs could not be read (missing, unreadable, not a file).
     #[error("cannot read {file}{}: {source}", referenced(.referenced_at))]
     Read {
+        /// The file that could not be read: relative to the scene's folder, or its full path
+        /// when the scene was loaded from disk.
         file: String,
         /// Where the file is named (the TOML key, the `mtllib` or `map_Kd` line), if anywhere.
         referenced_at: Option<Location>,
+        /// What the file source said (the operating system's error, or not found in memory).
         #[source]
         source: io::Error,
     },
     /// A file was read but its contents are invalid.
     #[error("{at}: {detail}")]
-    Invalid { at: Location, detail: String },
+    Invalid {
+        /// The file, and the line when the problem is on one.
+        at: Location,
+        /// The problem in words, for the person who wrote the file.
+        detail: String,
+    },
 }
 
 /// A place in a scene file: the file, and the 1-based line when the problem has one.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Location {
+    /// The file: relative to the scene's folder, or its full path when the scene was loaded
+    /// from disk.
     pub file: String,
+    /// The 1-based line, as editors count; `None` for a problem of the file as a whole.
     pub line: Option<usize>,
 }
 

@@ -26,6 +26,7 @@ pub trait SceneFiles {
 /// Files in a folder on disk.
 #[derive(Clone, Debug)]
 pub struct DiskFiles {
+    /// The folder relative paths are resolved against: the scene file's own folder.
     pub root: PathBuf,
 }
 
@@ -71,6 +72,7 @@ impl SceneFiles for MemoryFiles {
 }
 
 impl MemoryFiles {
+    /// An empty file set, to be filled with [`MemoryFiles::insert`].
     pub fn new() -> Self {
         Self::default()
     }

@@ -34,7 +34,10 @@ use glam::{Vec2, Vec3};
 /// A scene ready to render.
 #[derive(Clone, Debug)]
 pub struct Scene {
+    /// Image size, samples, path depth, seed and frame count (`[render]`, with the command
+    /// line's overrides applied by the caller).
     pub settings: RenderSettings,
+    /// Where the camera is and looks at each frame: one fixed pose or keyframes.
     pub camera: CameraTrack,
     /// When the camera's shutter is open around each frame (`[camera] shutter`).
     pub shutter: Shutter,
@@ -44,8 +47,11 @@ pub struct Scene {
     /// The objects that move by keyframes, in object space with their tracks, in file order.
     /// Their triangles are numbered after [`Scene::triangles`] (see `geometry::motion`).
     pub moving: Vec<MovingObject>,
+    /// Every material in use, indexed by [`Triangle::material`].
     pub materials: Vec<Material>,
+    /// Every decoded texture, as linear RGB, indexed by the materials that sample one.
     pub textures: Vec<Texture>,
+    /// The point lights, in file order; area lights are the emissive triangles instead.
     pub point_lights: Vec<PointLight>,
     /// The radiance arriving along directions that escape the scene (constant or a map), if any.
     pub environment: Option<Environment>,
@@ -62,8 +68,11 @@ pub struct Scene {
 /// Render settings; the TOML's `[render]` table. See `scenes/README.md` for the defaults.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderSettings {
+    /// Image width in pixels, at least 1.
     pub width: u32,
+    /// Image height in pixels, at least 1.
     pub height: u32,
+    /// Samples averaged per pixel, at least 1; each is one camera path.
     pub samples_per_pixel: u32,
     /// Maximum number of scattering events, as pbrt counts depth: 0 shows emitters only, 1 adds
     /// direct lighting, and a path has at most `max_depth + 1` segments. `None` means unlimited,
@@ -71,7 +80,10 @@ pub struct RenderSettings {
     pub max_depth: Option<u32>,
     /// The depth from which Russian roulette may end paths; `None` turns it off.
     pub russian_roulette_depth: Option<u32>,
+    /// The seed of every pixel's counter-based random streams: with the scene, the frame, the
+    /// pixel and the sample index it decides a sample's value.
     pub seed: u64,
+    /// How many frames the animation has (frames 0 to `frames - 1`).
     pub frames: u32,
     /// How media are sampled: a comparison knob for `tessera accuracy`, not in the scene format;
     /// the default is what every image is rendered with ([`MediaSampling`]).
@@ -98,6 +110,7 @@ impl Triangle {
         (self.p[1] - self.p[0]).cross(self.p[2] - self.p[0])
     }
 
+    /// The triangle's area, in the scene's units squared; 0 for a degenerate triangle.
     pub fn area(&self) -> f32 {
         0.5 * self.area_vector().length()
     }
@@ -106,7 +119,9 @@ impl Triangle {
 /// An isotropic point light: radiant intensity in W/sr per channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PointLight {
+    /// Where the light is, in world space.
     pub position: Vec3,
+    /// Radiant intensity per RGB channel, in W/sr: irradiance falls off as intensity / d^2.
     pub intensity: Vec3,
 }
 

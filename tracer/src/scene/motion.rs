@@ -28,7 +28,9 @@ use glam::{DMat3, DVec3, Vec3};
 /// own instant: no motion blur.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Shutter {
+    /// When the shutter opens, in frames after the frame's own instant (negative: before it).
     pub open: f32,
+    /// When the shutter closes, in frames after the frame's own instant; `close >= open`.
     pub close: f32,
 }
 
@@ -51,9 +53,14 @@ impl Shutter {
 /// translation, as `[[object]]`'s keys say.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TransformKey {
+    /// The frame at which the object has this pose exactly.
     pub frame: u32,
+    /// Scale along the object-space x, y and z axes, applied first.
     pub scale: Vec3,
+    /// Rotation about the x, then y, then z axis, in degrees, applied after the scale; angles are
+    /// interpolated as given, so several turns between two keys are several turns.
     pub rotate_degrees: Vec3,
+    /// Translation in world space, applied last.
     pub translate: Vec3,
 }
 
@@ -69,9 +76,15 @@ pub struct TransformTrack {
 /// the inverse of `linear` (which takes rays into object space) and its transpose (normals).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Placement {
+    /// Scale and rotation: object space to world space, before the translation.
     pub linear: DMat3,
+    /// The inverse of `linear`: takes ray directions (and origins, less the translation) from
+    /// world space into object space.
     pub inverse: DMat3,
+    /// The transpose of `inverse`: takes object-space normals to world space, perpendicular to
+    /// the placed surface (unnormalised where the scale is not uniform).
     pub normal: DMat3,
+    /// Where the object-space origin lands, in world space.
     pub translation: DVec3,
 }
 
@@ -80,6 +93,7 @@ pub struct Placement {
 pub struct MovingObject {
     /// Object-space triangles (shading normals in object space too), zero-area ones dropped.
     pub triangles: Vec<Triangle>,
+    /// The object's keyframed poses, which place `triangles` in world space at any time.
     pub track: TransformTrack,
 }
 
@@ -96,6 +110,7 @@ impl TransformTrack {
         (keys.len() >= 2 && ordered && moves).then_some(Self { keys, rotations })
     }
 
+    /// The keys, sorted by strictly increasing frame.
     pub fn keys(&self) -> &[TransformKey] {
         &self.keys
     }
