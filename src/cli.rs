@@ -1,5 +1,6 @@
 //! Command-line arguments.
 
+use balancer::motion::MotionSearch;
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
@@ -200,8 +201,8 @@ pub struct FrameArgs {
     /// Motion-compensated prediction: the largest shift of the cost landscape between frames
     /// searched, in 8-pixel blocks per frame, or `off` to predict each tile from where the
     /// costs were (see balancer::Config::motion).
-    #[arg(long, default_value_t = Motion::default(), value_parser = parse_motion)]
-    pub motion: Motion,
+    #[arg(long, default_value_t = MotionSearch::default())]
+    pub motion: MotionSearch,
     /// Which light-transport effects to pay for: those the scene calls for, or all of them.
     #[arg(long, value_enum, default_value_t = EffectsChoice::Auto)]
     pub effects: EffectsChoice,
@@ -233,37 +234,6 @@ pub struct FrameArgs {
 }
 
 /// A value as the command line spells it (`round-robin`), which is also how files record it.
-/// `--motion`: blocks per frame, or `off`. Its default is the balancer's.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Motion(pub Option<u32>);
-
-impl Default for Motion {
-    fn default() -> Self {
-        Motion(balancer::Config::default().motion)
-    }
-}
-
-impl std::fmt::Display for Motion {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self.0 {
-            Some(blocks) => write!(f, "{blocks}"),
-            None => f.write_str("off"),
-        }
-    }
-}
-
-pub fn parse_motion(text: &str) -> Result<Motion, String> {
-    match text {
-        "off" => Ok(Motion(None)),
-        _ => match text.parse::<u32>() {
-            Ok(blocks) if blocks > 0 => Ok(Motion(Some(blocks))),
-            _ => Err(format!(
-                "{text:?}: give a positive number of blocks, or off"
-            )),
-        },
-    }
-}
-
 pub fn flag_name<T: ValueEnum>(value: &T) -> String {
     value
         .to_possible_value()

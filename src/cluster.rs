@@ -7,7 +7,7 @@ use anyhow::Context;
 use runtime::net::{ClusterCerts, PeerIdentity};
 use runtime::node;
 use runtime::slurm::{self, Role};
-use std::net::{Ipv4Addr, SocketAddr, ToSocketAddrs};
+use std::net::{Ipv4Addr, SocketAddr};
 use std::path::Path;
 use std::time::{Duration, Instant};
 use tokio::signal::unix::SignalKind;
@@ -63,7 +63,7 @@ pub fn keygen(args: &KeygenArgs) -> anyhow::Result<()> {
 pub fn peer(args: &PeerArgs) -> anyhow::Result<()> {
     let index = match args.index {
         Some(index) => index,
-        None => only_peer_index(&args.certs)?,
+        None => PeerIdentity::only_index(&args.certs)?,
     };
     // A plain peer is started by hand after the owner: one try, as it always was.
     join(
@@ -133,7 +133,7 @@ pub fn slurm(mut args: SlurmArgs) -> anyhow::Result<()> {
             })
         }
         Role::Peer { index } => {
-            let owner = owner_address(&step.owner, step.port)?;
+            let owner = slurm::owner_address(&step.owner, step.port)?;
             tracing::info!(
                 "SLURM task {index} of {}: joining {} ({owner})",
                 step.tasks,
@@ -143,26 +143,6 @@ pub fn slurm(mut args: SlurmArgs) -> anyhow::Result<()> {
             join(owner, listen, &args.certs, index, threads, patience)
         }
     }
-}
-
-/// The owner's IPv4 address: it listens on 0.0.0.0, and a peer's endpoint, bound the same way,
-/// can only dial IPv4.
-fn owner_address(host: &str, port: u16) -> anyhow::Result<SocketAddr> {
-    let addresses: Vec<SocketAddr> = (host, port)
-        .to_socket_addrs()
-        .with_context(|| {
-            format!(
-                "cannot resolve the owner's host {host:?}; name a host peers can reach with --owner"
-            )
-        })?
-        .collect();
-    addresses
-        .iter()
-        .find(|a| a.is_ipv4())
-        .copied()
-        .with_context(|| {
-            format!("the owner's host {host:?} has no IPv4 address ({addresses:?}); name another with --owner")
-        })
 }
 
 /// Joins the owner at `owner` as peer `index` and renders until the render is over. While
@@ -233,29 +213,4 @@ fn join(
     };
     println!("peer {index}: rendered {} tiles; {ending}", run.tiles.len());
     Ok(())
-}
-
-/// The K of the only `peer-K-key.pem` (K >= 1) in `dir`.
-fn only_peer_index(dir: &Path) -> anyhow::Result<u32> {
-    let mut found = Vec::new();
-    for entry in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
-        let name = entry?.file_name().to_string_lossy().into_owned();
-        if let Some(k) = name
-            .strip_prefix("peer-")
-            .and_then(|n| n.strip_suffix("-key.pem"))
-            && let Ok(k) = k.parse::<u32>()
-            && k >= 1
-        {
-            found.push(k);
-        }
-    }
-    found.sort_unstable();
-    match found.as_slice() {
-        [k] => Ok(*k),
-        [] => anyhow::bail!("no peer-K-key.pem (K >= 1) in {}", dir.display()),
-        many => anyhow::bail!(
-            "{} holds keys of peers {many:?}: say which with --index",
-            dir.display()
-        ),
-    }
 }

@@ -7,7 +7,7 @@ use crate::progress::Progress;
 use anyhow::Context;
 use runtime::frames::{self, resume};
 use runtime::node::{self, CompletedFrame, FrameSink, Job};
-use runtime_core::stats::{Accepted, FrameStats, PeerFrameStats, StatsFile, TileStats};
+use runtime_core::stats::{Accepted, StatsFile};
 use std::sync::Arc;
 use std::time::Instant;
 use tracer::{Effects, Scene, World};
@@ -163,15 +163,7 @@ pub fn execute(
         return Ok(());
     }
     let mut stats = sink.stats;
-    // Peers may join a served render after it started: count everyone who took part.
-    let took_part: std::collections::BTreeSet<_> =
-        run.peers.keys().map(|(_, peer)| *peer).collect();
-    stats.peers = stats.peers.max(took_part.len());
-    for ((frame, peer), peer_stats) in &run.peers {
-        if let Some(entry) = stats.frames.iter_mut().find(|f| f.frame == *frame) {
-            entry.peers.push(PeerFrameStats::new(peer.0, peer_stats));
-        }
-    }
+    stats.add_peer_accounts(&run.peers);
     if let (Some(path), Some(trace)) = (&args.trace, &sink.trace) {
         trace.write(path)?;
     }
@@ -261,19 +253,7 @@ impl FrameSink for Sink {
         for t in &done.tiles {
             self.accepted.insert((done.frame, t.peer, t.rect));
         }
-        let mut frame = FrameStats {
-            frame: done.frame,
-            seconds: done.seconds,
-            completed_at: done.completed_at,
-            rays: done.rays,
-            work: done.tiles.iter().map(|t| t.measured).sum(),
-            tiles: TileStats::per_tile(&done.tiles),
-            duplicates_agreed: done.audit.agreed,
-            duplicates_disagreed: done.audit.disagreed,
-            ..FrameStats::default()
-        };
-        frame.summarise_leaves();
-        self.stats.frames.push(frame);
+        self.stats.frames.push(done.stats());
         let costs = done.tiles.iter().map(|t| (t.rect, t.measured)).collect();
         self.files
             .send(frames::Frame {

@@ -8,7 +8,9 @@
 
 use crate::cli::DealOrder;
 use anyhow::{Context, bail};
+use balancer::motion::MotionSearch;
 use runtime_core::stats::StatsFile;
+use sim::knobs::PieceFactor;
 use sim::scenario::{DEFAULT_WORK_PER_SECOND, Scenario};
 use sim::synthetic::HotSpot;
 use sim::{Crash, GanttChoice, Network, OwnerCosts, Policy, Sweep, Trace};
@@ -35,8 +37,8 @@ pub struct SimulateArgs {
     /// Motion-compensated prediction: the largest shift of the cost landscape between frames
     /// searched, in blocks per frame, or `off` (as `tessera render --motion`; with --validate,
     /// the render's).
-    #[arg(long, default_value_t = crate::cli::Motion::default(), value_parser = crate::cli::parse_motion)]
-    pub motion: crate::cli::Motion,
+    #[arg(long, default_value_t = MotionSearch::default())]
+    pub motion: MotionSearch,
     /// Simulate only this frame of the trace, over and over: a static scene, every frame of
     /// which after the first is predicted exactly (isolates motion from unevenness).
     #[arg(long)]
@@ -89,8 +91,8 @@ pub struct SimulateArgs {
     pub prefetch: usize,
     /// Peers render pieces of at most this many times the frame's mean tile area, so that the
     /// unrendered part of a large tile can still be stolen; `off` renders tiles whole.
-    #[arg(long, default_value = "2", value_parser = parse_render_pieces)]
-    pub render_pieces: RenderPieces,
+    #[arg(long, default_value = "2")]
+    pub render_pieces: PieceFactor,
     /// Whether a victim cuts a tile too large to give whole and gives its far half.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub split_on_steal: bool,
@@ -113,8 +115,8 @@ pub struct SimulateArgs {
     pub doubt_error: f64,
     /// While the prediction is doubted, peers render pieces of at most this many times the
     /// frame's mean tile area; `off` uses `--render-pieces`.
-    #[arg(long, default_value = "0.125", value_parser = parse_render_pieces)]
-    pub doubtful_pieces: RenderPieces,
+    #[arg(long, default_value = "0.125")]
+    pub doubtful_pieces: PieceFactor,
     /// The share of a frame's predicted cost still missing when the next frame is dealt (if
     /// frames may overlap; also dealt when the first peer runs out of work).
     #[arg(long, default_value_t = runtime_core::peer::Config::default().waning)]
@@ -140,22 +142,6 @@ pub struct SimulateArgs {
     /// balancer and tiles) and compare frame times and initial tile sets with it.
     #[arg(long)]
     pub validate: Option<PathBuf>,
-}
-
-/// `--render-pieces`: a factor of the mean tile area, or tiles rendered whole.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RenderPieces(pub Option<f64>);
-
-fn parse_render_pieces(text: &str) -> Result<RenderPieces, String> {
-    if text == "off" {
-        return Ok(RenderPieces(None));
-    }
-    match text.parse::<f64>() {
-        Ok(factor) if factor > 0.0 && factor.is_finite() => Ok(RenderPieces(Some(factor))),
-        _ => Err(format!(
-            "{text:?}: give a positive multiple of the mean tile area, or off"
-        )),
-    }
 }
 
 /// The x axis of a line chart.
@@ -259,24 +245,8 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
     let crashes = args
         .crash
         .iter()
-        .map(|spec| {
-            let bad = || anyhow::anyhow!("--crash {spec:?}: expected PEER@SECONDS (e.g. 3@0.5) or PEER@tile:N (e.g. 3@tile:40)");
-            let (peer, when) = spec.split_once('@').ok_or_else(bad)?;
-            let peer = peer.parse().map_err(|_| bad())?;
-            if let Some(tile) = when.strip_prefix("tile:") {
-                return match tile.parse::<u64>() {
-                    Ok(tile) if tile > 0 => Ok(Crash::starting(peer, tile)),
-                    _ => Err(bad()),
-                };
-            }
-            match when.parse::<f64>() {
-                Ok(at) if at >= 0.0 && at.is_finite() => {
-                    Ok(Crash::at(peer, Duration::from_secs_f64(at)))
-                }
-                _ => Err(bad()),
-            }
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .map(|spec| spec.parse().map_err(|e| anyhow::anyhow!("--crash {e}")))
+        .collect::<anyhow::Result<Vec<Crash>>>()?;
     let mut scenario = Scenario {
         slots,
         network: Network {

@@ -29,6 +29,44 @@ pub struct Motion {
     pub dy: f64,
 }
 
+/// [`Config::motion`](crate::Config::motion) as the command line and the statistics file spell
+/// it: the largest shift searched, in blocks per frame (`16`), or `off` for no motion
+/// compensation. Its default is the config's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MotionSearch(pub Option<u32>);
+
+impl Default for MotionSearch {
+    fn default() -> Self {
+        MotionSearch(crate::Config::default().motion)
+    }
+}
+
+impl std::fmt::Display for MotionSearch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {
+            Some(blocks) => write!(f, "{blocks}"),
+            None => f.write_str("off"),
+        }
+    }
+}
+
+impl std::str::FromStr for MotionSearch {
+    /// The text as given, in a sentence that says what a valid one looks like.
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        match text {
+            "off" => Ok(MotionSearch(None)),
+            _ => match text.parse::<u32>() {
+                Ok(blocks) if blocks > 0 => Ok(MotionSearch(Some(blocks))),
+                _ => Err(format!(
+                    "{text:?}: give a positive number of blocks, or off"
+                )),
+            },
+        }
+    }
+}
+
 /// How much better than standing still a shift must explain the newer map (mean absolute
 /// difference over the overlap) to be believed: a tenth.
 pub const MIN_GAIN: f64 = 0.9;

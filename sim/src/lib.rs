@@ -12,6 +12,8 @@
 //! - [`trace`]: cost traces (every frame's counted work per block of pixels), their JSON Lines
 //!   format, reader and writer; what `tessera render --trace` records.
 //! - [`synthetic`]: traces made up for tests and experiments: a hot spot orbiting the image.
+//! - [`knobs`]: the scenario's knobs that are more than a number (crashes, the owner's costs,
+//!   the pieces peers render), with their command-line spellings.
 //! - [`network`]: the network model: per-link latency with jitter, bandwidth, loss.
 //! - [`scenario`]: one run: the scenario's knobs, and the frame owner's loop (partition,
 //!   assign, start the frame, feed the measured costs back) in virtual time.
@@ -27,6 +29,7 @@
 //!   the pictures of who rendered what when, shared with real renders (`tessera render
 //!   --gantt`): one frame in full, and a whole run's utilisation.
 
+pub mod knobs;
 pub mod network;
 pub mod plot;
 pub mod report;

@@ -23,8 +23,8 @@ use runtime_core::director::{self, Director};
 use runtime_core::peer::Config;
 use runtime_core::peer::testing::Cluster;
 use runtime_core::wire::PeerId;
-use serde::{Deserialize, Serialize};
 
+pub use crate::knobs::{Crash, CrashWhen, OwnerCosts};
 use crate::network::Links;
 use crate::report::{FrameReport, RunReport};
 use crate::sweep::Policy;
@@ -84,91 +84,6 @@ pub struct Scenario {
     pub doubt_error: f64,
     /// Pieces while the prediction is doubted (`director::Config::doubtful_piece_factor`).
     pub doubtful_piece_factor: Option<f64>,
-}
-
-/// What the frame owner's control loop spends on each tile, one thing at a time, besides
-/// rendering: every result received waits for it to finish the ones before, so a large cluster
-/// converging on one owner can find it the bottleneck. The owner's rendering slots are not
-/// slowed by it (the control loop has a core of its own on a real machine).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct OwnerCosts {
-    /// Per tile result received: the wire decoder, the ledger's bookkeeping, decoding its pixels
-    /// and costs, copying them into the frame.
-    pub per_result: Duration,
-    /// Per pixel of each result received, on top of `per_result`.
-    pub per_result_pixel_ns: f64,
-    /// Per tile dealt to a remote peer: the director's cut and deal, the core's start of the
-    /// frame, encoding its part of an `Assign`; paid before the `Assign` leaves.
-    pub per_dealt_tile: Duration,
-}
-
-impl OwnerCosts {
-    /// Free: the owner of an idealised cluster.
-    pub const NONE: Self = Self {
-        per_result: Duration::ZERO,
-        per_result_pixel_ns: 0.0,
-        per_dealt_tile: Duration::ZERO,
-    };
-
-    /// Measured on the development machine (2 AMD EPYC cores, shared) with the real code,
-    /// `cargo run --release -p runtime --example owner_costs`: the least-squares line through
-    /// the fastest of five runs for tiles of 8 to 128 pixels a side (1024x1024 image, 8 peers),
-    /// and per dealt tile the fastest of five runs at 256 to 4096 tiles. See `docs/results.md`.
-    pub const MEASURED: Self = Self {
-        per_result: Duration::from_nanos(OWNER_PER_RESULT_NS),
-        per_result_pixel_ns: OWNER_PER_PIXEL_NS,
-        per_dealt_tile: Duration::from_nanos(OWNER_PER_DEALT_NS),
-    };
-
-    /// The owner's time for one result of `pixels` pixels.
-    pub fn result(&self, pixels: u64) -> Duration {
-        self.per_result
-            + Duration::from_nanos((pixels as f64 * self.per_result_pixel_ns).ceil() as u64)
-    }
-}
-
-// 2026-12-01, load average about 3: results of 8x8 to 128x128 pixels took 1.51, 3.18, 7.27,
-// 23.69 and 99.88 us (fit: 0.83 us + 6.02 ns per pixel); a dealt tile 0.35 to 0.38 us.
-const OWNER_PER_RESULT_NS: u64 = 830;
-const OWNER_PER_PIXEL_NS: f64 = 6.02;
-const OWNER_PER_DEALT_NS: u64 = 380;
-
-/// A peer that stops dead `when` it is told to. Its connections time out
-/// `Network::loss_detection` later.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Crash {
-    /// The peer that crashes (never 0, the owner).
-    pub peer: u32,
-    /// When it crashes.
-    pub when: CrashWhen,
-}
-
-/// The moment a peer crashes.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub enum CrashWhen {
-    /// At this virtual time since the run began, after everything else due at that instant.
-    At(Duration),
-    /// As it starts its `n`-th tile of the run (counting from 1), which it never finishes: a
-    /// moment when it holds work in flight, whatever the timing of the run.
-    Starting(u64),
-}
-
-impl Crash {
-    /// Peer `peer` crashes at virtual time `at`.
-    pub fn at(peer: u32, at: Duration) -> Self {
-        Self {
-            peer,
-            when: CrashWhen::At(at),
-        }
-    }
-
-    /// Peer `peer` crashes as it starts its `tile`-th tile of the run (counting from 1).
-    pub fn starting(peer: u32, tile: u64) -> Self {
-        Self {
-            peer,
-            when: CrashWhen::Starting(tile),
-        }
-    }
 }
 
 impl Default for Scenario {

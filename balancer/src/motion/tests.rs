@@ -264,3 +264,26 @@ fn turns_are_clamped_to_the_most_believed() {
         "{angle}"
     );
 }
+
+/// `--motion` and `stats.json` spell the search as a positive number of blocks or `off`, and
+/// what is written reads back as itself.
+#[test]
+fn motion_search_spellings_read_back() {
+    assert_eq!(MotionSearch::default().0, crate::Config::default().motion);
+    for search in [
+        MotionSearch(None),
+        MotionSearch(Some(1)),
+        MotionSearch(Some(16)),
+    ] {
+        assert_eq!(search.to_string().parse::<MotionSearch>(), Ok(search));
+    }
+    assert_eq!(MotionSearch(None).to_string(), "off");
+    assert_eq!("4".parse::<MotionSearch>(), Ok(MotionSearch(Some(4))));
+    for bad in ["0", "-1", "1.5", "", "Off", "none"] {
+        let error = bad.parse::<MotionSearch>().unwrap_err();
+        assert_eq!(
+            error,
+            format!("{bad:?}: give a positive number of blocks, or off")
+        );
+    }
+}

@@ -7,13 +7,14 @@
 //! pure functions: no I/O (the drivers read and write the JSON). Fields are only ever added;
 //! fields missing from older files read as their defaults.
 
-use std::collections::HashSet;
+use std::collections::{BTreeMap, BTreeSet, HashSet};
 use std::time::Duration;
 
 use balancer::Rect;
 use serde::{Deserialize, Serialize};
 
 use crate::peer::PeerStats;
+use crate::wire::PeerId;
 
 /// The `--stats` file: one entry per frame, plus what the render was.
 #[derive(Debug, Default, Serialize, Deserialize)]
@@ -48,6 +49,22 @@ pub struct StatsFile {
     pub first_frame: u32,
     /// The frames this run rendered, in order.
     pub frames: Vec<FrameStats>,
+}
+
+impl StatsFile {
+    /// Adds each peer's own account of each frame (as its core counted it, keyed by frame and
+    /// peer) to that frame's entry, and counts as the render's peers everyone who took part:
+    /// peers may join a served render after it started. Frames without an entry (none was
+    /// rendered by this run) are skipped.
+    pub fn add_peer_accounts(&mut self, accounts: &BTreeMap<(u32, PeerId), PeerStats>) {
+        let took_part: BTreeSet<PeerId> = accounts.keys().map(|(_, peer)| *peer).collect();
+        self.peers = self.peers.max(took_part.len());
+        for ((frame, peer), account) in accounts {
+            if let Some(entry) = self.frames.iter_mut().find(|f| f.frame == *frame) {
+                entry.peers.push(PeerFrameStats::new(peer.0, account));
+            }
+        }
+    }
 }
 
 /// One frame.
@@ -308,5 +325,41 @@ mod tests {
         assert!(json.contains("\"rect\":[4,0,4,4]"), "{json}");
         let back: TileStats = serde_json::from_str(&json).expect("and reads back");
         assert_eq!(back, tiles[1]);
+    }
+
+    /// Peers' accounts land in their frames' entries, in peer order; a peer that joined late
+    /// raises the count of peers, and an account of a frame this run has no entry for is
+    /// dropped.
+    #[test]
+    fn peer_accounts_join_their_frames_and_count_latecomers() {
+        let mut file = StatsFile {
+            peers: 2,
+            first_frame: 3,
+            frames: [3, 4]
+                .map(|frame| FrameStats {
+                    frame,
+                    ..FrameStats::default()
+                })
+                .into(),
+            ..StatsFile::default()
+        };
+        let account = |tiles_rendered| PeerStats {
+            tiles_rendered,
+            ..PeerStats::default()
+        };
+        let accounts = BTreeMap::from([
+            ((2, PeerId(0)), account(9)),
+            ((3, PeerId(1)), account(5)),
+            ((3, PeerId(0)), account(7)),
+            ((4, PeerId(2)), account(6)),
+        ]);
+        file.add_peer_accounts(&accounts);
+        assert_eq!(file.peers, 3);
+        let rendered = |i: usize| -> Vec<(u32, u32)> {
+            let peers = &file.frames[i].peers;
+            peers.iter().map(|p| (p.peer, p.tiles_rendered)).collect()
+        };
+        assert_eq!(rendered(0), [(0, 7), (1, 5)]);
+        assert_eq!(rendered(1), [(2, 6)]);
     }
 }

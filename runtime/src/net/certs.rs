@@ -107,6 +107,30 @@ pub enum CertError {
         /// The peer whose certificate it should be.
         index: u32,
     },
+    /// The folder searched for this peer's key could not be listed.
+    #[error("reading {}", dir.display())]
+    ReadDir {
+        /// The folder.
+        dir: PathBuf,
+        /// What the system said.
+        #[source]
+        source: io::Error,
+    },
+    /// The folder holds no key of a peer other than the owner's.
+    #[error("no peer-K-key.pem (K >= 1) in {}", dir.display())]
+    NoPeerKey {
+        /// The folder.
+        dir: PathBuf,
+    },
+    /// The folder holds the keys of several peers (`tessera keygen` writes all of them into
+    /// one), so which one this process is must be said.
+    #[error("{} holds keys of peers {peers:?}: say which with --index", dir.display())]
+    SeveralPeerKeys {
+        /// The folder.
+        dir: PathBuf,
+        /// The indices of the peers whose keys it holds, in increasing order.
+        peers: Vec<u32>,
+    },
 }
 
 impl ClusterCerts {
@@ -204,6 +228,36 @@ impl PeerIdentity {
         };
         identity.check()?;
         Ok(identity)
+    }
+
+    /// The K of the only `peer-K-key.pem` with K >= 1 in `dir`: the index of a peer whose
+    /// folder was given only its own key, so that it need not be told which peer it is. The
+    /// owner's key (K = 0) does not count, since peers and owner may share one folder.
+    pub fn only_index(dir: &Path) -> Result<u32, CertError> {
+        let unreadable = |source| CertError::ReadDir {
+            dir: dir.to_owned(),
+            source,
+        };
+        let mut found = Vec::new();
+        for entry in fs::read_dir(dir).map_err(unreadable)? {
+            let name = entry.map_err(unreadable)?.file_name();
+            let name = name.to_string_lossy();
+            if let Some(k) = name
+                .strip_prefix("peer-")
+                .and_then(|n| n.strip_suffix("-key.pem"))
+                && let Ok(k) = k.parse::<u32>()
+                && k >= 1
+            {
+                found.push(k);
+            }
+        }
+        found.sort_unstable();
+        let dir = dir.to_owned();
+        match found.len() {
+            1 => Ok(found[0]),
+            0 => Err(CertError::NoPeerKey { dir }),
+            _ => Err(CertError::SeveralPeerKeys { dir, peers: found }),
+        }
     }
 
     /// This peer's index in the cluster.
@@ -415,5 +469,30 @@ mod tests {
             PeerIdentity::load(renamed.path(), 0),
             Err(CertError::Pem { .. })
         ));
+    }
+
+    /// A folder with one peer's key names that peer; the owner's key does not count, and a
+    /// folder with several, or none, or that is not there, is an error that says so.
+    #[test]
+    fn the_only_peer_key_in_a_folder_names_the_peer() {
+        let dir = tempfile::tempdir().expect("a temporary directory");
+        let touch = |name: &str| std::fs::write(dir.path().join(name), "").expect("writing");
+        let index = || PeerIdentity::only_index(dir.path());
+        touch("ca.pem");
+        touch("peer-0-key.pem");
+        touch("peer-x-key.pem");
+        let none = index().expect_err("only the owner's key");
+        assert!(matches!(none, CertError::NoPeerKey { .. }), "{none}");
+        touch("peer-12-key.pem");
+        assert_eq!(index().expect("one peer's key"), 12);
+        touch("peer-3-key.pem");
+        let several = index().expect_err("two peers' keys").to_string();
+        assert!(
+            several.ends_with("keys of peers [3, 12]: say which with --index"),
+            "{several}"
+        );
+        let missing =
+            PeerIdentity::only_index(&dir.path().join("absent")).expect_err("no such folder");
+        assert!(matches!(missing, CertError::ReadDir { .. }), "{missing}");
     }
 }

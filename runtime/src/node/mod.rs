@@ -21,7 +21,7 @@ pub use owner::{Job, Owner, PeerReport};
 pub use peer::{Leave, PeerRun, run_peer};
 
 use crate::net::{BindError, ClusterCerts, ConnectError};
-use runtime_core::stats::{LocalTile, TileStats};
+use runtime_core::stats::{FrameStats, LocalTile, TileStats};
 use runtime_core::wire::{PeerId, TileId};
 use std::net::{Ipv4Addr, SocketAddr};
 use std::time::Duration;
@@ -133,6 +133,28 @@ pub struct CompletedFrame {
     pub audit: runtime_core::peer::Audit,
 }
 
+impl CompletedFrame {
+    /// The frame's entry of `stats.json`: its times, rays and counted work, one record per
+    /// tile of the partition (its pieces summed), how the duplicates compared, and the spread
+    /// of the tiles' measured costs. The peers' own accounts are added when the render ends
+    /// ([`runtime_core::stats::StatsFile::add_peer_accounts`]).
+    pub fn stats(&self) -> FrameStats {
+        let mut stats = FrameStats {
+            frame: self.frame,
+            seconds: self.seconds,
+            completed_at: self.completed_at,
+            rays: self.rays,
+            work: self.tiles.iter().map(|t| t.measured).sum(),
+            tiles: TileStats::per_tile(&self.tiles),
+            duplicates_agreed: self.audit.agreed,
+            duplicates_disagreed: self.audit.disagreed,
+            ..FrameStats::default()
+        };
+        stats.summarise_leaves();
+        stats
+    }
+}
+
 /// Where finished frames go (the CLI writes them to disk).
 pub trait FrameSink: Send {
     /// Takes one finished frame, in frame order; an error stops the render with
@@ -189,4 +211,48 @@ pub async fn run_local(
         peers: report,
         timelines,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use balancer::Rect;
+
+    /// A frame's entry sums its pieces' work, folds them into their tiles, keeps the audit and
+    /// states the spread of the tiles' costs.
+    #[test]
+    fn a_completed_frame_states_its_tiles_work_and_duplicates() {
+        let done = CompletedFrame {
+            frame: 7,
+            film: Film::new(8, 4),
+            tiles: vec![
+                TileStats::piece(0, Rect::new(0, 0, 4, 4), 10.0, 12, 0, 0),
+                TileStats::piece(1, Rect::new(4, 0, 4, 2), 2.0, 2, 1, 0),
+                TileStats::piece(1, Rect::new(4, 2, 4, 2), 2.0, 2, 1, 0),
+            ],
+            seconds: 1.5,
+            completed_at: 2.5,
+            rays: 1000,
+            audit: runtime_core::peer::Audit {
+                agreed: 2,
+                disagreed: 0,
+            },
+        };
+        let stats = done.stats();
+        assert_eq!(
+            (stats.frame, stats.seconds, stats.completed_at),
+            (7, 1.5, 2.5)
+        );
+        assert_eq!((stats.rays, stats.work), (1000, 16));
+        assert_eq!(stats.tiles.len(), 2);
+        assert_eq!((stats.tiles[1].measured, stats.tiles[1].pieces), (4, 2));
+        assert_eq!(
+            (stats.duplicates_agreed, stats.duplicates_disagreed),
+            (2, 0)
+        );
+        // Tiles of 12 and 4: mean 8, variance 16, the largest 1.5 times the mean.
+        assert_eq!(stats.leaf_cost_variance, 16.0);
+        assert_eq!(stats.leaf_cost_max_over_mean, 1.5);
+        assert!(stats.peers.is_empty());
+    }
 }

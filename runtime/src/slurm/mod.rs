@@ -293,6 +293,51 @@ fn invalid(name: &'static str, value: &str, reason: &'static str) -> SlurmError 
     }
 }
 
+/// Why a peer cannot dial the owner's host.
+#[derive(Debug, thiserror::Error)]
+pub enum OwnerAddressError {
+    /// The host name does not resolve here.
+    #[error("cannot resolve the owner's host {host:?}; name a host peers can reach with --owner")]
+    Unresolved {
+        /// The owner's host, as the step or `--owner` named it.
+        host: String,
+        /// What the resolver said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The host resolves, to IPv6 addresses only.
+    #[error(
+        "the owner's host {host:?} has no IPv4 address ({addresses:?}); name another with --owner"
+    )]
+    NoIpv4 {
+        /// The owner's host.
+        host: String,
+        /// What it resolved to.
+        addresses: Vec<std::net::SocketAddr>,
+    },
+}
+
+/// The address a peer dials to reach the owner on `host`: its first IPv4 address. IPv4 only,
+/// because the owner listens on 0.0.0.0 and a peer's endpoint, bound the same way, can only
+/// dial IPv4.
+pub fn owner_address(host: &str, port: u16) -> Result<std::net::SocketAddr, OwnerAddressError> {
+    use std::net::ToSocketAddrs;
+    let addresses: Vec<_> = (host, port)
+        .to_socket_addrs()
+        .map_err(|source| OwnerAddressError::Unresolved {
+            host: host.to_owned(),
+            source,
+        })?
+        .collect();
+    match addresses.iter().find(|a| a.is_ipv4()) {
+        Some(address) => Ok(*address),
+        None => Err(OwnerAddressError::NoIpv4 {
+            host: host.to_owned(),
+            addresses,
+        }),
+    }
+}
+
 /// Whether a peer's join failed because nobody answered, as opposed to being refused: srun
 /// starts every task at once and the owner loads its scene before it listens, so a peer may
 /// knock first. Worth trying again; a refusal (another cluster's certificate) is not.

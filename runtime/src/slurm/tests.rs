@@ -296,3 +296,20 @@ fn arbitrary_layouts_need_the_owner_named() {
         assert_eq!(step(&env).owner, "n1", "{layout}");
     }
 }
+
+/// Peers dial the owner's IPv4 address; a host with only IPv6 ones is refused, saying why.
+/// Address literals only: a test must not depend on a resolver.
+#[test]
+fn peers_dial_the_owner_over_ipv4() {
+    let address = owner_address("127.0.0.1", 20_017).unwrap();
+    assert_eq!(
+        address,
+        std::net::SocketAddr::from(([127, 0, 0, 1], 20_017))
+    );
+    let error = owner_address("::1", 20_017).unwrap_err();
+    assert!(matches!(error, OwnerAddressError::NoIpv4 { .. }), "{error}");
+    assert!(
+        error.to_string().ends_with("name another with --owner"),
+        "{error}"
+    );
+}
