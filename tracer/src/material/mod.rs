@@ -81,7 +81,8 @@ pub enum Bsdf {
     Conductor {
         /// Reflectance at normal incidence per RGB channel, Schlick's Fresnel term's start.
         f0: Vec3,
-        /// GGX roughness (the square of perceptual roughness): near 0 polished, 1 very rough.
+        /// The GGX width: near 0 polished, 1 very rough (a scene's `roughness` as given; from
+        /// an MTL's `Ns`, `sqrt(2 / (Ns + 2))`).
         alpha: f32,
     },
     /// Smooth glass: Fresnel reflection and refraction with index `ior` (outside is vacuum), and a
@@ -89,7 +90,8 @@ pub enum Bsdf {
     Dielectric {
         /// Index of refraction of the glass relative to vacuum, above 1 for real glass.
         ior: f32,
-        /// Transmittance per RGB channel applied to every refracted path, each in [0, 1].
+        /// The factor per RGB channel of each refraction through the surface, each in [0, 1];
+        /// reflection is not tinted.
         tint: Vec3,
     },
     /// Smooth glass whose index depends on the wavelength (`dispersion`), with a transmission
@@ -99,7 +101,8 @@ pub enum Bsdf {
     DispersiveGlass {
         /// How the index of refraction depends on the wavelength.
         dispersion: Dispersion,
-        /// Transmittance per RGB channel applied to every refracted path, each in [0, 1].
+        /// The factor per RGB channel of each refraction through the surface, each in [0, 1];
+        /// reflection is not tinted.
         tint: Vec3,
     },
     /// An index-matched boundary: light passes straight through, unchanged. It only marks

@@ -51,7 +51,7 @@ pub struct Scene {
     pub materials: Vec<Material>,
     /// Every decoded texture, as linear RGB, indexed by the materials that sample one.
     pub textures: Vec<Texture>,
-    /// The point lights, in file order; area lights are the emissive triangles instead.
+    /// The point lights; area lights are the emissive triangles instead.
     pub point_lights: Vec<PointLight>,
     /// The radiance arriving along directions that escape the scene (constant or a map), if any.
     pub environment: Option<Environment>,

@@ -82,7 +82,7 @@ pub struct Placement {
     /// world space into object space.
     pub inverse: DMat3,
     /// The transpose of `inverse`: takes object-space normals to world space, perpendicular to
-    /// the placed surface (unnormalised where the scale is not uniform).
+    /// the placed surface (not unit length unless the scale is 1).
     pub normal: DMat3,
     /// Where the object-space origin lands, in world space.
     pub translation: DVec3,
