@@ -149,9 +149,7 @@ fn label(row: &Row) -> String {
         | Knob::Offset
         | Knob::Environment
         | Knob::Spectral
-        | Knob::Media => {
-            row.setting.clone()
-        }
+        | Knob::Media => row.setting.clone(),
     }
 }
 

@@ -381,7 +381,15 @@ pub fn markdown(run: &Run) -> String {
             format!("{title}, at {} spp ({what})", run.knob_spp),
             &format!("{column} | {COMMON} | {versus_head} | image"),
             run.rows_of(knob)
-                .map(|r| format!("{} | {} | {} | {}", r.setting, common(r), versus(r), image(r)))
+                .map(|r| {
+                    format!(
+                        "{} | {} | {} | {}",
+                        r.setting,
+                        common(r),
+                        versus(r),
+                        image(r)
+                    )
+                })
                 .collect(),
         );
     }
