@@ -317,9 +317,13 @@ impl World {
                 let weight = if last_delta {
                     1.0
                 } else {
-                    let light_pdf =
-                        self.lights
-                            .triangle_pdf(hit.triangle, last_point, surface.at.p);
+                    let light_pdf = self.lights.triangle_pdf(
+                        &self.scene,
+                        moment,
+                        hit.triangle,
+                        last_point,
+                        surface.at.p,
+                    );
                     power_heuristic(last_pdf, light_pdf)
                 };
                 radiance += self.weighed(beta, ratio) * spectrum.of(material.emission) * weight;
@@ -395,7 +399,7 @@ impl World {
         stats: &mut PathStats,
     ) -> Vec3 {
         stats.light_samples += 1;
-        let Some(light) = self.lights.sample(&self.scene, at.p, u_choice, u) else {
+        let Some(light) = self.lights.sample(&self.scene, moment, at.p, u_choice, u) else {
             return Vec3::ZERO;
         };
         let f = scatter.f(light.wi);
