@@ -22,9 +22,9 @@ use crate::geometry::{Moment, SurfacePoint, plane_normal};
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use moving::{locate, moving_first, placed_shape};
+use std::f32::consts::PI;
 
 mod moving;
-use std::f32::consts::PI;
 
 /// One light.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -375,24 +375,21 @@ impl Lights {
         if index == u32::MAX {
             return 0.0;
         }
-        let moving;
-        let shape = match self.lights[index as usize] {
+        // A moving emitter's area and normal are where the path's moment places it, as
+        // `moving::sample` computed them for the same point.
+        let (area, normal) = match self.lights[index as usize] {
             Light::Moving { object, triangle } => {
                 let v = &scene.moving[object as usize].triangles[triangle as usize].p;
-                let (area, normal) = placed_shape(moment.placement(object as usize), v);
-                moving = TriangleShape {
-                    area,
-                    normal,
-                    plane_normal: normal,
-                };
-                &moving
+                placed_shape(moment.placement(object as usize), v)
             }
-            _ => &self.shapes[index as usize],
+            _ => {
+                let shape = &self.shapes[index as usize];
+                (shape.area, shape.normal)
+            }
         };
-        let area = shape.area;
         let to_light = hit_point - p;
         let distance_squared = to_light.length_squared();
-        let cos_light = (to_light.normalize_or_zero().dot(shape.normal)).abs();
+        let cos_light = (to_light.normalize_or_zero().dot(normal)).abs();
         if cos_light == 0.0 || area == 0.0 {
             return 0.0;
         }

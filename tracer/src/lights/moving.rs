@@ -45,6 +45,7 @@ pub(super) fn sample(
     let wi = to_light / distance;
     let cos_light = -wi.dot(at.normal);
     if cos_light <= 0.0 {
+        // The sampled point shows us its back, which does not emit.
         return None;
     }
     Some(LightSample {
