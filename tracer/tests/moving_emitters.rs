@@ -108,24 +108,49 @@ fn key_toml(frame: u32, p: &Pose) -> String {
 /// The floor `y = 0` seen at its origin through a narrow camera from the side, lit by the
 /// moving square alone (`max_depth = 1`: direct light only), which faces down.
 fn floor_toml(a: &Pose, b: &Pose, spp: u32) -> String {
+    floor_toml_at([0.0; 3], a, b, spp)
+}
+
+/// [`floor_toml`] with the whole scene (floor, camera and the lamp's keys) moved by `origin`.
+fn floor_toml_at(origin: [f64; 3], a: &Pose, b: &Pose, spp: u32) -> String {
     let h = HALF;
+    let [ox, oy, oz] = origin;
+    let moved = |p: &Pose| Pose {
+        translate: [
+            p.translate[0] + ox,
+            p.translate[1] + oy,
+            p.translate[2] + oz,
+        ],
+        ..*p
+    };
     format!(
         "[render]\nwidth = 8\nheight = 8\nspp = {spp}\nmax_depth = 1\n\
-         [camera]\nposition = [3, 2, 0]\nlook_at = [0, 0, 0]\nvfov = 0.05\nshutter = [0, 1]\n\
+         [camera]\nposition = [{}, {}, {oz}]\nlook_at = [{ox}, {oy}, {oz}]\nvfov = 0.05\n\
+         shutter = [0, 1]\n\
          [materials.floor]\ntype = \"diffuse\"\nalbedo = {ALBEDO}\n\
          [materials.lamp]\ntype = \"diffuse\"\nalbedo = 0\nemission = {EMISSION}\n\
          [[object]]\nshape = \"quad\"\n\
-         corners = [[-20, 0, -20], [-20, 0, 20], [20, 0, 20], [20, 0, -20]]\n\
+         corners = [[{}, {oy}, {}], [{}, {oy}, {}], [{}, {oy}, {}], [{}, {oy}, {}]]\n\
          material = \"floor\"\n\
          [[object]]\nshape = \"quad\"\n\
          corners = [[{}, 0, {}], [{h}, 0, {}], [{h}, 0, {h}], [{}, 0, {h}]]\n\
          material = \"lamp\"\n{}{}",
+        ox + 3.0,
+        oy + 2.0,
+        ox - 20.0,
+        oz - 20.0,
+        ox - 20.0,
+        oz + 20.0,
+        ox + 20.0,
+        oz + 20.0,
+        ox + 20.0,
+        oz - 20.0,
         -h,
         -h,
         -h,
         -h,
-        key_toml(0, a),
-        key_toml(1, b)
+        key_toml(0, &moved(a)),
+        key_toml(1, &moved(b))
     )
 }
 
@@ -193,6 +218,21 @@ fn a_moving_lamp_lights_the_floor_with_the_time_average_of_the_static_closed_for
         let expected = (ALBEDO / std::f64::consts::PI * mean_irradiance(&a, &b)) as f32;
         assert!(expected > 1e-3, "{what}: the case lights the floor");
         assert_close(what, mean_and_error(&out), Vec3::splat(expected), 0.01);
+    }
+}
+
+#[test]
+fn a_moving_lamp_far_from_the_origin_lights_the_floor_the_same() {
+    // Spawn offsets and the shadow ray's end near the lamp grow with the coordinates; light
+    // that reaches the floor must not be lost to the lamp occluding its own samples there.
+    for origin in [[1000.0, 500.0, -700.0], [-30000.0, 0.0, 20000.0]] {
+        for (what, a, b) in cases() {
+            let scene = load(&floor_toml_at(origin, &a, &b, 64));
+            let out = render(&scene, None, 0);
+            let expected = (ALBEDO / std::f64::consts::PI * mean_irradiance(&a, &b)) as f32;
+            let what = format!("{what} at {origin:?}");
+            assert_close(&what, mean_and_error(&out), Vec3::splat(expected), 0.01);
+        }
     }
 }
 
