@@ -24,7 +24,9 @@
 //! which is the identity, with no arithmetic, on an RGB path.
 //!
 //! Motion: a path has one time (`radiance`'s `time`, drawn per sample where the scene has
-//! motion blur), and every ray of it meets the moving objects where they are then.
+//! motion blur), and every ray of it meets the moving objects where they are then; light
+//! sampling, and the density a BSDF-sampled hit on a moving emitter is weighed with, place
+//! moving emitters at that time too (`lights/moving.rs`).
 //!
 //! Specialisation: every branch guarded by a flag of [`Effects`] is one whose work would add
 //! exactly zero when the scene lacks the effect (see [`crate::effects`] for the argument, flag by
