@@ -9,6 +9,8 @@
 //! floor would make it swamp a point light and turn the lamp's rare samples into fireflies). The
 //! choice uses one random number, and the position on the light two more, whatever the light.
 //!
+//! Moving emitters are area lights placed at the path's time: `moving.rs`.
+//!
 //! A light without positive, finite power is never listed, whatever the effect set: it would be
 //! chosen with probability zero anyway, and leaving it out in both a specialised render and one
 //! with every effect forced on keeps the two choice distributions identical to the bit (see
@@ -16,16 +18,25 @@
 
 use crate::effects::Effects;
 use crate::environment::{Environment, MapSampler};
-use crate::geometry::{SurfacePoint, plane_normal};
+use crate::geometry::{Moment, SurfacePoint, plane_normal};
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
+use moving::{locate, moving_first, placed_shape};
 use std::f32::consts::PI;
+
+mod moving;
 
 /// One light.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Light {
     /// An emissive triangle: the index into `Scene::triangles`.
     Triangle(u32),
+    /// An emissive triangle of a moving object: `triangle` of `Scene::moving[object]`, placed
+    /// where the path's moment puts it.
+    Moving {
+        object: u32,
+        triangle: u32,
+    },
     Point {
         position: Vec3,
         intensity: Vec3,
@@ -89,7 +100,8 @@ pub struct Lights {
     lights: Vec<Light>,
     /// Cumulative choice probabilities, last entry 1.
     cdf: Vec<f32>,
-    /// For each scene triangle, its light's index, or `u32::MAX` when it does not emit.
+    /// For each scene triangle, its light's index, or `u32::MAX` when it does not emit; moving
+    /// triangles follow the still ones, by the global index hits report.
     triangle_light: Vec<u32>,
     /// The probability of choosing the environment; zero when it is not a sampled light.
     environment_choice: f32,
@@ -142,13 +154,21 @@ impl Lights {
                 power.push(p);
             }
         };
+        let moving_first = moving_first(scene);
         if effects.area_lights {
             for (index, triangle) in scene.emissive_triangles() {
                 let emission = scene.materials[triangle.material as usize].emission;
-                add(
-                    Light::Triangle(index),
-                    triangle.area() * luminance(emission) * PI,
-                );
+                let (light, area) = match locate(&moving_first, scene, index) {
+                    None => (Light::Triangle(index), triangle.area()),
+                    Some((object, local)) => {
+                        let light = Light::Moving {
+                            object,
+                            triangle: local,
+                        };
+                        (light, moving::mean_area(scene, object, &triangle.p))
+                    }
+                };
+                add(light, area * luminance(emission) * PI);
             }
         }
         if effects.point_lights {
@@ -181,11 +201,16 @@ impl Lights {
             }
         }
         let cdf = choice_cdf(&lights, &power);
-        let mut triangle_light = vec![u32::MAX; scene.triangles.len()];
+        let moving_triangles: usize = scene.moving.iter().map(|o| o.triangles.len()).sum();
+        let mut triangle_light = vec![u32::MAX; scene.triangles.len() + moving_triangles];
         let mut environment_light = None;
         for (index, light) in lights.iter().enumerate() {
             match light {
                 Light::Triangle(t) => triangle_light[*t as usize] = index as u32,
+                Light::Moving { object, triangle } => {
+                    let global = moving_first[*object as usize] + triangle;
+                    triangle_light[global as usize] = index as u32;
+                }
                 Light::Environment => environment_light = Some(index as u32),
                 Light::Point { .. } => {}
             }
@@ -229,8 +254,16 @@ impl Lights {
         self.cdf[index] - below
     }
 
-    /// Samples a light as seen from `p`. `u_choice` picks the light, `u` the point on it.
-    pub fn sample(&self, scene: &Scene, p: Vec3, u_choice: f32, u: Vec2) -> Option<LightSample> {
+    /// Samples a light as seen from `p` at `moment` (where moving emitters are). `u_choice`
+    /// picks the light, `u` the point on it.
+    pub fn sample(
+        &self,
+        scene: &Scene,
+        moment: &Moment,
+        p: Vec3,
+        u_choice: f32,
+        u: Vec2,
+    ) -> Option<LightSample> {
         if self.lights.is_empty() {
             return None;
         }
@@ -273,6 +306,9 @@ impl Lights {
                     pdf,
                     delta: false,
                 })
+            }
+            Light::Moving { object, triangle } => {
+                moving::sample(scene, moment, (object, triangle), p, u, choice)
             }
             Light::Point {
                 position,
@@ -322,20 +358,38 @@ impl Lights {
         }
     }
 
-    /// The density with which `sample` would have produced the hit of emissive triangle `t` from
-    /// `p`, for multiple importance sampling; zero if the triangle is not a sampled light.
-    pub fn triangle_pdf(&self, t: u32, p: Vec3, hit_point: Vec3) -> f32 {
+    /// The density with which `sample` would have produced the hit of emissive triangle `t` (a
+    /// global index, as hits report it) from `p` at `moment`, for multiple importance sampling;
+    /// zero if the triangle is not a sampled light.
+    pub fn triangle_pdf(
+        &self,
+        scene: &Scene,
+        moment: &Moment,
+        t: u32,
+        p: Vec3,
+        hit_point: Vec3,
+    ) -> f32 {
         let Some(&index) = self.triangle_light.get(t as usize) else {
             return 0.0;
         };
         if index == u32::MAX {
             return 0.0;
         }
-        let shape = &self.shapes[index as usize];
-        let area = shape.area;
+        // A moving emitter's area and normal are where the path's moment places it, as
+        // `moving::sample` computed them for the same point.
+        let (area, normal) = match self.lights[index as usize] {
+            Light::Moving { object, triangle } => {
+                let v = &scene.moving[object as usize].triangles[triangle as usize].p;
+                placed_shape(moment.placement(object as usize), v)
+            }
+            _ => {
+                let shape = &self.shapes[index as usize];
+                (shape.area, shape.normal)
+            }
+        };
         let to_light = hit_point - p;
         let distance_squared = to_light.length_squared();
-        let cos_light = (to_light.normalize_or_zero().dot(shape.normal)).abs();
+        let cos_light = (to_light.normalize_or_zero().dot(normal)).abs();
         if cos_light == 0.0 || area == 0.0 {
             return 0.0;
         }
@@ -360,7 +414,7 @@ impl Lights {
 /// likely, lights within a kind by power. Empty when there is no light; every power is positive.
 fn choice_cdf(lights: &[Light], power: &[f32]) -> Vec<f32> {
     let kind = |light: &Light| match light {
-        Light::Triangle(_) => 0,
+        Light::Triangle(_) | Light::Moving { .. } => 0,
         Light::Point { .. } => 1,
         Light::Environment => 2,
     };

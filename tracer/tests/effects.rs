@@ -216,6 +216,7 @@ fn shipped_scenes_render_the_same_bits_specialised_or_forced() {
         ("prism/prism.toml", 0),
         ("fog-window/fog-window.toml", 0),
         ("fog-window/fog-window.toml", 11),
+        ("swinging-lamp/swinging-lamp.toml", 6),
     ] {
         let scene = shipped(name, 24, 20, 4);
         assert_ne!(

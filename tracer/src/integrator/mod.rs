@@ -24,7 +24,9 @@
 //! which is the identity, with no arithmetic, on an RGB path.
 //!
 //! Motion: a path has one time (`radiance`'s `time`, drawn per sample where the scene has
-//! motion blur), and every ray of it meets the moving objects where they are then.
+//! motion blur), and every ray of it meets the moving objects where they are then; light
+//! sampling, and the density a BSDF-sampled hit on a moving emitter is weighed with, place
+//! moving emitters at that time too (`lights/moving.rs`).
 //!
 //! Specialisation: every branch guarded by a flag of [`Effects`] is one whose work would add
 //! exactly zero when the scene lacks the effect (see [`crate::effects`] for the argument, flag by
@@ -317,9 +319,13 @@ impl World {
                 let weight = if last_delta {
                     1.0
                 } else {
-                    let light_pdf =
-                        self.lights
-                            .triangle_pdf(hit.triangle, last_point, surface.at.p);
+                    let light_pdf = self.lights.triangle_pdf(
+                        &self.scene,
+                        moment,
+                        hit.triangle,
+                        last_point,
+                        surface.at.p,
+                    );
                     power_heuristic(last_pdf, light_pdf)
                 };
                 radiance += self.weighed(beta, ratio) * spectrum.of(material.emission) * weight;
@@ -395,7 +401,7 @@ impl World {
         stats: &mut PathStats,
     ) -> Vec3 {
         stats.light_samples += 1;
-        let Some(light) = self.lights.sample(&self.scene, at.p, u_choice, u) else {
+        let Some(light) = self.lights.sample(&self.scene, moment, at.p, u_choice, u) else {
             return Vec3::ZERO;
         };
         let f = scatter.f(light.wi);

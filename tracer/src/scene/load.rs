@@ -15,7 +15,6 @@ use super::obj::{self, NO_MATERIAL};
 use super::shapes::{Transform, given_keys, shape_triangles};
 use super::{CameraTrack, PointLight, RenderSettings, Scene, Triangle};
 use crate::environment::{Environment, EnvironmentMap, decode_exr};
-use glam::Vec3;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use toml::Spanned;
@@ -296,17 +295,9 @@ impl Builder<'_> {
             too_far,
         });
         match track {
+            // A moving object may emit: light sampling places it at each path's time
+            // (`lights.rs`).
             Some(track) => {
-                if let Some(t) = kept
-                    .iter()
-                    .find(|t| self.table.materials[t.material as usize].emission != Vec3::ZERO)
-                {
-                    let name = &self.table.materials[t.material as usize].name;
-                    return Err(format!(
-                        "material `{name}` emits, and moving lights are not supported: only \
-                         objects that stand still may emit"
-                    ));
-                }
                 self.moving.push(MovingObject {
                     triangles: kept,
                     track,

@@ -139,10 +139,13 @@ impl Scene {
         self.camera.moves() || !self.moving.is_empty()
     }
 
-    /// The triangles whose material emits: the scene's area lights, in triangle order.
+    /// The triangles whose material emits: the scene's area lights, in triangle order, with
+    /// their global index: the still triangles first, then the moving objects' (in object
+    /// space), numbered after them in object order as hits on them are (`geometry::motion`).
     pub fn emissive_triangles(&self) -> impl Iterator<Item = (u32, &Triangle)> {
         self.triangles
             .iter()
+            .chain(self.moving.iter().flat_map(|o| &o.triangles))
             .enumerate()
             .filter(|(_, t)| self.materials[t.material as usize].emission != Vec3::ZERO)
             .map(|(i, t)| (i as u32, t))

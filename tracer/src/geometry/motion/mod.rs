@@ -71,6 +71,14 @@ pub struct MovingTriangle {
     pub triangle: usize,
 }
 
+impl Moment {
+    /// The placement of moving object `object` (its index in `Scene::moving`) at this moment:
+    /// where light sampling finds a moving emitter ([`crate::lights`]).
+    pub fn placement(&self, object: usize) -> &Placement {
+        &self.placements[object].1
+    }
+}
+
 impl MotionAccel {
     /// Trees for `objects`, whose hits will be numbered from `first`.
     pub fn build(objects: &[MovingObject], first: u32, quality: BuildQuality) -> Self {

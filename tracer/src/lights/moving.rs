@@ -1,0 +1,108 @@
+//! Moving emitters: the emissive triangles of moving objects as area lights.
+//!
+//! A triangle of a moving object is a light like any other, sampled where the
+//! path's [`Moment`] places it: its barycentrics are drawn on the object-space triangle (an
+//! affine map keeps a uniform density uniform) and the point is placed in the world by
+//! [`placed_point`], exactly as a hit there is, so the shadow ray meets the same surface the
+//! camera would. Its area density is one over the *placed* area at that time, which a scale
+//! changes (rotations and translations keep it), and [`super::Lights::triangle_pdf`] computes the same
+//! area and normal at the same moment when a BSDF-sampled ray hits it, so multiple importance
+//! sampling weighs the two strategies consistently. Its choice probability is fixed, from its
+//! power at the mean of its keys' areas: any fixed choice is unbiased, and one that depended on
+//! the time would make the choice distribution differ per path for no gain with a few movers.
+//!
+//! Only the placement differs from a still triangle: the choice of light, the shadow ray and the
+//! weights are the same code (`lights.rs`).
+
+use super::LightSample;
+use crate::geometry::{Moment, placed_point};
+use crate::scene::{Placement, Scene};
+use glam::{DVec3, Vec2, Vec3};
+
+/// Samples triangle `triangle` of moving object `object` as seen from `p` at `moment`; `choice`
+/// is the probability of having chosen it.
+pub(super) fn sample(
+    scene: &Scene,
+    moment: &Moment,
+    (object, triangle): (u32, u32),
+    p: Vec3,
+    u: Vec2,
+    choice: f32,
+) -> Option<LightSample> {
+    let triangle = &scene.moving[object as usize].triangles[triangle as usize];
+    let placement = moment.placement(object as usize);
+    let su = u.x.sqrt();
+    let (b1, b2) = (su * (1.0 - u.y), su * u.y);
+    // The point and its normal exactly as a hit there is placed (`hits.rs`).
+    let at = placed_point(placement, &triangle.p, b1, b2);
+    let (area, _) = placed_shape(placement, &triangle.p);
+    let to_light = at.p - p;
+    let distance_squared = to_light.length_squared();
+    if distance_squared == 0.0 || area == 0.0 {
+        return None;
+    }
+    let distance = distance_squared.sqrt();
+    let wi = to_light / distance;
+    let cos_light = -wi.dot(at.normal);
+    if cos_light <= 0.0 {
+        // The sampled point shows us its back, which does not emit.
+        return None;
+    }
+    Some(LightSample {
+        wi,
+        distance,
+        at,
+        radiance: scene.materials[triangle.material as usize].emission,
+        pdf: choice * distance_squared / (cos_light * area),
+        delta: false,
+    })
+}
+
+/// The area of the object-space triangle `v` of object `object` placed by each of its keys,
+/// averaged: what its power, and so its choice probability, is reckoned from.
+pub(super) fn mean_area(scene: &Scene, object: u32, v: &[Vec3; 3]) -> f32 {
+    let keys = scene.moving[object as usize].track.keys();
+    keys.iter()
+        .map(|k| placed_shape(&k.placement(), v).0)
+        .sum::<f32>()
+        / keys.len() as f32
+}
+
+/// The area of the object-space triangle `v` placed by `placement`, and its unit normal in the
+/// world as [`placed_point`] gives it (the side it emits to). The area is taken from the
+/// placed edges in f64: a scale changes it, a rotation or translation does not.
+pub(super) fn placed_shape(placement: &Placement, v: &[Vec3; 3]) -> (f32, Vec3) {
+    let [a, b, c] = v.map(|p| p.as_dvec3());
+    let (e1, e2) = (b - a, c - a);
+    let object_normal: DVec3 = e1.cross(e2).normalize_or_zero();
+    let placed = (placement.linear * e1).cross(placement.linear * e2);
+    let normal = (placement.normal * object_normal)
+        .normalize_or_zero()
+        .as_vec3();
+    ((0.5 * placed.length()) as f32, normal)
+}
+
+/// For each moving object, the global index of its first triangle: they follow the still
+/// triangles in object order (`geometry::motion`).
+pub(super) fn moving_first(scene: &Scene) -> Vec<u32> {
+    let mut next = scene.triangles.len();
+    scene
+        .moving
+        .iter()
+        .map(|o| {
+            let first = next;
+            next += o.triangles.len();
+            u32::try_from(first).expect("fewer than 2^32 triangles: Hit::triangle is a u32")
+        })
+        .collect()
+}
+
+/// The moving object and its triangle that global index `index` names, or `None` for a still
+/// triangle.
+pub(super) fn locate(moving_first: &[u32], scene: &Scene, index: u32) -> Option<(u32, u32)> {
+    if (index as usize) < scene.triangles.len() {
+        return None;
+    }
+    let object = moving_first.partition_point(|&f| f <= index) - 1;
+    Some((object as u32, index - moving_first[object]))
+}
