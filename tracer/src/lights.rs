@@ -34,11 +34,17 @@ pub enum Light {
     /// An emissive triangle of a moving object: `triangle` of `Scene::moving[object]`, placed
     /// where the path's moment puts it.
     Moving {
+        /// The moving object, an index into `Scene::moving`.
         object: u32,
+        /// The triangle, an index into that object's triangles (in object space).
         triangle: u32,
     },
+    /// A point light: where it is and its intensity (power per solid angle), which falls off
+    /// with the squared distance.
     Point {
+        /// Its position in world space.
         position: Vec3,
+        /// Its radiant intensity per channel.
         intensity: Vec3,
     },
     /// The scene's environment, [`Scene::environment`].
@@ -60,6 +66,7 @@ pub enum EnvironmentSampling {
 }
 
 impl EnvironmentSampling {
+    /// Every way, the default first: the ladder `tessera accuracy --knobs environment` walks.
     pub const ALL: [EnvironmentSampling; 3] = [
         EnvironmentSampling::Importance,
         EnvironmentSampling::Uniform,
@@ -91,6 +98,8 @@ pub struct LightSample {
     /// Solid-angle density including the probability of choosing this light; for a point light,
     /// just the choice probability (a delta in direction).
     pub pdf: f32,
+    /// Whether the light is a delta in direction (a point light): BSDF sampling can never find
+    /// it, so no multiple importance weight applies.
     pub delta: bool,
 }
 
@@ -236,14 +245,18 @@ impl Lights {
         result
     }
 
+    /// Whether the scene has no light at all (then no light is sampled and no shadow ray cast).
     pub fn is_empty(&self) -> bool {
         self.lights.is_empty()
     }
 
+    /// How many lights there are, the environment counted as one.
     pub fn len(&self) -> usize {
         self.lights.len()
     }
 
+    /// The radius of a sphere about the scene's still geometry, which the environment's power
+    /// is reckoned over.
     pub fn scene_radius(&self) -> f32 {
         self.scene_radius
     }
@@ -444,6 +457,8 @@ fn choice_cdf(lights: &[Light], power: &[f32]) -> Vec<f32> {
     cdf
 }
 
+/// The luminance of linear sRGB (Rec. 709 weights): how lights and environment texels are
+/// weighed against each other.
 pub fn luminance(c: Vec3) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }

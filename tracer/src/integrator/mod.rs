@@ -53,11 +53,15 @@ mod scatter;
 
 /// A scene prepared for rendering: its acceleration structure, lights and effect set.
 pub struct World {
+    /// The scene as loaded, its still triangles and textures moved onto huge pages.
     pub scene: Scene,
+    /// The still geometry's tree (the moving objects have theirs in `motion`).
     pub accel: Accel,
     /// The moving objects' trees, built from [`Scene::moving`]; empty when nothing moves.
     pub motion: MotionAccel,
+    /// Every light with its choice distribution, for next-event estimation.
     pub lights: Lights,
+    /// The effects this world pays for: the scene's own, or more where a caller forces them.
     pub effects: Effects,
     /// Whether some material is an index-matched interface, the one surface shadow rays pass
     /// (`scatter.rs`); taken from the scene's materials when the world is made.
@@ -76,11 +80,14 @@ pub struct World {
 /// tests read to check that absent effects cost nothing.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PathStats {
+    /// BVH nodes and triangles the traversals of closest-hit and shadow rays visited.
     pub traversal: TraversalStats,
     /// Closest-hit rays (camera and bounce rays).
     pub rays: u64,
     /// Of those, the ones that hit a surface (and were shaded); the rest escaped.
     pub hits: u64,
+    /// Occlusion rays towards sampled lights (and the closest-hit queries that stand in for
+    /// them where shadows cross interfaces).
     pub shadow_rays: u64,
     /// Lights sampled by next-event estimation (each may or may not need a shadow ray).
     pub light_samples: u64,
@@ -100,6 +107,7 @@ pub struct PathStats {
 }
 
 impl PathStats {
+    /// Adds `other`'s counts to these, as a tile sums its samples'.
     pub fn add(&mut self, other: &PathStats) {
         self.traversal.nodes += other.traversal.nodes;
         self.traversal.triangles += other.traversal.triangles;
@@ -137,6 +145,8 @@ impl PathStats {
 }
 
 impl World {
+    /// Prepares `scene` for rendering with the still geometry's tree `accel`: builds the moving
+    /// objects' trees and the lights, and moves the arrays every hit reads onto huge pages.
     pub fn new(mut scene: Scene, accel: Accel, effects: Effects) -> Self {
         // Every hit reads its triangle, at random on large meshes: huge pages spare most of
         // those reads a page-table walk (`geometry/memory.rs`).

@@ -26,6 +26,8 @@ pub struct LoadReport {
     pub objects: Vec<ObjectReport>,
 }
 
+/// What the loader made of one `[[object]]`: the counts a user needs to see that it loaded
+/// as meant.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ObjectReport {
     /// The OBJ file (relative to the scene's folder) or the shape's name (`"sphere"`, ...).

@@ -67,7 +67,9 @@ pub struct Moment {
 /// Where a ray met a moving object: which object and which of its triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MovingTriangle {
+    /// The moving object, an index into `Scene::moving`.
     pub object: usize,
+    /// The triangle, an index into that object's own triangles (in object space).
     pub triangle: usize,
 }
 
