@@ -296,29 +296,8 @@ impl Lights {
                 let (b1, b2) = (su * (1.0 - u.y), su * u.y);
                 let at =
                     SurfacePoint::on_triangle_with_normal(&triangle.p, b1, b2, shape.plane_normal);
-                let (area, normal) = (shape.area, shape.normal);
-                let to_light = at.p - p;
-                let distance_squared = to_light.length_squared();
-                if distance_squared == 0.0 || area == 0.0 {
-                    return None;
-                }
-                let distance = distance_squared.sqrt();
-                let wi = to_light / distance;
-                let cos_light = -wi.dot(normal);
-                if cos_light <= 0.0 {
-                    // The sampled point shows us its back, which does not emit.
-                    return None;
-                }
-                let pdf = choice * distance_squared / (cos_light * area);
                 let radiance = scene.materials[triangle.material as usize].emission;
-                Some(LightSample {
-                    wi,
-                    distance,
-                    at,
-                    radiance,
-                    pdf,
-                    delta: false,
-                })
+                area_sample(p, at, (shape.area, shape.normal), radiance, choice)
             }
             Light::Moving { object, triangle } => {
                 moving::sample(scene, moment, (object, triangle), p, u, choice)
@@ -455,6 +434,39 @@ fn choice_cdf(lights: &[Light], power: &[f32]) -> Vec<f32> {
         *last = 1.0;
     }
     cdf
+}
+
+/// The light sample of point `at` on an area emitter of `area` whose emitting side faces
+/// `normal`, seen from `p`, chosen with probability `choice`: the one conversion of an area
+/// density into a solid-angle one, for still and moving triangles alike. `None` where the point
+/// shows its back (which does not emit) or the emitter has no area.
+fn area_sample(
+    p: Vec3,
+    at: SurfacePoint,
+    (area, normal): (f32, Vec3),
+    radiance: Vec3,
+    choice: f32,
+) -> Option<LightSample> {
+    let to_light = at.p - p;
+    let distance_squared = to_light.length_squared();
+    if distance_squared == 0.0 || area == 0.0 {
+        return None;
+    }
+    let distance = distance_squared.sqrt();
+    let wi = to_light / distance;
+    let cos_light = -wi.dot(normal);
+    if cos_light <= 0.0 {
+        // The sampled point shows us its back, which does not emit.
+        return None;
+    }
+    Some(LightSample {
+        wi,
+        distance,
+        at,
+        radiance,
+        pdf: choice * distance_squared / (cos_light * area),
+        delta: false,
+    })
 }
 
 /// The luminance of linear sRGB (Rec. 709 weights): how lights and environment texels are

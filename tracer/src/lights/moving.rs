@@ -36,26 +36,8 @@ pub(super) fn sample(
     // The point and its normal exactly as a hit there is placed (`hits.rs`).
     let at = placed_point(placement, &triangle.p, b1, b2);
     let (area, _) = placed_shape(placement, &triangle.p);
-    let to_light = at.p - p;
-    let distance_squared = to_light.length_squared();
-    if distance_squared == 0.0 || area == 0.0 {
-        return None;
-    }
-    let distance = distance_squared.sqrt();
-    let wi = to_light / distance;
-    let cos_light = -wi.dot(at.normal);
-    if cos_light <= 0.0 {
-        // The sampled point shows us its back, which does not emit.
-        return None;
-    }
-    Some(LightSample {
-        wi,
-        distance,
-        at,
-        radiance: scene.materials[triangle.material as usize].emission,
-        pdf: choice * distance_squared / (cos_light * area),
-        delta: false,
-    })
+    let radiance = scene.materials[triangle.material as usize].emission;
+    super::area_sample(p, at, (area, at.normal), radiance, choice)
 }
 
 /// The area of the object-space triangle `v` of object `object` placed by each of its keys,
