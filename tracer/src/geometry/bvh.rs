@@ -109,7 +109,12 @@ pub struct Accel {
     /// For every input triangle, degenerate ones included, by input index: its [`plane_normal`]
     /// (f64) and its `area_vector().normalize()` (f32, NaN without area), computed once here
     /// rather than at every hit, side by side so that a hit reads one cache line for both.
-    normals: Vec<[Vec3; 2]>,
+    pub(super) normals: Vec<[Vec3; 2]>,
+    /// The caller's record of each input triangle that it reads at every closest hit (the
+    /// integrator's `Triangle`: texture coordinates, normals, material), as the address of the
+    /// first and the size of one, set by [`Accel::prefetch_at_hits`]. Only ever prefetched,
+    /// never read: a stale address costs a wasted hint, never a wrong value.
+    pub(super) hit_records: Option<(usize, usize)>,
 }
 
 impl Accel {
@@ -132,6 +137,7 @@ impl Accel {
                 depth: 0,
                 wide: Bvh8::default(),
                 normals,
+                hit_records: None,
             };
         }
         let shapes: Vec<obvhs::triangle::Triangle> = kept
@@ -162,7 +168,17 @@ impl Accel {
             depth,
             wide,
             normals: on_huge_pages(normals),
+            hit_records: None,
         }
+    }
+
+    /// Prefetch `records[triangle]`, with this tree's own normals of the triangle, whenever a
+    /// closest-hit query keeps a hit on it, while the traversal goes on. What the caller reads
+    /// first at a hit is that record (on Sponza, the texture coordinates whose texel is the
+    /// next miss); without the hint it is a cache miss that starts only once the query has
+    /// returned. A prefetch reads nothing into the computation, so results are unchanged.
+    pub fn prefetch_at_hits<T>(&mut self, records: &[T]) {
+        self.hit_records = Some((records.as_ptr() as usize, std::mem::size_of::<T>()));
     }
 
     /// The unit plane normal of input triangle `triangle`, as [`plane_normal`] computes it, for
