@@ -172,15 +172,6 @@ impl Accel {
         }
     }
 
-    /// Prefetch `records[triangle]`, with this tree's own normals of the triangle, whenever a
-    /// closest-hit query keeps a hit on it, while the traversal goes on. What the caller reads
-    /// first at a hit is that record (on Sponza, the texture coordinates whose texel is the
-    /// next miss); without the hint it is a cache miss that starts only once the query has
-    /// returned. A prefetch reads nothing into the computation, so results are unchanged.
-    pub fn prefetch_at_hits<T>(&mut self, records: &[T]) {
-        self.hit_records = Some((records.as_ptr() as usize, std::mem::size_of::<T>()));
-    }
-
     /// The unit plane normal of input triangle `triangle`, as [`plane_normal`] computes it, for
     /// [`crate::geometry::SurfacePoint::on_triangle_with_normal`].
     #[inline]
