@@ -109,7 +109,12 @@ pub struct Accel {
     /// For every input triangle, degenerate ones included, by input index: its [`plane_normal`]
     /// (f64) and its `area_vector().normalize()` (f32, NaN without area), computed once here
     /// rather than at every hit, side by side so that a hit reads one cache line for both.
-    normals: Vec<[Vec3; 2]>,
+    pub(super) normals: Vec<[Vec3; 2]>,
+    /// The caller's record of each input triangle that it reads at every closest hit (the
+    /// integrator's `Triangle`: texture coordinates, normals, material), as the address of the
+    /// first and the size of one, set by [`Accel::prefetch_at_hits`]. Only ever prefetched,
+    /// never read: a stale address costs a wasted hint, never a wrong value.
+    pub(super) hit_records: Option<(usize, usize)>,
 }
 
 impl Accel {
@@ -132,6 +137,7 @@ impl Accel {
                 depth: 0,
                 wide: Bvh8::default(),
                 normals,
+                hit_records: None,
             };
         }
         let shapes: Vec<obvhs::triangle::Triangle> = kept
@@ -162,6 +168,7 @@ impl Accel {
             depth,
             wide,
             normals: on_huge_pages(normals),
+            hit_records: None,
         }
     }
 

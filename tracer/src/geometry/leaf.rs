@@ -95,6 +95,7 @@ impl Accel {
                     stats.triangles += u64::from(lane + 1);
                     return true;
                 }
+                self.prefetch_hit(original);
             }
         }
         false
@@ -167,5 +168,47 @@ mod tests {
             hits += hit.is_some() as u32;
         }
         assert!(hits > 1000, "only {hits} hits");
+    }
+
+    #[test]
+    fn prefetching_records_at_hits_changes_no_hit_even_for_records_too_short() {
+        // The hint is given for every kept hit, at addresses computed from the records'
+        // start: with records far too few for the triangles, most lie outside the slice, which
+        // a prefetch must never read. Hits and counted work stay those of the plain tree.
+        let v = |i: usize, j: usize| Vec3::new(i as f32, j as f32, ((i * 7 + j * 13) % 5) as f32);
+        let triangles: Vec<Triangle> = (0..400)
+            .flat_map(|k| {
+                let (i, j) = (k % 20, k / 20);
+                [
+                    [v(i, j), v(i + 1, j), v(i + 1, j + 1)],
+                    [v(i, j), v(i + 1, j + 1), v(i, j + 1)],
+                ]
+            })
+            .map(|p| Triangle {
+                p,
+                n: None,
+                uv: None,
+                material: 0,
+            })
+            .collect();
+        let plain = Accel::build(&triangles, BuildQuality::Medium);
+        let mut hinted = plain.clone();
+        let records = [0u64; 3];
+        hinted.prefetch_at_hits(&records);
+        let (mut a, mut b) = (TraversalStats::default(), TraversalStats::default());
+        let mut hits = 0;
+        for i in 0..400 {
+            let (x, y) = ((i % 20) as f32 + 0.37, (i / 20) as f32 + 0.61);
+            let ray = Ray {
+                origin: Vec3::new(x, y, 10.0),
+                dir: Vec3::new(0.013 * (i % 7) as f32, -0.011 * (i % 5) as f32, -1.0),
+                t_max: f32::INFINITY,
+            };
+            let hit = plain.intersect(&ray, &mut a);
+            assert_eq!(hit, hinted.intersect(&ray, &mut b), "{ray:?}");
+            hits += hit.is_some() as u32;
+        }
+        assert_eq!(a, b);
+        assert!(hits > 300, "only {hits} hits");
     }
 }

@@ -147,10 +147,12 @@ impl PathStats {
 impl World {
     /// Prepares `scene` for rendering with the still geometry's tree `accel`: builds the moving
     /// objects' trees and the lights, and moves the arrays every hit reads onto huge pages.
-    pub fn new(mut scene: Scene, accel: Accel, effects: Effects) -> Self {
+    pub fn new(mut scene: Scene, mut accel: Accel, effects: Effects) -> Self {
         // Every hit reads its triangle, at random on large meshes: huge pages spare most of
-        // those reads a page-table walk (`geometry/memory.rs`).
+        // those reads a page-table walk (`geometry/memory.rs`), and the traversal asks for it
+        // as soon as it keeps a hit on it, so that the miss overlaps the rest of the query.
         scene.triangles = on_huge_pages(scene.triangles);
+        accel.prefetch_at_hits(&scene.triangles);
         // So does every hit on a textured surface read a texel (`scene/texture.rs`).
         for texture in &mut scene.textures {
             texture.on_huge_pages();
