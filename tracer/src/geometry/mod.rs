@@ -56,17 +56,25 @@ use glam::Vec3;
 /// A ray segment `origin + t * dir` for `t` in `(0, t_max)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ray {
+    /// Where the segment starts, in world space (already offset off any surface it leaves).
     pub origin: Vec3,
+    /// Its direction; not necessarily unit length, and `t` is measured in its units.
     pub dir: Vec3,
+    /// The end of the segment, exclusive; infinite for rays that may escape.
     pub t_max: f32,
 }
 
 /// The closest hit of a ray: distance, triangle index and barycentrics of vertices 1 and 2.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
+    /// The distance along the ray, in units of its direction.
     pub t: f32,
+    /// The triangle: an index into the still triangles, or past them into the moving objects'
+    /// (numbered in object order, as the lights number them).
     pub triangle: u32,
+    /// The barycentric coordinate of vertex 1.
     pub b1: f32,
+    /// The barycentric coordinate of vertex 2.
     pub b2: f32,
 }
 

@@ -49,6 +49,7 @@ pub enum OffsetMethod {
 }
 
 impl OffsetMethod {
+    /// Both methods, the default first: the ladder `tessera accuracy --knobs offset` walks.
     pub const ALL: [OffsetMethod; 2] = [OffsetMethod::ErrorBound, OffsetMethod::FixedUlp];
 
     /// The name on the command line and in reports.
@@ -65,6 +66,7 @@ impl OffsetMethod {
 /// point on no surface (a point light).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfacePoint {
+    /// The computed point, in world space.
     pub p: Vec3,
     /// Per axis, a conservative bound of `|p - q|` for some point `q` exactly on the surface.
     pub error: Vec3,

@@ -25,12 +25,16 @@ use glam::{Vec3, Vec3Swizzles};
 /// the hit point with respect to the triangle's vertices 0, 1 and 2.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TriangleHit {
+    /// The distance along the ray, in units of its direction.
     pub t: f32,
     /// A bound on the rounding error of `t` (pbrt-v4's `deltaT`), for queries that must know
     /// whether a hit certainly lies before a given distance.
     pub t_error: f32,
+    /// The barycentric coordinate of vertex 0.
     pub b0: f32,
+    /// The barycentric coordinate of vertex 1.
     pub b1: f32,
+    /// The barycentric coordinate of vertex 2.
     pub b2: f32,
 }
 

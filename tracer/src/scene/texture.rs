@@ -13,7 +13,9 @@ use glam::{Vec2, Vec3};
 /// A texture of sRGB-encoded bytes, read as linear RGB.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Texture {
+    /// Texels per row.
     pub width: u32,
+    /// Rows of texels.
     pub height: u32,
     /// Row-major, top row first, three sRGB bytes (red, green, blue) per texel.
     srgb: Vec<u8>,
