@@ -55,10 +55,19 @@ impl PixelSampler {
 
     /// The next number, uniform in [0, 1).
     pub fn next_1d(&mut self) -> f32 {
-        let bits = mix(self.key ^ u64::from(self.dimension).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        let bits = mix(self.key ^ u64::from(self.dimension).wrapping_mul(GOLDEN_GAMMA));
         self.dimension += 1;
-        // The top 24 bits give every float in [0, 1) with spacing 2^-24, never 1.0 itself.
-        (bits >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
+        unit_f32(bits)
+    }
+
+    /// A stream of its own under `key` (the lens's, the time's, a bounce's medium's...), from
+    /// its first dimension.
+    fn stream(key: u64) -> PixelSampler {
+        PixelSampler {
+            key,
+            dimension: 0,
+            bounce: 0,
+        }
     }
 
     /// The next two numbers as a point in [0, 1)^2, x drawn first.
@@ -70,48 +79,28 @@ impl PixelSampler {
     /// The point on the lens, in [0, 1)^2: a fixed pair of camera dimensions in the lens's own
     /// stream, the same whenever it is asked for and independent of every other number.
     pub fn lens(&self) -> Vec2 {
-        let mut lens = PixelSampler {
-            key: mix(self.key ^ LENS_STREAM),
-            dimension: 0,
-            bounce: 0,
-        };
-        lens.next_2d()
+        Self::stream(mix(self.key ^ LENS_STREAM)).next_2d()
     }
 
     /// The sample's fraction of the exposure, in [0, 1): one camera dimension in the time's own
     /// stream, the same whenever it is asked for and independent of every other number, so a
     /// render without motion blur, which never asks, draws what it drew before time existed.
     pub fn time(&self) -> f32 {
-        let mut time = PixelSampler {
-            key: mix(self.key ^ TIME_STREAM),
-            dimension: 0,
-            bounce: 0,
-        };
-        time.next_1d()
+        Self::stream(mix(self.key ^ TIME_STREAM)).next_1d()
     }
 
     /// The number that places a spectral path's wavelengths, in [0, 1): one dimension in the
     /// wavelengths' own stream, the same whenever it is asked for and independent of every
     /// other number, so paths that stay RGB, which never ask, draw what they always drew.
     pub fn wavelength(&self) -> f32 {
-        let mut wavelength = PixelSampler {
-            key: mix(self.key ^ WAVELENGTH_STREAM),
-            dimension: 0,
-            bounce: 0,
-        };
-        wavelength.next_1d()
+        Self::stream(mix(self.key ^ WAVELENGTH_STREAM)).next_1d()
     }
 
     /// The channel choice and the free-flight distance of the current bounce's segment through
     /// a medium, in [0, 1)^2: a pair in the medium stream of this bounce, independent of every
     /// other number and the same however often it is asked for.
     pub fn medium(&self) -> Vec2 {
-        let mut medium = PixelSampler {
-            key: mix(mix(self.key ^ MEDIUM_STREAM) ^ u64::from(self.bounce)),
-            dimension: 0,
-            bounce: 0,
-        };
-        medium.next_2d()
+        Self::stream(mix(mix(self.key ^ MEDIUM_STREAM) ^ u64::from(self.bounce))).next_2d()
     }
 }
 
@@ -124,12 +113,26 @@ const TIME_STREAM: u64 = 0x71e0_0000_0000_0003;
 /// Tells the wavelengths' stream from the others, as [`LENS_STREAM`] does.
 const WAVELENGTH_STREAM: u64 = 0x3a5e_0000_0000_0004;
 
-/// The SplitMix64 finaliser: a bijection on u64 with full avalanche.
-fn mix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+/// SplitMix64's increment, 2^64 over the golden ratio.
+pub(crate) const GOLDEN_GAMMA: u64 = 0x9e37_79b9_7f4a_7c15;
+
+/// One SplitMix64 step on `z`: the increment, then the finaliser.
+fn mix(z: u64) -> u64 {
+    splitmix_finalise(z.wrapping_add(GOLDEN_GAMMA))
+}
+
+/// The SplitMix64 finaliser: a bijection on u64 with full avalanche. The one hash of every
+/// random number the tracer draws (this sampler's, and the media trackers' streams).
+pub(crate) fn splitmix_finalise(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)
+}
+
+/// The top 24 bits of `bits` as a float in [0, 1) with spacing 2^-24: every such float, never
+/// 1.0 itself, so `1 - u` is exact and never 0.
+pub(crate) fn unit_f32(bits: u64) -> f32 {
+    (bits >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
 }
 
 #[cfg(test)]

@@ -44,6 +44,7 @@
 //! other number moves.
 
 use super::{Flight, Medium, ln};
+use crate::sampler::{GOLDEN_GAMMA, splitmix_finalise, unit_f32};
 use glam::{Vec2, Vec3};
 
 /// How a render samples free flights and shadow-ray transmittance through media. The default
@@ -322,23 +323,16 @@ impl Stream {
     pub fn new(numbers: &[f32]) -> Self {
         let mut state = 0x7ac4_0000_0000_0005u64;
         for x in numbers {
-            state = mix(state ^ u64::from(x.to_bits()));
+            state = splitmix_finalise(state ^ u64::from(x.to_bits()));
         }
         Stream { state }
     }
 
     /// The next number, uniform in [0, 1) with spacing 2^-24.
     pub fn next_1d(&mut self) -> f32 {
-        self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        (mix(self.state) >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
+        self.state = self.state.wrapping_add(GOLDEN_GAMMA);
+        unit_f32(splitmix_finalise(self.state))
     }
-}
-
-/// The SplitMix64 finaliser (as the pixel sampler's).
-fn mix(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 #[cfg(test)]
