@@ -246,10 +246,7 @@ impl<'a> Bench<'a> {
     /// bit-identical to the default quality's (it must be: the traversal finds the closest hit
     /// whatever the tree).
     pub fn bvh_ladder(&mut self, spp: u32) -> Vec<Row> {
-        let settings = RenderSettings {
-            samples_per_pixel: spp,
-            ..self.baseline.clone()
-        };
+        let settings = self.at_spp(spp);
         self.world.scene.settings = settings.clone();
         let default_image = render_with(&self.world, self.pool, Timing::ONCE).image;
         let rows = BuildQuality::ALL
@@ -280,28 +277,16 @@ impl<'a> Bench<'a> {
     /// Our robust traversal (4-wide, what renders use), the same tests over the binary tree,
     /// and obvhs's own, at `spp`; each image is compared with the first's.
     pub fn traversal_ladder(&mut self, spp: u32) -> Vec<Row> {
-        let settings = RenderSettings {
-            samples_per_pixel: spp,
-            ..self.baseline.clone()
-        };
-        let mut rows = Vec::new();
-        let mut robust_image = None;
-        for traversal in Traversal::ALL {
-            self.world.traversal = traversal;
-            let (mut row, image) = self.measure(
-                Knob::Traversal,
-                format!("{traversal:?}").to_lowercase(),
-                settings.clone(),
-            );
-            row.traversal = traversal;
-            match &robust_image {
-                None => robust_image = Some(image),
-                Some(robust) => {
-                    row.note = difference_note(&image, robust, "the robust traversal's image")
-                }
-            }
-            rows.push(row);
-        }
+        let settings = self.at_spp(spp);
+        let rows = self.compared_ladder(
+            Knob::Traversal,
+            Traversal::ALL,
+            "the robust traversal's image",
+            |bench, traversal| {
+                bench.world.traversal = traversal;
+                (format!("{traversal:?}").to_lowercase(), settings.clone())
+            },
+        );
         self.world.traversal = Traversal::Robust;
         rows
     }
@@ -310,24 +295,16 @@ impl<'a> Bench<'a> {
     /// its coordinates both start rays on the right side; the images differ by the noise of
     /// paths that took other turns, and the times by the cost of computing the bound.
     pub fn offset_ladder(&mut self, spp: u32) -> Vec<Row> {
-        let settings = RenderSettings {
-            samples_per_pixel: spp,
-            ..self.baseline.clone()
-        };
-        let mut rows = Vec::new();
-        let mut first_image = None;
-        for offset in OffsetMethod::ALL {
-            self.world.offset = offset;
-            let (mut row, image) =
-                self.measure(Knob::Offset, offset.name().to_owned(), settings.clone());
-            match &first_image {
-                None => first_image = Some(image),
-                Some(first) => {
-                    row.note = difference_note(&image, first, "the error-bound offset's image")
-                }
-            }
-            rows.push(row);
-        }
+        let settings = self.at_spp(spp);
+        let rows = self.compared_ladder(
+            Knob::Offset,
+            OffsetMethod::ALL,
+            "the error-bound offset's image",
+            |bench, offset| {
+                bench.world.offset = offset;
+                (offset.name().to_owned(), settings.clone())
+            },
+        );
         self.world.offset = OffsetMethod::default();
         rows
     }
@@ -336,28 +313,17 @@ impl<'a> Bench<'a> {
     /// at `spp`. All three are unbiased: the images differ by noise, which is the point; in a
     /// scene without an environment they are the same bits.
     pub fn environment_ladder(&mut self, spp: u32) -> Vec<Row> {
-        let settings = RenderSettings {
-            samples_per_pixel: spp,
-            ..self.baseline.clone()
-        };
-        let mut rows = Vec::new();
-        let mut first_image = None;
-        for sampling in EnvironmentSampling::ALL {
-            self.world.lights =
-                Lights::with_sampling(&self.world.scene, &self.world.effects, sampling);
-            let (mut row, image) = self.measure(
-                Knob::Environment,
-                sampling.name().to_owned(),
-                settings.clone(),
-            );
-            match &first_image {
-                None => first_image = Some(image),
-                Some(first) => {
-                    row.note = difference_note(&image, first, "importance sampling's image")
-                }
-            }
-            rows.push(row);
-        }
+        let settings = self.at_spp(spp);
+        let rows = self.compared_ladder(
+            Knob::Environment,
+            EnvironmentSampling::ALL,
+            "importance sampling's image",
+            |bench, sampling| {
+                bench.world.lights =
+                    Lights::with_sampling(&bench.world.scene, &bench.world.effects, sampling);
+                (sampling.name().to_owned(), settings.clone())
+            },
+        );
         self.world.lights = Lights::new(&self.world.scene, &self.world.effects);
         rows
     }
@@ -366,23 +332,56 @@ impl<'a> Bench<'a> {
     /// dispersive glass (the default), spectral from the camera with three hero wavelengths,
     /// with one. All unbiased for the same image; they differ in noise and time.
     pub fn spectral_ladder(&mut self, spp: u32) -> Vec<Row> {
-        let settings = RenderSettings {
+        let settings = self.at_spp(spp);
+        let rows = self.compared_ladder(
+            Knob::Spectral,
+            SpectralSampling::ALL,
+            "the RGB render's image",
+            |bench, sampling| {
+                bench.world.spectral = sampling;
+                (sampling.name().to_owned(), settings.clone())
+            },
+        );
+        self.world.spectral = SpectralSampling::default();
+        rows
+    }
+
+    /// The baseline settings at `spp` samples per pixel.
+    pub(super) fn at_spp(&self, spp: u32) -> RenderSettings {
+        RenderSettings {
             samples_per_pixel: spp,
             ..self.baseline.clone()
-        };
+        }
+    }
+
+    /// One rung per choice, each set up by `set` (on the world, and by the settings and name it
+    /// returns) and its image compared with the first rung's, which `first` names in the notes;
+    /// a rung's own note (samples dropped) is kept after the comparison.
+    pub(super) fn compared_ladder<T>(
+        &mut self,
+        knob: Knob,
+        choices: impl IntoIterator<Item = T>,
+        first: &str,
+        mut set: impl FnMut(&mut Self, T) -> (String, RenderSettings),
+    ) -> Vec<Row> {
         let mut rows = Vec::new();
         let mut first_image = None;
-        for sampling in SpectralSampling::ALL {
-            self.world.spectral = sampling;
-            let (mut row, image) =
-                self.measure(Knob::Spectral, sampling.name().to_owned(), settings.clone());
+        for choice in choices {
+            let (name, settings) = set(self, choice);
+            let (mut row, image) = self.measure(knob, name, settings);
             match &first_image {
                 None => first_image = Some(image),
-                Some(first) => row.note = difference_note(&image, first, "the RGB render's image"),
+                Some(first_image) => {
+                    let note = difference_note(&image, first_image, first);
+                    row.note = if row.note.is_empty() {
+                        note
+                    } else {
+                        format!("{note}; {}", row.note)
+                    };
+                }
             }
             rows.push(row);
         }
-        self.world.spectral = SpectralSampling::default();
         rows
     }
 

@@ -12,35 +12,25 @@
 //! rays; read this ladder's seconds, or run it with `--cost time`.
 
 use super::Knob;
-use super::bench::{Bench, Row, difference_note};
+use super::bench::{Bench, Row};
 use tracer::medium::MediaSampling;
 use tracer::scene::RenderSettings;
 
 impl Bench<'_> {
     /// Each of [`MediaSampling::LADDER`] at `spp`; each image is compared with the default's.
     pub fn media_ladder(&mut self, spp: u32) -> Vec<Row> {
-        let mut rows = Vec::new();
-        let mut first_image = None;
-        for media in MediaSampling::LADDER {
-            let settings = RenderSettings {
-                samples_per_pixel: spp,
-                media,
-                ..self.baseline.clone()
-            };
-            let (mut row, image) = self.measure(Knob::Media, media.name(), settings);
-            match &first_image {
-                None => first_image = Some(image),
-                Some(first) => {
-                    let note = difference_note(&image, first, "the analytic default's image");
-                    row.note = if row.note.is_empty() {
-                        note
-                    } else {
-                        format!("{note}; {}", row.note)
-                    };
-                }
-            }
-            rows.push(row);
-        }
-        rows
+        let at_spp = self.at_spp(spp);
+        self.compared_ladder(
+            Knob::Media,
+            MediaSampling::LADDER,
+            "the analytic default's image",
+            |_, media| {
+                let settings = RenderSettings {
+                    media,
+                    ..at_spp.clone()
+                };
+                (media.name(), settings)
+            },
+        )
     }
 }
