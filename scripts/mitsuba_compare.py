@@ -100,11 +100,18 @@ def main():
     )
     parser.add_argument("--variants", default="llvm_ad_rgb,scalar_rgb")
     parser.add_argument("--tolerance", type=float, default=0.01, help="allowed relative difference of channel means")
+    parser.add_argument(
+        "--integrator",
+        choices=["auto", "path", "volpath"],
+        default="auto",
+        help="Mitsuba's integrator: auto is volpath where the scene has media, else path; forcing volpath "
+        "on a scene without media measures what a renderer that always tracks media pays",
+    )
     parser.add_argument("--worker", nargs=3, metavar=("VARIANT", "TOML", "EXR"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         variant, toml, exr = args.worker
-        print(json.dumps(render_mitsuba(variant, Path(toml), Path(exr), args.size, args.spp, args.segments)))
+        print(json.dumps(render_mitsuba(variant, Path(toml), Path(exr), args.size, args.spp, args.segments, args.integrator)))
         return
 
     present = [Path(s) for s in args.scenes if scene_files_present(Path(s))]
@@ -135,7 +142,7 @@ def main():
             rows.append(row)
     report = {
         "settings": {"size": args.size, "spp": args.spp, "segments": args.segments, "tessera_max_depth": args.segments - 1,
-                     "tolerance": args.tolerance},
+                     "tolerance": args.tolerance, "mitsuba_integrator": args.integrator},
         "mtl_mapping": MTL_MAPPING,
         "media_mapping": MEDIA_MAPPING,
         "cores": os.cpu_count(),
@@ -158,6 +165,7 @@ def scene_files_present(toml):
 def run_worker(variant, toml, exr, args):
     command = [sys.executable, __file__, "--worker", variant, str(toml), str(exr)]
     command += ["--size", str(args.size), "--spp", str(args.spp), "--segments", str(args.segments)]
+    command += ["--integrator", args.integrator]
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode != 0:
         return {"error": done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"exit {done.returncode}"}
@@ -278,7 +286,7 @@ def fmt_load(load):
 # --- The Mitsuba side, run in a process of its own per (variant, scene). ---
 
 
-def render_mitsuba(variant, toml, exr, size, spp, segments):
+def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto"):
     import drjit as dr
     import mitsuba as mi
 
@@ -324,7 +332,8 @@ def render_mitsuba(variant, toml, exr, size, spp, segments):
             shapes[f"shape-{index}-{name}"] = mesh
     description = {
         "type": "scene",
-        "integrator": {"type": "volpath" if media else "path", "max_depth": segments},
+        "integrator": {"type": integrator if integrator != "auto" else "volpath" if media else "path",
+                       "max_depth": segments},
         "sensor": {
             "type": "perspective",
             "fov": camera.get("vfov", 40.0),
