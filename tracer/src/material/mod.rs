@@ -53,9 +53,14 @@ pub struct Material {
     pub emission: Vec3,
     /// The medium filling the closed object this material bounds (an index into
     /// `Scene::media`), for glass and interfaces; `None` is vacuum. A path that crosses the
-    /// surface against its normal enters this medium, and one that crosses it along the normal
-    /// returns to the scene's outside medium (`Scene::camera_medium`).
+    /// surface against its normal enters this medium.
     pub interior: Option<u32>,
+    /// The medium around the closed object this material bounds (an index into
+    /// `Scene::media`; `None` is vacuum): a path that crosses the surface along its normal
+    /// enters it. A scene's loader makes it the camera's medium (`Scene::camera_medium`) unless
+    /// the scene names another, the medium of an object that encloses this one (pbrt-v4's
+    /// `MediumInterface`, Mitsuba 3's `exterior`).
+    pub exterior: Option<u32>,
 }
 
 /// The closed set of scattering models.
