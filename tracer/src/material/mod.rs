@@ -90,8 +90,8 @@ pub enum Bsdf {
         /// an MTL's `Ns`, `sqrt(2 / (Ns + 2))`).
         alpha: f32,
     },
-    /// Smooth glass: Fresnel reflection and refraction with index `ior` (outside is vacuum), and a
-    /// transmission `tint`.
+    /// Smooth glass: Fresnel reflection and refraction with index `ior` (index 1 outside,
+    /// whatever medium is there), and a transmission `tint`.
     Dielectric {
         /// Index of refraction of the glass relative to vacuum, above 1 for real glass.
         ior: f32,
