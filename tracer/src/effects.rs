@@ -40,8 +40,10 @@
 //!   effect, and scenes without them never touch that code.
 //! - `specular_reflection`, `glossy_reflection`, `refraction`, `diffuse`: reported, and counted
 //!   per sample (refractions); the BSDF is a closed enum, so no code of an absent material runs.
-//! - `media`: a used material binds a medium that is not vacuum, the camera starts in one, or a
-//!   used material is an index-matched interface. Only then does every ray sample a free flight
+//! - `media`: a used material binds a medium that is not vacuum, inside or outside (the
+//!   outside is the camera's medium unless the scene names an enclosing object's, so nested
+//!   media need no rule of their own), the camera starts in one, or a used material is an
+//!   index-matched interface. Only then does every ray sample a free flight
 //!   through the medium it is in and every shadow ray take the transmittance
 //!   ([`crate::medium`]), finding its closest blocker to pass interfaces where the scene has any
 //!   (without one, the any-hit query answers the same). With media forced on in a scene
@@ -155,7 +157,9 @@ impl Effects {
         let media = not_vacuum(scene.camera_medium)
             || scene.all_triangles().any(|t| {
                 let material = &scene.materials[t.material as usize];
-                matches!(material.bsdf, Bsdf::Interface) || not_vacuum(material.interior)
+                matches!(material.bsdf, Bsdf::Interface)
+                    || not_vacuum(material.interior)
+                    || not_vacuum(material.exterior)
             });
         Effects {
             area_lights,

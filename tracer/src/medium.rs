@@ -3,8 +3,11 @@
 //!
 //! A medium fills the interior of a closed object (bound through the object's glass or an
 //! index-matched `interface` boundary) or, as global fog, the space outside every object, which
-//! is where the camera starts ([`crate::scene::Scene::camera_medium`]). Coefficients are per unit
-//! length of the scene and per RGB channel.
+//! is where the camera starts ([`crate::scene::Scene::camera_medium`]). Objects nest: each
+//! boundary names the media on its two sides ([`crate::material::Material::interior`] and
+//! [`crate::material::Material::exterior`], the outside being the camera's medium unless the
+//! scene names an enclosing object's), so a glass inside a smoke-filled box leads paths back
+//! into the smoke. Coefficients are per unit length of the scene and per RGB channel.
 //!
 //! **Tracking method: analytic distance sampling by a hero channel, with spectral MIS over the
 //! three channels at the level of the whole path.** A homogeneous medium's majorant is its own

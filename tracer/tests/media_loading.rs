@@ -158,7 +158,7 @@ fn media_references_are_checked() {
     rejects(
         &scene("type = \"glass\"", media, ""),
         "[media.m]",
-        "[media.m] is used by no material's and not by the camera's `medium`",
+        "[media.m] is used by no material's `medium` or `outside_medium` and not by the camera's `medium`",
     );
     // `medium` applies to glass and interfaces only; interfaces take nothing else.
     rejects(
@@ -179,5 +179,69 @@ fn media_references_are_checked() {
         &scene("type = \"interface\"\nior = 1.3", "", ""),
         "[materials.ball]",
         "key `ior` does not apply to type interface",
+    ); // `outside_medium` likewise: a medium it names must be defined, and only glass and
+    // interfaces bound a medium.
+    rejects(
+        &scene("type = \"glass\"\noutside_medium = \"n\"", media, ""),
+        "outside_medium = \"n\"",
+        "[materials.ball] `outside_medium`: medium `n` is not defined",
     );
+    for kind in ["diffuse", "mirror", "metal"] {
+        rejects(
+            &scene(
+                &format!("type = \"{kind}\"\noutside_medium = \"m\""),
+                media,
+                "",
+            ),
+            "[materials.ball]",
+            &format!("key `outside_medium` does not apply to type {kind}"),
+        );
+    }
+}
+
+#[test]
+fn an_objects_outside_is_the_camera_medium_unless_named() {
+    let two = "[media.fog]\nsigma_s = 0.1\n[media.smoke]\nsigma_s = 2";
+    // Named: the enclosing medium, with or without one inside, whatever the camera is in.
+    for (ball, camera) in [
+        (
+            "type = \"interface\"\nmedium = \"smoke\"\noutside_medium = \"fog\"",
+            "",
+        ),
+        (
+            "type = \"glass\"\nmedium = \"smoke\"\noutside_medium = \"fog\"",
+            "medium = \"smoke\"",
+        ),
+    ] {
+        let s = load_str(&scene(ball, two, camera)).expect("loads");
+        let m = &s.materials[0];
+        let (fog, smoke) = (
+            m.exterior.expect("fog outside"),
+            m.interior.expect("smoke inside"),
+        );
+        assert_eq!(s.media[fog as usize].sigma_s, Vec3::splat(0.1), "{ball}");
+        assert_eq!(s.media[smoke as usize].sigma_s, Vec3::splat(2.0), "{ball}");
+    }
+    // Left out: the camera's medium, vacuum without one, as before media nested.
+    let s = load_str(&scene(
+        "type = \"glass\"\nmedium = \"smoke\"",
+        two,
+        "medium = \"fog\"",
+    ))
+    .expect("loads");
+    assert!(s.camera_medium.is_some());
+    assert_eq!(s.materials[0].exterior, s.camera_medium);
+    assert_ne!(s.materials[0].exterior, s.materials[0].interior);
+    let s = load_str(&scene(
+        "type = \"glass\"\noutside_medium = \"fog\"",
+        "[media.fog]\nsigma_s = 0.1",
+        "",
+    ))
+    .expect("loads");
+    assert_eq!(
+        (s.materials[0].interior, s.materials[0].exterior),
+        (None, Some(0))
+    );
+    let s = load_str(&scene("type = \"glass\"", "", "")).expect("loads");
+    assert_eq!(s.materials[0].exterior, None);
 }

@@ -5,8 +5,12 @@
 //! A path starts in the camera's medium (`Scene::camera_medium`, vacuum when there is none) and
 //! changes medium only where it crosses a surface: through glass (a refraction) or an
 //! index-matched interface. Crossing against the surface's normal enters the material's
-//! interior medium, crossing along it returns to the outside medium. Objects therefore hold one
-//! medium each inside the outside one; a medium-filled object inside another is not modelled.
+//! interior medium, crossing along it its exterior one, which is the camera's medium unless the
+//! scene names the medium of an enclosing object (`outside_medium`). So media nest as pbrt-v4's
+//! `MediumInterface` nests them: each surface says what lies on its two sides, and the path
+//! keeps no stack. Shadow rays follow the same rule: they start in the medium of the point they
+//! leave and cross each interface on their way into the medium its side names, so every
+//! segment's transmittance is taken in the medium that segment lies in.
 
 use super::World;
 use crate::geometry::{Moment, Ray};
@@ -106,13 +110,13 @@ impl World {
         })
     }
 
-    /// The medium beyond a surface of `material` that a path crosses, entering the object when
-    /// it arrived on the front side (`front_facing`).
+    /// The medium beyond a surface of `material` that a path crosses: the object's inside when
+    /// it arrived on the front side (`front_facing`), else the object's outside.
     pub(super) fn medium_across(&self, material: &Material, front_facing: bool) -> Option<u32> {
         if front_facing {
             material.interior
         } else {
-            self.scene.camera_medium
+            material.exterior
         }
     }
 

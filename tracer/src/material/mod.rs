@@ -53,9 +53,14 @@ pub struct Material {
     pub emission: Vec3,
     /// The medium filling the closed object this material bounds (an index into
     /// `Scene::media`), for glass and interfaces; `None` is vacuum. A path that crosses the
-    /// surface against its normal enters this medium, and one that crosses it along the normal
-    /// returns to the scene's outside medium (`Scene::camera_medium`).
+    /// surface against its normal enters this medium.
     pub interior: Option<u32>,
+    /// The medium around the closed object this material bounds (an index into
+    /// `Scene::media`; `None` is vacuum): a path that crosses the surface along its normal
+    /// enters it. A scene's loader makes it the camera's medium (`Scene::camera_medium`) unless
+    /// the scene names another, the medium of an object that encloses this one (pbrt-v4's
+    /// `MediumInterface`, Mitsuba 3's `exterior`).
+    pub exterior: Option<u32>,
 }
 
 /// The closed set of scattering models.
@@ -85,8 +90,8 @@ pub enum Bsdf {
         /// an MTL's `Ns`, `sqrt(2 / (Ns + 2))`).
         alpha: f32,
     },
-    /// Smooth glass: Fresnel reflection and refraction with index `ior` (outside is vacuum), and a
-    /// transmission `tint`.
+    /// Smooth glass: Fresnel reflection and refraction with index `ior` (index 1 outside,
+    /// whatever medium is there), and a transmission `tint`.
     Dielectric {
         /// Index of refraction of the glass relative to vacuum, above 1 for real glass.
         ior: f32,

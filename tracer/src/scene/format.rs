@@ -211,6 +211,8 @@ pub(crate) struct MaterialSpec {
     pub emission: Option<Radiance>,
     /// The medium inside the object (glass and interfaces only).
     pub medium: Option<Spanned<String>>,
+    /// The medium outside the object (glass and interfaces only); the camera's when left out.
+    pub outside_medium: Option<Spanned<String>>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]

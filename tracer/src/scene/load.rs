@@ -111,6 +111,7 @@ pub fn load_with_report(
         Some(name) => Some(builder.table.media.medium("[camera] `medium`", name)?),
         None => None,
     };
+    builder.table.place_outside(camera_medium);
     if let Some(unused) = builder.table.media.unused_definition() {
         return Err(unused);
     }

@@ -1,7 +1,8 @@
 //! The scene's material, texture and medium tables.
 //!
-//! Media (`[media.NAME]`) enter the same way, when a material's or the camera's `medium` key
-//! first names them ([`MediumTable`]), and a table that nothing uses is an error.
+//! Media (`[media.NAME]`) enter the same way, when a material's `medium` or `outside_medium`
+//! key or the camera's `medium` first names them ([`MediumTable`]), and a table that nothing
+//! uses is an error.
 //!
 //! Materials come from two places: `[materials.NAME]` tables of the TOML and `newmtl` blocks of
 //! MTL files. A TOML table replaces every MTL material of the same name, which is how a scene
@@ -28,6 +29,9 @@ pub(crate) struct MaterialTable<'a> {
     used_defined: BTreeSet<String>,
     pub materials: Vec<Material>,
     ids: BTreeMap<MaterialKey, u32>,
+    /// The materials whose `outside_medium` the TOML names; every other material's outside is
+    /// the camera's medium ([`MaterialTable::place_outside`]).
+    outside_named: BTreeSet<u32>,
     pub textures: Vec<Texture>,
     /// Decoded textures by path relative to the scene's folder.
     texture_ids: BTreeMap<String, u32>,
@@ -57,6 +61,7 @@ impl<'a> MaterialTable<'a> {
             used_defined: BTreeSet::new(),
             materials: Vec::new(),
             ids: BTreeMap::new(),
+            outside_named: BTreeSet::new(),
             textures: Vec::new(),
             texture_ids: BTreeMap::new(),
         }
@@ -82,7 +87,11 @@ impl<'a> MaterialTable<'a> {
         };
         let material = self.define(log, definition, spec)?;
         self.used_defined.insert(name.get_ref().clone());
-        Ok(self.add(key, material))
+        let id = self.add(key, material);
+        if spec.outside_medium.is_some() {
+            self.outside_named.insert(id);
+        }
+        Ok(id)
     }
 
     /// The id of an MTL material, or of the TOML material that replaces it.
@@ -123,6 +132,17 @@ impl<'a> MaterialTable<'a> {
         )
     }
 
+    /// Gives every material whose TOML does not name its `outside_medium` (MTL materials
+    /// among them) the camera's medium `camera_medium` outside: the one outside medium that
+    /// objects held before media could nest, so scenes without the key keep their meaning.
+    pub(crate) fn place_outside(&mut self, camera_medium: Option<u32>) {
+        for (id, material) in (0u32..).zip(&mut self.materials) {
+            if !self.outside_named.contains(&id) {
+                material.exterior = camera_medium;
+            }
+        }
+    }
+
     fn add(&mut self, key: MaterialKey, material: Material) -> u32 {
         let id = self.materials.len() as u32;
         self.materials.push(material);
@@ -159,12 +179,13 @@ impl<'a> MaterialTable<'a> {
                     "glass",
                     "tint",
                     "medium",
+                    "outside_medium",
                     "emission",
                 ],
             ),
             MaterialKind::Metal => ("metal", &["reflectance", "roughness", "emission"]),
             MaterialKind::Emissive => ("emissive", &["albedo", "emission"]),
-            MaterialKind::Interface => ("interface", &["medium"]),
+            MaterialKind::Interface => ("interface", &["medium", "outside_medium"]),
         };
         let given = [
             ("albedo", spec.albedo.is_some()),
@@ -177,6 +198,7 @@ impl<'a> MaterialTable<'a> {
             ("tint", spec.tint.is_some()),
             ("roughness", spec.roughness.is_some()),
             ("medium", spec.medium.is_some()),
+            ("outside_medium", spec.outside_medium.is_some()),
             ("emission", spec.emission.is_some()),
         ];
         if let Some((key, _)) = given
@@ -243,18 +265,23 @@ impl<'a> MaterialTable<'a> {
             },
             MaterialKind::Interface => Bsdf::Interface,
         };
-        let interior = match &spec.medium {
+        let mut medium = |key: &str, given: &Option<Spanned<String>>| match given {
             Some(medium) => {
-                let key = format!("[materials.{}] `medium`", name.get_ref());
-                Some(self.media.medium(&key, medium)?)
+                let key = format!("[materials.{}] `{key}`", name.get_ref());
+                self.media.medium(&key, medium).map(Some)
             }
-            None => None,
+            None => Ok(None),
         };
+        let interior = medium("medium", &spec.medium)?;
+        // Left out, the outside is the camera's medium, which is resolved after the objects:
+        // `MaterialTable::place_outside` fills it in then.
+        let exterior = medium("outside_medium", &spec.outside_medium)?;
         Ok(Material {
             name: name.get_ref().clone(),
             bsdf,
             emission,
             interior,
+            exterior,
         })
     }
 
@@ -341,7 +368,9 @@ impl<'a> MediumTable<'a> {
     /// A `[media.NAME]` table that nothing used.
     pub(crate) fn unused_definition(&self) -> Option<SceneError> {
         unused_table(self.toml, self.text, self.defined, &self.used, |name| {
-            format!("[media.{name}] is used by no material's and not by the camera's `medium`")
+            format!(
+                "[media.{name}] is used by no material's `medium` or `outside_medium` and not by the camera's `medium`"
+            )
         })
     }
 }

@@ -197,6 +197,9 @@ impl MtlMaterial {
             emission,
             // MTL has no media; a TOML material of the same name can bind one.
             interior: None,
+            // The loader puts every MTL material in the camera's medium
+            // (`MaterialTable::place_outside`).
+            exterior: None,
         })
     }
 
