@@ -105,8 +105,8 @@ pub fn basis(nm: f32) -> Vec3 {
 }
 
 /// The RGB a unit of spectral radiance at `nm` adds, per unit of wavelength: the CIE 1931
-/// observer weighted by D65, in linear sRGB. Negative where the wavelength's hue lies outside
-/// sRGB's gamut, as every monochromatic hue but none does.
+/// observer weighted by D65, in linear sRGB. Some channel is negative at every
+/// wavelength: monochromatic light lies outside sRGB's gamut.
 pub fn sensor(nm: f32) -> Vec3 {
     interpolate(&primaries::SENSOR, nm)
 }
