@@ -13,48 +13,54 @@
 //!
 //! **Hero wavelengths, three of them** (Wilkie et al. 2014; pbrt-v4's `SampledWavelengths`). A
 //! spectral path carries three wavelengths in the slots where an RGB path carries its channels,
-//! `l_i = 400 + 300 frac(u + i / 3)` nm (one uniform `u`, the others stratified from it), so the
+//! `l_i = 380 + 400 frac(u + i / 3)` nm (one uniform `u`, the others stratified from it), so the
 //! integrator's arithmetic, its Russian roulette and the media's hero-channel MIS
 //! ([`crate::medium`]: there it becomes pbrt's spectral MIS over wavelengths) run unchanged on
-//! them. pbrt carries four; three is what fits the integrator's colour type, and the variance
-//! difference is small next to what dispersion itself adds. A dispersive surface bends each
-//! wavelength its own way but a path has one direction, so there the secondaries end (pbrt's
-//! `TerminateSecondary`): the first wavelength goes on with three times its weight, the others
-//! with none.
+//! them. pbrt carries four; three is what fits the integrator's colour type. A dispersive surface
+//! bends each wavelength its own way but a path has one direction, so there the secondaries end
+//! (pbrt's `TerminateSecondary`): the first wavelength goes on with three times its weight, the
+//! others with none. The range is 380-780 nm, the CIE's own 5 nm tables': the observer outside it
+//! holds under 0.01 % of its luminance, and sampling further would spend wavelengths on nothing.
+//!
+//! **The sensor is the CIE 1931 observer.** A spectral path's pixel value is
+//! `sum_i S(l_i) L(l_i) / (3 p(l))`, `p` the uniform density over the range, with the sensor
+//! `S(l) = M xyz_bar(l) D65(l) / Y_D65`: the 2-degree colour-matching functions, through the XYZ
+//! to linear sRGB matrix `M`, weighted by D65 (sRGB's white) and normalised so that the constant
+//! spectrum 1 is RGB (1, 1, 1). The weighting stands in the sensor rather than in the emitters:
+//! emission multiplies the whole path, so it is the same thing, and nothing else changes. So a
+//! prism spreads white into a spectrum's hues, violet through cyan to deep red.
 //!
 //! **From RGB to a spectrum and back: a partition of unity.** An RGB value `v` is the spectrum
-//! `v . B(l)`, with `B = (red, green, blue)` three smooth bands that sum to exactly 1 at every
-//! wavelength (a spectral primary decomposition, as Mallett and Yuksel's 2019 upsampling of sRGB
-//! reflectances, with bands of our own instead of their fitted primaries): white stays exactly
-//! white, and an albedo in [0, 1] stays in [0, 1] at every wavelength, so energy is conserved by
-//! construction. A spectrum goes back to RGB through the sensor `S(l) = M^-1 B(l) / |B|`, where
-//! `|B|` is each band's integral and `M` the bands' overlap matrix, `M_cd = <B_c, B_d> / |B_c|`:
-//! then `integral S(l) B(l)^T dl` is the identity, so an RGB value turned into a spectrum and
-//! measured comes back exactly, in expectation. A spectral path's pixel value is
-//! `sum_i S(l_i) L(l_i) / (3 p(l))`, `p` the uniform density over 400-700 nm.
-//! This sensor is a three-band model, not the CIE 1931 observer; what it gives is an exact round
-//! trip for RGB scenes, so that a spectral render of an RGB scene has the RGB render's mean.
+//! `v . B(l)`, with `B = (red, green, blue)` the spectral primaries of Mallett and Yuksel 2019
+//! (EGSR, "Spectral Primary Decomposition for Rendering with sRGB Reflectance"): the smoothest
+//! three spectra with `B >= 0`, `B_r + B_g + B_b = 1` at every wavelength and
+//! `integral S_c B_d dl = delta_cd`. So an RGB value turned into a spectrum and measured comes
+//! back exactly, in expectation (a spectral render of an RGB scene has the RGB render's mean),
+//! white stays exactly white, and an albedo in [0, 1] stays in [0, 1] at every wavelength, so
+//! energy is conserved by construction. `scripts/fit_spectral_primaries.py` fits them and writes
+//! both `B` and `S`, every 5 nm, into [`primaries`] (generated; its docstring gives the CIE data's
+//! provenance); both are read by linear interpolation, and the fit's integrals are those of the
+//! interpolants, so the identity holds for what the tracer reads, to about 1e-8.
 //!
-//! **Media** stay per RGB channel: a wavelength sees the coefficients of the band it falls in
-//! most (red from 580 nm, green from 490 nm, blue below), which is a medium whose spectrum is
-//! piecewise constant, so a spectral path through it is exact for that medium.
+//! **Media** stay per RGB channel: a wavelength sees the coefficients of the band that weighs
+//! most there (blue below about 490 nm, green to about 590 nm, red beyond; the red band's small
+//! violet lobe never leads), which is a medium whose spectrum is piecewise constant, so a
+//! spectral path through it is exact for that medium.
 //!
 //! Everything here is basic IEEE arithmetic, the same on every machine.
 
 use crate::material::Bsdf;
 use crate::medium::Medium;
 use crate::sampler::PixelSampler;
-use glam::{Mat3, Vec3};
+use glam::Vec3;
 
-/// The shortest wavelength sampled, in nanometres.
-pub const LAMBDA_MIN: f32 = 400.0;
-/// The longest wavelength sampled, in nanometres.
-pub const LAMBDA_MAX: f32 = 700.0;
-/// Where the blue band hands over to the green one, and the green to the red (nanometres).
-const BLUE_GREEN: f32 = 490.0;
-const GREEN_RED: f32 = 580.0;
-/// The width of each hand-over, a smoothstep.
-const BLEND: f32 = 40.0;
+mod primaries;
+
+/// The shortest wavelength sampled, in nanometres: the first of the fitted table's.
+pub const LAMBDA_MIN: f32 = primaries::FIRST_NM;
+/// The longest wavelength sampled, in nanometres: the last of the fitted table's.
+pub const LAMBDA_MAX: f32 =
+    primaries::FIRST_NM + primaries::STEP_NM * (primaries::SAMPLES - 1) as f32;
 
 /// Which wavelengths a render samples: the sampling choice dispersion brings (a comparison knob
 /// for `tessera accuracy` and `tessera bench`, like [`crate::lights::EnvironmentSampling`]).
@@ -92,48 +98,36 @@ impl SpectralSampling {
     }
 }
 
-/// The (red, green, blue) weights of the wavelength `nm`: three smooth bands summing to 1.
+/// The (red, green, blue) weights of the wavelength `nm`: the fitted spectral primaries, at
+/// least 0 and summing to 1 (to within a rounding) at every wavelength.
 pub fn basis(nm: f32) -> Vec3 {
-    let smoothstep = |t: f32| {
-        let t = t.clamp(0.0, 1.0);
-        t * t * (3.0 - 2.0 * t)
-    };
-    let blue = 1.0 - smoothstep((nm - (BLUE_GREEN - 0.5 * BLEND)) / BLEND);
-    let red = smoothstep((nm - (GREEN_RED - 0.5 * BLEND)) / BLEND);
-    // The hand-overs do not overlap, so at most one of `red` and `blue` is above zero.
-    Vec3::new(red, 1.0 - red - blue, blue)
+    interpolate(&primaries::BANDS, nm)
 }
 
-/// The RGB a unit of spectral radiance at `nm` adds, per unit of wavelength.
+/// The RGB a unit of spectral radiance at `nm` adds, per unit of wavelength: the CIE 1931
+/// observer weighted by D65, in linear sRGB. Some channel is negative at every
+/// wavelength: monochromatic light lies outside sRGB's gamut.
 pub fn sensor(nm: f32) -> Vec3 {
-    let (overlap_inverse, band) = sensor_matrix();
-    overlap_inverse * (basis(nm) / band)
+    interpolate(&primaries::SENSOR, nm)
 }
 
-/// `M^-1` and the bands' integrals `|B|`, in closed form: each hand-over is a smoothstep `s`
-/// over [`BLEND`], and `integral s (1 - s) = 9 / 70` of its width.
-fn sensor_matrix() -> (Mat3, Vec3) {
-    let band = Vec3::new(
-        LAMBDA_MAX - GREEN_RED,
-        GREEN_RED - BLUE_GREEN,
-        BLUE_GREEN - LAMBDA_MIN,
-    );
-    let o = BLEND * 9.0 / 70.0;
-    let rows = [
-        Vec3::new(band.x - o, o, 0.0) / band.x,
-        Vec3::new(o, band.y - 2.0 * o, o) / band.y,
-        Vec3::new(0.0, o, band.z - o) / band.z,
-    ];
-    let overlap = Mat3::from_cols(rows[0], rows[1], rows[2]).transpose();
-    (overlap.inverse(), band)
+/// `table` read at `nm` by linear interpolation between its samples, clamped to its range.
+fn interpolate(table: &[[f32; 3]; primaries::SAMPLES], nm: f32) -> Vec3 {
+    let last = primaries::SAMPLES - 1;
+    let x = ((nm - primaries::FIRST_NM) / primaries::STEP_NM).clamp(0.0, last as f32);
+    // `x` is at least 0, so the cast truncates towards the sample below; at the range's end
+    // that sample is the last but one, with `t` = 1.
+    let i = (x as usize).min(last - 1);
+    let t = x - i as f32;
+    Vec3::from(table[i]) * (1.0 - t) + Vec3::from(table[i + 1]) * t
 }
 
-/// The band (0 red, 1 green, 2 blue) a wavelength falls in most: which RGB channel of a medium
-/// it sees.
-fn channel(nm: f32) -> usize {
-    if nm >= GREEN_RED {
+/// The band (0 red, 1 green, 2 blue) a wavelength falls in most, from its weights: which RGB
+/// channel of a medium it sees. A tie goes to the redder band.
+fn channel(weights: Vec3) -> usize {
+    if weights.x >= weights.y && weights.x >= weights.z {
         0
-    } else if nm >= BLUE_GREEN {
+    } else if weights.y >= weights.z {
         1
     } else {
         2
@@ -162,10 +156,11 @@ impl Wavelengths {
     }
 
     fn at(nm: [f32; 3]) -> Self {
+        let basis = nm.map(basis);
         Wavelengths {
             nm,
-            basis: nm.map(basis),
-            channel: nm.map(channel),
+            basis,
+            channel: basis.map(channel),
             single: false,
         }
     }
@@ -338,55 +333,142 @@ impl PathSpectrum {
 mod tests {
     use super::*;
 
-    /// The integral over the sampled range of `f`, by the midpoint rule on a fine grid.
-    fn integrate(f: impl Fn(f32) -> Vec3) -> Vec3 {
-        let steps = 30_000;
-        let h = (LAMBDA_MAX - LAMBDA_MIN) / steps as f32;
-        (0..steps)
-            .map(|i| f(LAMBDA_MIN + (i as f32 + 0.5) * h) * h)
-            .fold(Vec3::ZERO, |a, b| a + b)
+    /// The integral over the sampled range of `f`, by the midpoint rule on a fine grid,
+    /// summed in f64 so that the sum's own rounding stays far below the tolerances.
+    fn integrate(f: impl Fn(f32) -> Vec3) -> [f64; 3] {
+        let steps = 40_000;
+        let h = f64::from(LAMBDA_MAX - LAMBDA_MIN) / steps as f64;
+        let mut sum = [0.0f64; 3];
+        for i in 0..steps {
+            let v = f((f64::from(LAMBDA_MIN) + (i as f64 + 0.5) * h) as f32);
+            for (s, v) in sum.iter_mut().zip(v.to_array()) {
+                *s += f64::from(v) * h;
+            }
+        }
+        sum
+    }
+
+    /// The sRGB standard's (IEC 61966-2-1) linear RGB to XYZ matrix, as published, rows X, Y, Z:
+    /// typed in, not derived from the sensor's own matrix.
+    const SRGB_TO_XYZ: [[f32; 3]; 3] = [
+        [0.4124, 0.3576, 0.1805],
+        [0.2126, 0.7152, 0.0722],
+        [0.0193, 0.1192, 0.9505],
+    ];
+
+    fn xyz(rgb: Vec3) -> Vec3 {
+        let row = |r: [f32; 3]| Vec3::from(r).dot(rgb);
+        Vec3::new(
+            row(SRGB_TO_XYZ[0]),
+            row(SRGB_TO_XYZ[1]),
+            row(SRGB_TO_XYZ[2]),
+        )
     }
 
     #[test]
     fn the_bands_are_a_partition_of_unity_in_zero_one() {
-        for i in 0..=3000 {
-            let b = basis(LAMBDA_MIN + i as f32 * 0.1);
-            assert_eq!(
-                b.x + b.y + b.z,
-                1.0,
-                "at {} nm",
-                LAMBDA_MIN + i as f32 * 0.1
+        for i in 0..=4000 {
+            let nm = LAMBDA_MIN + i as f32 * 0.1;
+            let b = basis(nm);
+            let sum = b.x + b.y + b.z;
+            assert!((sum - 1.0).abs() <= 2.0 * f32::EPSILON, "{sum} at {nm} nm");
+            assert!(
+                b.min_element() >= 0.0 && b.max_element() <= 1.0,
+                "{b} at {nm} nm"
             );
-            assert!(b.min_element() >= 0.0 && b.max_element() <= 1.0);
         }
-        assert_eq!(basis(450.0), Vec3::Z);
-        assert_eq!(basis(530.0), Vec3::Y);
-        assert_eq!(basis(650.0), Vec3::X);
+        // Where the table has a sample, the sum is exactly one: the script saw to it in f32.
+        for i in 0..primaries::SAMPLES {
+            let b = Vec3::from(primaries::BANDS[i]);
+            assert_eq!(b.x + b.y + b.z, 1.0, "sample {i}");
+        }
+        // Violet and blue light falls mostly in the blue band, green in the green, red in the red.
+        assert_eq!(channel(basis(450.0)), 2);
+        assert_eq!(channel(basis(530.0)), 1);
+        assert_eq!(channel(basis(650.0)), 0);
     }
 
     #[test]
     fn rgb_to_spectrum_and_back_is_the_identity() {
-        // The closed-form overlap matrix against numerical integration of S(l) B(l)^T.
+        // The sensor measures each band as exactly its own channel, through the tracer's own
+        // interpolation of the table, integrated independently of the script's quadrature.
         for (c, unit) in [Vec3::X, Vec3::Y, Vec3::Z].into_iter().enumerate() {
             let measured = integrate(|nm| sensor(nm) * basis(nm).dot(unit));
+            for (d, m) in measured.into_iter().enumerate() {
+                let expected = if c == d { 1.0 } else { 0.0 };
+                assert!((m - expected).abs() < 1e-4, "band {c}, channel {d}: {m}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_equal_energy_spectrum_is_white() {
+        // The sensor carries D65's weighting: the constant spectrum 1 (a unit reflectance under
+        // the D65 the sensor assumes) is RGB (1, 1, 1), sRGB's white.
+        let white = integrate(sensor);
+        for w in white {
+            assert!((w - 1.0).abs() < 1e-4, "{white:?}");
+        }
+    }
+
+    #[test]
+    fn monochromatic_light_lies_on_the_spectral_locus() {
+        // CIE 1931 2-degree chromaticity coordinates (x, y) of monochromatic light, from the
+        // CIE's published table (CIE 015:2018), typed in. They are given to five decimals and
+        // the sRGB matrices to four, which bounds how close the sensor can come.
+        let locus = [
+            (450.0, 0.15664, 0.01771),
+            (475.0, 0.10959, 0.08684),
+            (500.0, 0.00817, 0.53842),
+            (520.0, 0.07430, 0.83380),
+            (550.0, 0.30160, 0.69231),
+            (600.0, 0.62704, 0.37249),
+            (650.0, 0.72599, 0.27401),
+            (700.0, 0.73469, 0.26531),
+        ];
+        for (nm, x, y) in locus {
+            let c = xyz(sensor(nm));
+            let sum = c.x + c.y + c.z;
+            let (seen_x, seen_y) = (c.x / sum, c.y / sum);
             assert!(
-                (measured - unit).abs().max_element() < 1e-3,
-                "channel {c}: {measured}"
+                (seen_x - x).abs() < 3e-4 && (seen_y - y).abs() < 3e-4,
+                "{nm} nm: ({seen_x}, {seen_y}), the CIE gives ({x}, {y})"
             );
         }
-        // A flat spectrum is white.
-        let white = integrate(sensor);
-        assert!((white - Vec3::ONE).abs().max_element() < 1e-3, "{white}");
+    }
+
+    #[test]
+    fn the_sensors_luminance_is_y_bar_times_d65() {
+        // y_bar (CIE 1931, 5 nm table) and D65's relative power (ISO 11664-2) as published,
+        // typed in; the luminance the sensor gives a wavelength, relative to 560 nm's, must be
+        // their product's.
+        let at_560 = 0.995 * 100.0;
+        let published = [
+            (450.0, 0.038, 117.008),
+            (500.0, 0.323, 109.354),
+            (600.0, 0.631, 90.006),
+            (650.0, 0.107, 80.027),
+        ];
+        let luminance = |nm: f32| xyz(sensor(nm)).y;
+        for (nm, y_bar, d65) in published {
+            let seen = luminance(nm) / luminance(560.0);
+            let expected = y_bar * d65 / at_560;
+            assert!(
+                (seen / expected - 1.0).abs() < 2e-3,
+                "{nm} nm: {seen}, published {expected}"
+            );
+        }
     }
 
     #[test]
     fn hero_wavelengths_are_stratified_and_cover_the_range() {
+        let third = (LAMBDA_MAX - LAMBDA_MIN) / 3.0;
         for u in [0.0f32, 0.2, 0.5, 0.999] {
             let w = Wavelengths::sample(u);
             let mut nm = w.nm;
             nm.sort_by(f32::total_cmp);
             assert!(nm[0] >= LAMBDA_MIN && nm[2] < LAMBDA_MAX, "{nm:?}");
-            assert!((nm[1] - nm[0] - 100.0).abs() < 1e-3 && (nm[2] - nm[1] - 100.0).abs() < 1e-3);
+            assert!((nm[1] - nm[0] - third).abs() < 1e-3 && (nm[2] - nm[1] - third).abs() < 1e-3);
         }
     }
 

@@ -55,11 +55,11 @@ fn every_way_of_giving_an_index_loads() {
 fn bad_indices_are_refused_at_their_line_and_key() {
     #[rustfmt::skip]
     let cases = [
-        ("type = \"glass\"\ncauchy = [0.9, 0.01]", 3, "at least 1 over 400-700 nm (key `materials.g.cauchy`)"),
+        ("type = \"glass\"\ncauchy = [0.9, 0.01]", 3, "at least 1 over 380-780 nm (key `materials.g.cauchy`)"),
         ("type = \"glass\"\ncauchy = [1.5]", 3, "two numbers `[A, B]`, not 1 (key `materials.g.cauchy`)"),
         ("type = \"glass\"\ncauchy = [1.5, -0.01]", 3, "must not be negative"),
         ("type = \"glass\"\ncauchy = [1.5, nan]", 3, "finite"),
-        ("type = \"glass\"\nsellmeier = [1, 0, 0, 0.25, 0, 0]", 3, "pole at 500 nm, inside the rendered range 400-700 nm (key `materials.g.sellmeier`)"),
+        ("type = \"glass\"\nsellmeier = [1, 0, 0, 0.25, 0, 0]", 3, "pole at 500 nm, inside the rendered range 380-780 nm (key `materials.g.sellmeier`)"),
         ("type = \"glass\"\nsellmeier = [1, 0, 0]", 3, "six numbers"),
         ("type = \"glass\"\nsellmeier = [-1, 0, 0, 0.01, 0, 0]", 3, "no coefficient may be negative"),
         ("type = \"glass\"\nsellmeier = [0, 0, 1, 0, 0, 1.0]", 3, "at least 1"),

@@ -154,16 +154,21 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
         ],
         [3, 6, 6, 5, 3, 2, 3, 3, 6]
     );
-    // The furnace is white: the spectral rungs differ from the RGB one by noise alone.
+    // The furnace is white: the spectral rungs differ from the RGB one by noise alone. The
+    // CIE sensor makes one wavelength per path noisy (its channels' sum varies with the
+    // wavelength), so the bound is four standard errors of the image mean, estimated from the
+    // rung's own RMSE over the last run's 8 x 8 x 3 values, and never tighter than 5 %.
+    let values = (8 * 8 * 3) as f64;
     for row in rows.iter().filter(|r| r["knob"] == "spectral").skip(1) {
         assert!(
             row["note"].starts_with("differs"),
             "an always-spectral render gave the RGB render's bits: {row:?}"
         );
         let bias = number(row, "mean_bias").abs();
+        let bound = (4.0 * number(row, "rmse") / values.sqrt()).max(0.05);
         assert!(
-            bias < 0.05,
-            "a spectral white furnace is off by {bias}: {row:?}"
+            bias < bound,
+            "a spectral white furnace is off by {bias}, beyond {bound}: {row:?}"
         );
     }
     // The binary tree opens other nodes than the 4-wide one, never another hit.
