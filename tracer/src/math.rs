@@ -39,6 +39,21 @@ pub fn powf(x: f32, y: f32) -> f32 {
     libm::powf(x, y)
 }
 
+/// The hyperbolic tangent of `x`.
+pub fn tanh(x: f32) -> f32 {
+    libm::tanhf(x)
+}
+
+/// The inverse hyperbolic tangent of `x`, for `x` in (-1, 1).
+pub fn atanh(x: f32) -> f32 {
+    libm::atanhf(x)
+}
+
+/// The hyperbolic cosine of `x`.
+pub fn cosh(x: f32) -> f32 {
+    libm::coshf(x)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -13,7 +13,9 @@
 //!
 //! **Hero wavelengths, three of them** (Wilkie et al. 2014; pbrt-v4's `SampledWavelengths`). A
 //! spectral path carries three wavelengths in the slots where an RGB path carries its channels,
-//! `l_i = 380 + 400 frac(u + i / 3)` nm (one uniform `u`, the others stratified from it), so the
+//! drawn where the eye sees most ([`visible`], pbrt's `SampleVisibleWavelengths`) at
+//! `u`, `u + 1/3` and `u + 2/3` of that density's CDF (one uniform `u`, the others stratified
+//! from it), so the
 //! integrator's arithmetic, its Russian roulette and the media's hero-channel MIS
 //! ([`crate::medium`]: there it becomes pbrt's spectral MIS over wavelengths) run unchanged on
 //! them. pbrt carries four; three is what fits the integrator's colour type. A dispersive surface
@@ -23,7 +25,7 @@
 //! holds under 0.01 % of its luminance, and sampling further would spend wavelengths on nothing.
 //!
 //! **The sensor is the CIE 1931 observer.** A spectral path's pixel value is
-//! `sum_i S(l_i) L(l_i) / (3 p(l))`, `p` the uniform density over the range, with the sensor
+//! `sum_i S(l_i) L(l_i) / (3 p(l_i))`, `p` the wavelengths' density, with the sensor
 //! `S(l) = M xyz_bar(l) D65(l) / Y_D65`: the 2-degree colour-matching functions, through the XYZ
 //! to linear sRGB matrix `M`, weighted by D65 (sRGB's white) and normalised so that the constant
 //! spectrum 1 is RGB (1, 1, 1). The weighting stands in the sensor rather than in the emitters:
@@ -55,6 +57,7 @@ use crate::sampler::PixelSampler;
 use glam::Vec3;
 
 mod primaries;
+mod visible;
 
 /// The shortest wavelength sampled, in nanometres: the first of the fitted table's.
 pub const LAMBDA_MIN: f32 = primaries::FIRST_NM;
@@ -138,6 +141,9 @@ fn channel(weights: Vec3) -> usize {
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Wavelengths {
     nm: [f32; 3],
+    /// Each wavelength's density per nanometre ([`visible`]; 1 for a monochrome path, which
+    /// does not estimate an integral over wavelengths).
+    pdf: [f32; 3],
     basis: [Vec3; 3],
     channel: [usize; 3],
     /// Only slot 0 carries weight: the secondaries were ended, or never carried.
@@ -145,20 +151,22 @@ struct Wavelengths {
 }
 
 impl Wavelengths {
-    /// Three stratified wavelengths from one uniform `u`.
+    /// Three wavelengths from one uniform `u`, stratified in the density's CDF: at
+    /// `u`, `u + 1/3` and `u + 2/3` (modulo 1) of it.
     fn sample(u: f32) -> Self {
-        let range = LAMBDA_MAX - LAMBDA_MIN;
+        let visible = visible::Visible::new();
         let nm = [0.0f32, 1.0 / 3.0, 2.0 / 3.0].map(|offset| {
             let x = u + offset;
-            LAMBDA_MIN + range * if x >= 1.0 { x - 1.0 } else { x }
+            visible.sample(if x >= 1.0 { x - 1.0 } else { x })
         });
-        Self::at(nm)
+        Self::at(nm, nm.map(|nm| visible.pdf(nm)))
     }
 
-    fn at(nm: [f32; 3]) -> Self {
+    fn at(nm: [f32; 3], pdf: [f32; 3]) -> Self {
         let basis = nm.map(basis);
         Wavelengths {
             nm,
+            pdf,
             basis,
             channel: basis.map(channel),
             single: false,
@@ -214,7 +222,7 @@ impl PathSpectrum {
                 spectrum.terminate_secondary(&mut beta);
             }
             SpectralSampling::Monochrome(nm) => {
-                spectrum.wavelengths = Some(Wavelengths::at([nm; 3]));
+                spectrum.wavelengths = Some(Wavelengths::at([nm; 3], [1.0; 3]));
                 spectrum.monochrome = true;
             }
         }
@@ -319,11 +327,10 @@ impl PathSpectrum {
             None => radiance,
             Some(_) if self.monochrome => radiance,
             Some(w) => {
-                let per_slot = (LAMBDA_MAX - LAMBDA_MIN) / 3.0;
-                let rgb = sensor(w.nm[0]) * radiance.x
-                    + sensor(w.nm[1]) * radiance.y
-                    + sensor(w.nm[2]) * radiance.z;
-                self.gathered_rgb + rgb * per_slot
+                // Each slot estimates the integral over wavelengths by itself; the three
+                // estimates are averaged.
+                let slot = |i: usize, l: f32| sensor(w.nm[i]) * (l / (3.0 * w.pdf[i]));
+                self.gathered_rgb + slot(0, radiance.x) + slot(1, radiance.y) + slot(2, radiance.z)
             }
         }
     }
@@ -462,13 +469,16 @@ mod tests {
 
     #[test]
     fn hero_wavelengths_are_stratified_and_cover_the_range() {
-        let third = (LAMBDA_MAX - LAMBDA_MIN) / 3.0;
+        let visible = visible::Visible::new();
         for u in [0.0f32, 0.2, 0.5, 0.999] {
             let w = Wavelengths::sample(u);
-            let mut nm = w.nm;
-            nm.sort_by(f32::total_cmp);
-            assert!(nm[0] >= LAMBDA_MIN && nm[2] < LAMBDA_MAX, "{nm:?}");
-            assert!((nm[1] - nm[0] - third).abs() < 1e-3 && (nm[2] - nm[1] - third).abs() < 1e-3);
+            // A third of the density apart: the images of u, u + 1/3 and u + 2/3.
+            for (i, offset) in [0.0f32, 1.0 / 3.0, 2.0 / 3.0].into_iter().enumerate() {
+                let x = (u + offset).fract();
+                assert_eq!(w.nm[i], visible.sample(x), "slot {i} of {u}");
+                assert_eq!(w.pdf[i], visible.pdf(w.nm[i]));
+                assert!(w.nm[i] >= LAMBDA_MIN && w.nm[i] < LAMBDA_MAX, "{:?}", w.nm);
+            }
         }
     }
 

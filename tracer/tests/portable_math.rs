@@ -7,9 +7,9 @@
 use std::path::{Path, PathBuf};
 
 /// Methods of `f32` and `f64` that call the C library (or may: LLVM lowers them to libm calls).
-const PLATFORM_CALLS: [&str; 19] = [
-    "sin", "cos", "sin_cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "exp",
-    "exp2", "exp_m1", "ln", "log", "log2", "log10", "powf",
+const PLATFORM_CALLS: [&str; 22] = [
+    "sin", "cos", "sin_cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
+    "asinh", "acosh", "atanh", "exp", "exp2", "exp_m1", "ln", "log", "log2", "log10", "powf",
 ];
 
 fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
