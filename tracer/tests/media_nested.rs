@@ -15,12 +15,10 @@
 
 mod common;
 
-use common::{assert_close, assert_same_bits, mean_and_error, render};
+use common::{assert_close, assert_same_bits, mean_and_error, radiance_under_the_light, render};
 use glam::Vec3;
-use tracer::geometry::Ray;
-use tracer::sampler::PixelSampler;
+use tracer::Effects;
 use tracer::scene::{Scene, load_str};
-use tracer::{Effects, PathStats, World};
 
 fn load(toml: &str) -> Scene {
     load_str(toml).expect("test scene loads")
@@ -74,23 +72,6 @@ fn boxes_under_a_light(d2: f32, m1: &str, m2: &str, nested: bool) -> String {
         {m2}
         "#
     )
-}
-
-/// The radiance of one path from `(3, 1, 0)` to the floor point under the light (the origin),
-/// which sees the light along a vertical shadow ray through both boxes. The camera ray meets
-/// neither box, so the path is deterministic: next-event estimation alone reaches the light.
-fn radiance_under_the_light(scene: Scene) -> (Vec3, PathStats) {
-    let world = World::prepare(scene, None);
-    let origin = Vec3::new(3.0, 1.0, 0.0);
-    let ray = Ray {
-        origin,
-        dir: (Vec3::ZERO - origin).normalize(),
-        t_max: f32::INFINITY,
-    };
-    let mut stats = PathStats::default();
-    let mut sampler = PixelSampler::new(0, 0, 0, 0, 0);
-    let radiance = world.radiance(ray, 0.0, &mut sampler, &mut stats);
-    (radiance, stats)
 }
 
 #[test]

@@ -120,3 +120,21 @@ pub fn load_with(toml: &str, files: &[(&str, Vec<u8>)]) -> Result<Scene, tracer:
     }
     tracer::scene::load_from(&set, "scene.toml")
 }
+
+/// The radiance of one path from `(3, 1, 0)` to the floor point under the light (the origin):
+/// the media tests' scenes put a point light straight above that point, with slabs or boxes of
+/// media between, and keep the camera ray clear of them, so the path is deterministic and
+/// next-event estimation alone reaches the light, along a vertical shadow ray.
+pub fn radiance_under_the_light(scene: Scene) -> (Vec3, PathStats) {
+    let world = World::prepare(scene, None);
+    let origin = Vec3::new(3.0, 1.0, 0.0);
+    let ray = tracer::geometry::Ray {
+        origin,
+        dir: (Vec3::ZERO - origin).normalize(),
+        t_max: f32::INFINITY,
+    };
+    let mut stats = PathStats::default();
+    let mut sampler = tracer::sampler::PixelSampler::new(0, 0, 0, 0, 0);
+    let radiance = world.radiance(ray, 0.0, &mut sampler, &mut stats);
+    (radiance, stats)
+}
