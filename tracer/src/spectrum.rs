@@ -154,7 +154,7 @@ impl Wavelengths {
     /// Three wavelengths from one uniform `u`, stratified in the density's CDF: at
     /// `u`, `u + 1/3` and `u + 2/3` (modulo 1) of it.
     fn sample(u: f32) -> Self {
-        let visible = visible::Visible::new();
+        let visible = &*visible::VISIBLE;
         let nm = [0.0f32, 1.0 / 3.0, 2.0 / 3.0].map(|offset| {
             let x = u + offset;
             visible.sample(if x >= 1.0 { x - 1.0 } else { x })

@@ -17,11 +17,16 @@
 
 use super::{LAMBDA_MAX, LAMBDA_MIN};
 use crate::math;
+use std::sync::LazyLock;
 
 /// Where the density peaks, in nanometres.
 const CENTRE: f32 = 538.0;
 /// How fast it falls off away from [`CENTRE`], per nanometre.
 const SHARPNESS: f32 = 0.0072;
+
+/// The density every spectral path samples: its ends are two `tanh`, worked out once rather
+/// than at each path's start.
+pub(super) static VISIBLE: LazyLock<Visible> = LazyLock::new(Visible::new);
 
 /// The density over the sampled range: its two ends, `tanh(a (l - c))` at
 /// [`LAMBDA_MIN`] and [`LAMBDA_MAX`], which are the inverse CDF's bounds and its normaliser.
