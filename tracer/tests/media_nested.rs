@@ -32,17 +32,38 @@ const MEDIA: [(&str, [f64; 3]); 4] = [
     ("sigma_a = [0.2, 1, 5]", [0.2, 1.0, 5.0]),
 ];
 
+/// The two boxes' materials and media: `a` an interface around `m1`, `b` one around `m2`,
+/// whose outside is `m1` when `nested` (else the camera's vacuum, as before media nested).
+fn nested_boundaries(m1: &str, m2: &str, nested: bool) -> String {
+    let outside = if nested {
+        "outside_medium = \"m1\""
+    } else {
+        ""
+    };
+    format!(
+        r#"
+        [materials.a]
+        type = "interface"
+        medium = "m1"
+        [materials.b]
+        type = "interface"
+        medium = "m2"
+        {outside}
+        [media.m1]
+        {m1}
+        [media.m2]
+        {m2}
+        "#
+    )
+}
+
 /// A white diffuse floor at y = 0 under a point light of intensity 16 at height 4 above the
 /// origin, with box A (`[-1, 1] x [1, 3] x [-1, 1]`, medium `m1`) around box B (`[-0.5, 0.5] x
 /// [1.4, 1.4 + d2] x [-0.5, 0.5]`, medium `m2`); B's boundary names `m1` outside when
 /// `nested`. Direct light only.
 fn boxes_under_a_light(d2: f32, m1: &str, m2: &str, nested: bool) -> String {
     let top = 1.4 + d2;
-    let outside = if nested {
-        "outside_medium = \"m1\""
-    } else {
-        ""
-    };
+    let boundaries = nested_boundaries(m1, m2, nested);
     format!(
         r#"
         render = {{ width = 8, height = 8, spp = 1, max_depth = 1, russian_roulette_depth = "off" }}
@@ -59,17 +80,7 @@ fn boxes_under_a_light(d2: f32, m1: &str, m2: &str, nested: bool) -> String {
         [materials.floor]
         type = "diffuse"
         albedo = 1
-        [materials.a]
-        type = "interface"
-        medium = "m1"
-        [materials.b]
-        type = "interface"
-        medium = "m2"
-        {outside}
-        [media.m1]
-        {m1}
-        [media.m2]
-        {m2}
+        {boundaries}
         "#
     )
 }
@@ -109,11 +120,7 @@ fn shadow_rays_through_nested_boxes_carry_each_segments_own_medium() {
 /// view, in front of an emitter of radiance 1 facing the camera; emitters only.
 fn emitter_behind_nested_slabs(d2: f32, m1: &str, m2: &str, nested: bool) -> String {
     let back = 0.5 + d2;
-    let outside = if nested {
-        "outside_medium = \"m1\""
-    } else {
-        ""
-    };
+    let boundaries = nested_boundaries(m1, m2, nested);
     format!(
         r#"
         render = {{ width = 32, height = 32, spp = 16, max_depth = 0 }}
@@ -126,17 +133,7 @@ fn emitter_behind_nested_slabs(d2: f32, m1: &str, m2: &str, nested: bool) -> Str
         [materials.lamp]
         type = "emissive"
         emission = 1
-        [materials.a]
-        type = "interface"
-        medium = "m1"
-        [materials.b]
-        type = "interface"
-        medium = "m2"
-        {outside}
-        [media.m1]
-        {m1}
-        [media.m2]
-        {m2}
+        {boundaries}
         "#
     )
 }
