@@ -7,16 +7,17 @@
 //! every machine runs the same IEEE operations on the same values; only how many lanes one
 //! instruction holds differs.
 //!
-//! **Exactness.** Each lane of either test evaluates exactly the expressions of the binary
+//! **Exactness.** Each lane of the SSE test evaluates exactly the expressions of the binary
 //! traversal's slab test (`SlabRay::enter` in `traverse.rs`) for its box: the same subtraction,
 //! the same multiplications by the same reciprocal and by `FAR_SCALE`, the same NaN-dropping
 //! selects, then a running maximum and minimum over the axes, in the same order, with the same
-//! operand order (x86's `max`/`min` return their second operand on NaN and on equal zeros, so
-//! SSE and AVX agree on every input, and what reaches them is NaN-free and never `-0.0` anyway),
-//! and the same ordered comparison at the end. AVX's `vblendvps` picks by the mask's sign bit,
-//! SSE2's select by the whole mask; the masks are all ones or all zeros, so they pick the same
-//! value. The two paths therefore enter the same boxes at the same distances, bit for bit, and a
-//! traversal takes the same steps and counts the same work on every machine.
+//! operand order (x86's `max`/`min` return their second operand on NaN and on equal zeros, and
+//! what reaches them is NaN-free and never `-0.0` anyway), and the same ordered comparison at
+//! the end. The AVX test computes the same subtraction and multiplications and folds each
+//! select into the maximum or minimum that follows it (`enter_avx` says why that gives the
+//! same entered boxes and the same entry distances, bit for bit, on every input). The two
+//! paths therefore enter the same boxes at the same distances, and a traversal takes the same
+//! steps and counts the same work on every machine.
 //! `tracer/tests/wide_traversal.rs` renders through both and compares.
 
 use super::Ray;
@@ -168,7 +169,20 @@ impl BoxTest for Avx {
     }
 }
 
-/// [`Portable::enter`] in one step of eight lanes, with the same operations in the same order.
+/// [`Portable::enter`] in one step of eight lanes, with the select that drops a NaN or
+/// negative distance folded into the running maximum (and likewise for the minimum).
+///
+/// Why the results are the same bits: the portable test keeps `t0 = max(t0, near > 0 ? near :
+/// 0)` from `t0 = 0`; this one keeps `t0 = vmaxps(near, t0)`, which is `near` when `near > t0`
+/// and `t0` otherwise (on a NaN `near`, on equality, and for any `near <= 0`, since `t0 >= 0`
+/// throughout). Both are therefore the largest of 0 and the axes' non-NaN distances, and
+/// neither is ever `-0.0` (a `-0.0` distance loses to the running `+0.0`, which is the second
+/// operand on equality), so the stored entry distances are the same bits. Likewise `t1` is
+/// the smallest of `t_max` and the non-NaN exit distances either way; it may differ only in
+/// the sign of a zero, which the final ordered `t0 <= t1` does not see. So the entered mask
+/// and the entry distances equal the portable test's (and the binary traversal's) on every
+/// input; `tracer/tests/wide_traversal.rs` renders through both and compares. It saves a
+/// compare and a blend per bound per axis, off the chain each node's test waits on.
 ///
 /// # Safety
 /// The processor must support AVX.
@@ -198,12 +212,12 @@ unsafe fn enter_avx(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDT
             _mm256_mul_ps(_mm256_sub_ps(far_plane, origin), inv_dir),
             scale,
         );
-        // The portable `blend(t, f)` is `vblendvps(f, t, mask)`; `max`/`min` keep the portable
-        // operand order (the running value first).
-        let near_kept = _mm256_blendv_ps(zero, near, _mm256_cmp_ps::<_CMP_GT_OQ>(near, zero));
-        let far_kept = _mm256_blendv_ps(end, far, _mm256_cmp_ps::<_CMP_LT_OQ>(far, end));
-        t0 = _mm256_max_ps(t0, near_kept);
-        t1 = _mm256_min_ps(t1, far_kept);
+        // The portable test's select-then-maximum in one instruction: `vmaxps(a, b)` returns
+        // its second operand when either is NaN, so with the running value second a NaN
+        // distance is dropped, as the select drops it. See [`enter_avx`] for why the results
+        // are the same bits.
+        t0 = _mm256_max_ps(near, t0);
+        t1 = _mm256_min_ps(far, t1);
     }
     let entered = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
     let mut t_near = [0.0f32; WIDTH];
