@@ -251,3 +251,79 @@ pub(super) fn avx_available() -> bool {
         false
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// The values that make a slab test hard: zeros of both signs (a reciprocal of +-inf, and
+    /// `0 * inf = NaN` where the origin lies on a plane), infinities, the extremes of the
+    /// normal range, subnormals, and plain values on both sides.
+    const HARD: [f32; 14] = [
+        0.0,
+        -0.0,
+        1.0,
+        -1.0,
+        0.5,
+        -3.0,
+        1e-30,
+        -1e-30,
+        1e30,
+        -1e30,
+        f32::MIN_POSITIVE / 4.0,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        2.0,
+    ];
+
+    /// A deterministic stream of hard values (a linear congruential walk over `HARD`).
+    fn hard(state: &mut u64) -> f32 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        HARD[(*state >> 33) as usize % HARD.len()]
+    }
+
+    #[test]
+    fn the_avx_box_test_enters_the_same_boxes_at_the_same_distances_as_the_portable_one() {
+        if !avx_available() {
+            eprintln!("this processor has no AVX: only the portable test runs here");
+            return;
+        }
+        let mut state = 7u64;
+        let mut entered_any = 0;
+        for case in 0..20_000 {
+            let mut node = Node8::EMPTY;
+            // Seven of eight lanes hold a box whose corners are hard values (not sorted, so
+            // some boxes are inverted or flat), one is left empty.
+            for lane in 0..WIDTH - 1 {
+                let min = [hard(&mut state), hard(&mut state), hard(&mut state)];
+                let max = [hard(&mut state), hard(&mut state), hard(&mut state)];
+                node.set_bounds(lane, min, max);
+                node.valid |= 1 << lane;
+            }
+            let ray = Ray {
+                origin: Vec3::new(hard(&mut state), hard(&mut state), hard(&mut state)),
+                dir: Vec3::new(hard(&mut state), hard(&mut state), hard(&mut state)),
+                t_max: f32::INFINITY,
+            };
+            let wide = WideRay::new(&ray);
+            for t_max in [f32::INFINITY, 1.0, 0.0, 1e-30] {
+                let (mask, t) = Portable::enter(&wide, &node, t_max);
+                let (mask_avx, t_avx) = Avx::enter(&wide, &node, t_max);
+                assert_eq!(mask, mask_avx, "case {case}, t_max {t_max}: {ray:?}");
+                for lane in (0..WIDTH).filter(|&l| mask & (1 << l) != 0) {
+                    assert_eq!(
+                        t[lane].to_bits(),
+                        t_avx[lane].to_bits(),
+                        "case {case}, lane {lane}, t_max {t_max}: {ray:?}"
+                    );
+                }
+                entered_any += mask.count_ones();
+            }
+        }
+        // The walk must reach boxes that are entered, or the comparison says little.
+        assert!(entered_any > 10_000, "only {entered_any} boxes entered");
+    }
+}
