@@ -14,10 +14,11 @@
 //! interfaces without counting a bounce. Contributions are divided by the mean of the path's
 //! spectral density ratios (the balance heuristic over hero channels).
 //!
-//! Module map: `scatter` (a BSDF or a phase function as next-event estimation sees it, the
-//! bounce's random numbers, which medium a path is in, and shadow-ray transmittance); `hits`
-//! (where rays meet the static and the moving geometry at the path's time, and the local
-//! geometry at a hit).
+//! Module map: `direct` (next-event estimation, and how it and BSDF sampling share the area
+//! lights: [`AreaLightSampling`]); `scatter` (a BSDF or a phase function as next-event
+//! estimation sees it, the bounce's random numbers, which medium a path is in, and shadow-ray
+//! transmittance); `hits` (where rays meet the static and the moving geometry at the path's
+//! time, and the local geometry at a hit).
 //!
 //! Dispersion ([`crate::spectrum`]): a path is RGB until it meets dispersive glass, where it
 //! turns spectral; from then on every RGB value it meets goes through its [`PathSpectrum`],
@@ -36,20 +37,24 @@
 use crate::effects::Effects;
 use crate::geometry::{
     Accel, Moment, MotionAccel, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats,
-    on_huge_pages, spawn_ray, spawn_ray_to,
+    on_huge_pages, spawn_ray,
 };
-use crate::lights::{EnvironmentSampling, LightSample, Lights};
+use crate::lights::{EnvironmentSampling, Lights};
 use crate::material::{Bsdf, Frame};
 use crate::medium::{Flight, hero_channel, mean_ratio, sample_henyey_greenstein};
 use crate::sampler::PixelSampler;
 use crate::scene::Scene;
 use crate::spectrum::{PathSpectrum, SpectralSampling};
-use glam::{Vec2, Vec3};
+use direct::power_heuristic;
+use glam::Vec3;
 use hits::Surface;
-use scatter::{BounceNumbers, Phase, Scatterer, SurfaceScatter};
+use scatter::{BounceNumbers, Phase, SurfaceScatter};
 
+mod direct;
 mod hits;
 mod scatter;
+
+pub use direct::AreaLightSampling;
 
 /// A scene prepared for rendering: its acceleration structure, lights and effect set.
 pub struct World {
@@ -74,6 +79,9 @@ pub struct World {
     /// Which wavelengths paths sample: RGB until dispersive glass (the default), or spectral
     /// from the camera on (comparison knobs, [`SpectralSampling`]).
     pub spectral: SpectralSampling,
+    /// Which strategies find area lights: both, weighted (the default), or one alone
+    /// (comparison knobs, [`AreaLightSampling`]).
+    pub area_lights: AreaLightSampling,
 }
 
 /// Per-sample counters: the counted work that becomes a tile's cost, and the effect counters the
@@ -176,6 +184,7 @@ impl World {
             traversal: Traversal::Robust,
             offset: OffsetMethod::default(),
             spectral: SpectralSampling::default(),
+            area_lights: AreaLightSampling::default(),
         }
     }
 
@@ -331,14 +340,15 @@ impl World {
                 let weight = if last_delta {
                     1.0
                 } else {
-                    let light_pdf = self.lights.triangle_pdf(
-                        &self.scene,
-                        moment,
-                        hit.triangle,
-                        last_point,
-                        surface.at.p,
-                    );
-                    power_heuristic(last_pdf, light_pdf)
+                    self.area_lights.bsdf_hit_weight(last_pdf, || {
+                        self.lights.triangle_pdf(
+                            &self.scene,
+                            moment,
+                            hit.triangle,
+                            last_point,
+                            surface.at.p,
+                        )
+                    })
                 };
                 radiance += self.weighed(beta, ratio) * spectrum.of(material.emission) * weight;
             }
@@ -400,51 +410,6 @@ impl World {
         spectrum.finish(radiance)
     }
 
-    /// One light sample seen from `at` in `medium` through `scatter` (a BSDF or a phase
-    /// function), weighted by multiple importance sampling against the scatterer's own sampling,
-    /// at the wavelengths of `spectrum`.
-    fn direct_light(
-        &self,
-        scatter: &impl Scatterer,
-        at: &SurfacePoint,
-        (medium, spectrum): (Option<u32>, &PathSpectrum),
-        moment: &Moment,
-        (u_choice, u): (f32, Vec2),
-        stats: &mut PathStats,
-    ) -> Vec3 {
-        stats.light_samples += 1;
-        let Some(light) = self.lights.sample(&self.scene, moment, at.p, u_choice, u) else {
-            return Vec3::ZERO;
-        };
-        let f = scatter.f(light.wi);
-        if f == Vec3::ZERO || light.radiance == Vec3::ZERO || light.pdf <= 0.0 {
-            return Vec3::ZERO;
-        }
-        stats.shadow_rays += 1;
-        let shadow = self.shadow_ray(at, &light);
-        // Without media a shadow ray is blocked or not; with them it carries what the media let
-        // through, and passes index-matched interfaces (`scatter.rs`). A vacuum lets exactly 1
-        // through, and `x * 1` is `x`, so the product below keeps its bits either way.
-        let transmittance = if self.effects.media {
-            let numbers = [u_choice, u.x, u.y];
-            let transmittance = self.transmittance(shadow, &light, medium, moment, &numbers, stats);
-            if transmittance == Vec3::ZERO {
-                return Vec3::ZERO;
-            }
-            spectrum.channels(transmittance)
-        } else if self.occluded(&shadow, moment, &mut stats.traversal) {
-            return Vec3::ZERO;
-        } else {
-            Vec3::ONE
-        };
-        let weight = if light.delta {
-            1.0
-        } else {
-            power_heuristic(light.pdf, scatter.pdf(light.wi))
-        };
-        f * spectrum.of(light.radiance) * (weight / light.pdf) * transmittance
-    }
-
     /// What a path of throughput `beta` and spectral ratios `ratio` contributes per unit of
     /// what it finds: `beta` over the mean ratio where media are tracked (the balance
     /// heuristic over hero channels, `crate::medium`), `beta` itself elsewhere, with no
@@ -473,16 +438,6 @@ impl World {
         true
     }
 
-    /// The shadow ray from `at` towards the sampled light: to its point, or along its direction
-    /// when it is infinitely far (the environment).
-    fn shadow_ray(&self, at: &SurfacePoint, light: &LightSample) -> Ray {
-        if light.distance.is_finite() {
-            spawn_ray_to(at, &light.at, self.offset)
-        } else {
-            spawn_ray(at, light.wi, self.offset)
-        }
-    }
-
     fn resolve(&self, bsdf: &Bsdf, surface: &Surface) -> Bsdf {
         match *bsdf {
             Bsdf::Diffuse {
@@ -497,19 +452,4 @@ impl World {
             other => other,
         }
     }
-}
-
-fn power_heuristic(f: f32, g: f32) -> f32 {
-    let (f2, g2) = (f * f, g * g);
-    if f2 + g2 == 0.0 || !(f2 + g2).is_finite() {
-        // One density is infinite (a delta) or both vanish: the finite one takes all the weight.
-        return if f.is_finite() && f > g {
-            1.0
-        } else if g.is_finite() && g > f {
-            0.0
-        } else {
-            1.0
-        };
-    }
-    f2 / (f2 + g2)
 }

@@ -12,10 +12,8 @@ use super::{Cost, Knob};
 use crate::compare::{Metrics, mean_flip};
 use std::time::Instant;
 use tracer::geometry::{Accel, BuildQuality, OffsetMethod, Traversal};
-use tracer::lights::{EnvironmentSampling, Lights};
 use tracer::output::RgbImage;
 use tracer::scene::RenderSettings;
-use tracer::spectrum::SpectralSampling;
 use tracer::{FrameConfig, World};
 
 /// The side of the square tiles a frame is cut into.
@@ -306,43 +304,6 @@ impl<'a> Bench<'a> {
             },
         );
         self.world.offset = OffsetMethod::default();
-        rows
-    }
-
-    /// The environment sampled by importance, uniformly and not at all (BSDF sampling alone),
-    /// at `spp`. All three are unbiased: the images differ by noise, which is the point; in a
-    /// scene without an environment they are the same bits.
-    pub fn environment_ladder(&mut self, spp: u32) -> Vec<Row> {
-        let settings = self.at_spp(spp);
-        let rows = self.compared_ladder(
-            Knob::Environment,
-            EnvironmentSampling::ALL,
-            "importance sampling's image",
-            |bench, sampling| {
-                bench.world.lights =
-                    Lights::with_sampling(&bench.world.scene, &bench.world.effects, sampling);
-                (sampling.name().to_owned(), settings.clone())
-            },
-        );
-        self.world.lights = Lights::new(&self.world.scene, &self.world.effects);
-        rows
-    }
-
-    /// Wavelengths sampled as each [`SpectralSampling`] choice says, at `spp`: RGB until
-    /// dispersive glass (the default), spectral from the camera with three hero wavelengths,
-    /// with one. All unbiased for the same image; they differ in noise and time.
-    pub fn spectral_ladder(&mut self, spp: u32) -> Vec<Row> {
-        let settings = self.at_spp(spp);
-        let rows = self.compared_ladder(
-            Knob::Spectral,
-            SpectralSampling::ALL,
-            "the RGB render's image",
-            |bench, sampling| {
-                bench.world.spectral = sampling;
-                (sampling.name().to_owned(), settings.clone())
-            },
-        );
-        self.world.spectral = SpectralSampling::default();
         rows
     }
 

@@ -14,7 +14,8 @@
 //!
 //! - `bench`: the timed render of a whole frame, and the one-knob-at-a-time ladders.
 //! - `reference`: the reference image: analytic, cached, or rendered and cached.
-//! - `media`: the media knob's ladder (free flights and shadow rays through participating media).
+//! - `sampling`: the sampling knobs' ladders: area lights, the environment, wavelengths and
+//!   media (free flights and shadow rays through participating media).
 //! - `leaks`: robust against obvhs's traversal on a closed sphere, and the two spawn offsets on
 //!   the sphere far from the origin: leaks and self-hits.
 //! - `report`: accuracy.csv and accuracy.md; `plot`: accuracy.svg.
@@ -25,10 +26,10 @@ pub mod bench;
 mod curve;
 mod findings;
 mod leaks;
-mod media;
 mod plot;
 pub mod reference;
 mod report;
+mod sampling;
 
 use crate::{LabError, ensure};
 use clap::ValueEnum;
@@ -132,6 +133,10 @@ pub enum Knob {
     Traversal,
     /// Spawn offsets from each hit point's error bound against the fixed 256 ULPs.
     Offset,
+    /// Area lights found by both strategies weighted by the power heuristic (the default), by
+    /// next-event estimation alone, or by BSDF sampling alone
+    /// (`tracer::integrator::AreaLightSampling`).
+    Lights,
     /// The environment sampled by importance (a map by luminance), uniformly, or by BSDF
     /// sampling alone (no MIS).
     Environment,
@@ -145,13 +150,14 @@ pub enum Knob {
 
 impl Knob {
     /// Every knob, in the order the report shows them.
-    pub const ALL: [Knob; 9] = [
+    pub const ALL: [Knob; 10] = [
         Knob::Spp,
         Knob::Depth,
         Knob::Roulette,
         Knob::Bvh,
         Knob::Traversal,
         Knob::Offset,
+        Knob::Lights,
         Knob::Environment,
         Knob::Spectral,
         Knob::Media,
@@ -166,6 +172,7 @@ impl Knob {
             Knob::Bvh => "bvh",
             Knob::Traversal => "traversal",
             Knob::Offset => "offset",
+            Knob::Lights => "lights",
             Knob::Environment => "environment",
             Knob::Spectral => "spectral",
             Knob::Media => "media",
@@ -268,6 +275,7 @@ pub fn run(args: &Config) -> Result<(), LabError> {
                 }
                 bench.offset_ladder(args.knob_spp)
             }
+            Knob::Lights => bench.lights_ladder(args.knob_spp),
             Knob::Environment => bench.environment_ladder(args.knob_spp),
             Knob::Spectral => bench.spectral_ladder(args.knob_spp),
             Knob::Media => bench.media_ladder(args.knob_spp),

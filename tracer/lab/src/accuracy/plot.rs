@@ -147,6 +147,7 @@ fn label(row: &Row) -> String {
         Knob::Bvh
         | Knob::Traversal
         | Knob::Offset
+        | Knob::Lights
         | Knob::Environment
         | Knob::Spectral
         | Knob::Media => row.setting.clone(),
@@ -161,6 +162,7 @@ fn colour(knob: Knob) -> RGBColor {
         Knob::Bvh => RGBColor(255, 127, 14),
         Knob::Traversal => RGBColor(148, 103, 189),
         Knob::Offset => RGBColor(140, 86, 75),
+        Knob::Lights => RGBColor(227, 119, 194),
         Knob::Environment => RGBColor(23, 190, 207),
         Knob::Spectral => RGBColor(188, 189, 34),
         Knob::Media => RGBColor(127, 127, 127),

@@ -353,6 +353,14 @@ pub fn markdown(run: &Run) -> String {
     // with the ladder's first rung, and how its image differs.
     let sampling = [
         (
+            Knob::Lights,
+            "Area light sampling",
+            "emissive triangles found by next-event estimation and BSDF sampling weighted by the \
+             power heuristic, by next-event estimation alone, or by BSDF sampling alone; in a \
+             scene without area lights the rungs are the same bits",
+            "strategies",
+        ),
+        (
             Knob::Environment,
             "Environment sampling",
             "next-event estimation of the environment: by importance, uniformly over the sphere, \

@@ -1,0 +1,170 @@
+//! Next-event estimation (a point sampled on a light, then a shadow ray) and how it combines
+//! with the other strategy that can find an area light, BSDF sampling (a direction drawn from
+//! the surface that happens to hit an emitter).
+//!
+//! Both are unbiased for the light a path gathers from an emissive triangle, so a renderer may
+//! use either alone or both, weighted. The default weighs them by the power heuristic (Veach's
+//! multiple importance sampling, exponent 2), which keeps each where it is good: light sampling
+//! for small or distant lights seen from rough surfaces, BSDF sampling for large lights seen
+//! from glossy ones. The two single strategies exist as a comparison knob ([`AreaLightSampling`],
+//! `tessera accuracy --knobs lights`): they show what the weighting buys in noise, and what it
+//! costs in time (the light's density at every BSDF-sampled emitter hit, the BSDF's at every
+//! light sample). Only area lights follow the knob: a point light is a delta that only light
+//! sampling can find, and the environment has its own knob
+//! ([`crate::lights::EnvironmentSampling`]).
+
+use super::scatter::Scatterer;
+use super::{PathStats, World};
+use crate::geometry::{Moment, Ray, SurfacePoint, spawn_ray, spawn_ray_to};
+use crate::lights::LightSample;
+use crate::spectrum::PathSpectrum;
+use glam::{Vec2, Vec3};
+
+/// Which strategies find area lights (emissive triangles, still or moving); every choice is
+/// unbiased, and they differ in noise and time only. A comparison knob, like
+/// [`crate::lights::EnvironmentSampling`]: renders pick the default.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum AreaLightSampling {
+    /// Both, weighted by the power heuristic.
+    #[default]
+    Mis,
+    /// Next-event estimation alone: a BSDF-sampled ray that hits an emitter adds nothing,
+    /// except after a specular bounce or from the camera, where no light sample could have
+    /// found it.
+    Light,
+    /// BSDF sampling alone: light samples that land on an area light are dropped, before their
+    /// shadow ray.
+    Bsdf,
+}
+
+impl AreaLightSampling {
+    /// Every way, the default first: the ladder `tessera accuracy --knobs lights` walks.
+    pub const ALL: [AreaLightSampling; 3] = [
+        AreaLightSampling::Mis,
+        AreaLightSampling::Light,
+        AreaLightSampling::Bsdf,
+    ];
+
+    /// The name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            AreaLightSampling::Mis => "mis",
+            AreaLightSampling::Light => "light-only",
+            AreaLightSampling::Bsdf => "bsdf-only",
+        }
+    }
+
+    /// The weight of an emitter found by BSDF sampling with density `bsdf_pdf` after a
+    /// non-specular bounce; `light_pdf` gives light sampling's density of the same point,
+    /// asked only where the weighting needs it.
+    pub(super) fn bsdf_hit_weight(self, bsdf_pdf: f32, light_pdf: impl FnOnce() -> f32) -> f32 {
+        match self {
+            AreaLightSampling::Mis => power_heuristic(bsdf_pdf, light_pdf()),
+            AreaLightSampling::Light => 0.0,
+            AreaLightSampling::Bsdf => 1.0,
+        }
+    }
+
+    /// Whether this choice drops the light sample `light` before its shadow ray: BSDF sampling
+    /// alone drops those on area lights.
+    pub(super) fn drops(self, light: &LightSample) -> bool {
+        self == AreaLightSampling::Bsdf && on_area_light(light)
+    }
+
+    /// The weight of the light sample `light` (one [`AreaLightSampling::drops`] kept), whose
+    /// direction the scatterer would sample with density `scatter_pdf` (asked only where the
+    /// weighting needs it). Delta lights take all the weight whatever the choice; the
+    /// environment is weighed by the power heuristic, as its own knob decides how it is sampled.
+    pub(super) fn light_weight(
+        self,
+        light: &LightSample,
+        scatter_pdf: impl FnOnce() -> f32,
+    ) -> f32 {
+        if light.delta || (self == AreaLightSampling::Light && on_area_light(light)) {
+            1.0
+        } else {
+            power_heuristic(light.pdf, scatter_pdf())
+        }
+    }
+}
+
+impl World {
+    /// One light sample seen from `at` in `medium` through `scatter` (a BSDF or a phase
+    /// function), weighted by multiple importance sampling against the scatterer's own sampling,
+    /// at the wavelengths of `spectrum`.
+    pub(super) fn direct_light(
+        &self,
+        scatter: &impl Scatterer,
+        at: &SurfacePoint,
+        (medium, spectrum): (Option<u32>, &PathSpectrum),
+        moment: &Moment,
+        (u_choice, u): (f32, Vec2),
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        stats.light_samples += 1;
+        let Some(light) = self.lights.sample(&self.scene, moment, at.p, u_choice, u) else {
+            return Vec3::ZERO;
+        };
+        if self.area_lights.drops(&light) {
+            return Vec3::ZERO;
+        }
+        let f = scatter.f(light.wi);
+        if f == Vec3::ZERO || light.radiance == Vec3::ZERO || light.pdf <= 0.0 {
+            return Vec3::ZERO;
+        }
+        stats.shadow_rays += 1;
+        let shadow = self.shadow_ray(at, &light);
+        // Without media a shadow ray is blocked or not; with them it carries what the media let
+        // through, and passes index-matched interfaces (`scatter.rs`). A vacuum lets exactly 1
+        // through, and `x * 1` is `x`, so the product below keeps its bits either way.
+        let transmittance = if self.effects.media {
+            let numbers = [u_choice, u.x, u.y];
+            let transmittance = self.transmittance(shadow, &light, medium, moment, &numbers, stats);
+            if transmittance == Vec3::ZERO {
+                return Vec3::ZERO;
+            }
+            spectrum.channels(transmittance)
+        } else if self.occluded(&shadow, moment, &mut stats.traversal) {
+            return Vec3::ZERO;
+        } else {
+            Vec3::ONE
+        };
+        let weight = self
+            .area_lights
+            .light_weight(&light, || scatter.pdf(light.wi));
+        f * spectrum.of(light.radiance) * (weight / light.pdf) * transmittance
+    }
+
+    /// The shadow ray from `at` towards the sampled light: to its point, or along its direction
+    /// when it is infinitely far (the environment).
+    pub(super) fn shadow_ray(&self, at: &SurfacePoint, light: &LightSample) -> Ray {
+        if light.distance.is_finite() {
+            spawn_ray_to(at, &light.at, self.offset)
+        } else {
+            spawn_ray(at, light.wi, self.offset)
+        }
+    }
+}
+
+/// Whether `light` lies on an area light: of the lights that are not deltas, every one but the
+/// environment (the only one infinitely far) is an emissive triangle.
+fn on_area_light(light: &LightSample) -> bool {
+    !light.delta && light.distance.is_finite()
+}
+
+/// Veach's power heuristic with exponent 2: the weight of a sample drawn with density `f`
+/// against another strategy's density `g` of the same sample.
+pub(super) fn power_heuristic(f: f32, g: f32) -> f32 {
+    let (f2, g2) = (f * f, g * g);
+    if f2 + g2 == 0.0 || !(f2 + g2).is_finite() {
+        // One density is infinite (a delta) or both vanish: the finite one takes all the weight.
+        return if f.is_finite() && f > g {
+            1.0
+        } else if g.is_finite() && g > f {
+            0.0
+        } else {
+            1.0
+        };
+    }
+    f2 / (f2 + g2)
+}
