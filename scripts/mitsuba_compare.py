@@ -69,14 +69,15 @@ MTL_MAPPING = (
 # `albedo = sigma_s / sigma_t` (RGB) and an `hg` phase function of the same `g` (both renderers
 # take g > 0 as forward scattering); a sphere whose material is `interface` becomes Mitsuba's
 # analytic `sphere` with a `null` BSDF and that medium as `interior`, `glass` a `dielectric`
-# (int_ior = ior, ext_ior = 1). Our sphere is an icosphere (20,480 faces at subdivisions 5,
-# 0.03 % less area than the sphere), Mitsuba's the exact sphere. `[camera] medium` (global fog)
+# (int_ior = ior, ext_ior = outside_ior, 1 when left out: both renderers refract by their ratio).
+# Our sphere is an icosphere (20,480 faces at subdivisions 5, 0.03 % less area than the sphere),
+# Mitsuba's the exact sphere. `[camera] medium` (global fog)
 # becomes the sensor's `medium`: both renderers start camera rays in it, and since the meshes
 # name no media, a ray that reflects stays in it (Mitsuba changes a ray's medium only at shapes
 # with an interior or exterior medium, tessera only at glass and interfaces).
 MEDIA_MAPPING = (
     "[media] -> homogeneous(sigma_t = sigma_a + sigma_s, albedo = sigma_s / sigma_t, phase hg(g)); "
-    "sphere with interface -> sphere(null BSDF, interior = medium); with glass -> sphere(dielectric(int_ior), interior); "
+    "sphere with interface -> sphere(null BSDF, interior = medium); with glass -> sphere(dielectric(int_ior = ior, ext_ior = outside_ior), interior); "
     "[camera] medium -> the sensor's medium"
 )
 
@@ -417,8 +418,12 @@ def mitsuba_sphere(toml, obj, materials, media):
     material = materials[obj["material"]]
     if material.get("type") == "interface" and set(material) <= {"type", "medium"}:
         bsdf = {"type": "null"}
-    elif material.get("type") == "glass" and set(material) <= {"type", "ior", "medium"}:
-        bsdf = {"type": "dielectric", "int_ior": float(material.get("ior", 1.5)), "ext_ior": 1.0}
+    elif material.get("type") == "glass" and set(material) <= {"type", "ior", "outside_ior", "medium"}:
+        bsdf = {
+            "type": "dielectric",
+            "int_ior": float(material.get("ior", 1.5)),
+            "ext_ior": float(material.get("outside_ior", 1.0)),
+        }
     else:
         raise SystemExit(f"{toml}: sphere material {obj['material']} is neither a plain interface nor a plain glass")
     sphere = {

@@ -287,8 +287,14 @@ impl PathSpectrum {
                 ior,
                 tint: w.project(tint),
             },
-            Bsdf::DispersiveGlass { dispersion, tint } => Bsdf::Dielectric {
-                ior: dispersion.ior(w.nm[0]),
+            // The outside index does not depend on the wavelength (`Bsdf::DispersiveGlass`);
+            // dividing by 1, as without `outside_ior`, leaves the index's bits alone.
+            Bsdf::DispersiveGlass {
+                dispersion,
+                outside_ior,
+                tint,
+            } => Bsdf::Dielectric {
+                ior: dispersion.ior(w.nm[0]) / outside_ior,
                 tint: w.project(tint),
             },
             Bsdf::Interface => Bsdf::Interface,

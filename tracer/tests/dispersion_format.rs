@@ -29,9 +29,16 @@ fn every_way_of_giving_an_index_loads() {
             "[materials.g]\ntype = \"glass\"\n{keys}\ntint = 0.9"
         ))
         .unwrap_or_else(|e| panic!("{keys}: {e}"));
-        let Bsdf::DispersiveGlass { dispersion, tint } = scene.materials[0].bsdf else {
+        let Bsdf::DispersiveGlass {
+            dispersion,
+            outside_ior,
+            tint,
+        } = scene.materials[0].bsdf
+        else {
             panic!("{keys} gave {:?}", scene.materials[0].bsdf)
         };
+        // Left out, the outside is vacuum.
+        assert_eq!(outside_ior, 1.0, "{keys}");
         assert!(
             (dispersion.ior_d() - n_d).abs() < 2e-4,
             "{keys}: n_d {}",

@@ -12,7 +12,10 @@
 //!   (`eval` is zero when `wo` and `wi` are on opposite sides). Meshes in scenes are often not
 //!   closed or consistently wound, and a one-sided diffuse wall would render black from behind.
 //!   The dielectric is the one material where the side matters: the normal points outside, and
-//!   `ior` is the index inside.
+//!   `ior` is the index inside relative to the index outside (Mitsuba 3's `int_ior / ext_ior`).
+//!   Outside is vacuum unless the scene says otherwise: glass inside another glass, such as a
+//!   glass ball in water, refracts by the ratio of the two indices, which the loader works out
+//!   (or, for a dispersive glass, [`Bsdf::DispersiveGlass`] keeps the outside index).
 //! - **Radiance.** The renderer transports radiance, so refraction scales throughput by 1/eta^2
 //!   (the `dielectric` module says which eta).
 //! - **Random numbers.** [`Bsdf::sample`] takes its random numbers as arguments (one for a
@@ -31,6 +34,11 @@ mod dielectric;
 mod dispersion;
 mod frame;
 mod microfacet;
+// In a `tests` folder, as unit tests that may call the platform's `sin` and `asin` for their
+// expected values (tests/portable_math.rs reads every other file as the renderer's code).
+#[cfg(test)]
+#[path = "tests/nested_ior.rs"]
+mod nested_ior_tests;
 
 pub use dielectric::{fresnel_dielectric, fresnel_schlick};
 pub use dispersion::{Dispersion, GLASSES};
@@ -90,10 +98,12 @@ pub enum Bsdf {
         /// an MTL's `Ns`, `sqrt(2 / (Ns + 2))`).
         alpha: f32,
     },
-    /// Smooth glass: Fresnel reflection and refraction with index `ior` (index 1 outside,
-    /// whatever medium is there), and a transmission `tint`.
+    /// Smooth glass: Fresnel reflection and refraction with the relative index `ior`, and a
+    /// transmission `tint`.
     Dielectric {
-        /// Index of refraction of the glass relative to vacuum, above 1 for real glass.
+        /// The index of refraction inside the glass over the index outside it: the glass's own
+        /// index when vacuum (or air) surrounds it, above 1 for glass in air, below 1 for an
+        /// air bubble in water.
         ior: f32,
         /// The factor per RGB channel of each refraction through the surface, each in [0, 1];
         /// reflection is not tinted.
@@ -102,10 +112,14 @@ pub enum Bsdf {
     /// Smooth glass whose index depends on the wavelength (`dispersion`), with a transmission
     /// `tint`. A path that meets it turns spectral (`crate::spectrum`), which resolves it into
     /// the [`Bsdf::Dielectric`] of its wavelength; unresolved, it samples as the glass of its
-    /// index at the d line ([`Dispersion::ior_d`]).
+    /// index at the d line ([`Dispersion::ior_d`]). Either way the relative index is the
+    /// glass's index at the wavelength over `outside_ior`.
     DispersiveGlass {
         /// How the index of refraction depends on the wavelength.
         dispersion: Dispersion,
+        /// The index of what surrounds the glass, the same at every wavelength (1 for vacuum or
+        /// air); kept apart from `dispersion` because the ratio changes with the wavelength.
+        outside_ior: f32,
         /// The factor per RGB channel of each refraction through the surface, each in [0, 1];
         /// reflection is not tinted.
         tint: Vec3,
@@ -211,9 +225,11 @@ impl Bsdf {
                 })
             }
             Bsdf::Dielectric { ior, tint } => sample_dielectric(ior, tint, wo, u_choice),
-            Bsdf::DispersiveGlass { dispersion, tint } => {
-                sample_dielectric(dispersion.ior_d(), tint, wo, u_choice)
-            }
+            Bsdf::DispersiveGlass {
+                dispersion,
+                outside_ior,
+                tint,
+            } => sample_dielectric(dispersion.ior_d() / outside_ior, tint, wo, u_choice),
             Bsdf::Interface => Some(BsdfSample {
                 wi: -wo,
                 weight: Vec3::ONE,

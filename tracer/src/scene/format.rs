@@ -202,6 +202,8 @@ pub(crate) struct MaterialSpec {
     pub texture: Option<Spanned<String>>,
     pub reflectance: Option<Reflectance>,
     pub ior: Option<Ior>,
+    /// The index of what surrounds a glass (any finite number above 0); index 1 when left out.
+    pub outside_ior: Option<Positive>,
     /// A dispersive glass's index: Cauchy's `[A, B]`, Sellmeier's six coefficients, or a name.
     pub cauchy: Option<Cauchy>,
     pub sellmeier: Option<Sellmeier>,

@@ -9,11 +9,17 @@
 //! fixes an exported material without editing the data. Each material and texture enters the
 //! scene once, when first used, so the tables hold only what triangles reference, in first-use
 //! order.
+//!
+//! Indices of refraction nest as media do: a glass's `outside_ior` is the index of what
+//! surrounds it (the enclosing glass's `ior`; 1, vacuum or air, when left out), and its BSDF
+//! works with the relative index, `ior / outside_ior`, since refraction and Fresnel reflection
+//! depend on nothing else. Like `outside_medium`, the key is trusted: nothing checks it against
+//! the glass that actually encloses the object.
 
 use super::Texture;
 use super::error::{SceneError, line_of};
 use super::files::FileLog;
-use super::format::{MaterialKind, MaterialSpec, MediumSpec};
+use super::format::{MaterialKind, MaterialSpec, MediumSpec, Positive};
 use super::mtl::MtlMaterial;
 use crate::material::{Bsdf, Material};
 use crate::medium::Medium;
@@ -174,6 +180,7 @@ impl<'a> MaterialTable<'a> {
                 "glass",
                 &[
                     "ior",
+                    "outside_ior",
                     "cauchy",
                     "sellmeier",
                     "glass",
@@ -192,6 +199,7 @@ impl<'a> MaterialTable<'a> {
             ("texture", spec.texture.is_some()),
             ("reflectance", spec.reflectance.is_some()),
             ("ior", spec.ior.is_some()),
+            ("outside_ior", spec.outside_ior.is_some()),
             ("cauchy", spec.cauchy.is_some()),
             ("sellmeier", spec.sellmeier.is_some()),
             ("glass", spec.glass.is_some()),
@@ -244,10 +252,11 @@ impl<'a> MaterialTable<'a> {
                     }
                     (Some((_, Some(Some(dispersion)))), None) => Bsdf::DispersiveGlass {
                         dispersion: *dispersion,
+                        outside_ior: spec.outside_ior.map_or(1.0, |i| i.0),
                         tint,
                     },
                     _ => Bsdf::Dielectric {
-                        ior: spec.ior.map_or(1.5, |i| i.0),
+                        ior: relative_ior(spec.ior.map_or(1.5, |i| i.0), spec.outside_ior),
                         tint,
                     },
                 }
@@ -302,6 +311,18 @@ impl<'a> MaterialTable<'a> {
         self.textures.push(texture);
         self.texture_ids.insert(path, id);
         Ok(id)
+    }
+}
+
+/// The index a plain glass's BSDF works with: its `ior` over its `outside_ior`, as Mitsuba 3's
+/// dielectric uses `int_ior / ext_ior`, because refraction and Fresnel reflection depend only on
+/// the ratio of the indices on the two sides. Worked out here, once, so that the renderer does
+/// no division; without `outside_ior` the index is `ior` itself, bit for bit. The ratio may be
+/// below 1 (an air bubble in water), which the BSDF handles from either side.
+fn relative_ior(ior: f32, outside_ior: Option<Positive>) -> f32 {
+    match outside_ior {
+        Some(outside) => ior / outside.0,
+        None => ior,
     }
 }
 
