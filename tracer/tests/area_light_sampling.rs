@@ -6,19 +6,16 @@
 
 mod common;
 
-use common::{assert_close, load_with, mean_and_error};
+use common::{assert_close, load_with, mean_and_error, render_world};
 use glam::Vec3;
 use tracer::integrator::AreaLightSampling;
-use tracer::{Rect, TileOutput, World};
+use tracer::{TileOutput, World};
 
 fn render(toml: &str, sampling: AreaLightSampling) -> TileOutput {
     let scene = load_with(toml, &[]).expect("the scene loads");
     let mut world = World::prepare(scene, None);
     world.area_lights = sampling;
-    let (w, h) = (world.scene.settings.width, world.scene.settings.height);
-    let out = tracer::render_tile(&world, 0, Rect { x: 0, y: 0, w, h });
-    assert_eq!(out.stats.invalid_samples, 0, "a sample was NaN or infinite");
-    out
+    render_world(&world, 0)
 }
 
 /// A closed room whose every wall emits `emission` and reflects diffusely with `albedo`, seen

@@ -14,19 +14,16 @@
 
 mod common;
 
-use common::{assert_close, mean_and_error};
+use common::{assert_close, mean_and_error, render_world};
 use glam::Vec3;
 use tracer::spectrum::SpectralSampling;
-use tracer::{Rect, TileOutput, World};
+use tracer::{TileOutput, World};
 
 fn render(toml: &str, sampling: SpectralSampling) -> TileOutput {
     let scene = tracer::scene::load_str(toml).expect("test scene loads");
     let mut world = World::prepare(scene, None);
     world.spectral = sampling;
-    let (w, h) = (world.scene.settings.width, world.scene.settings.height);
-    let out = tracer::render_tile(&world, 0, Rect { x: 0, y: 0, w, h });
-    assert_eq!(out.stats.invalid_samples, 0, "a sample was NaN or infinite");
-    out
+    render_world(&world, 0)
 }
 
 /// A glass sphere of `index` (the material's index keys) under a white sky, filling most of

@@ -1,6 +1,9 @@
 //! Dispersive glass in the scene format: each way of giving an index loads into the glass it
 //! names, and every bad value is refused with the file, the line and the key.
 
+mod common;
+
+use common::assert_refused;
 use tracer::material::{Bsdf, Dispersion};
 use tracer::scene::MemoryFiles;
 
@@ -77,18 +80,6 @@ fn bad_indices_are_refused_at_their_line_and_key() {
         ("type = \"metal\"\nglass = \"bk7\"", 1, "key `glass` does not apply to type metal"),
     ];
     for (keys, line, says) in cases {
-        let error = load(&format!("[materials.g]\n{keys}"))
-            .err()
-            .unwrap_or_else(|| panic!("{keys} must be refused"));
-        let message = error.to_string();
-        assert_eq!(
-            (error.file(), error.line()),
-            ("scene.toml", Some(line)),
-            "{keys}: {message}"
-        );
-        assert!(
-            message.contains(says),
-            "{keys}: `{message}` should say `{says}`"
-        );
+        assert_refused(&format!("[materials.g]\n{keys}\n{CAMERA}"), line, says);
     }
 }

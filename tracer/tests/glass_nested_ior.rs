@@ -15,11 +15,11 @@
 
 mod common;
 
-use common::{assert_close, mean_and_error, render};
+use common::{assert_close, assert_refused, load_with, mean_and_error, render};
 use glam::{Vec2, Vec3};
 use tracer::geometry::{Ray, intersect_triangle};
 use tracer::material::Frame;
-use tracer::scene::{MemoryFiles, Scene, load_str};
+use tracer::scene::{Scene, load_str};
 
 fn load(toml: &str) -> Scene {
     load_str(toml).unwrap_or_else(|e| panic!("test scene loads: {e}\n{toml}"))
@@ -253,11 +253,6 @@ fn glass_and_bubbles_inside_glass_in_a_white_furnace_render_one() {
 fn bad_outside_indices_are_refused_at_their_line_and_key() {
     const CAMERA: &str = "[camera]\nposition = [0, 0, -5]\nlook_at = [0, 0, 0]\n\
         [[object]]\nshape = \"sphere\"\nmaterial = \"g\"\n";
-    let load = |material: &str| {
-        let mut files = MemoryFiles::new();
-        files.insert("scene.toml", format!("[materials.g]\n{material}\n{CAMERA}"));
-        tracer::scene::load_from(&files, "scene.toml")
-    };
     let key = "(key `materials.g.outside_ior`)";
     #[rustfmt::skip]
     let cases = [
@@ -272,19 +267,7 @@ fn bad_outside_indices_are_refused_at_their_line_and_key() {
         ("type = \"mirror\"\noutside_ior = 1.33", 1, "key `outside_ior` does not apply to type mirror"),
     ];
     for (keys, line, says) in cases {
-        let error = load(keys)
-            .err()
-            .unwrap_or_else(|| panic!("{keys} must be refused"));
-        let message = error.to_string();
-        assert_eq!(
-            (error.file(), error.line()),
-            ("scene.toml", Some(line)),
-            "{keys}: {message}"
-        );
-        assert!(
-            message.contains(says),
-            "{keys}: `{message}` should say `{says}`"
-        );
+        let message = assert_refused(&format!("[materials.g]\n{keys}\n{CAMERA}"), line, says);
         if line > 1 {
             assert!(
                 message.contains(key),
@@ -299,6 +282,10 @@ fn bad_outside_indices_are_refused_at_their_line_and_key() {
         "ior = 1.2\noutside_ior = 3",
         "glass = \"bk7\"\noutside_ior = 2",
     ] {
-        load(&format!("type = \"glass\"\n{keys}")).unwrap_or_else(|e| panic!("{keys}: {e}"));
+        load_with(
+            &format!("[materials.g]\ntype = \"glass\"\n{keys}\n{CAMERA}"),
+            &[],
+        )
+        .unwrap_or_else(|e| panic!("{keys}: {e}"));
     }
 }

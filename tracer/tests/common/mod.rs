@@ -20,8 +20,14 @@ pub fn render_with(
     sampling: EnvironmentSampling,
 ) -> TileOutput {
     let world = World::prepare(scene.clone(), effects).with_environment_sampling(sampling);
-    let (w, h) = (scene.settings.width, scene.settings.height);
-    let out = tracer::render_tile(&world, frame, Rect { x: 0, y: 0, w, h });
+    render_world(&world, frame)
+}
+
+/// Renders frame `frame` of `world` whole, as its settings say; no sample may come out NaN or
+/// infinite.
+pub fn render_world(world: &World, frame: u32) -> TileOutput {
+    let (w, h) = (world.scene.settings.width, world.scene.settings.height);
+    let out = tracer::render_tile(world, frame, Rect { x: 0, y: 0, w, h });
     assert_eq!(out.stats.invalid_samples, 0, "a sample was NaN or infinite");
     out
 }
@@ -109,6 +115,25 @@ pub fn exr_bytes(
         .to_buffered(&mut bytes)
         .expect("the EXR encodes");
     bytes.into_inner()
+}
+
+/// Asserts that `toml`, loaded as `scene.toml`, is refused at its line `line` with a message
+/// that says `says`; returns the message, for further checks.
+pub fn assert_refused(toml: &str, line: usize, says: &str) -> String {
+    let error = load_with(toml, &[])
+        .err()
+        .unwrap_or_else(|| panic!("must be refused, saying `{says}`:\n{toml}"));
+    let message = error.to_string();
+    assert_eq!(
+        (error.file(), error.line()),
+        ("scene.toml", Some(line)),
+        "{message}\n{toml}"
+    );
+    assert!(
+        message.contains(says),
+        "`{message}` should say `{says}`\n{toml}"
+    );
+    message
 }
 
 /// Loads `toml` as `scene.toml` beside the given files.
