@@ -1,7 +1,7 @@
 //! Time from the TOML: the camera's track (`[[camera.keys]]`) and shutter, and a moving
 //! object's track (`[[object.keys]]`), each key completed from its table's own values, with
 //! errors that name the key's line (the shutter's own checks run as it is parsed, in
-//! `format.rs`, where the value's line is known).
+//! `values.rs`, where the value's line is known).
 
 use super::error::{SceneError, line_of};
 use super::format::{self, ObjectSpec, SceneSpec};

@@ -18,6 +18,7 @@ mod mtl;
 mod obj;
 mod shapes;
 mod texture;
+mod values;
 
 pub use camera::{Camera, CameraKey, CameraRays, CameraTrack};
 pub use error::{Location, SceneError};
