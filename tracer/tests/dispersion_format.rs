@@ -3,18 +3,15 @@
 
 mod common;
 
-use common::assert_refused;
+use common::{assert_refused, load_with};
 use tracer::material::{Bsdf, Dispersion};
-use tracer::scene::MemoryFiles;
 
 const CAMERA: &str = "[camera]\nposition = [0, 0, -5]\nlook_at = [0, 0, 0]\n\
 [[object]]\nshape = \"sphere\"\nmaterial = \"g\"\n";
 
 /// Loads a scene whose material `g` is `material` (starting on line 1).
 fn load(material: &str) -> Result<tracer::Scene, tracer::SceneError> {
-    let mut files = MemoryFiles::new();
-    files.insert("scene.toml", format!("{material}\n{CAMERA}"));
-    tracer::scene::load_from(&files, "scene.toml")
+    load_with(&format!("{material}\n{CAMERA}"), &[])
 }
 
 #[test]

@@ -19,7 +19,7 @@
 use super::Texture;
 use super::error::{SceneError, line_of};
 use super::files::FileLog;
-use super::format::{MaterialKind, MaterialSpec, MediumSpec, Positive};
+use super::format::{MaterialKind, MaterialSpec, MediumSpec};
 use super::mtl::MtlMaterial;
 use crate::material::{Bsdf, Material};
 use crate::medium::Medium;
@@ -237,6 +237,8 @@ impl<'a> MaterialTable<'a> {
             },
             MaterialKind::Glass => {
                 let tint = spec.tint.map_or(Vec3::ONE, |t| t.0);
+                // Vacuum (or air) outside when the key is left out.
+                let outside_ior = spec.outside_ior.map_or(1.0, |i| i.0);
                 let indices = [
                     ("ior", spec.ior.map(|_| None)),
                     ("cauchy", spec.cauchy.map(|c| Some(c.0))),
@@ -252,11 +254,13 @@ impl<'a> MaterialTable<'a> {
                     }
                     (Some((_, Some(Some(dispersion)))), None) => Bsdf::DispersiveGlass {
                         dispersion: *dispersion,
-                        outside_ior: spec.outside_ior.map_or(1.0, |i| i.0),
+                        outside_ior,
                         tint,
                     },
+                    // The relative index, worked out once here so that the renderer divides
+                    // nothing; over the default 1 it is `ior` itself, bit for bit.
                     _ => Bsdf::Dielectric {
-                        ior: relative_ior(spec.ior.map_or(1.5, |i| i.0), spec.outside_ior),
+                        ior: spec.ior.map_or(1.5, |i| i.0) / outside_ior,
                         tint,
                     },
                 }
@@ -311,18 +315,6 @@ impl<'a> MaterialTable<'a> {
         self.textures.push(texture);
         self.texture_ids.insert(path, id);
         Ok(id)
-    }
-}
-
-/// The index a plain glass's BSDF works with: its `ior` over its `outside_ior`, as Mitsuba 3's
-/// dielectric uses `int_ior / ext_ior`, because refraction and Fresnel reflection depend only on
-/// the ratio of the indices on the two sides. Worked out here, once, so that the renderer does
-/// no division; without `outside_ior` the index is `ior` itself, bit for bit. The ratio may be
-/// below 1 (an air bubble in water), which the BSDF handles from either side.
-fn relative_ior(ior: f32, outside_ior: Option<Positive>) -> f32 {
-    match outside_ior {
-        Some(outside) => ior / outside.0,
-        None => ior,
     }
 }
 
