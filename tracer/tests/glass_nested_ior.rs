@@ -6,12 +6,15 @@
 //!   real indices, so its sideways shift through the inner slab follows `n2` (not `n1 n2`, as
 //!   when the inner glass ignores what surrounds it), and it leaves parallel to where it came in.
 //! - An index-matched glass inside water (`ior` and `outside_ior` both the water's) reflects
-//!   nothing: the render equals the one without it, while the same glass without
-//!   `outside_ior` (index 1 outside, the old rule) visibly darkens it.
+//!   nothing: the render equals the one without it, while a denser glass in the same water
+//!   visibly darkens it, and the same glass without `outside_ior` (index 1 around it inside
+//!   the water) is refused by the loader's nesting check.
 //! - Glass, dispersive glass and an air bubble inside a glass ball, in a white furnace with no
 //!   absorption, render 1 (energy; this alone would not notice a wrong relative index).
 //! - Bad `outside_ior` values, and the key on a material that is not glass, are refused with
-//!   the file, the line and the key.
+//!   the file, the line and the key; so is any glass whose relative index (its own over
+//!   `outside_ior`, at every rendered wavelength for a dispersive one) leaves
+//!   [`tracer::material::RELATIVE_IOR`], while the range's ends load.
 
 mod common;
 
@@ -201,19 +204,24 @@ fn an_index_matched_glass_inside_water_lets_light_through_unchanged() {
             se.z.hypot(without_se.z),
         );
         assert_close(&what, (mean, combined), without, 0.0);
-        // Guard: the same glass with index 1 outside reflects at its two faces, and this
-        // scene sees it, so the equality above is not vacuous.
-        let old_rule = format!("type = \"glass\"\nior = {n}");
+        // Guard: a glass of another index in the same water reflects at its two faces, and
+        // this scene sees it, so the equality above is not vacuous. (The same glass with
+        // `outside_ior` left out, index 1 around it in the water, is refused by the loader.)
+        let denser = format!("type = \"glass\"\nior = {}\noutside_ior = {n}", 1.5 * n);
         let (darker, darker_se) = mean_and_error(&render(
-            &load(&slab_before_a_lamp(n, Some(&old_rule))),
+            &load(&slab_before_a_lamp(n, Some(&denser))),
             None,
             0,
         ));
         let gap = without.x - darker.x;
         assert!(
             gap > 8.0 * darker_se.x.hypot(without_se.x),
-            "{n}: index 1 outside renders {darker}, without the glass {without}"
+            "{n}: a denser glass renders {darker}, without the glass {without}"
         );
+        let old_rule = format!("type = \"glass\"\nior = {n}");
+        let refused = load_with(&slab_before_a_lamp(n, Some(&old_rule)), &[])
+            .expect_err("index 1 around a glass inside water contradicts the geometry");
+        assert!(refused.to_string().contains("`outside_ior`"), "{refused}");
     }
 }
 
@@ -275,17 +283,84 @@ fn bad_outside_indices_are_refused_at_their_line_and_key() {
             );
         }
     }
-    // Any finite index above 0 is physical: below the glass's own (glass in a denser glass)
-    // and below 1 alike.
-    for keys in [
-        "outside_ior = 0.5",
-        "ior = 1.2\noutside_ior = 3",
-        "glass = \"bk7\"\noutside_ior = 2",
+    // Any finite index above 0 passes the key's own check: below the glass's own (glass in a
+    // denser glass) and below 1 alike; the glass around the ball makes it true.
+    for (keys, around) in [
+        ("outside_ior = 0.5", "type = \"interface\"\nmedium = \"m\""),
+        ("ior = 1.2\noutside_ior = 3", "type = \"glass\"\nior = 3"),
+        (
+            "glass = \"bk7\"\noutside_ior = 2",
+            "type = \"glass\"\nior = 2",
+        ),
     ] {
-        load_with(
-            &format!("[materials.g]\ntype = \"glass\"\n{keys}\n{CAMERA}"),
-            &[],
-        )
-        .unwrap_or_else(|e| panic!("{keys}: {e}"));
+        load_with(&inside_a_ball(keys, around), &[]).unwrap_or_else(|e| panic!("{keys}: {e}"));
+    }
+}
+
+/// A glass ball whose table's keys are `keys` inside a ball of radius 3 of the material whose
+/// table's body is `around` (with a medium `m` inside, if it names one, which the inner ball
+/// then has outside).
+fn inside_a_ball(keys: &str, around: &str) -> String {
+    let outside_medium = if around.contains("medium") {
+        "outside_medium = \"m\"\n[media.m]\nsigma_a = 0.1"
+    } else {
+        ""
+    };
+    format!(
+        "[camera]\nposition = [0, 0, -5]\nlook_at = [0, 0, 0]\n\
+         [[object]]\nshape = \"sphere\"\nmaterial = \"g\"\n\
+         [[object]]\nshape = \"sphere\"\nradius = 3\nmaterial = \"around\"\n\
+         [materials.around]\n{around}\n\
+         [materials.g]\ntype = \"glass\"\n{keys}\n{outside_medium}\n"
+    )
+}
+
+#[test]
+fn relative_indices_outside_the_accepted_range_are_refused() {
+    const CAMERA: &str = "[camera]\nposition = [0, 0, -5]\nlook_at = [0, 0, 0]\n\
+        [[object]]\nshape = \"sphere\"\nmaterial = \"g\"\n";
+    let (low, high) = (
+        *tracer::material::RELATIVE_IOR.start(),
+        *tracer::material::RELATIVE_IOR.end(),
+    );
+    let scene = |keys: &str| format!("[materials.g]\ntype = \"glass\"\n{keys}\n{CAMERA}");
+    // Too dense a glass on its own, in air; a glass in a far denser or far thinner
+    // surround; a dispersive glass whose index at some wavelength leaves the range.
+    #[rustfmt::skip]
+    let refused = [
+        format!("ior = {}", high * 1.01),
+        "ior = 1e30".to_string(),
+        "ior = 3e38".to_string(),
+        format!("ior = 1.5\noutside_ior = {}", 1.5 / (low * 0.99)),
+        "ior = 1\noutside_ior = 1e30".to_string(),
+        "ior = 2\noutside_ior = 1e-30".to_string(),
+        "ior = 1e20\noutside_ior = 1e-20".to_string(),
+        "glass = \"bk7\"\noutside_ior = 1e-3".to_string(),
+        "glass = \"sf11\"\noutside_ior = 1e4".to_string(),
+        "cauchy = [1.5, 0.004]\noutside_ior = 1e-20".to_string(),
+        "sellmeier = [1.03961212, 0.231792344, 1.01046945, 0.00600069867, 0.0200179144, 103.560653]\noutside_ior = 1e5".to_string(),
+    ];
+    for keys in &refused {
+        assert_refused(&scene(keys), 1, "relative index of refraction");
+    }
+    // The range's ends themselves load, as do extreme but physical pairs, each inside a ball
+    // of its outside index.
+    for (keys, outside) in [
+        (format!("ior = {high}"), None),
+        (
+            format!("ior = 1\noutside_ior = {}", 1.0 / low),
+            Some(1.0 / low),
+        ),
+        ("ior = 1\noutside_ior = 4".to_string(), Some(4.0)),
+        (
+            "glass = \"sf11\"\noutside_ior = 100".to_string(),
+            Some(100.0),
+        ),
+    ] {
+        let toml = match outside {
+            None => scene(&keys),
+            Some(n) => inside_a_ball(&keys, &format!("type = \"glass\"\nior = {n}")),
+        };
+        load_with(&toml, &[]).unwrap_or_else(|e| panic!("{keys}: {e}"));
     }
 }

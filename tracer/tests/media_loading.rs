@@ -17,6 +17,17 @@ fn scene(ball: &str, media: &str, camera: &str) -> String {
     )
 }
 
+/// [`scene`] with the ball inside a larger sphere bounded by an interface around medium
+/// `fog` (which `media` defines): where a ball whose outside is the fog must be for the
+/// loader's nesting check.
+fn scene_in_fog(ball: &str, media: &str, camera: &str) -> String {
+    format!(
+        "{}\n[[object]]\nshape = \"sphere\"\nradius = 2\nmaterial = \"around\"\n\
+         [materials.around]\ntype = \"interface\"\nmedium = \"fog\"\n",
+        scene(ball, media, camera)
+    )
+}
+
 /// Asserts that loading fails with a message containing `says` and naming the line of
 /// scene.toml that holds `at` (the first such line).
 fn rejects(toml: &str, at: &str, says: &str) {
@@ -213,7 +224,7 @@ fn an_objects_outside_is_the_camera_medium_unless_named() {
             "medium = \"smoke\"",
         ),
     ] {
-        let s = load_str(&scene(ball, two, camera)).expect("loads");
+        let s = load_str(&scene_in_fog(ball, two, camera)).expect("loads");
         let m = &s.materials[0];
         let (fog, smoke) = (
             m.exterior.expect("fog outside"),
@@ -232,7 +243,7 @@ fn an_objects_outside_is_the_camera_medium_unless_named() {
     assert!(s.camera_medium.is_some());
     assert_eq!(s.materials[0].exterior, s.camera_medium);
     assert_ne!(s.materials[0].exterior, s.materials[0].interior);
-    let s = load_str(&scene(
+    let s = load_str(&scene_in_fog(
         "type = \"glass\"\noutside_medium = \"fog\"",
         "[media.fog]\nsigma_s = 0.1",
         "",

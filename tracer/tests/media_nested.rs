@@ -4,14 +4,14 @@
 //!
 //! - Shadow rays through a box B of medium m2 inside a box A of medium m1 carry
 //!   `exp(-sigma_t1 d1 - sigma_t2 d2)` (deterministic, to float rounding), for several
-//!   coefficients and thicknesses; with B's outside left out, the stretch of A beyond B is the
-//!   camera's vacuum, as before media nested.
+//!   coefficients and thicknesses. With B's outside left out (the camera's vacuum, which the
+//!   geometry contradicts) the loader refuses the scene, naming `outside_medium`.
 //! - Camera rays through the same nesting arrive with that transmittance on average (free-flight
 //!   sampling, within Monte Carlo error).
 //! - A white furnace of nested scattering media (albedo 1) inside each other, through glass or
 //!   interfaces, still renders 1.
-//! - The effect set turns `media` on for a medium named only as an outside, and nested scenes
-//!   render the same bits specialised or with every effect forced.
+//! - Nested scenes render the same bits specialised or with every effect forced. (A medium
+//!   named only as an outside cannot load any more: nothing encloses it.)
 
 mod common;
 
@@ -93,24 +93,21 @@ fn shadow_rays_through_nested_boxes_carry_each_segments_own_medium() {
         let d2_f64 = f64::from(d2);
         for (m1, sigma_1) in MEDIA {
             for (m2, sigma_2) in MEDIA {
-                for nested in [true, false] {
-                    let toml = boxes_under_a_light(d2, m1, m2, nested);
-                    let (through, stats) = radiance_under_the_light(load(&toml));
-                    // One shadow ray and four more segments past the boxes' four faces.
-                    assert_eq!(stats.shadow_rays, 5, "{m1} / {m2}, d2 = {d2}");
-                    // A's medium below B is 0.4 thick; above B, 1.6 - d2 more when B's outside
-                    // is A's medium, and vacuum (the camera's medium) when it is left out.
-                    let d1 = if nested { 2.0 - d2_f64 } else { 0.4 };
-                    for c in 0..3 {
-                        let expected = by_hand * (-sigma_1[c] * d1 - sigma_2[c] * d2_f64).exp();
-                        let got = f64::from(through[c]);
-                        assert!(
-                            (got - expected).abs() <= 2e-5 * expected,
-                            "{m1} around {m2}, d2 = {d2}, nested {nested}, channel {c}: \
-                             {got}, expected {expected}"
-                        );
-                    }
+                let toml = boxes_under_a_light(d2, m1, m2, true);
+                let (through, stats) = radiance_under_the_light(load(&toml));
+                // One shadow ray and four more segments past the boxes' four faces.
+                assert_eq!(stats.shadow_rays, 5, "{m1} / {m2}, d2 = {d2}");
+                // A's medium is 0.4 thick below B and 1.6 - d2 above it.
+                let d1 = 2.0 - d2_f64;
+                for c in 0..3 {
+                    let expected = by_hand * (-sigma_1[c] * d1 - sigma_2[c] * d2_f64).exp();
+                    let got = f64::from(through[c]);
+                    assert!(
+                        (got - expected).abs() <= 2e-5 * expected,
+                        "{m1} around {m2}, d2 = {d2}, channel {c}: {got}, expected {expected}"
+                    );
                 }
+                refused_for_vacuum_around_b(&boxes_under_a_light(d2, m1, m2, false));
             }
         }
     }
@@ -143,18 +140,17 @@ fn camera_rays_through_nested_slabs_arrive_with_the_product_of_transmittances() 
     let cases = [(0, 3, 0.5f32), (3, 1, 1.0), (1, 0, 1.25)];
     for (i, j, d2) in cases {
         let ((m1, sigma_1), (m2, sigma_2)) = (MEDIA[i], MEDIA[j]);
-        for nested in [true, false] {
-            let scene = load(&emitter_behind_nested_slabs(d2, m1, m2, nested));
-            let out = render(&scene, None, 0);
-            let d1 = if nested { 2.0 - d2 } else { 0.5 };
-            // Rays lie within 1.5 degrees of the axis: their paths are at most 1.0004 times
-            // the thicknesses.
-            let expected = Vec3::from_array(std::array::from_fn(|c| {
-                (-(sigma_1[c] as f32) * d1 - (sigma_2[c] as f32) * d2).exp()
-            }));
-            let what = format!("{m1} around {m2}, d2 = {d2}, nested {nested}");
-            assert_close(&what, mean_and_error(&out), expected, 0.002);
-        }
+        let scene = load(&emitter_behind_nested_slabs(d2, m1, m2, true));
+        let out = render(&scene, None, 0);
+        let d1 = 2.0 - d2;
+        // Rays lie within 1.5 degrees of the axis: their paths are at most 1.0004 times
+        // the thicknesses.
+        let expected = Vec3::from_array(std::array::from_fn(|c| {
+            (-(sigma_1[c] as f32) * d1 - (sigma_2[c] as f32) * d2).exp()
+        }));
+        let what = format!("{m1} around {m2}, d2 = {d2}");
+        assert_close(&what, mean_and_error(&out), expected, 0.002);
+        refused_for_vacuum_around_b(&emitter_behind_nested_slabs(d2, m1, m2, false));
     }
 }
 
@@ -262,15 +258,17 @@ fn nested_media_render_the_same_bits_specialised_or_forced() {
     let nested = load(&fog_box_room(true));
     let (auto, _) = assert_same_bits("glass in a fog box", &nested, 0);
     assert!(auto.stats.flights > 0 && auto.stats.medium_scatters > 0);
-    // Guard: the glass's outside does change the image, so equal bits are not vacuous.
-    let flat = render(&load(&fog_box_room(false)), None, 0);
-    assert_ne!(auto.pixels, flat.pixels);
+    let refused = load_str(&fog_box_room(false)).expect_err("vacuum around glass in fog");
+    let says = "[materials.gem]: the geometry puts medium `fog` around it, but its \
+                `outside_medium` says vacuum";
+    assert!(refused.to_string().contains(says), "{refused}");
 }
 
 #[test]
-fn a_medium_named_only_outside_an_object_turns_media_on() {
-    // A clear glass ball in a fog that only its outside names: the fog is a medium a path can
-    // be in (after leaving the ball), so rays must be tracked through it.
+fn a_medium_named_only_outside_an_object_is_refused() {
+    // A glass ball in a fog that only its outside names: nothing encloses the ball in the fog,
+    // so a ray leaving it escapes to the camera's vacuum, and the loader says so. (Before the
+    // nesting check this loaded, and the fog was a medium paths could enter only from the ball.)
     let toml = r#"
         render = { width = 8, height = 8, spp = 2 }
         camera = { position = [0, 0, -3], look_at = [0, 0, 0] }
@@ -282,8 +280,31 @@ fn a_medium_named_only_outside_an_object_turns_media_on() {
         [media.fog]
         sigma_a = 0.5
         "#;
-    let scene = load(toml);
-    assert_eq!(scene.camera_medium, None);
+    let refused = load_str(toml).expect_err("nothing encloses the ball in fog");
+    assert!(
+        refused.to_string().contains("escapes to infinity"),
+        "{refused}"
+    );
+    // Enclosed in a fog-filled interface, it loads and tracks media.
+    let enclosed = toml
+        .replace(
+            "[materials.ball]",
+            "[materials.around]\ntype = \"interface\"\nmedium = \"fog\"\n[materials.ball]",
+        )
+        .replace(
+            "material = \"ball\" }]",
+            "material = \"ball\" }, { shape = \"sphere\", radius = 2, material = \"around\" }]",
+        );
+    let scene = load(&enclosed);
     assert!(Effects::of(&scene).media);
-    assert_same_bits("glass with fog outside", &scene, 0);
+    assert_same_bits("glass in fog", &scene, 0);
+}
+
+/// Asserts that `toml`, in which box B's outside is left out (the camera's vacuum) although
+/// it lies inside A's medium, is refused naming `outside_medium` and the medium around B.
+fn refused_for_vacuum_around_b(toml: &str) {
+    let refused = load_str(toml).expect_err("vacuum around B contradicts the geometry");
+    let says = "[materials.b]: the geometry puts medium `m1` around it, but its \
+                `outside_medium` says vacuum";
+    assert!(refused.to_string().contains(says), "{refused}");
 }

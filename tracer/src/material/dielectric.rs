@@ -15,6 +15,7 @@
 
 use super::BsdfSample;
 use glam::Vec3;
+use std::ops::RangeInclusive;
 
 /// The exact unpolarised Fresnel reflectance of a smooth dielectric interface.
 ///
@@ -77,16 +78,39 @@ pub(crate) fn refract_local(wo: Vec3, eta: f32) -> Option<(Vec3, f32)> {
     Some((wt.normalize_or_zero(), eta))
 }
 
-/// The index of refraction the sampler works with: finite and in [1e-3, 1e3].
+/// The relative indices of refraction (inside over outside) the renderer accepts. Real
+/// interfaces lie far inside it: water in air 1.33, diamond 2.42, germanium in the infrared 4,
+/// an air bubble in glass 0.66. Beyond it Fresnel's and Snell's arithmetic in `f32` loses its
+/// meaning (`eta * eta` overflows near 1.8e19), and nothing physical lies there.
 ///
-/// The scene loader rejects non-positive or non-finite indices with a message; this clamp only
-/// keeps a bad value that slipped through from poisoning the image with NaN (NaN becomes 1, an
-/// index-matched interface that lets light through unchanged).
+/// The one owner of the limit: the scene loader refuses a glass whose relative index leaves it
+/// ([`check_relative_ior`]), and the sampler clamps to it ([`sanitize_ior`]).
+pub const RELATIVE_IOR: RangeInclusive<f32> = 1e-3..=1e3;
+
+/// `relative` (inside over outside) when it lies in [`RELATIVE_IOR`], else what is wrong, for
+/// the loader to show with the keys that gave it.
+pub fn check_relative_ior(relative: f32) -> Result<f32, String> {
+    if RELATIVE_IOR.contains(&relative) {
+        Ok(relative)
+    } else {
+        Err(format!(
+            "gives a relative index of refraction (inside over outside) of {relative}, outside [{}, {}]",
+            RELATIVE_IOR.start(),
+            RELATIVE_IOR.end()
+        ))
+    }
+}
+
+/// The index of refraction the sampler works with: finite and in [`RELATIVE_IOR`].
+///
+/// The scene loader refuses indices outside it with a message; this clamp only keeps a bad
+/// value that slipped through (a hand-built [`super::Bsdf`]) from poisoning the image with NaN
+/// (NaN becomes 1, an index-matched interface that lets light through unchanged).
 pub(crate) fn sanitize_ior(ior: f32) -> f32 {
     if ior.is_nan() {
         1.0
     } else {
-        ior.clamp(1e-3, 1e3)
+        ior.clamp(*RELATIVE_IOR.start(), *RELATIVE_IOR.end())
     }
 }
 

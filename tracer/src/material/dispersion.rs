@@ -139,9 +139,7 @@ impl Dispersion {
             }
         }
         // Every nanometre: n is smooth between poles, so a dip below 1 cannot hide between them.
-        for step in 0..=(hi - lo) as u32 {
-            let nm = lo + step as f32;
-            let n = self.ior(nm);
+        for (nm, n) in self.rendered_indices() {
             if !n.is_finite() || n < 1.0 {
                 return Err(format!(
                     "the index at {nm} nm is {n}: it must be finite and at least 1 over {lo}-{hi} nm"
@@ -149,6 +147,25 @@ impl Dispersion {
             }
         }
         Ok(())
+    }
+
+    /// The smallest and the largest index over the wavelengths the renderer samples, taken every
+    /// nanometre as [`Dispersion::check`] does: what the loader holds against the accepted
+    /// relative indices once it knows what surrounds the glass.
+    pub fn index_range(&self) -> (f32, f32) {
+        self.rendered_indices()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(low, high), (_, n)| {
+                (low.min(n), high.max(n))
+            })
+    }
+
+    /// (wavelength in nm, index) at every whole nanometre of the rendered range.
+    fn rendered_indices(&self) -> impl Iterator<Item = (f32, f32)> + '_ {
+        let (lo, hi) = (crate::spectrum::LAMBDA_MIN, crate::spectrum::LAMBDA_MAX);
+        (0..=(hi - lo) as u32).map(move |step| {
+            let nm = lo + step as f32;
+            (nm, self.ior(nm))
+        })
     }
 
     /// The index at the helium d line (587.56 nm), the one catalogues quote as `n_d`: what a

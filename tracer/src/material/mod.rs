@@ -40,7 +40,7 @@ mod microfacet;
 #[path = "tests/nested_ior.rs"]
 mod nested_ior_tests;
 
-pub use dielectric::{fresnel_dielectric, fresnel_schlick};
+pub use dielectric::{RELATIVE_IOR, check_relative_ior, fresnel_dielectric, fresnel_schlick};
 pub use dispersion::{Dispersion, GLASSES};
 pub use frame::Frame;
 pub use microfacet::MIN_ALPHA;

@@ -11,6 +11,7 @@ use super::format::{self, ObjectSpec, SceneSpec};
 use super::keys::{camera_track, key_pose, object_track, shutter};
 use super::materials::MaterialTable;
 use super::motion::{MovingObject, TransformTrack};
+use super::nesting;
 use super::obj::{self, NO_MATERIAL};
 use super::shapes::{Transform, given_keys, shape_triangles};
 use super::{CameraTrack, PointLight, RenderSettings, Scene, Triangle};
@@ -112,6 +113,15 @@ pub fn load_with_report(
         None => None,
     };
     builder.table.place_outside(camera_medium);
+    let table = &builder.table;
+    if let Some(c) = nesting::check(
+        &builder.triangles,
+        &table.materials,
+        &table.indices,
+        camera_medium,
+    ) {
+        return Err(nesting::refusal(table, &c));
+    }
     if let Some(unused) = builder.table.media.unused_definition() {
         return Err(unused);
     }

@@ -13,15 +13,18 @@
 //! Indices of refraction nest as media do: a glass's `outside_ior` is the index of what
 //! surrounds it (the enclosing glass's `ior`; 1, vacuum or air, when left out), and its BSDF
 //! works with the relative index, `ior / outside_ior`, since refraction and Fresnel reflection
-//! depend on nothing else. Like `outside_medium`, the key is trusted: nothing checks it against
-//! the glass that actually encloses the object.
+//! depend on nothing else; a relative index outside [`crate::material::RELATIVE_IOR`] is
+//! refused. Both outside keys, given or left out, are held against the geometry once the
+//! objects are placed (`nesting.rs`): a glass whose outside contradicts what encloses it is
+//! refused.
 
 use super::Texture;
 use super::error::{SceneError, line_of};
 use super::files::FileLog;
 use super::format::{MaterialKind, MaterialSpec, MediumSpec};
 use super::mtl::MtlMaterial;
-use crate::material::{Bsdf, Material};
+use super::nesting::Indices;
+use crate::material::{Bsdf, Material, check_relative_ior};
 use crate::medium::Medium;
 use glam::Vec3;
 use std::collections::{BTreeMap, BTreeSet};
@@ -34,6 +37,9 @@ pub(crate) struct MaterialTable<'a> {
     defined: &'a BTreeMap<Spanned<String>, MaterialSpec>,
     used_defined: BTreeSet<String>,
     pub materials: Vec<Material>,
+    /// Each material's indices of refraction on its two sides, where it is a boundary (glass
+    /// or interface): what `nesting::check` holds against the geometry.
+    pub indices: Vec<Option<Indices>>,
     ids: BTreeMap<MaterialKey, u32>,
     /// The materials whose `outside_medium` the TOML names; every other material's outside is
     /// the camera's medium ([`MaterialTable::place_outside`]).
@@ -66,6 +72,7 @@ impl<'a> MaterialTable<'a> {
             defined,
             used_defined: BTreeSet::new(),
             materials: Vec::new(),
+            indices: Vec::new(),
             ids: BTreeMap::new(),
             outside_named: BTreeSet::new(),
             textures: Vec::new(),
@@ -91,9 +98,9 @@ impl<'a> MaterialTable<'a> {
                 format!("material `{name}` is not defined: add a [materials.{name}] table");
             return Err(SceneError::at_line(self.toml, line, detail));
         };
-        let material = self.define(log, definition, spec)?;
+        let (material, indices) = self.define(log, definition, spec)?;
         self.used_defined.insert(name.get_ref().clone());
-        let id = self.add(key, material);
+        let id = self.add(key, material, indices);
         if spec.outside_medium.is_some() {
             self.outside_named.insert(id);
         }
@@ -119,7 +126,9 @@ impl<'a> MaterialTable<'a> {
         }
         let material =
             m.to_material(|texture, line| self.texture(log, (&m.file, line), texture))?;
-        Ok(self.add(key, material))
+        // MTL glass has air outside, so its relative index is its own.
+        let indices = Indices::of(&material.bsdf);
+        Ok(self.add(key, material, indices))
     }
 
     /// Whether the TOML defines a material `name`.
@@ -149,20 +158,36 @@ impl<'a> MaterialTable<'a> {
         }
     }
 
-    fn add(&mut self, key: MaterialKey, material: Material) -> u32 {
+    /// Where material `id` is defined, for messages about it: its `[materials.NAME]` table's
+    /// file and line, or the MTL file it came from.
+    pub(crate) fn place(&self, id: u32) -> (&str, Option<usize>) {
+        let name = self.materials[id as usize].name.as_str();
+        if let Some((table, _)) = self.defined.get_key_value(name) {
+            return (self.toml, Some(line_of(self.text, table.span().start)));
+        }
+        let file = self.ids.iter().find_map(|(key, &i)| match key {
+            MaterialKey::Mtl { file, .. } if i == id => Some(file.as_str()),
+            _ => None,
+        });
+        (file.unwrap_or(self.toml), None)
+    }
+
+    fn add(&mut self, key: MaterialKey, material: Material, indices: Option<Indices>) -> u32 {
         let id = self.materials.len() as u32;
         self.materials.push(material);
+        self.indices.push(indices);
         self.ids.insert(key, id);
         id
     }
 
-    /// The material a `[materials.NAME]` table defines.
+    /// The material a `[materials.NAME]` table defines, with its indices of refraction on
+    /// both sides where it is a boundary.
     fn define(
         &mut self,
         log: &mut FileLog,
         name: &Spanned<String>,
         spec: &MaterialSpec,
-    ) -> Result<Material, SceneError> {
+    ) -> Result<(Material, Option<Indices>), SceneError> {
         let line = line_of(self.text, name.span().start);
         let err = |detail: &str| {
             let detail = format!("[materials.{}]: {detail}", name.get_ref());
@@ -218,6 +243,8 @@ impl<'a> MaterialTable<'a> {
             )));
         }
         let emission = spec.emission.map_or(Vec3::ZERO, |e| e.0);
+        // A plain glass's indices on both sides, where its BSDF keeps only their ratio.
+        let mut own_indices = None;
         let bsdf = match kind {
             MaterialKind::Diffuse => {
                 let texture = match &spec.texture {
@@ -252,17 +279,34 @@ impl<'a> MaterialTable<'a> {
                             "give one index (`ior`, `cauchy`, `sellmeier` or `glass`), not both `{a}` and `{b}`"
                         )));
                     }
-                    (Some((_, Some(Some(dispersion)))), None) => Bsdf::DispersiveGlass {
-                        dispersion: *dispersion,
-                        outside_ior,
-                        tint,
-                    },
+                    (Some((key, Some(Some(dispersion)))), None) => {
+                        let (low, high) = dispersion.index_range();
+                        for n in [low, high] {
+                            check_relative_ior(n / outside_ior).map_err(|e| {
+                                err(&format!("`{key}` over `outside_ior` {e} (index {n})"))
+                            })?;
+                        }
+                        Bsdf::DispersiveGlass {
+                            dispersion: *dispersion,
+                            outside_ior,
+                            tint,
+                        }
+                    }
                     // The relative index, worked out once here so that the renderer divides
-                    // nothing; over the default 1 it is `ior` itself, bit for bit.
-                    _ => Bsdf::Dielectric {
-                        ior: spec.ior.map_or(1.5, |i| i.0) / outside_ior,
-                        tint,
-                    },
+                    // nothing; over the default 1 it is `ior` itself, bit for bit. The glass's
+                    // own index is kept for the nesting check, which the BSDF's would not serve.
+                    _ => {
+                        let ior = spec.ior.map_or(1.5, |i| i.0);
+                        own_indices = Some(Indices {
+                            inside: Some(ior),
+                            outside: Some(outside_ior),
+                        });
+                        Bsdf::Dielectric {
+                            ior: check_relative_ior(ior / outside_ior)
+                                .map_err(|e| err(&format!("`ior` over `outside_ior` {e}")))?,
+                            tint,
+                        }
+                    }
                 }
             }
             MaterialKind::Metal => Bsdf::Conductor {
@@ -289,13 +333,15 @@ impl<'a> MaterialTable<'a> {
         // Left out, the outside is the camera's medium, which is resolved after the objects:
         // `MaterialTable::place_outside` fills it in then.
         let exterior = medium("outside_medium", &spec.outside_medium)?;
-        Ok(Material {
+        let indices = own_indices.or_else(|| Indices::of(&bsdf));
+        let material = Material {
             name: name.get_ref().clone(),
             bsdf,
             emission,
             interior,
             exterior,
-        })
+        };
+        Ok((material, indices))
     }
 
     /// The index of the texture `reference`, named at `from` (file, line); decoded once.
@@ -355,6 +401,14 @@ impl<'a> MediumTable<'a> {
 
     /// The id of the medium `name`, referenced where `name`'s span says (`key` names the
     /// referencing key in messages).
+    /// The name medium `id` has in the TOML.
+    pub(crate) fn name(&self, id: u32) -> &str {
+        self.ids
+            .iter()
+            .find_map(|(name, &i)| (i == id).then_some(name.as_str()))
+            .expect("every medium id was handed out by `medium` under a name")
+    }
+
     pub(crate) fn medium(&mut self, key: &str, name: &Spanned<String>) -> Result<u32, SceneError> {
         if let Some(&id) = self.ids.get(name.get_ref()) {
             return Ok(id);

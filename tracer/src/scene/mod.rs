@@ -15,6 +15,7 @@ mod load;
 mod materials;
 mod motion;
 mod mtl;
+mod nesting;
 mod obj;
 mod shapes;
 mod texture;

@@ -18,7 +18,7 @@
 
 use super::error::SceneError;
 use super::obj::statements;
-use crate::material::{Bsdf, Material};
+use crate::material::{Bsdf, Material, check_relative_ior};
 use glam::Vec3;
 
 /// A value and the 1-based line it was read from.
@@ -164,7 +164,9 @@ impl MtlMaterial {
                         format!("`Ni {}` must be at least 1 for glass", ni.value),
                     ));
                 }
-                Some(ni) => ni.value,
+                // Glass in MTL has air outside: `Ni` is the relative index itself.
+                Some(ni) => check_relative_ior(ni.value)
+                    .map_err(|e| self.bad(ni.line, format!("`Ni {}` {e}", ni.value)))?,
                 None => 1.5,
             };
             Bsdf::Dielectric {
@@ -372,5 +374,22 @@ mod tests {
         assert!(e.to_string().contains("before any `newmtl`"), "{e}");
         let e = parse("a.mtl", b"newmtl x\nnewmtl y\nnewmtl x\n").unwrap_err();
         assert_eq!(e.line(), Some(3));
+    }
+
+    #[test]
+    fn glass_indices_are_held_to_the_relative_range() {
+        // MTL glass has air outside, so `Ni` is the relative index: refused above the range's
+        // top, at its line; the top itself and real glasses load.
+        for ni in ["1000.5", "1e6", "3e38"] {
+            let e = one(&format!("newmtl g\nillum 7\nNi {ni}\n")).unwrap_err();
+            assert_eq!((e.file(), e.line()), ("a.mtl", Some(3)), "{e}");
+            assert!(
+                e.to_string().contains("relative index of refraction"),
+                "{e}"
+            );
+        }
+        for ni in ["1", "1.5", "2.42", "1000"] {
+            one(&format!("newmtl g\nillum 7\nNi {ni}\n")).unwrap();
+        }
     }
 }

@@ -24,19 +24,27 @@ const PAIRS: [(f32, f32); 7] = [
 /// Angles of incidence, in radians, from normal to nearly grazing.
 const ANGLES: [f64; 6] = [0.0, 0.2, 0.5, 0.8, 1.1, 1.45];
 
-/// The BSDF of a scene's glass material whose table's index keys are `keys`.
-fn loaded(keys: &str) -> Bsdf {
+/// The BSDF of a scene's glass material whose table's index keys are `keys`, a ball inside a
+/// larger ball of glass of index `outside`, as the loader's nesting check wants it.
+fn loaded_in(keys: &str, outside: f32) -> Bsdf {
     let toml = format!(
         "camera = {{ position = [0, 0, -5], look_at = [0, 0, 0] }}\n\
-         object = [{{ shape = \"sphere\", material = \"g\" }}]\n\
-         [materials.g]\ntype = \"glass\"\n{keys}\n"
+         object = [{{ shape = \"sphere\", material = \"g\" }},\n\
+         {{ shape = \"sphere\", radius = 3, material = \"around\" }}]\n\
+         [materials.g]\ntype = \"glass\"\n{keys}\n\
+         [materials.around]\ntype = \"glass\"\nior = {outside}\n"
     );
     let scene = load_str(&toml).unwrap_or_else(|e| panic!("{keys}: {e}"));
     scene.materials[0].bsdf
 }
 
+/// The BSDF of a scene's glass material whose table's index keys are `keys`, in vacuum.
+fn loaded(keys: &str) -> Bsdf {
+    loaded_in(keys, 1.0)
+}
+
 fn glass(inside: f32, outside: f32) -> Bsdf {
-    loaded(&format!("ior = {inside}\noutside_ior = {outside}"))
+    loaded_in(&format!("ior = {inside}\noutside_ior = {outside}"), outside)
 }
 
 /// The sample taken with `u_choice = 1`: the refraction whenever one exists (its `pdf` is then
@@ -162,7 +170,10 @@ fn dispersive_glass_refracts_by_its_index_at_the_wavelength_over_the_outside_ind
     let (a, b) = (1.6, 0.01);
     let cauchy = |nm: f64| a + b / (nm * 1e-3).powi(2);
     for outside in [1.0f32, 1.33, 1.9] {
-        let bsdf = loaded(&format!("cauchy = [{a}, {b}]\noutside_ior = {outside}"));
+        let bsdf = loaded_in(
+            &format!("cauchy = [{a}, {b}]\noutside_ior = {outside}"),
+            outside,
+        );
         let n_out = f64::from(outside);
         // An RGB path samples the glass at the d line; spectral paths at their wavelength.
         let mut cases = vec![(bsdf, 587.56)];
