@@ -69,7 +69,9 @@ MTL_MAPPING = (
 # `albedo = sigma_s / sigma_t` (RGB) and an `hg` phase function of the same `g` (both renderers
 # take g > 0 as forward scattering); a sphere whose material is `interface` becomes Mitsuba's
 # analytic `sphere` with a `null` BSDF and that medium as `interior`, `glass` a `dielectric`
-# (int_ior = ior, ext_ior = outside_ior, 1 when left out: both renderers refract by their ratio).
+# (int_ior = ior, ext_ior = outside_ior, 1 when left out: both renderers refract by their ratio);
+# its `outside_medium` (the camera's medium when left out, as in tessera) becomes the sphere's
+# `exterior`, so media nest alike in both renderers (`scenes/shared/cornell-box-nested.toml`).
 # Our sphere is an icosphere (20,480 faces at subdivisions 5, 0.03 % less area than the sphere),
 # Mitsuba's the exact sphere. `[camera] medium` (global fog)
 # becomes the sensor's `medium`: both renderers start camera rays in it, and since the meshes
@@ -77,7 +79,8 @@ MTL_MAPPING = (
 # with an interior or exterior medium, tessera only at glass and interfaces).
 MEDIA_MAPPING = (
     "[media] -> homogeneous(sigma_t = sigma_a + sigma_s, albedo = sigma_s / sigma_t, phase hg(g)); "
-    "sphere with interface -> sphere(null BSDF, interior = medium); with glass -> sphere(dielectric(int_ior = ior, ext_ior = outside_ior), interior); "
+    "sphere with interface -> sphere(null BSDF, interior = medium, exterior = outside_medium or the camera's); "
+    "with glass -> sphere(dielectric(int_ior = ior, ext_ior = outside_ior), interior, exterior); "
     "[camera] medium -> the sensor's medium"
 )
 
@@ -305,7 +308,9 @@ def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto"):
     triangles = 0
     for index, obj in enumerate(scene_toml.get("object", [])):
         if obj.get("shape") == "sphere":
-            shapes[f"shape-{index}-sphere"] = mitsuba_sphere(toml, obj, scene_toml.get("materials", {}), media)
+            shapes[f"shape-{index}-sphere"] = mitsuba_sphere(
+                toml, obj, scene_toml.get("materials", {}), media, camera.get("medium")
+            )
             continue
         if set(obj) != {"obj"}:
             raise SystemExit(f"{toml}: object {index} has keys other than obj, which this script does not translate")
@@ -409,16 +414,18 @@ def mitsuba_medium(spec):
     }
 
 
-def mitsuba_sphere(toml, obj, materials, media):
-    """A procedural sphere bounded by an `interface` or `glass` material with a medium."""
+def mitsuba_sphere(toml, obj, materials, media, camera_medium):
+    """A procedural sphere bounded by an `interface` or `glass` material with a medium, and with
+    the medium outside it: its `outside_medium`, or the camera's medium when left out (tessera's
+    rule; Mitsuba's own default, no exterior, would be vacuum)."""
     import mitsuba as mi
 
     if set(obj) - {"shape", "center", "radius", "subdivisions", "material"}:
         raise SystemExit(f"{toml}: a sphere with keys this script does not translate: {sorted(obj)}")
     material = materials[obj["material"]]
-    if material.get("type") == "interface" and set(material) <= {"type", "medium"}:
+    if material.get("type") == "interface" and set(material) <= {"type", "medium", "outside_medium"}:
         bsdf = {"type": "null"}
-    elif material.get("type") == "glass" and set(material) <= {"type", "ior", "outside_ior", "medium"}:
+    elif material.get("type") == "glass" and set(material) <= {"type", "ior", "outside_ior", "medium", "outside_medium"}:
         bsdf = {
             "type": "dielectric",
             "int_ior": float(material.get("ior", 1.5)),
@@ -433,6 +440,9 @@ def mitsuba_sphere(toml, obj, materials, media):
     }
     if "medium" in material:
         sphere["interior"] = mi.load_dict(media[material["medium"]])
+    outside = material.get("outside_medium", camera_medium)
+    if outside is not None:
+        sphere["exterior"] = mi.load_dict(media[outside])
     return mi.load_dict(sphere)
 
 
