@@ -269,6 +269,9 @@ impl Lights {
 
     /// Samples a light as seen from `p` at `moment` (where moving emitters are). `u_choice`
     /// picks the light, `u` the point on it.
+    // Inlined where the renderer calls it, so that its sample need not go through memory
+    // (a store-forwarding stall per shadow ray; docs/bench.md, issue 12, eighth round).
+    #[inline]
     pub fn sample(
         &self,
         scene: &Scene,

@@ -205,6 +205,9 @@ pub struct PathSpectrum {
 
 impl PathSpectrum {
     /// The state a path of `sampling` starts in, and its starting throughput.
+    // Inlined: returned through memory, written field by field and read back whole, the
+    // state stalled on store forwarding at every path's start (docs/bench.md, eighth round).
+    #[inline]
     pub fn start(sampling: SpectralSampling, sampler: &PixelSampler) -> (Self, Vec3) {
         let mut spectrum = PathSpectrum {
             wavelengths: None,

@@ -6,7 +6,8 @@
 //!   combination of keys: the right ones load, each wrong one is refused naming exactly the
 //!   keys that are wrong, at scales from a millimetre to a kilometre and far from the origin.
 //! - Probes pass through surfaces that do not bound media (a diffuse wall between the ball and
-//!   the tank), and a sibling ball beside the first does not count as enclosing it.
+//!   the tank), a sibling ball beside the first does not count as enclosing it, and probes that
+//!   meet different objects agree when those put the same medium there.
 //! - Where the geometry says no one thing (a ball crossing the tank's wall), nothing is refused.
 //! - An MTL glass, which cannot name its outside, is refused at its MTL file with the fix.
 
@@ -199,6 +200,36 @@ fn probes_pass_walls_and_siblings_but_not_ambiguous_geometry() {
             &toml,
             wrong,
             &format!("{keys:?} behind a wall beside a sibling"),
+        );
+    }
+    // In the fog box among six balls of another medium whose outside is the fog, one on each
+    // side: probes that meet those balls from outside and probes that pass between them to
+    // the box's inside both find fog, so they agree, and the ball's missing `outside_medium`
+    // is still refused.
+    let neighbour: String = [
+        [1.1, 0.0, 0.0],
+        [-1.1, 0.0, 0.0],
+        [0.0, 1.1, 0.0],
+        [0.0, -1.1, 0.0],
+        [0.0, 0.0, 1.1],
+        [0.0, 0.0, -1.1],
+    ]
+    .iter()
+    .map(|[x, y, z]| {
+        format!("{{ shape = \"sphere\", center = [{x}, {y}, {z}], radius = 0.5, subdivisions = 2, material = \"smoke-ball\" }},\n")
+    })
+    .collect();
+    let smoke = "[materials.smoke-ball]\ntype = \"interface\"\nmedium = \"smoke\"\noutside_medium = \"fog\"\n\
+                 [media.smoke]\nsigma_s = 3\n";
+    for (keys, wrong) in [
+        ("outside_medium = \"fog\"", &[][..]),
+        ("", &["outside_medium"][..]),
+    ] {
+        let toml = full_scene(Around::Fog, keys, 1.0, Vec3::ZERO, &neighbour) + smoke;
+        expect(
+            &toml,
+            wrong,
+            &format!("{keys:?} in fog beside a smoke ball"),
         );
     }
     // A ball crossing the tank's wall is partly in water and partly outside: its probes

@@ -209,6 +209,7 @@ impl Accel {
     }
 
     /// [`Accel::intersect`] by the chosen traversal.
+    #[inline]
     pub fn intersect_with(
         &self,
         ray: &Ray,
@@ -224,6 +225,7 @@ impl Accel {
     /// along shadow rays needs the closest blocker (to see whether it is a boundary the ray may
     /// pass), where occlusion needs only any. obvhs's traversal has no certainty rule, for
     /// either query, so it gives its plain closest hit.
+    #[inline]
     pub fn intersect_certain_with(
         &self,
         ray: &Ray,
@@ -234,6 +236,9 @@ impl Accel {
     }
 
     /// The closest hit by `traversal`, whose first accepted hit must be certain with `CERTAIN`.
+    /// Inlined, with the traversals it picks from kept out of line, so that the renderer's wide
+    /// traversal hands its hit back in registers (`wide.rs`, `PackedHit`).
+    #[inline(always)]
     fn closest_with<const CERTAIN: bool>(
         &self,
         ray: &Ray,

@@ -12,6 +12,8 @@
 //! - `build`: building the tree with obvhs, deterministically and without cracks.
 //! - `wide`: the tree collapsed into 8-wide nodes, and our robust traversal of it: what renders
 //!   use.
+//! - `packed_hit`: the wide traversal's answer in two registers, so that it reaches the
+//!   renderer without a trip through memory.
 //! - `leaf`: a leaf's triangles through the SIMD filters (four lanes, or eight with AVX) and
 //!   the scalar test on what they leave.
 //! - `memory`: the BVH's large arrays on transparent huge pages, where Linux offers them.
@@ -35,6 +37,7 @@ mod memory;
 mod motion;
 mod node8;
 mod offset;
+mod packed_hit;
 mod quad;
 #[cfg(target_arch = "x86_64")]
 mod quad_avx;

@@ -151,6 +151,9 @@ pub fn hit_point(p: &[Vec3; 3], b1: f32, b2: f32) -> Vec3 {
 /// `point` moved off its surface to the side of its normal that `toward` points to. A point on
 /// no surface (zero normal) is returned unchanged. A point on a moving object gives the origin
 /// it carries for that side, whatever `method` (the comparison offset is for still geometry).
+// Inlined into the spawns, so that the origin stays in registers (docs/bench.md, issue 12,
+// eighth round: a store-forwarding stall per ray when it was returned through memory).
+#[inline]
 pub fn offset_ray_origin(point: &SurfacePoint, toward: Vec3, method: OffsetMethod) -> Vec3 {
     let below = point.normal.dot(toward) < 0.0;
     if let Some([above_origin, below_origin]) = point.spawn {

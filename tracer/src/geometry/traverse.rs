@@ -79,6 +79,7 @@ struct StackEntry {
 
 impl Accel {
     /// Closest hit (or, with `ANY_HIT`, the first hit found) by our robust traversal.
+    #[inline(never)]
     pub(super) fn traverse_robust<const ANY_HIT: bool, const CERTAIN: bool>(
         &self,
         ray: &Ray,
@@ -203,6 +204,7 @@ impl Accel {
 
     /// Closest hit (or, with `ANY_HIT`, the first hit found) by obvhs's traversal, ray and
     /// Moller-Trumbore test. Barycentrics are computed for the winner with the same formulas.
+    #[inline(never)]
     pub(super) fn traverse_obvhs<const ANY_HIT: bool>(
         &self,
         ray: &Ray,

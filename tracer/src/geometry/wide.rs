@@ -26,6 +26,7 @@ use super::bvh::{Accel, Closest};
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
 use super::node8::{BoxTest, Node8, Portable, WIDTH, WideRay, avx_available};
+use super::packed_hit::PackedHit;
 use super::quad::{LANES, Quad, QuadRay};
 use super::traverse::FAR_SCALE;
 use super::triangle::ShearedRay;
@@ -171,6 +172,11 @@ const INLINE_STACK: usize = (WIDTH - 1) * 30;
 impl Accel {
     /// Closest hit (or, with `ANY_HIT`, the first certain hit found) by the wide traversal,
     /// with the box test [`Bvh8::simd`] names.
+    ///
+    /// Inlined into its callers, so that the hit comes back from the traversal proper (never
+    /// inlined: AVX code cannot be, and it is large) in two registers ([`PackedHit`]) and is
+    /// unpacked in the caller's registers.
+    #[inline(always)]
     pub(super) fn traverse_wide<const ANY_HIT: bool, const CERTAIN: bool>(
         &self,
         ray: &Ray,
@@ -183,9 +189,20 @@ impl Accel {
         if self.wide.simd == BoxSimd::Avx {
             // SAFETY: `simd` is `Avx` only where `is_x86_feature_detected!("avx")` said yes
             // (`best_simd`, `Accel::set_box_simd`).
-            return unsafe { self.traverse_avx::<ANY_HIT, CERTAIN>(ray, stats) };
+            return unsafe { self.traverse_avx::<ANY_HIT, CERTAIN>(ray, stats) }.unpack();
         }
-        self.traverse_with::<ANY_HIT, CERTAIN, Portable>(ray, stats)
+        self.traverse_portable::<ANY_HIT, CERTAIN>(ray, stats)
+            .unpack()
+    }
+
+    /// The traversal with the portable box test (SSE on x86-64).
+    #[inline(never)]
+    fn traverse_portable<const ANY_HIT: bool, const CERTAIN: bool>(
+        &self,
+        ray: &Ray,
+        stats: &mut TraversalStats,
+    ) -> PackedHit {
+        PackedHit::pack(self.traverse_with::<ANY_HIT, CERTAIN, Portable>(ray, stats))
     }
 
     /// The traversal compiled with AVX enabled: its box test and its test of two triangle
@@ -197,12 +214,13 @@ impl Accel {
     /// The processor must support AVX.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
+    #[inline(never)]
     unsafe fn traverse_avx<const ANY_HIT: bool, const CERTAIN: bool>(
         &self,
         ray: &Ray,
         stats: &mut TraversalStats,
-    ) -> Option<Hit> {
-        self.traverse_with::<ANY_HIT, CERTAIN, Avx>(ray, stats)
+    ) -> PackedHit {
+        PackedHit::pack(self.traverse_with::<ANY_HIT, CERTAIN, Avx>(ray, stats))
     }
 
     #[inline(always)]

@@ -34,6 +34,7 @@ pub(super) struct Placed<'a> {
 
 impl World {
     /// The closest hit of `ray` at `moment`.
+    #[inline]
     pub(super) fn closest(
         &self,
         ray: &Ray,
@@ -74,6 +75,9 @@ impl World {
     }
 
     /// The triangle `hit` names and where it is at `moment`.
+    // Inlined: its result, returned through memory, stalled on store forwarding at every
+    // hit (docs/bench.md, issue 12, eighth round).
+    #[inline]
     pub(super) fn placed<'a>(&'a self, hit: &Hit, moment: &'a Moment) -> Placed<'a> {
         match self.motion.locate(hit.triangle) {
             None => {

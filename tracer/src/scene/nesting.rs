@@ -17,8 +17,8 @@
 //! interfaces change the medium a path is in.
 //!
 //! **Conservative.** Geometry can be ambiguous: open sheets, coincident surfaces, a concave
-//! object whose probe meets itself. A probe that meets the front of its own material tells
-//! nothing and is dropped; the check speaks only when every remaining probe of a material
+//! object whose probe meets itself. A probe that meets its own material tells nothing and is
+//! dropped; the check speaks only when every remaining probe of a material
 //! agrees, and only about what they agree on. An index the surroundings leave unknown (inside a
 //! dispersive glass, whose index varies, or across an interface, which does not refract) is not
 //! compared. Moving objects are neither probed nor met: they move through what surrounds them.
@@ -151,7 +151,8 @@ pub(crate) fn check(
                     agreed = Some(found);
                     at = origin;
                 }
-                Some(seen) if seen == found => {}
+                // Probes that meet different objects agree when those say the same.
+                Some((seen, _)) if seen == found.0 => {}
                 // The probes disagree: the geometry does not say one thing.
                 Some(_) => return None,
             }
