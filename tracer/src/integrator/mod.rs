@@ -246,11 +246,21 @@ impl World {
             let found = self.closest(&ray, moment, &mut stats.traversal);
             if effects.media {
                 stats.flights += 1;
+            }
+            // Once the path has its hero channel, a flight through a vacuum is left out: every
+            // way of sampling flights passes a vacuum with weights of exactly 1 (`x * 1` is
+            // `x`), and its two numbers come from a stream of their own, so not drawing them
+            // moves no other. The first flight is always taken, as it picks the hero.
+            let flight_medium = effects
+                .media
+                .then(|| self.flight_medium(medium, found.is_none()))
+                .filter(|m| hero.is_none() || !m.is_vacuum());
+            if let Some(flight_medium) = flight_medium {
                 let length = ray.dir.length();
                 let t_end = found.map_or(f32::INFINITY, |h| h.t * length);
                 let u = sampler.medium();
                 let hero = *hero.get_or_insert_with(|| hero_channel(u.x));
-                let in_medium = &spectrum.medium(self.flight_medium(medium, found.is_none()));
+                let in_medium = &spectrum.medium(flight_medium);
                 match in_medium.sample_flight_with(&settings.media, t_end, hero, u) {
                     Flight::Pass {
                         weight,
