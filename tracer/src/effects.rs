@@ -49,8 +49,8 @@
 //!   (without one, the any-hit query answers the same). With media forced on in a scene
 //!   without them, every ray is in [`crate::medium::Medium::VACUUM`]: its flights pass with
 //!   weight exactly 1 (beta times 1 is beta; after a path's first flight, which picks its hero
-//!   channel, a vacuum's flights are not even drawn), its transmittance is exactly 1, and the closest
-//!   certain blocker exists exactly when the any-hit query finds one
+//!   channel, a vacuum's flights are not even drawn), its transmittance is exactly 1, and the
+//!   closest certain blocker exists exactly when the any-hit query finds one
 //!   ([`crate::geometry::Accel::intersect_certain_with`]), so the bits do not move; the free
 //!   flight's two random numbers come from a stream of their own ([`crate::sampler`]). That
 //!   forced pipeline is what a renderer that always tracks media pays: a flight per ray, and,

@@ -226,11 +226,7 @@ fn probes_pass_walls_and_siblings_but_not_ambiguous_geometry() {
         ("", &["outside_medium"][..]),
     ] {
         let toml = full_scene(Around::Fog, keys, 1.0, Vec3::ZERO, &neighbour) + smoke;
-        expect(
-            &toml,
-            wrong,
-            &format!("{keys:?} in fog beside a smoke ball"),
-        );
+        expect(&toml, wrong, &format!("{keys:?} in fog among smoke balls"));
     }
     // A ball crossing the tank's wall is partly in water and partly outside: its probes
     // disagree, so the check says nothing, whatever the keys.
