@@ -17,7 +17,6 @@
 //! - `leaf`: a leaf's triangles through the SIMD filters (four lanes, or eight with AVX) and
 //!   the scalar test on what they leave.
 //! - `memory`: the BVH's large arrays on transparent huge pages, where Linux offers them.
-//! - `grid`: the 8-wide node's boxes stored as bytes on a grid that always holds them.
 //! - `node8`: the 8-wide node and its box test, in AVX where the processor has it and in SSE
 //!   where not, with the same results bit for bit ([`BoxSimd`]).
 //! - `quad`: leaves packed four triangles to a group, and the SIMD filter that rejects four at
@@ -33,7 +32,6 @@
 
 mod build;
 mod bvh;
-mod grid;
 mod leaf;
 mod memory;
 mod motion;

@@ -21,9 +21,6 @@
 //! `tracer/tests/wide_traversal.rs` renders through both and compares.
 
 use super::Ray;
-#[cfg(test)]
-use super::grid::decode;
-use super::grid::{above, below, grid};
 use super::quad::{LaneHits, Quad, QuadRay};
 use super::traverse::FAR_SCALE;
 use wide::{CmpGt, CmpLe, CmpLt, f32x4};
@@ -31,18 +28,13 @@ use wide::{CmpGt, CmpLe, CmpLt, f32x4};
 /// Children per node: AVX's eight f32 lanes.
 pub(super) const WIDTH: usize = 8;
 
-/// A node of up to eight children: 128 bytes, two cache lines, aligned to them. The children's
-/// boxes are stored on a grid of bytes (`grid.rs`), which always holds each child's box.
+/// A node of up to eight children: 256 bytes, four cache lines, aligned to them.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub(super) struct Node8 {
-    /// Per axis, the grid's origin: the smallest min of the children's boxes.
-    pub(super) origin: [f32; 3],
-    /// Per axis, the grid's step.
-    pub(super) step: [f32; 3],
-    /// The children's planes in steps from the origin, one lane per child: min x, y, z, then
-    /// max x, y, z. Lanes past `children` are zero and are masked out.
-    pub(super) planes: [[u8; WIDTH]; 6],
+    /// The children's boxes, one lane per child: min x, y, z, then max x, y, z. Lanes past
+    /// `children` hold an empty box (min +inf, max -inf) and are masked out anyway.
+    pub(super) bounds: [[f32; WIDTH]; 6],
     /// Per child: an inner node's index in `Bvh8::nodes`, or a leaf's first group in
     /// `Bvh8::quads`.
     pub(super) index: [u32; WIDTH],
@@ -56,56 +48,29 @@ pub(super) struct Node8 {
     pub(super) children: u8,
 }
 
-const _: () = assert!(std::mem::size_of::<Node8>() == 128, "two cache lines");
+const _: () = assert!(std::mem::size_of::<Node8>() == 256, "four cache lines");
 
 impl Node8 {
     pub(super) const EMPTY: Node8 = Node8 {
-        origin: [0.0; 3],
-        step: [1.0; 3],
-        planes: [[0; WIDTH]; 6],
+        bounds: [
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+        ],
         index: [0; WIDTH],
         count: [0; WIDTH],
         valid: 0,
         children: 0,
     };
 
-    /// A node whose lanes hold `boxes` (min, max), in order, on a grid that holds each of
-    /// them; `index` and `count` are left for the caller. Bounds are first clamped to the
-    /// finite range, which still holds every finite vertex (the tree holds only those).
-    pub(super) fn with_boxes(boxes: &[([f32; 3], [f32; 3])]) -> Node8 {
-        assert!(
-            !boxes.is_empty() && boxes.len() <= WIDTH,
-            "a node has one to eight children"
-        );
-        let finite = |v: f32| v.clamp(-f32::MAX, f32::MAX);
-        let mut node = Node8::EMPTY;
+    pub(super) fn set_bounds(&mut self, lane: usize, min: [f32; 3], max: [f32; 3]) {
         for axis in 0..3 {
-            let low = boxes
-                .iter()
-                .map(|b| finite(b.0[axis]))
-                .fold(f32::MAX, f32::min);
-            let high = boxes.iter().map(|b| finite(b.1[axis])).fold(low, f32::max);
-            let (origin, step) = grid(low, high);
-            node.origin[axis] = origin;
-            node.step[axis] = step;
-            for (lane, (min, max)) in boxes.iter().enumerate() {
-                node.planes[axis][lane] = below(origin, step, finite(min[axis]));
-                node.planes[3 + axis][lane] = above(origin, step, finite(max[axis]).max(low));
-            }
+            self.bounds[axis][lane] = min[axis];
+            self.bounds[3 + axis][lane] = max[axis];
         }
-        node.valid = ((1u32 << boxes.len()) - 1) as u8;
-        node.children = boxes.len() as u8;
-        node
-    }
-
-    /// The plane `row` of lane `lane` as the box tests decode it.
-    #[cfg(test)]
-    pub(super) fn plane(&self, row: usize, lane: usize) -> f32 {
-        decode(
-            self.origin[row % 3],
-            self.step[row % 3],
-            self.planes[row][lane],
-        )
     }
 }
 
@@ -114,7 +79,7 @@ impl Node8 {
 pub(super) struct WideRay {
     origin: [f32; 3],
     inv_dir: [f32; 3],
-    /// Per axis, the index in [`Node8::planes`] of the near plane and of the far plane: the max
+    /// Per axis, the index in [`Node8::bounds`] of the near plane and of the far plane: the max
     /// when the reciprocal direction is negative (including -0.0's -inf), else the min.
     near: [usize; 3],
     far: [usize; 3],
@@ -154,11 +119,11 @@ impl BoxTest for Portable {
             let zero = f32x4::ZERO;
             let end = f32x4::splat(t_max);
             let scale = f32x4::splat(FAR_SCALE);
-            // `grid::decode` lane by lane: the byte as f32, times the step, plus the origin.
             let plane = |row: usize| {
-                let axis = row % 3;
-                let steps = std::array::from_fn(|i| f32::from(node.planes[row][4 * h + i]));
-                f32x4::new(steps) * f32x4::splat(node.step[axis]) + f32x4::splat(node.origin[axis])
+                let lanes: &[f32; 4] = node.bounds[row][4 * h..4 * h + 4]
+                    .try_into()
+                    .expect("a half of eight lanes is four");
+                f32x4::new(*lanes)
             };
             let mut t0 = zero;
             let mut t1 = end;
@@ -234,21 +199,14 @@ unsafe fn enter_avx(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDT
     for axis in 0..3 {
         let origin = _mm256_set1_ps(ray.origin[axis]);
         let inv_dir = _mm256_set1_ps(ray.inv_dir[axis]);
-        let node_origin = _mm256_set1_ps(node.origin[axis]);
-        let step = _mm256_set1_ps(node.step[axis]);
-        // `grid::decode` in eight lanes: the bytes widened to integers four at a time (SSE4.1,
-        // which AVX implies), converted exactly to f32, times the step, plus the origin: the
-        // same two roundings as the scalar expression.
-        let decode_row = |row: &[u8; WIDTH]| {
-            // SAFETY: `row` is eight bytes; the load reads exactly them, unaligned.
-            let bytes = unsafe { _mm_loadl_epi64(row.as_ptr().cast::<__m128i>()) };
-            let low = _mm_cvtepu8_epi32(bytes);
-            let high = _mm_cvtepu8_epi32(_mm_srli_si128::<4>(bytes));
-            let steps = _mm256_cvtepi32_ps(_mm256_set_m128i(high, low));
-            _mm256_add_ps(_mm256_mul_ps(steps, step), node_origin)
+        // SAFETY: each row is eight f32 in bounds of `node`, 32-byte aligned (the node is
+        // 64-byte aligned and rows are 32 bytes).
+        let (near_plane, far_plane) = unsafe {
+            (
+                _mm256_load_ps(node.bounds[ray.near[axis]].as_ptr()),
+                _mm256_load_ps(node.bounds[ray.far[axis]].as_ptr()),
+            )
         };
-        let near_plane = decode_row(&node.planes[ray.near[axis]]);
-        let far_plane = decode_row(&node.planes[ray.far[axis]]);
         let near = _mm256_mul_ps(_mm256_sub_ps(near_plane, origin), inv_dir);
         let far = _mm256_mul_ps(
             _mm256_mul_ps(_mm256_sub_ps(far_plane, origin), inv_dir),
@@ -336,21 +294,15 @@ mod tests {
         let mut state = 7u64;
         let mut entered_any = 0;
         for case in 0..20_000 {
-            // Grids whose origins and steps are hard values (steps of zero, negative or
-            // infinite included, which no build makes but both tests must decode alike), and
-            // bytes at the ends of their range and in between; seven of eight lanes valid.
             let mut node = Node8::EMPTY;
-            for axis in 0..3 {
-                node.origin[axis] = hard(&mut state);
-                node.step[axis] = hard(&mut state);
+            // Seven of eight lanes hold a box whose corners are hard values (not sorted, so
+            // some boxes are inverted or flat), one is left empty.
+            for lane in 0..WIDTH - 1 {
+                let min = [hard(&mut state), hard(&mut state), hard(&mut state)];
+                let max = [hard(&mut state), hard(&mut state), hard(&mut state)];
+                node.set_bounds(lane, min, max);
+                node.valid |= 1 << lane;
             }
-            for row in 0..6 {
-                for lane in 0..WIDTH {
-                    node.planes[row][lane] = [0, 1, 127, 254, 255, (state >> 40) as u8]
-                        [(hard(&mut state).to_bits() % 6) as usize];
-                }
-            }
-            node.valid = 0x7f;
             let ray = Ray {
                 origin: Vec3::new(hard(&mut state), hard(&mut state), hard(&mut state)),
                 dir: Vec3::new(hard(&mut state), hard(&mut state), hard(&mut state)),
@@ -373,47 +325,5 @@ mod tests {
         }
         // The walk must reach boxes that are entered, or the comparison says little.
         assert!(entered_any > 10_000, "only {entered_any} boxes entered");
-    }
-
-    /// Whatever boxes a node is given (tiny, huge, far off, flat, touching the ends of the
-    /// finite range), the planes its box tests decode hold each of them.
-    #[test]
-    fn a_nodes_decoded_boxes_hold_the_boxes_it_was_built_from() {
-        let mut state = 11u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
-        for case in 0..3000 {
-            let scale = [1e-30f32, 1e-6, 1.0, 1e4, 1e20, 1e37][case % 6];
-            let centre = [0.0f32, 1.0, -5e6, 3e25][case / 6 % 4];
-            let lanes = 1 + case % WIDTH;
-            let boxes: Vec<_> = (0..lanes)
-                .map(|_| {
-                    let corner = |f: f32| (centre + (f - 0.5) * scale).clamp(-f32::MAX, f32::MAX);
-                    let a = [next(), next(), next()].map(corner);
-                    let b = [next(), next(), next()].map(corner);
-                    let min = std::array::from_fn(|i| a[i].min(b[i]));
-                    let max = std::array::from_fn(|i| a[i].max(b[i]));
-                    (min, max)
-                })
-                .collect();
-            let node = Node8::with_boxes(&boxes);
-            assert_eq!(u32::from(node.valid), (1 << lanes) - 1);
-            for (lane, (min, max)) in boxes.iter().enumerate() {
-                for axis in 0..3 {
-                    assert!(
-                        node.plane(axis, lane) <= min[axis],
-                        "case {case}: {boxes:?}"
-                    );
-                    assert!(
-                        node.plane(3 + axis, lane) >= max[axis],
-                        "case {case}: {boxes:?}"
-                    );
-                }
-            }
-        }
     }
 }

@@ -120,16 +120,13 @@ impl Bvh8 {
                 children[i] = first;
                 children.insert(i + 1, first + 1);
             }
-            let boxes: Vec<_> = children
-                .iter()
-                .map(|&c| {
-                    let aabb = bvh.nodes[c].aabb();
-                    (aabb.min.to_array(), aabb.max.to_array())
-                })
-                .collect();
-            let mut node = Node8::with_boxes(&boxes);
+            let mut node = Node8::EMPTY;
             for (lane, &c) in children.iter().enumerate() {
                 let child = &bvh.nodes[c];
+                let aabb = child.aabb();
+                node.set_bounds(lane, aabb.min.to_array(), aabb.max.to_array());
+                node.valid |= 1 << lane;
+                node.children += 1;
                 if child.is_leaf() {
                     let first = child.first_index as usize;
                     node.index[lane] =
@@ -338,7 +335,7 @@ impl Accel {
         }
     }
 
-    /// Asks for the memory of every child the ray entered (an inner node's two cache lines, a
+    /// Asks for the memory of every child the ray entered (an inner node's four cache lines, a
     /// leaf's first two groups) before any of it is read. On large meshes the traversal waits mostly
     /// on cache misses, one at a time: the next node's address is known only once its parent is
     /// tested, and a leaf's triangles only once its box is. Prefetching all of a node's entered
@@ -367,7 +364,7 @@ impl Accel {
                 }
             } else if let Some(child) = self.wide.nodes.get(index) {
                 let start = (child as *const Node8).cast::<u8>();
-                for line in 0..std::mem::size_of::<Node8>() / 64 {
+                for line in 0..4 {
                     prefetch(start.wrapping_add(64 * line));
                 }
             }
