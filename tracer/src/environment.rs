@@ -9,11 +9,18 @@
 //! cells are chosen by luminance times sin(theta) (the solid angle a cell covers shrinks towards
 //! the poles), so the estimate's variance comes from colour and from sin(theta) varying within a
 //! cell only. The density in solid angle is the (u, v) density over `2 pi^2 sin(theta)`.
+//!
+//! `portal`: the windows a scene may declare for its environment, and the sampling of the
+//! directions through them.
+
+pub use portal::{MIN_SOLID_ANGLE, Portal, PortalSampler};
 
 use crate::distribution::Distribution2D;
 use crate::lights::luminance;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
+
+mod portal;
 
 /// Radiance arriving along every direction that escapes the scene.
 #[derive(Clone, Debug, PartialEq)]

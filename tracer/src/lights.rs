@@ -17,7 +17,7 @@
 //! [`crate::effects`]).
 
 use crate::effects::Effects;
-use crate::environment::{Environment, MapSampler};
+use crate::environment::{Environment, MapSampler, PortalSampler};
 use crate::geometry::{Moment, SurfacePoint, plane_normal};
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
@@ -57,8 +57,12 @@ pub enum Light {
 pub enum EnvironmentSampling {
     /// A map by its luminance times sin(theta), combined with BSDF sampling by the power
     /// heuristic; a constant environment uniformly over the sphere (which is its importance).
+    /// Where the scene declares portals, half the samples go through them instead (see
+    /// [`crate::environment::PortalSampler`]).
     #[default]
     Importance,
+    /// As [`EnvironmentSampling::Importance`], with the scene's portals ignored.
+    WithoutPortals,
     /// Uniformly over the sphere, map or not, combined with BSDF sampling.
     Uniform,
     /// Not at all: the environment is found only by BSDF sampling, with full weight (no MIS).
@@ -67,8 +71,9 @@ pub enum EnvironmentSampling {
 
 impl EnvironmentSampling {
     /// Every way, the default first: the ladder `tessera accuracy --knobs environment` walks.
-    pub const ALL: [EnvironmentSampling; 3] = [
+    pub const ALL: [EnvironmentSampling; 4] = [
         EnvironmentSampling::Importance,
+        EnvironmentSampling::WithoutPortals,
         EnvironmentSampling::Uniform,
         EnvironmentSampling::Bsdf,
     ];
@@ -77,6 +82,7 @@ impl EnvironmentSampling {
     pub fn name(self) -> &'static str {
         match self {
             EnvironmentSampling::Importance => "importance",
+            EnvironmentSampling::WithoutPortals => "without-portals",
             EnvironmentSampling::Uniform => "uniform",
             EnvironmentSampling::Bsdf => "bsdf-only",
         }
@@ -98,6 +104,12 @@ pub struct LightSample {
     /// Solid-angle density including the probability of choosing this light; for a point light,
     /// just the choice probability (a delta in direction).
     pub pdf: f32,
+    /// The density, choice included, with which the light's other sampling strategy would
+    /// produce `wi`: for the environment with portals, the portals' for its own sample and its
+    /// own for a portal sample; zero for every light sampled one way. Three strategies then
+    /// weigh a sample, and the power heuristic over three, `f^2 / (f^2 + g^2 + h^2)`, is the
+    /// two-strategy one against `sqrt(g^2 + h^2)`.
+    pub other_pdf: f32,
     /// Whether the light is a delta in direction (a point light): BSDF sampling can never find
     /// it, so no multiple importance weight applies.
     pub delta: bool,
@@ -114,8 +126,13 @@ pub struct Lights {
     triangle_light: Vec<u32>,
     /// The probability of choosing the environment; zero when it is not a sampled light.
     environment_choice: f32,
+    /// The environment's index in `lights`, when it is one.
+    environment_index: usize,
     /// The map's importance sampler, when the environment is a map sampled by importance.
     map_sampler: Option<MapSampler>,
+    /// The scene's portals, when the environment is sampled through them: then one sample in
+    /// two (by the leftover of the light choice's number) goes through a portal.
+    portals: Vec<PortalSampler>,
     scene_radius: f32,
     /// For each light, its triangle's shape when it is a triangle (default otherwise): what
     /// [`Lights::sample`] and [`Lights::triangle_pdf`] would otherwise recompute per sample.
@@ -190,16 +207,22 @@ impl Lights {
             }
         }
         let mut map_sampler = None;
+        let mut portals = Vec::new();
         if effects.environment
             && sampling != EnvironmentSampling::Bsdf
             && let Some(environment) = &scene.environment
         {
             // The power the environment sends through the scene's bounding sphere.
             let p = environment.mean_luminance() * PI * 4.0 * PI * radius * radius;
-            if let (Environment::Map(map), EnvironmentSampling::Importance) =
-                (environment, sampling)
-            {
+            let by_importance = matches!(
+                sampling,
+                EnvironmentSampling::Importance | EnvironmentSampling::WithoutPortals
+            );
+            if let (Environment::Map(map), true) = (environment, by_importance) {
                 map_sampler = MapSampler::new(map);
+            }
+            if sampling == EnvironmentSampling::Importance {
+                portals = scene.portals.iter().map(PortalSampler::new).collect();
             }
             // A map too faint for its distribution (every weight rounded to zero) is not listed.
             let sampleable = map_sampler.is_some()
@@ -237,7 +260,9 @@ impl Lights {
             cdf,
             triangle_light,
             environment_choice: 0.0,
+            environment_index: environment_light.map_or(0, |i| i as usize),
             map_sampler,
+            portals,
             scene_radius: radius,
         };
         result.environment_choice =
@@ -321,6 +346,7 @@ impl Lights {
                     at: SurfacePoint::exact(position),
                     radiance: intensity / distance_squared,
                     pdf: choice,
+                    other_pdf: 0.0,
                     delta: true,
                 })
             }
@@ -341,16 +367,67 @@ impl Lights {
                         (wi, environment.radiance(wi), choice / (4.0 * PI))
                     }
                 };
+                // With portals, the same direction might have come through one.
+                let other_pdf = if self.portals.is_empty() {
+                    0.0
+                } else {
+                    choice * self.portals_pdf(p, wi)
+                };
                 Some(LightSample {
                     wi,
                     distance: f32::INFINITY,
                     at: SurfacePoint::exact(Vec3::ZERO),
                     radiance,
                     pdf,
+                    other_pdf,
                     delta: false,
                 })
             }
         }
+    }
+
+    /// Whether next-event estimation takes a second sample through the scene's portals each
+    /// time it samples the environment ([`Lights::portal_sample`]).
+    pub fn has_portals(&self) -> bool {
+        !self.portals.is_empty()
+    }
+
+    /// The environment's second sample, through a portal, from `p`, for the numbers `sample`
+    /// was given when it chose the environment: the light choice's number past the choice
+    /// (uniform in [0, 1) again) picks the portal, and `u` with its coordinates swapped the
+    /// direction, uniformly in solid angle. Its density includes the environment's choice, as
+    /// the sample is taken whenever the environment is chosen; `other_pdf` is the environment's
+    /// own sampling's density. Both samples are weighed against each other and the BSDF by the
+    /// power heuristic (Veach's multi-sample estimator), so that neither strategy's samples are
+    /// halved: a one-sample mixture would turn the sun's steady beam into a coin toss.
+    pub fn portal_sample(
+        &self,
+        scene: &Scene,
+        p: Vec3,
+        u_choice: f32,
+        u: Vec2,
+    ) -> Option<LightSample> {
+        let environment = scene.environment.as_ref()?;
+        let choice = self.environment_choice;
+        if self.portals.is_empty() || choice <= 0.0 {
+            return None;
+        }
+        let index = self.environment_index;
+        let below = if index == 0 { 0.0 } else { self.cdf[index - 1] };
+        let rest = ((u_choice - below) / choice).clamp(0.0, 1.0);
+        let n = self.portals.len();
+        let k = ((rest * n as f32) as usize).min(n - 1);
+        let (wi, _) = self.portals[k].sample(p, (f64::from(u.y), f64::from(u.x)))?;
+        let pdf = choice * self.portals_pdf(p, wi);
+        (pdf > 0.0).then(|| LightSample {
+            wi,
+            distance: f32::INFINITY,
+            at: SurfacePoint::exact(Vec3::ZERO),
+            radiance: environment.radiance(wi),
+            pdf,
+            other_pdf: choice * self.own_environment_pdf(environment, wi),
+            delta: false,
+        })
     }
 
     /// The density with which `sample` would have produced the hit of emissive triangle `t` (a
@@ -391,10 +468,21 @@ impl Lights {
         self.choice_pdf(index as usize) * distance_squared / (cos_light * area)
     }
 
-    /// The density with which `sample` would have produced the escaped direction `dir`.
-    pub fn environment_pdf(&self, scene: &Scene, dir: Vec3) -> f32 {
+    /// The density with which `sample` would have produced the escaped direction `dir` from
+    /// `p`.
+    pub fn environment_pdf(&self, scene: &Scene, p: Vec3, dir: Vec3) -> f32 {
         if self.environment_choice == 0.0 {
             return 0.0;
+        }
+        if !self.portals.is_empty()
+            && let Some(environment) = &scene.environment
+        {
+            // Two light strategies: the power heuristic weighs BSDF sampling against the root
+            // of the sum of their squared densities (see `LightSample::other_pdf`).
+            let own =
+                f64::from(self.environment_choice * self.own_environment_pdf(environment, dir));
+            let portals = f64::from(self.environment_choice * self.portals_pdf(p, dir));
+            return (own * own + portals * portals).sqrt() as f32;
         }
         match (&self.map_sampler, &scene.environment) {
             (Some(sampler), Some(Environment::Map(map))) => {
@@ -402,6 +490,24 @@ impl Lights {
             }
             _ => self.environment_choice / (4.0 * PI),
         }
+    }
+}
+
+impl Lights {
+    /// The solid-angle density of the environment's own sampling (its map by importance, or the
+    /// sphere uniformly), without the choice of the environment among lights.
+    fn own_environment_pdf(&self, environment: &Environment, wi: Vec3) -> f32 {
+        match (&self.map_sampler, environment) {
+            (Some(sampler), Environment::Map(map)) => sampler.pdf(map, wi),
+            _ => 1.0 / (4.0 * PI),
+        }
+    }
+
+    /// The solid-angle density of a sample through the portals from `p` (one picked uniformly):
+    /// their densities' mean.
+    fn portals_pdf(&self, p: Vec3, wi: Vec3) -> f32 {
+        let sum: f32 = self.portals.iter().map(|portal| portal.pdf(p, wi)).sum();
+        sum / self.portals.len() as f32
     }
 }
 
@@ -468,6 +574,7 @@ fn area_sample(
         at,
         radiance,
         pdf: choice * distance_squared / (cos_light * area),
+        other_pdf: 0.0,
         delta: false,
     })
 }

@@ -19,6 +19,11 @@ pub fn sin_cos_f64(x: f64) -> (f64, f64) {
     libm::sincos(x)
 }
 
+/// `acos x` in double precision, in `[0, pi]`.
+pub fn acos_f64(x: f64) -> f64 {
+    libm::acos(x)
+}
+
 /// `sin x`.
 pub fn sin(x: f32) -> f32 {
     libm::sinf(x)

@@ -153,7 +153,7 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             count("spectral"),
             count("media")
         ],
-        [3, 6, 6, 5, 3, 2, 3, 3, 3, 6]
+        [3, 6, 6, 5, 3, 2, 3, 4, 3, 6]
     );
     // The furnace is one area light: each strategy alone renders other bits than the two
     // weighted (the knob reaches the integrator).

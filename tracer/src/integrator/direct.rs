@@ -82,6 +82,10 @@ impl AreaLightSampling {
     ) -> f32 {
         if light.delta || (self == AreaLightSampling::Light && on_area_light(light)) {
             1.0
+        } else if light.other_pdf > 0.0 {
+            // Three strategies: see `LightSample::other_pdf`.
+            let (g, h) = (f64::from(scatter_pdf()), f64::from(light.other_pdf));
+            power_heuristic(light.pdf, (g * g + h * h).sqrt() as f32)
         } else {
             power_heuristic(light.pdf, scatter_pdf())
         }
@@ -105,7 +109,37 @@ impl World {
         let Some(light) = self.lights.sample(&self.scene, moment, at.p, u_choice, u) else {
             return Vec3::ZERO;
         };
-        if self.area_lights.drops(&light) {
+        let numbers = [u_choice, u.x, u.y];
+        let media = (medium, spectrum);
+        let own = self.light_contribution(scatter, at, &light, media, moment, &numbers, stats);
+        // The environment with portals takes a second sample, through them (`Lights::
+        // portal_sample`); both are weighed by the power heuristic over the three strategies.
+        if light.distance.is_infinite()
+            && self.lights.has_portals()
+            && let Some(through) = self.lights.portal_sample(&self.scene, at.p, u_choice, u)
+        {
+            stats.light_samples += 1;
+            return own
+                + self.light_contribution(scatter, at, &through, media, moment, &numbers, stats);
+        }
+        own
+    }
+
+    /// What the light sample `light` brings to `at` through `scatter`, weighed; `numbers` drive
+    /// the shadow ray's tracking through media.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn light_contribution(
+        &self,
+        scatter: &impl Scatterer,
+        at: &SurfacePoint,
+        light: &LightSample,
+        (medium, spectrum): (Option<u32>, &PathSpectrum),
+        moment: &Moment,
+        numbers: &[f32; 3],
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        if self.area_lights.drops(light) {
             return Vec3::ZERO;
         }
         let f = scatter.f(light.wi);
@@ -113,13 +147,12 @@ impl World {
             return Vec3::ZERO;
         }
         stats.shadow_rays += 1;
-        let shadow = self.shadow_ray(at, &light);
+        let shadow = self.shadow_ray(at, light);
         // Without media a shadow ray is blocked or not; with them it carries what the media let
         // through, and passes index-matched interfaces (`scatter.rs`). A vacuum lets exactly 1
         // through, and `x * 1` is `x`, so the product below keeps its bits either way.
         let transmittance = if self.effects.media {
-            let numbers = [u_choice, u.x, u.y];
-            let transmittance = self.transmittance(shadow, &light, medium, moment, &numbers, stats);
+            let transmittance = self.transmittance(shadow, light, medium, moment, numbers, stats);
             if transmittance == Vec3::ZERO {
                 return Vec3::ZERO;
             }
@@ -131,7 +164,7 @@ impl World {
         };
         let weight = self
             .area_lights
-            .light_weight(&light, || scatter.pdf(light.wi));
+            .light_weight(light, || scatter.pdf(light.wi));
         f * spectrum.of(light.radiance) * (weight / light.pdf) * transmittance
     }
 

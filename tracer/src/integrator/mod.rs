@@ -326,7 +326,9 @@ impl World {
                     let weight = if last_delta {
                         1.0
                     } else {
-                        let light_pdf = self.lights.environment_pdf(&self.scene, ray.dir);
+                        let light_pdf =
+                            self.lights
+                                .environment_pdf(&self.scene, last_point, ray.dir);
                         power_heuristic(last_pdf, light_pdf)
                     };
                     radiance += self.weighed(beta, ratio)

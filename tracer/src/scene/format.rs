@@ -255,7 +255,8 @@ pub(crate) enum LightKind {
     Point,
 }
 
-/// `[environment]`: a constant `radiance`, or a `map` with its `scale` and `rotate`. Which keys
+/// `[environment]`: a constant `radiance`, or a `map` with its `scale` and `rotate`, and either
+/// with `portals`. Which keys
 /// go together is checked by the loader.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -264,6 +265,7 @@ pub(crate) struct EnvironmentSpec {
     pub map: Option<Spanned<String>>,
     pub scale: Option<Radiance>,
     pub rotate: Option<Finite>,
+    pub portals: Option<Spanned<Vec<[Point; 4]>>>,
 }
 
 /// Parses a scene file; errors name `file`, the line and the key path.

@@ -15,7 +15,7 @@ use super::nesting;
 use super::obj::{self, NO_MATERIAL};
 use super::shapes::{Transform, given_keys, shape_triangles};
 use super::{CameraTrack, PointLight, RenderSettings, Scene, Triangle};
-use crate::environment::{Environment, EnvironmentMap, decode_exr};
+use crate::environment::{Environment, EnvironmentMap, Portal, decode_exr};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use toml::Spanned;
@@ -126,6 +126,7 @@ pub fn load_with_report(
         return Err(unused);
     }
     let environment = environment(&mut builder.log, &toml, text, spec.environment.as_ref())?;
+    let portals = portals(&toml, text, spec.environment.as_ref())?;
     let Builder {
         log,
         table,
@@ -144,6 +145,7 @@ pub fn load_with_report(
         textures: table.textures,
         point_lights: spec.lights.iter().map(point_light).collect(),
         environment,
+        portals,
         media: table.media.media,
         camera_medium,
         files: log.into_read(),
@@ -405,6 +407,29 @@ fn environment(
     let rotate = e.rotate.map_or(0.0, |r| r.0);
     let map = EnvironmentMap::new(width, height, texels, rotate);
     Ok(Some(Environment::Map(map)))
+}
+
+/// The rectangles of `[environment] portals`; an error names the key's line and the portal.
+fn portals(
+    file: &str,
+    text: &str,
+    spec: Option<&Spanned<format::EnvironmentSpec>>,
+) -> Result<Vec<Portal>, SceneError> {
+    let Some(portals) = spec.and_then(|e| e.get_ref().portals.as_ref()) else {
+        return Ok(Vec::new());
+    };
+    let line = line_of(text, portals.span().start);
+    portals
+        .get_ref()
+        .iter()
+        .enumerate()
+        .map(|(i, corners)| {
+            Portal::from_corners(corners.map(|c| c.0)).map_err(|detail| {
+                let detail = format!("[environment] portals: portal {}: {detail}", i + 1);
+                SceneError::at_line(file, line, detail)
+            })
+        })
+        .collect()
 }
 
 fn point_light(l: &format::LightSpec) -> PointLight {

@@ -28,7 +28,7 @@ pub use load::{LoadReport, ObjectReport, load, load_from, load_str, load_with_re
 pub use motion::{MovingObject, Placement, Shutter, TransformKey, TransformTrack};
 pub use texture::Texture;
 
-use crate::environment::Environment;
+use crate::environment::{Environment, Portal};
 use crate::material::Material;
 use crate::medium::{MediaSampling, Medium};
 use glam::{Vec2, Vec3};
@@ -57,6 +57,9 @@ pub struct Scene {
     pub point_lights: Vec<PointLight>,
     /// The radiance arriving along directions that escape the scene (constant or a map), if any.
     pub environment: Option<Environment>,
+    /// The rectangles through which the environment reaches the scene's interior (`[environment]
+    /// portals`): where next-event estimation looks for it besides its own sampling.
+    pub portals: Vec<Portal>,
     /// The media that materials bind ([`Material::interior`]) and the camera starts in, in
     /// first-use order.
     pub media: Vec<Medium>,

@@ -137,8 +137,9 @@ pub enum Knob {
     /// next-event estimation alone, or by BSDF sampling alone
     /// (`tracer::integrator::AreaLightSampling`).
     Lights,
-    /// The environment sampled by importance (a map by luminance), uniformly, or by BSDF
-    /// sampling alone (no MIS).
+    /// The environment sampled by importance (a map by luminance, and through the scene's
+    /// portals where it has them), by importance with the portals ignored, uniformly, or by
+    /// BSDF sampling alone (no MIS).
     Environment,
     /// Wavelengths: RGB until dispersive glass (the default), or spectral from the camera on,
     /// with three hero wavelengths or one (`tracer::spectrum::SpectralSampling`).

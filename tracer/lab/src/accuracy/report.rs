@@ -363,8 +363,9 @@ pub fn markdown(run: &Run) -> String {
         (
             Knob::Environment,
             "Environment sampling",
-            "next-event estimation of the environment: by importance, uniformly over the sphere, \
-             or not at all, leaving it to BSDF sampling",
+            "next-event estimation of the environment: by importance (and through the scene's \
+             portals, where it has them), by importance with the portals ignored, uniformly over \
+             the sphere, or not at all, leaving it to BSDF sampling",
             "environment sampling",
         ),
         (

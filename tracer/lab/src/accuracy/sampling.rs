@@ -24,8 +24,9 @@ use tracer::scene::RenderSettings;
 use tracer::spectrum::SpectralSampling;
 
 impl Bench<'_> {
-    /// The environment sampled by importance, uniformly and not at all (BSDF sampling alone),
-    /// at `spp`. All three are unbiased: the images differ by noise, which is the point; in a
+    /// The environment sampled by importance (through the scene's portals too), by importance
+    /// without them, uniformly and not at all (BSDF sampling alone), at `spp`. All four are
+    /// unbiased: the images differ by noise, which is the point; in a
     /// scene without an environment they are the same bits.
     pub fn environment_ladder(&mut self, spp: u32) -> Vec<Row> {
         let settings = self.at_spp(spp);
