@@ -9,7 +9,9 @@
 //! floor would make it swamp a point light and turn the lamp's rare samples into fireflies). The
 //! choice uses one random number, and the position on the light two more, whatever the light.
 //!
-//! Moving emitters are area lights placed at the path's time: `moving.rs`.
+//! Moving emitters are area lights placed at the path's time: `moving.rs`. The environment's
+//! densities, and its second sample through the scene's portals where it has them:
+//! `environment.rs`.
 //!
 //! A light without positive, finite power is never listed, whatever the effect set: it would be
 //! chosen with probability zero anyway, and leaving it out in both a specialised render and one
@@ -24,6 +26,7 @@ use glam::{Vec2, Vec3};
 use moving::{locate, moving_first, placed_shape};
 use std::f32::consts::PI;
 
+mod environment;
 mod moving;
 
 /// One light.
@@ -57,8 +60,8 @@ pub enum Light {
 pub enum EnvironmentSampling {
     /// A map by its luminance times sin(theta), combined with BSDF sampling by the power
     /// heuristic; a constant environment uniformly over the sphere (which is its importance).
-    /// Where the scene declares portals, half the samples go through them instead (see
-    /// [`crate::environment::PortalSampler`]).
+    /// Where the scene declares portals, each sample is joined by a second through them (see
+    /// [`Lights::portal_sample`]).
     #[default]
     Importance,
     /// As [`EnvironmentSampling::Importance`], with the scene's portals ignored.
@@ -130,8 +133,8 @@ pub struct Lights {
     environment_index: usize,
     /// The map's importance sampler, when the environment is a map sampled by importance.
     map_sampler: Option<MapSampler>,
-    /// The scene's portals, when the environment is sampled through them: then one sample in
-    /// two (by the leftover of the light choice's number) goes through a portal.
+    /// The scene's portals, when the environment is sampled through them too: then each of its
+    /// light samples is joined by one through a portal ([`Lights::portal_sample`]).
     portals: Vec<PortalSampler>,
     scene_radius: f32,
     /// For each light, its triangle's shape when it is a triangle (default otherwise): what
@@ -386,50 +389,6 @@ impl Lights {
         }
     }
 
-    /// Whether next-event estimation takes a second sample through the scene's portals each
-    /// time it samples the environment ([`Lights::portal_sample`]).
-    pub fn has_portals(&self) -> bool {
-        !self.portals.is_empty()
-    }
-
-    /// The environment's second sample, through a portal, from `p`, for the numbers `sample`
-    /// was given when it chose the environment: the light choice's number past the choice
-    /// (uniform in [0, 1) again) picks the portal, and `u` with its coordinates swapped the
-    /// direction, uniformly in solid angle. Its density includes the environment's choice, as
-    /// the sample is taken whenever the environment is chosen; `other_pdf` is the environment's
-    /// own sampling's density. Both samples are weighed against each other and the BSDF by the
-    /// power heuristic (Veach's multi-sample estimator), so that neither strategy's samples are
-    /// halved: a one-sample mixture would turn the sun's steady beam into a coin toss.
-    pub fn portal_sample(
-        &self,
-        scene: &Scene,
-        p: Vec3,
-        u_choice: f32,
-        u: Vec2,
-    ) -> Option<LightSample> {
-        let environment = scene.environment.as_ref()?;
-        let choice = self.environment_choice;
-        if self.portals.is_empty() || choice <= 0.0 {
-            return None;
-        }
-        let index = self.environment_index;
-        let below = if index == 0 { 0.0 } else { self.cdf[index - 1] };
-        let rest = ((u_choice - below) / choice).clamp(0.0, 1.0);
-        let n = self.portals.len();
-        let k = ((rest * n as f32) as usize).min(n - 1);
-        let (wi, _) = self.portals[k].sample(p, (f64::from(u.y), f64::from(u.x)))?;
-        let pdf = choice * self.portals_pdf(p, wi);
-        (pdf > 0.0).then(|| LightSample {
-            wi,
-            distance: f32::INFINITY,
-            at: SurfacePoint::exact(Vec3::ZERO),
-            radiance: environment.radiance(wi),
-            pdf,
-            other_pdf: choice * self.own_environment_pdf(environment, wi),
-            delta: false,
-        })
-    }
-
     /// The density with which `sample` would have produced the hit of emissive triangle `t` (a
     /// global index, as hits report it) from `p` at `moment`, for multiple importance sampling;
     /// zero if the triangle is not a sampled light.
@@ -466,48 +425,6 @@ impl Lights {
             return 0.0;
         }
         self.choice_pdf(index as usize) * distance_squared / (cos_light * area)
-    }
-
-    /// The density with which `sample` would have produced the escaped direction `dir` from
-    /// `p`.
-    pub fn environment_pdf(&self, scene: &Scene, p: Vec3, dir: Vec3) -> f32 {
-        if self.environment_choice == 0.0 {
-            return 0.0;
-        }
-        if !self.portals.is_empty()
-            && let Some(environment) = &scene.environment
-        {
-            // Two light strategies: the power heuristic weighs BSDF sampling against the root
-            // of the sum of their squared densities (see `LightSample::other_pdf`).
-            let own =
-                f64::from(self.environment_choice * self.own_environment_pdf(environment, dir));
-            let portals = f64::from(self.environment_choice * self.portals_pdf(p, dir));
-            return (own * own + portals * portals).sqrt() as f32;
-        }
-        match (&self.map_sampler, &scene.environment) {
-            (Some(sampler), Some(Environment::Map(map))) => {
-                self.environment_choice * sampler.pdf(map, dir)
-            }
-            _ => self.environment_choice / (4.0 * PI),
-        }
-    }
-}
-
-impl Lights {
-    /// The solid-angle density of the environment's own sampling (its map by importance, or the
-    /// sphere uniformly), without the choice of the environment among lights.
-    fn own_environment_pdf(&self, environment: &Environment, wi: Vec3) -> f32 {
-        match (&self.map_sampler, environment) {
-            (Some(sampler), Environment::Map(map)) => sampler.pdf(map, wi),
-            _ => 1.0 / (4.0 * PI),
-        }
-    }
-
-    /// The solid-angle density of a sample through the portals from `p` (one picked uniformly):
-    /// their densities' mean.
-    fn portals_pdf(&self, p: Vec3, wi: Vec3) -> f32 {
-        let sum: f32 = self.portals.iter().map(|portal| portal.pdf(p, wi)).sum();
-        sum / self.portals.len() as f32
     }
 }
 

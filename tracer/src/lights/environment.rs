@@ -1,0 +1,96 @@
+//! The environment as next-event estimation sees it: its density for a direction a BSDF sampled,
+//! and, where the scene declares portals, the second sample taken through them beside its own
+//! ([`crate::environment::PortalSampler`] says why).
+
+use super::{LightSample, Lights};
+use crate::environment::Environment;
+use crate::geometry::SurfacePoint;
+use crate::scene::Scene;
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+impl Lights {
+    /// Whether next-event estimation takes a second sample through the scene's portals each
+    /// time it samples the environment ([`Lights::portal_sample`]).
+    pub fn has_portals(&self) -> bool {
+        !self.portals.is_empty()
+    }
+
+    /// The environment's second sample, through a portal, from `p`, for the numbers `sample`
+    /// was given when it chose the environment: the light choice's number past the choice
+    /// (uniform in [0, 1) again) picks the portal, and `u` with its coordinates swapped the
+    /// direction, uniformly in solid angle. Its density includes the environment's choice, as
+    /// the sample is taken whenever the environment is chosen; `other_pdf` is the environment's
+    /// own sampling's density. Both samples are weighed against each other and the BSDF by the
+    /// power heuristic (Veach's multi-sample estimator), so that neither strategy's samples are
+    /// halved: a one-sample mixture would turn the sun's steady beam into a coin toss.
+    pub fn portal_sample(
+        &self,
+        scene: &Scene,
+        p: Vec3,
+        u_choice: f32,
+        u: Vec2,
+    ) -> Option<LightSample> {
+        let environment = scene.environment.as_ref()?;
+        let choice = self.environment_choice;
+        if self.portals.is_empty() || choice <= 0.0 {
+            return None;
+        }
+        let index = self.environment_index;
+        let below = if index == 0 { 0.0 } else { self.cdf[index - 1] };
+        let rest = ((u_choice - below) / choice).clamp(0.0, 1.0);
+        let n = self.portals.len();
+        let k = ((rest * n as f32) as usize).min(n - 1);
+        let (wi, _) = self.portals[k].sample(p, (f64::from(u.y), f64::from(u.x)))?;
+        let pdf = choice * self.portals_pdf(p, wi);
+        (pdf > 0.0).then(|| LightSample {
+            wi,
+            distance: f32::INFINITY,
+            at: SurfacePoint::exact(Vec3::ZERO),
+            radiance: environment.radiance(wi),
+            pdf,
+            other_pdf: choice * self.own_environment_pdf(environment, wi),
+            delta: false,
+        })
+    }
+
+    /// The density with which `sample` would have produced the escaped direction `dir` from
+    /// `p`.
+    pub fn environment_pdf(&self, scene: &Scene, p: Vec3, dir: Vec3) -> f32 {
+        if self.environment_choice == 0.0 {
+            return 0.0;
+        }
+        if !self.portals.is_empty()
+            && let Some(environment) = &scene.environment
+        {
+            // Two light strategies: the power heuristic weighs BSDF sampling against the root
+            // of the sum of their squared densities (see `LightSample::other_pdf`).
+            let own =
+                f64::from(self.environment_choice * self.own_environment_pdf(environment, dir));
+            let portals = f64::from(self.environment_choice * self.portals_pdf(p, dir));
+            return (own * own + portals * portals).sqrt() as f32;
+        }
+        match (&self.map_sampler, &scene.environment) {
+            (Some(sampler), Some(Environment::Map(map))) => {
+                self.environment_choice * sampler.pdf(map, dir)
+            }
+            _ => self.environment_choice / (4.0 * PI),
+        }
+    }
+
+    /// The solid-angle density of the environment's own sampling (its map by importance, or the
+    /// sphere uniformly), without the choice of the environment among lights.
+    pub(super) fn own_environment_pdf(&self, environment: &Environment, wi: Vec3) -> f32 {
+        match (&self.map_sampler, environment) {
+            (Some(sampler), Environment::Map(map)) => sampler.pdf(map, wi),
+            _ => 1.0 / (4.0 * PI),
+        }
+    }
+
+    /// The solid-angle density of a sample through the portals from `p` (one picked uniformly):
+    /// their densities' mean.
+    pub(super) fn portals_pdf(&self, p: Vec3, wi: Vec3) -> f32 {
+        let sum: f32 = self.portals.iter().map(|portal| portal.pdf(p, wi)).sum();
+        sum / self.portals.len() as f32
+    }
+}
