@@ -188,8 +188,11 @@ fn a_peer_joining_a_running_step_takes_part_and_changes_no_pixel() {
     assert_frames_match(&out, reference_sized(&SLOW));
     let tiles = tiles_of(&out, 2);
     assert_eq!(tiles[0], 0, "the late peer rendered in frame 0");
+    // Taking part is rendering in some frame after it joined. Not necessarily the last: under
+    // the full suite's load a one-thread peer measured slow may be predicted less than a tile
+    // there and find nothing left to steal (seen once in CI: tiles [0, 6, 24, 2, 0, 0]).
     assert!(
-        tiles[FRAMES - 1] > 0,
+        tiles[1..].iter().sum::<usize>() > 0,
         "the late peer took no part: {tiles:?}"
     );
 }
