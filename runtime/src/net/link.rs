@@ -229,6 +229,25 @@ impl<M: Send + 'static> Link<M> {
     /// the send window is full. Cancelling this future abandons the message: the peer drops it and
     /// the connection stays up.
     pub async fn send(&self, conn: ConnId, message: &[u8]) -> Result<(), SendError> {
+        self.send_stream(conn, message).await.map(drop)
+    }
+
+    /// [`Link::send`], then waits until the peer has acknowledged every byte of the message
+    /// (received, not necessarily read), or the connection is gone. Closing a connection
+    /// discards what QUIC has not yet delivered, so whatever must arrive before a close (a
+    /// leaving peer's last results and goodbye, the owner's goodbyes) is sent this way and
+    /// waited for: handed to QUIC is not enough, as a step under load once showed (the owner
+    /// saw the close first and took a peer that was leaving for one that had failed).
+    pub async fn send_delivered(&self, conn: ConnId, message: &[u8]) -> Result<(), SendError> {
+        let outgoing = self.send_stream(conn, message).await?;
+        // `Ok(None)` once every byte is acknowledged; an error once the connection is gone,
+        // when there is nothing left to wait for.
+        let _ = outgoing.stream.stopped().await;
+        Ok(())
+    }
+
+    /// The message written and its stream finished: the stream, to wait on or to drop.
+    async fn send_stream(&self, conn: ConnId, message: &[u8]) -> Result<Outgoing, SendError> {
         let max = self.shared.config.max_message_bytes;
         let too_large = SendError::TooLarge {
             len: message.len(),
@@ -249,7 +268,7 @@ impl<M: Send + 'static> Link<M> {
         outgoing.stream.write_all(&header).await?;
         outgoing.stream.write_all(message).await?;
         outgoing.finish()?;
-        Ok(())
+        Ok(outgoing)
     }
 
     /// QUIC's smoothed estimate of one connection's round-trip time; `None` once it is gone.

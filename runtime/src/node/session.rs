@@ -178,7 +178,7 @@ impl Session {
         self.epoch
     }
 
-    /// Waits until every message sent so far has left (or failed to).
+    /// Waits until every message sent so far has been delivered (or failed to be).
     pub(crate) async fn drain_sends(&mut self) {
         while self.sends.join_next().await.is_some() {}
     }
@@ -202,7 +202,9 @@ impl Session {
         // Reap the sends that are done, so the set holds only those in flight.
         while self.sends.try_join_next().is_some() {}
         self.sends.spawn(async move {
-            if let Err(error) = link.send(conn, &bytes).await {
+            // Delivered, not only handed to QUIC: `drain_sends` before a close then waits for
+            // the peer to have every message (see `Link::send_delivered`).
+            if let Err(error) = link.send_delivered(conn, &bytes).await {
                 tracing::debug!(%error, kind, "a message was not sent");
             }
         });
