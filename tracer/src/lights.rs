@@ -221,7 +221,7 @@ impl Lights {
                 sampling,
                 EnvironmentSampling::Importance | EnvironmentSampling::WithoutPortals
             );
-            if let (Environment::Map(map), true) = (environment, by_importance) {
+            if by_importance && let Environment::Map(map) = environment {
                 map_sampler = MapSampler::new(map);
             }
             if sampling == EnvironmentSampling::Importance {
@@ -291,8 +291,13 @@ impl Lights {
 
     /// The probability that `sample` chooses light `index`.
     fn choice_pdf(&self, index: usize) -> f32 {
-        let below = if index == 0 { 0.0 } else { self.cdf[index - 1] };
-        self.cdf[index] - below
+        self.cdf[index] - self.cdf_below(index)
+    }
+
+    /// The cumulative probability of the lights before `index`: where its share of the choice's
+    /// number starts.
+    fn cdf_below(&self, index: usize) -> f32 {
+        if index == 0 { 0.0 } else { self.cdf[index - 1] }
     }
 
     /// Samples a light as seen from `p` at `moment` (where moving emitters are). `u_choice`

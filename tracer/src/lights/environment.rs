@@ -36,13 +36,20 @@ impl Lights {
         if self.portals.is_empty() || choice <= 0.0 {
             return None;
         }
-        let index = self.environment_index;
-        let below = if index == 0 { 0.0 } else { self.cdf[index - 1] };
+        let below = self.cdf_below(self.environment_index);
         let rest = ((u_choice - below) / choice).clamp(0.0, 1.0);
         let n = self.portals.len();
         let k = ((rest * n as f32) as usize).min(n - 1);
-        let (wi, _) = self.portals[k].sample(p, (f64::from(u.y), f64::from(u.x)))?;
-        let pdf = choice * self.portals_pdf(p, wi);
+        let (wi, sampled) = self.portals[k].sample(p, (f64::from(u.y), f64::from(u.x)))?;
+        // With one portal its own density is the portals' mean, the same bits (`x / 1` is `x`),
+        // without its solid angle worked out a second time; with more, every portal the
+        // direction crosses counts.
+        let portals = if n == 1 {
+            sampled
+        } else {
+            self.portals_pdf(p, wi)
+        };
+        let pdf = choice * portals;
         (pdf > 0.0).then(|| LightSample {
             wi,
             distance: f32::INFINITY,
