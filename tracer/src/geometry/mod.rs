@@ -30,7 +30,6 @@
 //! - `traverse`: the same robust traversal over the binary tree, and obvhs's own, for
 //!   comparison ([`Traversal`]).
 
-mod batch;
 mod build;
 mod bvh;
 mod leaf;

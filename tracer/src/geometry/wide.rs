@@ -343,7 +343,7 @@ impl Accel {
     /// part of the next node's. A prefetch reads nothing into the computation, so it cannot
     /// change a result.
     #[inline(always)]
-    pub(super) fn prefetch_children(&self, node: &Node8, mut entered: u32) {
+    fn prefetch_children(&self, node: &Node8, mut entered: u32) {
         while entered != 0 {
             let lane = entered.trailing_zeros() as usize;
             entered &= entered - 1;
@@ -373,17 +373,6 @@ impl Accel {
 }
 
 impl Accel {
-    /// Asks for the four cache lines of the wide node `index`.
-    #[inline(always)]
-    pub(super) fn prefetch_node(&self, index: u32) {
-        if let Some(child) = self.wide.nodes.get(index as usize) {
-            let start = (child as *const Node8).cast::<u8>();
-            for line in 0..4 {
-                prefetch(start.wrapping_add(64 * line));
-            }
-        }
-    }
-
     /// Prefetch `records[triangle]`, with this tree's own normals of the triangle, whenever a
     /// closest-hit query keeps a hit on it, while the traversal goes on. What the caller reads
     /// first at a hit is that record (on Sponza, the texture coordinates whose texel is the
