@@ -270,10 +270,18 @@ impl PathSpectrum {
     /// A BSDF as the path sees it: colours read at its wavelengths, and a dispersive glass as
     /// the plain glass of its index at the first wavelength (the only one that goes on through
     /// it, [`PathSpectrum::disperse`]). Unchanged on an RGB path.
+    // Inlined, with the spectral reading kept out of line, so that an RGB path (every path of
+    // a scene without dispersive glass) pays no call and no copy of the BSDF at each hit.
+    #[inline(always)]
     pub fn bsdf(&self, bsdf: Bsdf) -> Bsdf {
-        let Some(w) = &self.wavelengths else {
-            return bsdf;
-        };
+        match &self.wavelengths {
+            None => bsdf,
+            Some(w) => Self::spectral_bsdf(w, bsdf),
+        }
+    }
+
+    #[inline(never)]
+    fn spectral_bsdf(w: &Wavelengths, bsdf: Bsdf) -> Bsdf {
         match bsdf {
             Bsdf::Diffuse { albedo, texture } => Bsdf::Diffuse {
                 albedo: w.project(albedo),
@@ -331,17 +339,22 @@ impl PathSpectrum {
     }
 
     /// The path's RGB value from what it gathered, `radiance` (in its slots since it turned).
+    // Inlined for the RGB path's identity, as `bsdf`.
+    #[inline(always)]
     pub fn finish(&self, radiance: Vec3) -> Vec3 {
         match &self.wavelengths {
             None => radiance,
             Some(_) if self.monochrome => radiance,
-            Some(w) => {
-                // Each slot estimates the integral over wavelengths by itself; the three
-                // estimates are averaged.
-                let slot = |i: usize, l: f32| sensor(w.nm[i]) * (l / (3.0 * w.pdf[i]));
-                self.gathered_rgb + slot(0, radiance.x) + slot(1, radiance.y) + slot(2, radiance.z)
-            }
+            Some(w) => self.spectral_finish(w, radiance),
         }
+    }
+
+    #[inline(never)]
+    fn spectral_finish(&self, w: &Wavelengths, radiance: Vec3) -> Vec3 {
+        // Each slot estimates the integral over wavelengths by itself; the three estimates are
+        // averaged.
+        let slot = |i: usize, l: f32| sensor(w.nm[i]) * (l / (3.0 * w.pdf[i]));
+        self.gathered_rgb + slot(0, radiance.x) + slot(1, radiance.y) + slot(2, radiance.z)
     }
 }
 

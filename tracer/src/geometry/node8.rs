@@ -227,6 +227,10 @@ unsafe fn enter_avx(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDT
 }
 
 impl WideRay {
+    // Always inlined: once per ray, and a call would return the prepared ray through memory.
+    // Left to the heuristics, it was inlined or not depending on unrelated code elsewhere in
+    // the renderer (docs/bench.md, issue 12, twelfth round).
+    #[inline(always)]
     pub(super) fn new(ray: &Ray) -> Self {
         let inv = [1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z];
         let negative = |axis: usize| inv[axis] < 0.0;
