@@ -53,7 +53,7 @@ pub struct AccuracyArgs {
     #[arg(long, value_enum, default_value_t = Cost::Time)]
     pub cost: Cost,
     /// Rendering threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::threads)]
     pub threads: Option<usize>,
 }
 
@@ -75,6 +75,7 @@ pub fn run(args: &AccuracyArgs) -> anyhow::Result<()> {
         repeats: args.repeats,
         cost: args.cost,
         threads: args.threads,
+        available_memory: runtime::node::limits::available_memory(),
         command: command_line(),
     })?;
     Ok(())

@@ -17,7 +17,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub max_depth: Option<u32>,
     /// Rendering threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::threads)]
     pub threads: Option<usize>,
     /// Write each full-path image to DIR/SCENE.exr, to compare with another renderer's.
     #[arg(long)]

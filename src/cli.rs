@@ -43,7 +43,7 @@ pub struct RenderArgs {
     pub job: FrameArgs,
     /// Peers in this process, each with its own rendering threads, talking QUIC on loopback
     /// with certificates made in memory. Peer 0 owns the frames. `--peers 1` renders alone.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, value_parser = at_least_one)]
     pub peers: usize,
 }
 
@@ -76,7 +76,7 @@ pub struct PeerArgs {
     #[arg(long)]
     pub index: Option<u32>,
     /// Rendering threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, value_parser = threads)]
     pub threads: Option<usize>,
     /// The address to listen on for other peers (default: any port on all interfaces).
     #[arg(long, default_value = "0.0.0.0:0")]
@@ -165,16 +165,16 @@ pub struct FrameArgs {
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
     /// Number of frames to render (default: the scene's `frames`).
-    #[arg(long)]
+    #[arg(long, value_parser = frames)]
     pub frames: Option<u32>,
     #[command(flatten)]
     pub image: ImageArgs,
     /// Rendering threads of this process, shared evenly by its peers (default: all cores).
-    #[arg(long)]
+    #[arg(long, value_parser = threads)]
     pub threads: Option<usize>,
     /// Seconds a peer may stay silent before the owner gives its tiles to others (also the
-    /// transport's idle timeout).
-    #[arg(long, default_value_t = 10.0)]
+    /// transport's idle timeout); 0.1 to 1000000.
+    #[arg(long, default_value_t = 10.0, value_parser = peer_timeout)]
     pub peer_timeout: f64,
     /// Turn work stealing between peers off (each renders its initial set only).
     #[arg(long)]
@@ -193,7 +193,7 @@ pub struct FrameArgs {
     pub balancer: BalancerKind,
     /// Number of tiles per frame (PBT leaves, or grid cells rounded to a k x k grid); at most
     /// one per pixel. Default: the balancer's (256), or one per pixel on smaller images.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one)]
     pub tiles: Option<usize>,
     /// How each frame's tiles are dealt to peers before stealing starts.
     #[arg(long, value_enum, default_value_t = DealOrder::Interleaved)]
@@ -217,8 +217,9 @@ pub struct FrameArgs {
     /// `tessera simulate`.
     #[arg(long)]
     pub trace: Option<PathBuf>,
-    /// Exposure of the PNG previews (the EXR files are always linear and unscaled).
-    #[arg(long, default_value_t = 1.0)]
+    /// Exposure of the PNG previews (the EXR files are always linear and unscaled); a finite
+    /// number, 0 or more.
+    #[arg(long, default_value_t = 1.0, value_parser = exposure)]
     pub exposure: f32,
     /// Keep the frames OUT already holds from a render of the same scene files and settings
     /// (each frame-NNNN.exr records their hash) and render from the first one missing. A frame
@@ -231,6 +232,55 @@ pub struct FrameArgs {
     /// `--resume` after a stop goes on within a long frame. 0 writes none.
     #[arg(long, default_value_t = 30.0)]
     pub checkpoint_every: f64,
+}
+
+/// `--threads`: 1 to [`runtime::node::limits::MAX_THREADS`].
+pub fn threads(text: &str) -> Result<usize, String> {
+    let most = runtime::node::limits::MAX_THREADS;
+    match text.parse::<usize>() {
+        Ok(n) if (1..=most).contains(&n) => Ok(n),
+        _ => Err(format!("a whole number of threads from 1 to {most}")),
+    }
+}
+
+/// `--frames`: 1 to [`tracer::scene::MAX_FRAMES`].
+fn frames(text: &str) -> Result<u32, String> {
+    let most = tracer::scene::MAX_FRAMES;
+    match text.parse::<u32>() {
+        Ok(n) if (1..=most).contains(&n) => Ok(n),
+        _ => Err(format!("a whole number of frames from 1 to {most}")),
+    }
+}
+
+/// `--peer-timeout`: seconds in [`runtime::node::limits::PEER_TIMEOUT_SECONDS`].
+fn peer_timeout(text: &str) -> Result<f64, String> {
+    let range = runtime::node::limits::PEER_TIMEOUT_SECONDS;
+    match text.parse::<f64>() {
+        Ok(s) if range.contains(&s) => Ok(s),
+        _ => Err(format!(
+            "a number of seconds from {} to {}",
+            range.start(),
+            range.end()
+        )),
+    }
+}
+
+/// `--exposure`: a finite scale, 0 or more (a NaN would have written black previews, an
+/// infinite one white).
+fn exposure(text: &str) -> Result<f32, String> {
+    match text.parse::<f32>() {
+        Ok(e) if e.is_finite() && e >= 0.0 => Ok(e),
+        _ => Err("a finite number, 0 or more".to_string()),
+    }
+}
+
+/// `--peers`, `--tiles`: a count of at least one (zero would render nothing, or fail later
+/// under another name).
+fn at_least_one(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err("a whole number, 1 or more".to_string()),
+    }
 }
 
 /// A value as the command line spells it (`round-robin`), which is also how files record it.

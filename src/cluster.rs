@@ -91,10 +91,6 @@ pub fn slurm(mut args: SlurmArgs) -> anyhow::Result<()> {
             args.join_timeout
         )
     })?;
-    anyhow::ensure!(
-        args.job.threads != Some(0),
-        "--threads 0: a task needs at least one rendering thread"
-    );
     // Variables that are not Unicode are none of SLURM's, which writes ASCII.
     let env: slurm::Env = std::env::vars_os()
         .filter_map(|(k, v)| Some((k.into_string().ok()?, v.into_string().ok()?)))

@@ -65,6 +65,17 @@ pub fn execute(
     let world = Arc::new(prepare_world(scene, args.effects));
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
+    // Written only once every frame is done: a path that cannot take them is refused now, so
+    // that it costs the user nothing but the message.
+    for (flag, path) in [
+        ("--stats", &args.stats),
+        ("--gantt", &args.gantt),
+        ("--trace", &args.trace),
+    ] {
+        if let Some(path) = path {
+            check_writable(flag, path)?;
+        }
+    }
     let config =
         balancer::Config::with_tiles(args.balancer.into(), tiles, args.deal.into(), args.motion.0);
     let partitioner = balancer::Partitioner::new(settings.width, settings.height, &config)?;
@@ -194,9 +205,32 @@ pub fn execute(
     Ok(())
 }
 
+/// Whether a file can be written at `path` (named by `flag`) once the render is over: not a
+/// folder, in a folder that exists or can be made (as `--out` is), and open for writing. A file
+/// made by the check is removed again.
+fn check_writable(flag: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    let shown = path.display();
+    anyhow::ensure!(!path.is_dir(), "{flag} {shown}: is a folder; name a file");
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("{flag} {shown}: cannot create its folder"))?;
+    }
+    let existed = path.exists();
+    std::fs::OpenOptions::new()
+        .append(true)
+        .create(true)
+        .open(path)
+        .with_context(|| format!("{flag} {shown}: cannot be written"))?;
+    if !existed {
+        std::fs::remove_file(path).with_context(|| format!("{flag} {shown}: cannot be written"))?;
+    }
+    Ok(())
+}
+
 /// The node's options from the flags, with `threads` rendering threads per peer.
 pub fn options(args: &FrameArgs, threads: usize) -> node::Options {
-    let timeout = std::time::Duration::from_secs_f64(args.peer_timeout.max(0.1));
+    // In range: the flag's parser (`cli::peer_timeout`) refuses the rest.
+    let timeout = std::time::Duration::from_secs_f64(args.peer_timeout);
     let defaults = node::Options::default();
     node::Options {
         threads,

@@ -9,7 +9,7 @@ use runtime::node;
 
 /// `tessera render`: every peer in this process.
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
-    let peers = args.peers.max(1);
+    let peers = args.peers;
     let threads = args.job.threads.unwrap_or_else(job::available_threads);
     let options = job::options(&args.job, (threads / peers).max(1));
     // Every peer keeps a connection to every other: past the transport's limit some would be

@@ -136,3 +136,147 @@ fn settings_past_the_limits_are_refused_naming_the_flag() {
     );
     assert!(!dir.path().join("frame-0000.exr").exists());
 }
+
+/// Runs `command`, expects the command line's parser to refuse it (exit status 2, the usage
+/// error's), and returns its standard error.
+fn usage_error(command: &mut Command) -> String {
+    let output = command
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .expect("the tessera binary runs");
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert_eq!(output.status.code(), Some(2), "{command:?}:\n{stderr}");
+    assert!(
+        !stderr.contains("panicked") && !stderr.to_lowercase().contains("backtrace"),
+        "{command:?}:\n{stderr}"
+    );
+    stderr
+}
+
+/// Flag values that could not work are refused before anything starts, naming the flag and
+/// what it takes: infinite, NaN, too short or too long timeouts (an infinite one panicked),
+/// thread counts of zero or of a hundred thousand (which spent a minute spawning threads),
+/// previews of NaN or infinite exposure (black or white), and zero peers, tiles or frames
+/// (which ran one peer, failed under another name, or rendered nothing).
+#[test]
+fn flag_values_that_cannot_work_are_refused_before_anything_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::repo("scenes/point-in-sphere/point-in-sphere.toml");
+    let started = std::time::Instant::now();
+    let cases: [(&str, &[&str]); 6] = [
+        ("--peer-timeout", &["inf", "nan", "1e20", "0.05", "-1", "0"]),
+        ("--threads", &["0", "4097", "100000", "4294967296", "-2"]),
+        ("--exposure", &["nan", "inf", "-inf", "-1", "1e39"]),
+        ("--peers", &["0", "-1"]),
+        ("--tiles", &["0"]),
+        ("--frames", &["0", "16777217", "4294967295"]),
+    ];
+    for (flag, values) in cases {
+        for value in values {
+            let stderr = usage_error(
+                tessera()
+                    .arg("render")
+                    .arg(&scene)
+                    .arg(format!("{flag}={value}"))
+                    .arg("--out")
+                    .arg(dir.path()),
+            );
+            assert!(
+                stderr.contains(&format!("'{value}' for '{flag}")),
+                "{flag}={value}:\n{stderr}"
+            );
+        }
+    }
+    // Every command that renders takes the same thread counts.
+    for command in [
+        vec!["bench", "--threads", "0"],
+        vec!["accuracy", "scene.toml", "--threads", "5000"],
+        vec![
+            "peer",
+            "--join",
+            "127.0.0.1:1",
+            "--certs",
+            ".",
+            "--threads",
+            "0",
+        ],
+    ] {
+        let stderr = usage_error(tessera().args(&command));
+        assert!(stderr.contains("for '--threads"), "{command:?}:\n{stderr}");
+    }
+    assert!(started.elapsed() < std::time::Duration::from_secs(30));
+    assert!(!dir.path().join("frame-0000.exr").exists());
+}
+
+/// Files written only once the render is over (statistics, the chart, the cost trace) are
+/// checked before it starts: a folder where a file should be is refused naming the flag, and
+/// nothing is rendered; a file in a folder not yet made is written, as `--out` is made.
+#[test]
+fn files_written_at_the_end_are_checked_at_the_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::repo("scenes/point-in-sphere/point-in-sphere.toml");
+    let out = dir.path().join("out");
+    let small = [
+        "--width", "8", "--height", "8", "--spp", "1", "--peers", "1",
+    ];
+    for flag in ["--stats", "--gantt", "--trace"] {
+        let stderr = user_error(
+            tessera()
+                .arg("render")
+                .arg(&scene)
+                .args(small)
+                .arg(flag)
+                .arg(dir.path())
+                .arg("--out")
+                .arg(&out),
+        );
+        assert!(
+            stderr.contains(&format!("{flag} {}", dir.path().display()))
+                && stderr.contains("is a folder"),
+            "{stderr}"
+        );
+        assert!(!out.join("frame-0000.exr").exists());
+    }
+    let stats = dir.path().join("new").join("folder").join("stats.json");
+    let status = tessera()
+        .arg("render")
+        .arg(&scene)
+        .args(small)
+        .arg("--stats")
+        .arg(&stats)
+        .arg("--out")
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(stats.exists() && out.join("frame-0000.exr").exists());
+}
+
+/// `tessera accuracy` refuses, as `render` does, an image whose buffers cannot fit in this
+/// machine's memory, and a knob named twice.
+#[test]
+fn accuracy_refuses_images_past_memory_and_knobs_named_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::repo("scenes/point-in-sphere/point-in-sphere.toml");
+    let started = std::time::Instant::now();
+    let stderr = user_error(
+        tessera()
+            .arg("accuracy")
+            .arg(&scene)
+            .args(["--width", "200000", "--height", "200000", "--out"])
+            .arg(dir.path()),
+    );
+    assert!(
+        stderr.contains("--width 200000 --height 200000") && stderr.contains("MiB free"),
+        "{stderr}"
+    );
+    assert!(started.elapsed() < std::time::Duration::from_secs(20));
+    let stderr = user_error(
+        tessera()
+            .arg("accuracy")
+            .arg(&scene)
+            .args(["--knobs", "spp,depth,spp", "--out"])
+            .arg(dir.path()),
+    );
+    assert!(stderr.contains("--knobs names `spp` twice"), "{stderr}");
+}

@@ -5,6 +5,17 @@
 use super::Options;
 use runtime_core::wire::BYTES_PER_PIXEL;
 
+/// The most rendering threads one process may be asked for. Rendering wants a thread per core,
+/// and no machine has thousands; a number past this is a slip (`--threads 100000` spent a minute
+/// spawning threads before it failed, naming no flag), so it is refused before anything starts.
+pub const MAX_THREADS: usize = 4096;
+
+/// The silences the owner and peers accept as `--peer-timeout`, in seconds: heartbeats go every
+/// fifth of it, so below a tenth of a second they would flood the links; above a million
+/// seconds (eleven days) a dead peer would never be noticed within a render, and QUIC's idle
+/// timer has a range of its own.
+pub const PEER_TIMEOUT_SECONDS: std::ops::RangeInclusive<f64> = 0.1..=1e6;
+
 /// Why an image or a tile count cannot work.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LimitError {

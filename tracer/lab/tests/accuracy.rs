@@ -35,6 +35,7 @@ fn config(scene: &Path, out: &Path) -> Config {
         repeats: 1,
         cost: Cost::Time,
         threads: None,
+        available_memory: None,
         command: "tessera accuracy (a test)".into(),
     }
 }

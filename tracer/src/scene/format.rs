@@ -42,7 +42,7 @@ pub(crate) struct RenderSpec {
     pub max_depth: Limit<Unlimited>,
     pub russian_roulette_depth: Limit<Off>,
     pub seed: u64,
-    pub frames: Option<Count>,
+    pub frames: Option<FrameCount>,
 }
 
 impl Default for RenderSpec {
@@ -158,7 +158,7 @@ pub(crate) struct ObjectSpec {
     pub perturb: Option<Fraction>,
     pub seed: Option<u64>,
     pub smooth: Option<bool>,
-    pub corners: Option<[Point; 4]>,
+    pub corners: Option<Corners>,
     pub min: Option<Point>,
     pub max: Option<Point>,
     pub translate: Option<Point>,
@@ -210,7 +210,7 @@ pub(crate) struct MaterialSpec {
     pub glass: Option<GlassName>,
     pub tint: Option<Reflectance>,
     pub roughness: Option<Roughness>,
-    pub emission: Option<Radiance>,
+    pub emission: Option<Emitted>,
     /// The medium inside the object (glass and interfaces only).
     pub medium: Option<Spanned<String>>,
     /// The medium outside the object (glass and interfaces only); the camera's when left out.
@@ -246,7 +246,7 @@ pub(crate) struct LightSpec {
     #[serde(rename = "type")]
     pub kind: LightKind,
     pub position: Point,
-    pub intensity: Radiance,
+    pub intensity: Emitted,
 }
 
 #[derive(Clone, Copy, Debug, Deserialize)]
@@ -261,11 +261,11 @@ pub(crate) enum LightKind {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct EnvironmentSpec {
-    pub radiance: Option<Radiance>,
+    pub radiance: Option<Emitted>,
     pub map: Option<Spanned<String>>,
-    pub scale: Option<Radiance>,
+    pub scale: Option<Emitted>,
     pub rotate: Option<Finite>,
-    pub portals: Option<Spanned<Vec<[Point; 4]>>>,
+    pub portals: Option<Spanned<Vec<Corners>>>,
 }
 
 /// Parses a scene file; errors name `file`, the line and the key path.

@@ -25,6 +25,13 @@ pub(super) fn camera_track(
     for key in &c.keys {
         let k = key.get_ref();
         let line = line_of(text, key.span().start);
+        if k.frame >= super::MAX_FRAMES {
+            return Err(SceneError::at_line(
+                file,
+                line,
+                past_last_frame("camera", k.frame),
+            ));
+        }
         if let Some(first) = frames.insert(k.frame, line) {
             let detail = format!(
                 "camera: two keys at frame {} (the other at line {first})",
@@ -44,6 +51,15 @@ pub(super) fn camera_track(
     )
 }
 
+/// Why a key at `frame` is refused: past the last frame a render may have.
+fn past_last_frame(what: &str, frame: u32) -> String {
+    format!(
+        "{what} keys: frame {frame} is past the last a render may have, {} (2^24 - 1: time is \
+         counted in frames, exactly only up to there)",
+        super::MAX_FRAMES - 1
+    )
+}
+
 /// The camera of a complete pose; `line` is where the pose is given.
 fn camera(file: &str, line: usize, pose: format::Pose) -> Result<Camera, SceneError> {
     let err = |detail: &str| SceneError::at_line(file, line, format!("camera: {detail}"));
@@ -54,18 +70,39 @@ fn camera(file: &str, line: usize, pose: format::Pose) -> Result<Camera, SceneEr
     if forward == Vec3::ZERO {
         return Err(err("`look_at` equals `position`"));
     }
-    let right = forward.cross(up);
-    if !right.is_finite() || right.length_squared() <= f32::MIN_POSITIVE {
-        return Err(err("`up` is zero or parallel to the view direction"));
+
+    // Whether `up` is parallel is a question of angle, asked in f64 where nothing overflows:
+    // the camera's f32 basis below sin(angle) = 1e-4 would roll by rounding.
+    let (f, u) = (forward.as_dvec3(), up.as_dvec3());
+    if u == glam::DVec3::ZERO {
+        return Err(err("`up` is zero"));
     }
-    let vfov_degrees = pose.vfov.map_or(40.0, |v| v.0);
-    // In focus by default at the point looked at, as photographers aim.
-    let focus_distance = pose.focus_distance.map_or(forward.length(), |f| f.0);
-    if !focus_distance.is_finite() {
+    if f.cross(u).length() < 1e-4 * f.length() * u.length() {
+        return Err(err(
+            "`up` is parallel to the view direction (within 0.006 degrees)",
+        ));
+    }
+    // The camera's basis as `Camera::rays` works it out in f32: where a length squared
+    // overflows or underflows there, a normalised axis comes out zero or NaN.
+    let unit = |v: Vec3| {
+        let n = v.normalize();
+        n.is_finite() && n.length_squared() > 0.5
+    };
+    if !forward.is_finite() || !unit(forward) {
         return Err(err(
             "the distance from `position` to `look_at` overflows 32-bit floats",
         ));
     }
+    if !unit(forward.normalize().cross(up)) {
+        return Err(err(
+            "the cross product of the view direction and `up` is out of 32-bit floats' range; \
+             give `up` an ordinary length, such as 1",
+        ));
+    }
+    let vfov_degrees = pose.vfov.map_or(40.0, |v| v.0);
+    // In focus by default at the point looked at, as photographers aim.
+    // Finite: the view's length squared is (checked above).
+    let focus_distance = pose.focus_distance.map_or(forward.length(), |f| f.0);
     Ok(Camera {
         position,
         look_at,
@@ -89,6 +126,9 @@ pub(super) fn object_track(
         let k = spanned.get_ref();
         let line = line_of(text, spanned.span().start);
         let err = |detail: String| SceneError::at_line(file, line, detail);
+        if k.frame >= super::MAX_FRAMES {
+            return Err(err(past_last_frame("object", k.frame)));
+        }
         if let (Some(last), Some(&last_line)) = (keys.last(), lines.last()) {
             if k.frame == last.frame {
                 return Err(err(format!(
@@ -105,8 +145,10 @@ pub(super) fn object_track(
             }
         }
         let key = key_pose(o, Some(k));
+        // Signs compared, not a product, which underflows to zero for tiny scales.
+        let changes_sign = |a: f32, b: f32| a == 0.0 || b == 0.0 || (a < 0.0) != (b < 0.0);
         if let Some(last) = keys.last()
-            && (key.scale * last.scale).cmple(Vec3::ZERO).any()
+            && (0..3).any(|axis| changes_sign(key.scale[axis], last.scale[axis]))
         {
             return Err(err(format!(
                 "object keys: `scale` changes sign between frames {} and {}, so it would \

@@ -400,9 +400,15 @@ fn environment(
         for t in &mut texels {
             *t *= scale.0;
         }
-        if texels.iter().any(|t| !t.is_finite()) {
-            return Err(err("`scale` times the map overflows 32-bit floats"));
-        }
+    }
+    if texels
+        .iter()
+        .any(|t| !t.is_finite() || t.max_element() > super::MAX_RADIANCE)
+    {
+        return Err(err(&format!(
+            "the map's texels (times `scale`) must be at most {:e}",
+            super::MAX_RADIANCE
+        )));
     }
     let rotate = e.rotate.map_or(0.0, |r| r.0);
     let map = EnvironmentMap::new(width, height, texels, rotate);
@@ -424,7 +430,7 @@ fn portals(
         .iter()
         .enumerate()
         .map(|(i, corners)| {
-            Portal::from_corners(corners.map(|c| c.0)).map_err(|detail| {
+            Portal::from_corners(corners.0).map_err(|detail| {
                 let detail = format!("[environment] portals: portal {}: {detail}", i + 1);
                 SceneError::at_line(file, line, detail)
             })

@@ -22,6 +22,19 @@ mod texture;
 mod values;
 
 pub use camera::{Camera, CameraKey, CameraRays, CameraTrack};
+
+/// The most frames a render may have, so also one past the last frame a key may name: 2^24.
+/// Time is counted in frames, and up to 2^24 every frame is a whole number in `f32` and every
+/// key's fraction is exact (`CameraTrack::at_time`); past it, frames would blur into each
+/// other. Far beyond any animation (a week at 24 frames a second is 14.5 million frames).
+pub const MAX_FRAMES: u32 = 1 << 24;
+
+/// The most radiance (or a point light's intensity) a scene may emit, per channel, including an
+/// environment map's texels times its `scale`. A pixel sums its samples, each an emission times
+/// a path's weight, and `f32` ends at 3.4e38: from 3e38 a render wrote infinite pixels. 1e30
+/// leaves eight orders of magnitude for the sums, and is far above any light measured in
+/// physical units (the sun's radiance is about 1e7 W/(m^2 sr)).
+pub const MAX_RADIANCE: f32 = 1e30;
 pub use error::{Location, SceneError};
 pub use files::{DiskFiles, MemoryFiles, SceneFiles, normalize};
 pub use load::{LoadReport, ObjectReport, load, load_from, load_str, load_with_report};

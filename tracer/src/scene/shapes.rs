@@ -185,7 +185,7 @@ pub(crate) fn shape_triangles(
             let corners = o
                 .corners
                 .ok_or("quad needs `corners` (4 points, counter-clockwise seen from the front)")?;
-            quad(corners.map(|c| c.0), material)
+            quad(corners.0, material)
         }
         ShapeKind::Box => {
             let (Some(min), Some(max)) = (o.min, o.max) else {

@@ -49,9 +49,18 @@ impl<W> Limit<W> {
     }
 }
 
+/// A number of frames, 1 to [`super::MAX_FRAMES`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FrameCount(pub u32);
+/// An emitted radiance or intensity, or a factor on one: from 0 to [`super::MAX_RADIANCE`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Emitted(pub Vec3);
 /// A finite point or vector.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Point(pub Vec3);
+/// Four finite corners, of a quad or a portal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Corners(pub [Vec3; 4]);
 /// A finite number.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Finite(pub f32);
@@ -125,6 +134,15 @@ checked_type!(Count, u32, |v| if v >= 1 {
 } else {
     Err("must be at least 1".to_owned())
 });
+checked_type!(
+    FrameCount,
+    u32,
+    |v| if (1..=super::MAX_FRAMES).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("must be from 1 to {} (2^24)", super::MAX_FRAMES))
+    }
+);
 checked_type!(Point, Triple<3>, |v| finite(v.0));
 checked_type!(Finite, f32, |v| if v.is_finite() {
     Ok(v)
@@ -193,6 +211,17 @@ checked_type!(Radiance, Triple<1>, |v| {
         }
     })
 });
+checked_type!(Emitted, Triple<1>, |v| {
+    finite(v.0).and_then(|c| {
+        if !c.cmpge(Vec3::ZERO).all() {
+            Err("must not be negative".to_owned())
+        } else if !c.cmple(Vec3::splat(super::MAX_RADIANCE)).all() {
+            Err(format!("must be at most {:e}", super::MAX_RADIANCE))
+        } else {
+            Ok(c)
+        }
+    })
+});
 checked_type!(Scale, Triple<1>, |v| {
     finite(v.0).and_then(|c| {
         if c.cmpne(Vec3::ZERO).all() {
@@ -201,6 +230,17 @@ checked_type!(Scale, Triple<1>, |v| {
             Err("must not be 0".to_owned())
         }
     })
+});
+
+checked_type!(Corners, Vec<Point>, |v| {
+    // A Vec rather than `[Point; 4]`: serde's arrays ignore elements beyond their length.
+    match v.as_slice() {
+        &[a, b, c, d] => Ok([a.0, b.0, c.0, d.0]),
+        _ => Err(format!(
+            "must be four corners `[[x, y, z], ...]`, not {}",
+            v.len()
+        )),
+    }
 });
 
 checked_type!(ShutterSpec, Vec<f32>, |v| {

@@ -80,6 +80,9 @@ pub struct Config {
     pub cost: Cost,
     /// Rendering threads (default: all cores).
     pub threads: Option<usize>,
+    /// Memory free on this machine in bytes, if known: an image whose films would not fit is
+    /// refused before anything is rendered.
+    pub available_memory: Option<u64>,
     /// The command as a reader would retype it, for the report's header.
     pub command: String,
 }
@@ -188,6 +191,16 @@ pub fn run(args: &Config) -> Result<(), LabError> {
         args.max_spp >= 1 && args.knob_spp >= 1,
         "samples per pixel must be at least 1",
     )?;
+    for (i, knob) in args.knobs.iter().enumerate() {
+        ensure(
+            !args.knobs[..i].contains(knob),
+            &format!(
+                "--knobs names `{}` twice; each knob is measured once",
+                knob.to_possible_value()
+                    .map_or_else(|| format!("{knob:?}"), |v| v.get_name().to_owned())
+            ),
+        )?;
+    }
     ensure(
         args.reference_spp.is_none_or(|n| n >= 2),
         "the reference needs at least 2 samples per pixel",
@@ -203,6 +216,18 @@ pub fn run(args: &Config) -> Result<(), LabError> {
         scene.settings.width,
         scene.settings.height,
     )?;
+    if let Some(available) = args.available_memory {
+        let needed = u64::from(width) * u64::from(height) * BYTES_PER_PIXEL;
+        ensure(
+            needed <= available,
+            &format!(
+                "--width {width} --height {height}: the images need about {} MiB, and this \
+                 machine has {} MiB free",
+                needed >> 20,
+                available >> 20
+            ),
+        )?;
+    }
     let scene_settings = scene.settings.clone();
     scene.settings = RenderSettings {
         width,
@@ -308,6 +333,10 @@ pub fn run(args: &Config) -> Result<(), LabError> {
     );
     Ok(())
 }
+
+/// What the measurement holds per pixel at once, about: the reference's sums in `f64` and its
+/// image, a rung's film and image, and their error maps.
+const BYTES_PER_PIXEL: u64 = 64;
 
 /// The image size: the flags, or the scene's size scaled so its longer side is [`DEFAULT_SIZE`]
 /// pixels; a single flag keeps the scene's aspect ratio.
