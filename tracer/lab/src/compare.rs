@@ -146,14 +146,8 @@ impl Metrics {
             ));
         }
         let mut sums = Sums::default();
-        let mut max = MaxDifference {
-            value: 0.0,
-            x: 0,
-            y: 0,
-            channel: CHANNELS[0],
-            test: 0.0,
-            reference: 0.0,
-        };
+        // The first finite pair's, then any larger: never a place the images do not hold.
+        let mut max: Option<MaxDifference> = None;
         for (index, (a, b)) in test.pixels.iter().zip(&reference.pixels).enumerate() {
             for c in 0..3 {
                 let (ta, tb) = (a[c], b[c]);
@@ -170,22 +164,29 @@ impl Metrics {
                 sums.test[c] += fa;
                 sums.reference[c] += fb;
                 sums.per_channel[c] += 1;
-                if d.abs() > max.value {
+                if max.as_ref().is_none_or(|m| d.abs() > m.value) {
                     let (x, y) = (
                         (index % test.width as usize) as u32,
                         (index / test.width as usize) as u32,
                     );
-                    max = MaxDifference {
+                    max = Some(MaxDifference {
                         value: d.abs(),
                         x,
                         y,
                         channel: CHANNELS[c],
                         test: ta,
                         reference: tb,
-                    };
+                    });
                 }
             }
         }
+        let Some(max) = max else {
+            return Err(LabError::Invalid(format!(
+                "no channel value is finite in both images ({} are NaN or infinite): nothing \
+                 to compare",
+                sums.non_finite
+            )));
+        };
         let n = sums.count as f64;
         let mean = |sum: [f64; 3]| std::array::from_fn(|c| sum[c] / sums.per_channel[c] as f64);
         Ok(Metrics {
@@ -313,7 +314,8 @@ impl Comparison {
         );
         if m.non_finite > 0 {
             out += &format!(
-                "  warning: {} channel values are NaN or infinite and were left out\n",
+                "  warning: {} channel values are NaN or infinite: left out of every metric \
+                 but FLIP, which sees them as the previews do (NaN black, infinity white)\n",
                 m.non_finite
             );
         }
@@ -402,6 +404,34 @@ mod tests {
         assert_eq!(m.non_finite, 1);
         assert_eq!(m.mae, 1.0 / 5.0);
         assert_eq!(m.mean_test, [1.0, 1.0, 1.5]);
+    }
+
+    #[test]
+    fn the_largest_difference_is_a_place_the_images_hold_and_nothing_finite_is_an_error() {
+        // Equal images: the largest difference, 0, is reported at the first pixel with its
+        // true values, not made-up zeros.
+        let same = image(2, 1, |i| [1.0 + i as f32, 2.0, 3.0]);
+        let d = Metrics::between(&same, &same).unwrap().max_difference;
+        assert_eq!((d.value, d.x, d.test, d.reference), (0.0, 0, 1.0, 1.0));
+        // A NaN in the first place: the largest difference is found among the finite ones.
+        let test = image(2, 1, |i| {
+            if i == 0 {
+                [f32::NAN; 3]
+            } else {
+                [5.0, 2.0, 3.0]
+            }
+        });
+        let d = Metrics::between(&test, &same).unwrap().max_difference;
+        assert_eq!(
+            (d.value, d.x, d.channel, d.test, d.reference),
+            (3.0, 1, "R", 5.0, 2.0)
+        );
+        let nothing = image(2, 1, |_| [f32::NAN; 3]);
+        let error = Metrics::between(&nothing, &same).unwrap_err().to_string();
+        assert!(
+            error.contains("no channel value is finite in both"),
+            "{error}"
+        );
     }
 
     #[test]
