@@ -23,8 +23,8 @@ pub struct BenchArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Also time this many steal exchanges (request, then a grant of tiles) between two peers
-    /// over QUIC on loopback; 0 skips it.
-    #[arg(long, default_value_t = 0)]
+    /// over QUIC on loopback; 0 skips it, at most 1000000.
+    #[arg(long, default_value_t = 0, value_parser = steal_rtt)]
     pub steal_rtt: usize,
     /// Print JSON instead of text.
     #[arg(long)]
@@ -39,9 +39,21 @@ pub struct BenchArgs {
 /// Measures as the flags say; the image overrides are applied with `tessera render`'s checks.
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let image = args.image.clone();
+    let available = runtime::node::limits::available_memory();
     lab::bench::run(&lab::bench::Config {
         scenes: args.scenes.clone(),
-        adjust: Box::new(move |settings| image.apply(settings).map_err(|e| e.to_string())),
+        // The image flags, then the frame's memory as `render` checks it (its other limits
+        // concern messages between peers, which a bench does not send).
+        adjust: Box::new(move |settings| {
+            image.apply(settings).map_err(|e| e.to_string())?;
+            let (width, height) = (settings.width, settings.height);
+            match runtime::node::Options::default().check_frame(width, height, None, available) {
+                Err(e @ runtime::node::limits::LimitError::Memory { .. }) => {
+                    Err(format!("--width {width} --height {height}: {e}"))
+                }
+                _ => Ok(()),
+            }
+        }),
         max_depth: args.max_depth,
         threads: args.threads,
         out: args.out.clone(),
@@ -53,4 +65,12 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             .unwrap_or_default(),
     })?;
     Ok(())
+}
+
+/// `--steal-rtt`: 0 to a million exchanges (each keeps its time; 2^32 asked for 32 GB).
+fn steal_rtt(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(n) if n <= 1_000_000 => Ok(n),
+        _ => Err("a number of exchanges from 0 to 1000000".to_string()),
+    }
 }

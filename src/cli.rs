@@ -118,7 +118,8 @@ pub struct KeygenArgs {
     /// files are never overwritten.
     #[arg(long)]
     pub out: PathBuf,
-    /// Certificates to make: peer 0 is the frame owner (`serve`), peers 1.. join it.
+    /// Certificates to make: peer 0 is the frame owner (`serve`), peers 1.. join it; 2 to
+    /// 257 (an owner accepts at most 256 peers).
     #[arg(long, default_value_t = 8)]
     pub peers: u32,
 }
@@ -274,9 +275,9 @@ fn exposure(text: &str) -> Result<f32, String> {
     }
 }
 
-/// `--peers`, `--tiles`: a count of at least one (zero would render nothing, or fail later
-/// under another name).
-fn at_least_one(text: &str) -> Result<usize, String> {
+/// `--peers`, `--tiles`, `simulate --frames`: a count of at least one (zero would render
+/// nothing, or fail later under another name).
+pub fn at_least_one(text: &str) -> Result<usize, String> {
     match text.parse::<usize>() {
         Ok(n) if n >= 1 => Ok(n),
         _ => Err("a whole number, 1 or more".to_string()),

@@ -48,6 +48,14 @@ pub fn keygen(args: &KeygenArgs) -> anyhow::Result<()> {
         args.peers >= 2,
         "a cluster needs the owner (peer 0) and at least one peer"
     );
+    let most = node::Options::default().net.max_connections as u32 + 1;
+    anyhow::ensure!(
+        args.peers <= most,
+        "--peers {}: an owner accepts at most {} peers, so a cluster has at most {most} \
+         certificates",
+        args.peers,
+        most - 1
+    );
     let certs = ClusterCerts::generate(args.peers)?;
     certs
         .write_pem(&args.out)

@@ -44,7 +44,7 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub hold: Option<usize>,
     /// Frames to simulate (default: the trace's; more repeat it).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::at_least_one)]
     pub frames: Option<usize>,
     /// Rendering slots (threads) per peer (default 1; with --validate, the render's).
     #[arg(long)]
@@ -111,7 +111,8 @@ pub struct SimulateArgs {
     /// How far a frame's tiles may miss their predicted costs (relative, summed) before the
     /// director doubts the prediction: the next frame is then not overlapped and renders in
     /// small pieces.
-    #[arg(long, default_value_t = runtime_core::director::Config::default().doubt_error)]
+    #[arg(long, default_value_t = runtime_core::director::Config::default().doubt_error,
+          value_parser = doubt_error)]
     pub doubt_error: f64,
     /// While the prediction is doubted, peers render pieces of at most this many times the
     /// frame's mean tile area; `off` uses `--render-pieces`.
@@ -235,10 +236,12 @@ fn load_trace(spec: &str) -> anyhow::Result<Trace> {
 
 /// Everything but peers and policy, from the flags.
 fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result<Scenario> {
+    // Up to a million seconds (eleven days): far past any study, and inside `Duration`'s
+    // range with room for the sums the simulator makes of them (1e300 panicked).
     let millis = |ms: f64, what: &str| -> anyhow::Result<Duration> {
         anyhow::ensure!(
-            ms >= 0.0 && ms.is_finite(),
-            "--{what} must be a non-negative number of milliseconds"
+            (0.0..=1e9).contains(&ms),
+            "--{what} must be a number of milliseconds from 0 to 1e9"
         );
         Ok(Duration::from_secs_f64(ms / 1e3))
     };
@@ -255,10 +258,12 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
             link_spread: args.link_spread,
             bandwidth: if args.bandwidth == 0.0 {
                 None
-            } else if args.bandwidth > 0.0 && args.bandwidth.is_finite() {
+            } else if (1e-3..=1e9).contains(&args.bandwidth) {
+                // At least a kilobit a second, so that a tile's transfer time stays a
+                // `Duration` (1e-300 panicked).
                 Some(args.bandwidth * 1e6 / 8.0)
             } else {
-                bail!("--bandwidth must be a positive number of megabits per second, or 0")
+                bail!("--bandwidth must be a number of megabits per second from 0.001 to 1e9, or 0")
             },
             loss: args.loss,
             loss_detection: millis(args.loss_detection, "loss-detection")?,
@@ -332,4 +337,12 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
         .with_context(|| format!("writing {}", path.display()))?;
     println!("{}; wrote {}", validation.totals(), path.display());
     Ok(())
+}
+
+/// `--doubt-error`: a relative error, finite and not negative.
+fn doubt_error(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(e) if e.is_finite() && e >= 0.0 => Ok(e),
+        _ => Err("a finite relative error, 0 or more".to_string()),
+    }
 }

@@ -280,3 +280,103 @@ fn accuracy_refuses_images_past_memory_and_knobs_named_twice() {
     );
     assert!(stderr.contains("--knobs names `spp` twice"), "{stderr}");
 }
+
+/// The simulator, the bench and keygen refuse values that panicked, aborted or ran away, each
+/// naming its flag: times too long for the simulator's clock (1e300 milliseconds panicked in
+/// `Duration`), a bandwidth so small a transfer never ends, a crash at 1e300 seconds, zero
+/// frames, a NaN doubt threshold, a trace of an image 4294967295 pixels a side (which aborted
+/// allocating exabytes), 2^32 timed steal exchanges (32 GB), a bench image past this
+/// machine's memory, and a hundred million certificates.
+#[test]
+fn simulator_bench_and_keygen_values_that_cannot_work_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let simulate = |flags: &[&str]| {
+        let mut command = tessera();
+        command
+            .args([
+                "simulate",
+                "synthetic:16x12:2",
+                "--peers",
+                "2",
+                "--tiles",
+                "4",
+            ])
+            .args(flags)
+            .arg("--out")
+            .arg(dir.path());
+        command
+    };
+    let started = std::time::Instant::now();
+    for flag in [
+        "--latency",
+        "--jitter",
+        "--loss-detection",
+        "--tile-overhead",
+    ] {
+        let stderr = user_error(&mut simulate(&[flag, "1e300"]));
+        assert!(stderr.contains(&format!("{flag} must be")), "{stderr}");
+    }
+    let stderr = user_error(&mut simulate(&["--bandwidth", "1e-300"]));
+    assert!(stderr.contains("--bandwidth must be"), "{stderr}");
+    let stderr = user_error(&mut simulate(&["--crash", "1@1e300"]));
+    assert!(stderr.contains("--crash \"1@1e300\""), "{stderr}");
+    let stderr = usage_error(&mut simulate(&["--frames", "0"]));
+    assert!(stderr.contains("for '--frames"), "{stderr}");
+    let stderr = usage_error(&mut simulate(&["--doubt-error", "nan"]));
+    assert!(stderr.contains("for '--doubt-error"), "{stderr}");
+    let trace = dir.path().join("huge.json");
+    std::fs::write(
+        &trace,
+        "{\"format\":\"tessera-trace\",\"version\":1,\"width\":4294967295,\"height\":4294967295,\
+         \"block_size\":4294967295,\"source\":\"x\"}\n{\"frame\":0,\"blocks\":[5]}\n",
+    )
+    .unwrap();
+    let stderr = user_error(
+        tessera()
+            .arg("simulate")
+            .arg(&trace)
+            .args(["--peers", "1,2", "--tiles", "1,4", "--out"])
+            .arg(dir.path()),
+    );
+    assert!(stderr.contains("at most 65536 pixels a side"), "{stderr}");
+    let stderr = user_error(
+        tessera()
+            .args([
+                "simulate",
+                "synthetic:100000x100000:1",
+                "--peers",
+                "2",
+                "--out",
+            ])
+            .arg(dir.path()),
+    );
+    assert!(stderr.contains("at most 65536 pixels a side"), "{stderr}");
+
+    let scene = common::repo("scenes/point-in-sphere/point-in-sphere.toml");
+    let stderr = usage_error(
+        tessera()
+            .arg("bench")
+            .arg(&scene)
+            .args(["--steal-rtt", "4294967296"]),
+    );
+    assert!(stderr.contains("for '--steal-rtt"), "{stderr}");
+    let stderr = user_error(tessera().arg("bench").arg(&scene).args([
+        "--width",
+        "100000000",
+        "--height",
+        "100000000",
+        "--spp",
+        "1",
+    ]));
+    assert!(
+        stderr.contains("--width 100000000 --height 100000000") && stderr.contains("MiB free"),
+        "{stderr}"
+    );
+    let stderr = user_error(
+        tessera()
+            .args(["keygen", "--peers", "100000000", "--out"])
+            .arg(dir.path().join("keys")),
+    );
+    assert!(stderr.contains("--peers 100000000"), "{stderr}");
+    assert!(started.elapsed() < std::time::Duration::from_secs(60));
+}

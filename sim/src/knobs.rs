@@ -123,9 +123,8 @@ impl FromStr for Crash {
             };
         }
         match when.parse::<f64>() {
-            Ok(at) if at >= 0.0 && at.is_finite() => {
-                Ok(Crash::at(peer, Duration::from_secs_f64(at)))
-            }
+            // Up to a million seconds, as the network's times (`tessera simulate`).
+            Ok(at) if (0.0..=1e6).contains(&at) => Ok(Crash::at(peer, Duration::from_secs_f64(at))),
             _ => Err(bad()),
         }
     }

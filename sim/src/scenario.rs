@@ -425,17 +425,10 @@ fn stalled(cluster: &Cluster<SimWorld>) -> Error {
 }
 
 /// The encoded size of a tile result covering `rect`, with its pixels and a cost map of `block`
-/// pixels a side: the real encoder, counting (the zeroed buffers are never touched).
+/// pixels a side, as the wire format counts it without building the buffers (which, for a
+/// trace of a 4294967295-pixel-wide image, could not be allocated).
 fn result_bytes(rect: balancer::Rect, block: u32) -> u64 {
-    let result = runtime_core::wire::TileResult {
-        frame: runtime_core::wire::FrameId(0),
-        tile: runtime_core::wire::TileId(0),
-        piece: runtime_core::wire::Piece::WHOLE,
-        rect,
-        pixels: vec![0; (rect.area() * runtime_core::wire::BYTES_PER_PIXEL) as usize],
-        costs: vec![0; runtime_core::wire::cost_map_bytes(rect, block) as usize],
-    };
-    runtime_core::wire::encoded_len(&runtime_core::wire::Message::TileDone(result)) as u64
+    runtime_core::wire::tile_result_len(rect, block)
 }
 
 /// Hands the owner core's events since the last call to the director.

@@ -30,6 +30,13 @@ use serde::{Deserialize, Serialize};
 
 use crate::Error;
 
+/// The widest and tallest image a trace may describe. The simulator keeps per-frame cost grids
+/// of the image in 8-pixel blocks, as the balancer does; a 65536-pixel square already needs
+/// half a gigabyte of them per frame, and its film (12 bytes a pixel) more memory than a
+/// render's owner has, so larger traces describe no render that could run (a 4294967295-pixel
+/// side asked for exabytes and aborted).
+pub const MAX_SIDE: u32 = 1 << 16;
+
 /// The version [`TraceWriter`] writes and [`Trace::read`] accepts.
 pub const VERSION: u32 = 1;
 
@@ -76,6 +83,11 @@ impl Header {
         if width == 0 || height == 0 || block_size == 0 {
             return Err(Error::BadTrace(format!(
                 "a {width}x{height} image in {block_size}-pixel blocks has no blocks"
+            )));
+        }
+        if width > MAX_SIDE || height > MAX_SIDE {
+            return Err(Error::BadTrace(format!(
+                "a {width}x{height} image: traces are at most {MAX_SIDE} pixels a side"
             )));
         }
         Ok(Self {

@@ -221,3 +221,31 @@ fn emitters_stop_where_a_pixel_sum_could_overflow() {
     let e = map(1e10, 1e21).err().unwrap();
     assert!(e.to_string().contains("must be at most 1e30"), "{e}");
 }
+
+/// "Unlimited" depth without Russian roulette in a closed box of white walls: every path would
+/// bounce forever (the render hung); it now ends at `UNLIMITED_DEPTH` scattering events, so the
+/// render finishes with finite pixels, each path having cast exactly that many rays after its
+/// camera ray.
+#[test]
+fn an_unlimited_depth_without_roulette_ends_in_a_lossless_closed_box() {
+    let toml = "[render]\nwidth = 2\nheight = 2\nspp = 1\nmax_depth = \"unlimited\"\n\
+                russian_roulette_depth = \"off\"\n[[light]]\ntype = \"point\"\n\
+                position = [0, 0, 0]\nintensity = 10\n[camera]\nposition = [0, 0, 4]\n\
+                look_at = [0, 0, 0]\n[[object]]\nshape = \"box\"\nmin = [-3, -3, -3]\n\
+                max = [3, 3, 8]\ninward = true\nmaterial = \"m\"\n[materials.m]\n\
+                type = \"diffuse\"\nalbedo = 1\n";
+    let scene = load(toml).unwrap();
+    let effects = tracer::Effects::of(&scene);
+    let accel = tracer::geometry::Accel::build(&scene.triangles, Default::default());
+    let world = tracer::World::new(scene, accel, effects);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let film = tracer::render_frame(&world, 0, &pool, tracer::FrameConfig { tile: 8 });
+    let depth = u64::from(tracer::integrator::UNLIMITED_DEPTH);
+    assert_eq!(film.stats.rays, 4 * (depth + 1));
+    for pixel in &film.pixels {
+        assert!(pixel.iter().all(|c| c.is_finite() && *c > 0.0), "{pixel:?}");
+    }
+}

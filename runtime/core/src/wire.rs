@@ -523,6 +523,25 @@ pub fn encoded_len(message: &Message) -> usize {
         .expect("invariant: every Message field has a known length, so postcard cannot fail")
 }
 
+/// The length of [`encode`]'s output for a [`TileResult`] covering `rect` with a cost map of
+/// `block`-pixel blocks, without building its buffers (the simulator sizes every transfer by
+/// it, for tiles of any size): the encoding of the result with empty buffers, plus each
+/// buffer's bytes and what its length prefix takes beyond the empty one's byte (postcard writes
+/// a length as a varint, seven bits a byte).
+pub fn tile_result_len(rect: Rect, block: u32) -> u64 {
+    let empty = TileResult {
+        frame: FrameId(0),
+        tile: TileId(0),
+        piece: Piece::WHOLE,
+        rect,
+        pixels: Vec::new(),
+        costs: Vec::new(),
+    };
+    let base = encoded_len(&Message::TileDone(empty)) as u64;
+    let buffer = |n: u64| n + u64::from((64 - (n | 1).leading_zeros()).div_ceil(7)) - 1;
+    base + buffer(rect.area() * BYTES_PER_PIXEL) + buffer(cost_map_bytes(rect, block))
+}
+
 /// Decodes and validates one message. Pure and total: any input gives a message or an error.
 pub fn decode(bytes: &[u8], limits: &Limits) -> Result<Message, WireError> {
     if bytes.len() > limits.max_message_bytes {

@@ -34,6 +34,13 @@
 //! flag); the per-sample counters in [`PathStats`] let tests check that the skipped work is
 //! really skipped, and bit-identity with [`Effects::ALL`] that it really was zero.
 
+/// The scattering events a path may have at most when `max_depth` is unlimited: Russian
+/// roulette ends paths long before (its survival is below one), but without it a path in a
+/// closed scene of white walls would never end (`russian_roulette_depth = "off"` with
+/// `max_depth = "unlimited"` hung). Past 65536 events a path's weight in any lossy scene is
+/// below every float, and in a lossless one the cap is what makes the render finish.
+pub const UNLIMITED_DEPTH: u32 = 1 << 16;
+
 use crate::effects::Effects;
 use crate::geometry::{
     Accel, Moment, MotionAccel, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats,
@@ -281,7 +288,7 @@ impl World {
                         // path carries nothing further.
                         if beta == Vec3::ZERO
                             || !beta.is_finite()
-                            || settings.max_depth.is_some_and(|max| depth >= max)
+                            || depth >= settings.max_depth.unwrap_or(UNLIMITED_DEPTH)
                         {
                             break;
                         }
@@ -364,7 +371,7 @@ impl World {
                 };
                 radiance += self.weighed(beta, ratio) * spectrum.of(material.emission) * weight;
             }
-            if settings.max_depth.is_some_and(|max| depth >= max) {
+            if depth >= settings.max_depth.unwrap_or(UNLIMITED_DEPTH) {
                 break;
             }
 

@@ -366,3 +366,37 @@ fn a_frame_past_u32_does_not_decode() {
     past.extend([0x80, 0x80, 0x80, 0x80, 0x10]);
     assert!(decode(&past, &Limits::default()).is_err());
 }
+
+/// `tile_result_len` counts what the encoder writes for a real result of every size, across the
+/// lengths where the buffers' varint prefixes grow a byte (127/128 bytes, 16383/16384, ...),
+/// without building it.
+#[test]
+fn a_tile_results_length_is_counted_without_its_buffers() {
+    for (w, h) in [
+        (1, 1),
+        (3, 3),
+        (4, 3),
+        (10, 10),
+        (37, 3),
+        (64, 64),
+        (128, 11),
+        (200, 150),
+    ] {
+        for block in [1, 4, 8, 16, 64] {
+            let rect = Rect::new(5, 7, w, h);
+            let real = TileResult {
+                frame: FrameId(0),
+                tile: TileId(0),
+                piece: Piece::WHOLE,
+                rect,
+                pixels: vec![0; (rect.area() * BYTES_PER_PIXEL) as usize],
+                costs: vec![0; cost_map_bytes(rect, block) as usize],
+            };
+            assert_eq!(
+                tile_result_len(rect, block),
+                encoded_len(&Message::TileDone(real)) as u64,
+                "{w}x{h} in blocks of {block}"
+            );
+        }
+    }
+}
