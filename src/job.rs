@@ -2,7 +2,7 @@
 //! task 0): the scene with the command line's overrides, the node's options and limits, and
 //! [`execute`]: the frames written as they come, the statistics, the charts and a summary.
 
-use crate::cli::{EffectsChoice, FrameArgs, flag_name};
+use crate::cli::{BalancerKind, EffectsChoice, FrameArgs, flag_name};
 use crate::progress::Progress;
 use anyhow::Context;
 use runtime::frames::{self, resume};
@@ -76,9 +76,19 @@ pub fn execute(
             check_writable(flag, path)?;
         }
     }
+    // A regular grid is k x k tiles, so k cannot pass the image's shorter side: the default
+    // count shrinks to fit a small image; a count given that cannot fit is refused by name.
+    let tiles = match (args.balancer, args.tiles) {
+        (BalancerKind::Regular, None) => tiles.min((width.min(height) as usize).pow(2)),
+        _ => tiles,
+    };
     let config =
         balancer::Config::with_tiles(args.balancer.into(), tiles, args.deal.into(), args.motion.0);
-    let partitioner = balancer::Partitioner::new(settings.width, settings.height, &config)?;
+    let partitioner = balancer::Partitioner::new(settings.width, settings.height, &config)
+        .map_err(|e| match args.tiles {
+            Some(tiles) => anyhow::anyhow!("--tiles {tiles}: {e}"),
+            None => e.into(),
+        })?;
     let tiles = partitioner.tiles().len();
     let progress = Progress::new(settings.frames - first);
     progress.line(&format!(

@@ -380,3 +380,42 @@ fn simulator_bench_and_keygen_values_that_cannot_work_are_refused() {
     assert!(stderr.contains("--peers 100000000"), "{stderr}");
     assert!(started.elapsed() < std::time::Duration::from_secs(60));
 }
+
+/// A regular grid is k x k tiles: on an image smaller than the default grid it renders with a
+/// grid that fits (it failed, naming neither flag), and a `--tiles` that cannot fit is refused
+/// by name.
+#[test]
+fn a_regular_grid_fits_small_images_or_names_the_tiles_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::repo("scenes/point-in-sphere/point-in-sphere.toml");
+    let small = [
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--spp",
+        "1",
+        "--peers",
+        "1",
+        "--balancer",
+        "regular",
+    ];
+    let status = tessera()
+        .arg("render")
+        .arg(&scene)
+        .args(small)
+        .arg("--out")
+        .arg(dir.path())
+        .status()
+        .unwrap();
+    assert!(status.success() && dir.path().join("frame-0000.exr").exists());
+    let stderr = user_error(
+        tessera()
+            .arg("render")
+            .arg(&scene)
+            .args(small)
+            .args(["--tiles", "192", "--out"])
+            .arg(dir.path().join("other")),
+    );
+    assert!(stderr.contains("--tiles 192"), "{stderr}");
+}
