@@ -39,6 +39,12 @@ pub fn execute(
     let params = node::bundle::params(&scene, args.effects == EffectsChoice::All);
     let render_hash = node::bundle::render_hash(&files, &params);
     let settings = scene.settings.clone();
+    let every = args.checkpoint_every;
+    anyhow::ensure!(
+        (0.0..1e9).contains(&every),
+        "--checkpoint-every {every}: must be 0 (no checkpoints) or a number of seconds below 1e9"
+    );
+    check_out_folder("--out", &args.out)?;
     let (first, missing) = if args.resume {
         let removed = resume::remove_leftovers(&args.out)
             .with_context(|| format!("removing half-written files in {}", args.out.display()))?;
@@ -50,11 +56,6 @@ pub fn execute(
     } else {
         (0, None)
     };
-    let every = args.checkpoint_every;
-    anyhow::ensure!(
-        (0.0..1e9).contains(&every),
-        "--checkpoint-every {every}: must be a number of seconds, 0 (no checkpoints) or more"
-    );
     let checkpoint = node::checkpoint::Checkpointing::for_render(
         &args.out,
         (every > 0.0).then(|| std::time::Duration::from_secs_f64(every)),
@@ -63,8 +64,6 @@ pub fn execute(
         args.resume,
     );
     let world = Arc::new(prepare_world(scene, args.effects));
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
     // Written only once every frame is done: a path that cannot take them is refused now, so
     // that it costs the user nothing but the message.
     for (flag, path) in [
@@ -213,6 +212,19 @@ pub fn execute(
         args.out.display(),
     );
     Ok(())
+}
+
+/// Makes the folder `path` (named by `flag`) where a command writes its results, and checks that
+/// files can be made in it, before any work is done: a study or a render that ends by failing to
+/// write would lose everything it computed.
+pub(crate) fn check_out_folder(flag: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    let shown = path.display();
+    std::fs::create_dir_all(path).with_context(|| format!("{flag} {shown}: cannot create it"))?;
+    let probe = path.join(".tessera-write-check");
+    std::fs::write(&probe, b"")
+        .with_context(|| format!("{flag} {shown}: cannot write files in it"))?;
+    std::fs::remove_file(&probe)
+        .with_context(|| format!("{flag} {shown}: cannot write files in it"))
 }
 
 /// Whether a file can be written at `path` (named by `flag`) once the render is over: not a

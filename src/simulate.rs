@@ -169,6 +169,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.save_trace {
         trace.write(path)?;
     }
+    crate::job::check_out_folder("--out", &args.out)?;
     if let Some(stats) = &args.validate {
         return validate(args, &trace, stats);
     }
@@ -331,7 +332,6 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
     let validation = sim::validate::validate(trace, &stats, base, given)
         .with_context(|| format!("simulating the render {} describes", stats_path.display()))?;
     print!("{}", validation.table());
-    std::fs::create_dir_all(&args.out)?;
     let path = args.out.join("validation.csv");
     std::fs::write(&path, validation.csv())
         .with_context(|| format!("writing {}", path.display()))?;

@@ -419,3 +419,56 @@ fn a_regular_grid_fits_small_images_or_names_the_tiles_flag() {
     );
     assert!(stderr.contains("--tiles 192"), "{stderr}");
 }
+
+/// Where results cannot be written, the command says so before it works, naming the flag: a
+/// simulated study, a validation and a render whose `--out` is a file (they failed only once
+/// their work was done, losing it). And a scene file named to `bench` that does not exist is an
+/// error, not a scene skipped as those of an absent `../shared` are.
+#[test]
+fn an_unwritable_out_and_a_missing_bench_scene_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "not a folder").unwrap();
+    let scene = common::repo("scenes/point-in-sphere/point-in-sphere.toml");
+    let stats = dir.path().join("no-stats.json");
+    let commands: [Vec<std::ffi::OsString>; 3] = [
+        [
+            "simulate",
+            "synthetic:16x12:2",
+            "--peers",
+            "2",
+            "--tiles",
+            "4",
+        ]
+        .map(Into::into)
+        .to_vec(),
+        vec![
+            "simulate".into(),
+            "synthetic:16x12:2".into(),
+            "--validate".into(),
+            stats.clone().into(),
+        ],
+        vec![
+            "render".into(),
+            scene.clone().into(),
+            "--width".into(),
+            "8".into(),
+            "--height".into(),
+            "8".into(),
+        ],
+    ];
+    for (command, shown) in commands.iter().zip(["simulate", "validate", "render"]) {
+        for out in [file.clone(), file.join("below")] {
+            let stderr = user_error(tessera().args(command).arg("--out").arg(&out));
+            assert!(
+                stderr.contains(&format!("--out {}", out.display())),
+                "{shown}: {stderr}"
+            );
+        }
+    }
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "not a folder");
+
+    let missing = dir.path().join("missing.toml");
+    let stderr = user_error(tessera().arg("bench").arg(&missing).args(["--spp", "1"]));
+    assert!(stderr.contains("missing.toml"), "{stderr}");
+}

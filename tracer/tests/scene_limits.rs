@@ -1,7 +1,8 @@
 //! Scene values at the edges of what the format accepts, each family refused at its line with
 //! its reason or loaded whole: cameras whose `up` is parallel to the view at every scale and
 //! rounding, lists of corners that are not four, scales too small for their product, frames
-//! past 2^24, and emitters bright enough that a pixel's sum would overflow.
+//! past 2^24, emitters bright enough that a pixel's sum would overflow, and images that do not
+//! decode.
 
 // Test code: an unwrap that fails is a failed test, with its place in the output.
 #![allow(clippy::unwrap_used)]
@@ -248,4 +249,29 @@ fn an_unlimited_depth_without_roulette_ends_in_a_lossless_closed_box() {
     for pixel in &film.pixels {
         assert!(pixel.iter().all(|c| c.is_finite() && *c > 0.0), "{pixel:?}");
     }
+}
+
+/// An image that does not decode is named with the MTL line that asked for it, as a missing one
+/// is: the texture may be shared, and the fix is often in the MTL file.
+#[test]
+fn an_image_that_does_not_decode_names_the_line_that_asked_for_it() {
+    let camera = camera(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y);
+    let mut files = MemoryFiles::new();
+    files.insert(
+        "scene.toml",
+        format!("{camera}[[object]]\nobj = \"m.obj\"\n").as_str(),
+    );
+    files.insert(
+        "m.obj",
+        "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nusemtl t\nf 1/1 2/1 3/1\n",
+    );
+    files.insert("m.mtl", "newmtl t\nKd 0.5 0.5 0.5\n\nmap_Kd wall.png\n");
+    files.insert("wall.png", "\u{89}PNG but not an image");
+    let e = scene::load_from(&files, "scene.toml").err().unwrap();
+    let message = e.to_string();
+    assert_eq!(e.file(), "wall.png", "{message}");
+    assert!(
+        message.contains("cannot decode the image (referenced at m.mtl:4)"),
+        "{message}"
+    );
 }

@@ -19,7 +19,7 @@
 //! refused.
 
 use super::Texture;
-use super::error::{SceneError, line_of};
+use super::error::{Location, SceneError, line_of};
 use super::files::FileLog;
 use super::format::{MaterialKind, MaterialSpec, MediumSpec};
 use super::mtl::MtlMaterial;
@@ -355,8 +355,15 @@ impl<'a> MaterialTable<'a> {
         if let Some(&id) = self.texture_ids.get(&path) {
             return Ok(id);
         }
-        let texture = decode_texture(&bytes)
-            .map_err(|e| SceneError::in_file(&path, format!("cannot decode the image: {e}")))?;
+        // Named with the line that asked for it, as an unreadable file is: a scene may use a
+        // texture from several materials, and the fix is often in the MTL file, not the image.
+        let texture = decode_texture(&bytes).map_err(|e| {
+            let at = Location::line(from.0, from.1);
+            SceneError::in_file(
+                &path,
+                format!("cannot decode the image (referenced at {at}): {e}"),
+            )
+        })?;
         let id = self.textures.len() as u32;
         self.textures.push(texture);
         self.texture_ids.insert(path, id);

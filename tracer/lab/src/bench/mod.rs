@@ -206,7 +206,9 @@ fn bench_scene(
     let mut scene = match tracer::scene::load(path) {
         Ok(scene) => scene,
         Err(error) => {
-            return match absent_file(&error) {
+            // Only a file the scene refers to may be absent: a scene file named on the command
+            // line that does not exist is a mistake, not a scene to skip.
+            return match absent_file(&error).filter(|_| path.is_file()) {
                 Some(file) => Ok(Err(Skipped {
                     scene: path.display().to_string(),
                     reason: format!("{file} is absent"),
