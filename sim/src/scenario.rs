@@ -13,6 +13,9 @@
 //! [`DEFAULT_WORK_PER_SECOND`], was measured on the development machine (see its docs);
 //! ratios such as efficiency do not depend on it, but latency and bandwidth effects do, since
 //! they compare network time with render time.
+//!
+//! - `accounting`: what the owner plans for each frame when it deals it, and the frame's report,
+//!   which sets that plan against what happened.
 
 use std::collections::btree_map::Entry;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -26,10 +29,14 @@ use runtime_core::wire::PeerId;
 
 pub use crate::knobs::{Crash, CrashWhen, OwnerCosts};
 use crate::network::Links;
-use crate::report::{FrameReport, RunReport};
+use crate::report::RunReport;
 use crate::sweep::Policy;
 use crate::world::SimWorld;
 use crate::{Error, Network, Trace};
+
+mod accounting;
+
+use accounting::{Plan, frame_report, plan};
 
 /// The peer that owns every frame (and renders too, like any other).
 pub const OWNER: PeerId = PeerId(0);
@@ -154,21 +161,6 @@ impl Scenario {
             })
             .collect()
     }
-}
-
-/// What the owner planned for one frame, to set against what happened.
-struct Plan {
-    capacity: f64,
-    fastest: f64,
-    participants: usize,
-    work: f64,
-    largest: f64,
-    splits: usize,
-    merges: usize,
-    /// Bytes of one result per tile, as the wire encodes them, wherever they are rendered.
-    results: u64,
-    /// The owner's control-loop seconds to deal every tile and receive one result per tile.
-    owner_time: f64,
 }
 
 /// Simulates `scenario` on `trace`, the owner cutting frames with `partitioner` (which must
@@ -375,40 +367,6 @@ pub fn run(
     Ok(report)
 }
 
-/// What the owner plans for the frame of `deal`, costed by `map`.
-fn plan(
-    deal: &director::Deal,
-    map: &balancer::CostMap,
-    speeds: &[f64],
-    scenario: &Scenario,
-    block: u32,
-) -> Plan {
-    let seconds_per_unit = 1.0 / scenario.work_per_second;
-    let speed = |p: PeerId| speeds[p.0 as usize];
-    Plan {
-        capacity: deal.participants().map(speed).sum::<f64>() * scenario.slots as f64,
-        fastest: deal.participants().map(speed).fold(0.0, f64::max),
-        participants: deal.participants().count(),
-        work: map.total() * seconds_per_unit,
-        largest: deal
-            .tiles
-            .iter()
-            .map(|t| map.cost(t.rect))
-            .fold(0.0, f64::max)
-            * seconds_per_unit,
-        splits: 0,
-        merges: 0,
-        results: deal.tiles.iter().map(|t| result_bytes(t.rect, block)).sum(),
-        owner_time: deal
-            .tiles
-            .iter()
-            .map(|t| {
-                (scenario.owner.result(t.rect.area()) + scenario.owner.per_dealt_tile).as_secs_f64()
-            })
-            .sum(),
-    }
-}
-
 /// The error of a run with nothing left to happen: the oldest incomplete frame stalled.
 fn stalled(cluster: &Cluster<SimWorld>) -> Error {
     let world = cluster.world();
@@ -424,13 +382,6 @@ fn stalled(cluster: &Cluster<SimWorld>) -> Error {
     }
 }
 
-/// The encoded size of a tile result covering `rect`, with its pixels and a cost map of `block`
-/// pixels a side, as the wire format counts it without building the buffers (which, for a
-/// trace of a 4294967295-pixel-wide image, could not be allocated).
-fn result_bytes(rect: balancer::Rect, block: u32) -> u64 {
-    runtime_core::wire::tile_result_len(rect, block)
-}
-
 /// Hands the owner core's events since the last call to the director.
 fn feed(director: &mut Director, cluster: &mut Cluster<SimWorld>) -> Result<(), Error> {
     let now = cluster.now();
@@ -438,69 +389,4 @@ fn feed(director: &mut Director, cluster: &mut Cluster<SimWorld>) -> Result<(), 
         director.handle_core_event(now, event)?;
     }
     Ok(())
-}
-
-fn frame_report(
-    frame: u32,
-    plan: &Plan,
-    interval: Duration,
-    world: &SimWorld,
-    scenario: &Scenario,
-) -> FrameReport {
-    let slots = scenario.slots;
-    let tally = &world.frames[&frame];
-    let makespan = interval.as_secs_f64();
-    // A tile that can be cut on the way (rendered in pieces, or halved for a thief) no longer
-    // bounds its frame: then the fair share alone does.
-    let cuttable = scenario.render_piece_factor.is_some()
-        || (scenario.core.steal && scenario.core.split_on_steal);
-    let fair_share = plan.work / plan.capacity;
-    let lower_bound = if cuttable {
-        fair_share
-    } else {
-        fair_share.max(plan.largest / plan.fastest)
-    };
-    let slot_time = (plan.participants * slots) as f64 * makespan;
-    FrameReport {
-        frame,
-        tiles: tally.tiles,
-        participants: plan.participants,
-        capacity: plan.capacity,
-        makespan,
-        work: plan.work,
-        largest_tile: plan.largest,
-        lower_bound,
-        efficiency: if makespan > 0.0 {
-            plan.work / (plan.capacity * makespan)
-        } else {
-            1.0
-        },
-        bound_efficiency: if lower_bound > 0.0 {
-            plan.work / (plan.capacity * lower_bound)
-        } else {
-            1.0
-        },
-        idle_fraction: if slot_time > 0.0 {
-            (1.0 - tally.busy / slot_time).max(0.0)
-        } else {
-            0.0
-        },
-        renders: tally.renders,
-        pieces: tally.pieces,
-        duplicates_agreed: tally.audit.agreed,
-        results_ok: tally.results_ok,
-        steal_requests: tally.steal_requests,
-        grants: tally.grants,
-        stolen_tiles: tally.stolen_tiles,
-        messages: tally.messages,
-        bytes: tally.bytes,
-        failures: tally.failures,
-        faults: tally.faults,
-        splits: plan.splits,
-        merges: plan.merges,
-        result_bytes: tally.result_bytes,
-        owner_busy: tally.owner_busy,
-        frame_result_bytes: plan.results,
-        frame_owner_time: plan.owner_time,
-    }
 }
