@@ -1,5 +1,5 @@
 //! Charts as SVG files (plotters): the line charts of experiments (efficiency against peers,
-//! against tiles), here, and in [`gantt`] the charts of who rendered what when, shared by real
+//! against tiles), here, and in `gantt` the charts of who rendered what when, shared by real
 //! renders (`tessera render --gantt`) and simulated ones, and in `render` the charts of a real
 //! render from its statistics and its peers' timelines.
 //!

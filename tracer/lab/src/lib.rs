@@ -7,8 +7,8 @@
 //!   mean absolute error, the largest difference, mean FLIP), and of two OpenEXR files.
 //! - [`accuracy`]: what accuracy costs in time: one scene over a ladder of values per accuracy
 //!   knob, each rung measured against a reference, written as a table, a report and a plot.
-//! - [`bench`]: rays per second of the tracer alone on real scenes, and the steal round trip
-//!   between two peers on loopback.
+//! - [`bench`](mod@bench): rays per second of the tracer alone on real scenes, and the steal
+//!   round trip between two peers on loopback.
 //!
 //! Every whole-frame render here goes through [`tracer::render_frame`]; errors are [`LabError`],
 //! whose message and causes are what a user reads.
