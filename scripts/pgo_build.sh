@@ -53,7 +53,7 @@ echo "3/4: merging the profile"
 sum=$(cksum < "$data/tessera.profdata" | cut -d' ' -f1)
 
 echo "4/4: optimised build (target/pgo)"
-cp "$data/tessera.profdata" "$data/tessera-$sum.profdata"
+mv "$data/tessera.profdata" "$data/tessera-$sum.profdata"
 RUSTFLAGS="-Cprofile-use=$data/tessera-$sum.profdata" \
   cargo build --release --bin tessera --target-dir target/pgo
 echo "done: target/pgo/release/tessera"

@@ -220,7 +220,7 @@ pub struct FrameArgs {
     pub trace: Option<PathBuf>,
     /// Exposure of the PNG previews (the EXR files are always linear and unscaled); a finite
     /// number, 0 or more.
-    #[arg(long, default_value_t = 1.0, value_parser = exposure)]
+    #[arg(long, default_value_t = 1.0, value_parser = finite_non_negative::<f32>)]
     pub exposure: f32,
     /// Keep the frames OUT already holds from a render of the same scene files and settings
     /// (each frame-NNNN.exr records their hash) and render from the first one missing. A frame
@@ -266,11 +266,14 @@ fn peer_timeout(text: &str) -> Result<f64, String> {
     }
 }
 
-/// `--exposure`: a finite scale, 0 or more (a NaN would have written black previews, an
-/// infinite one white).
-fn exposure(text: &str) -> Result<f32, String> {
-    match text.parse::<f32>() {
-        Ok(e) if e.is_finite() && e >= 0.0 => Ok(e),
+/// `--exposure`, `simulate --doubt-error`: a finite number, 0 or more, in the flag's own type
+/// (a NaN exposure would have written black previews, an infinite one white; a NaN doubt
+/// threshold would never be crossed). A number too large for the type is not finite.
+pub fn finite_non_negative<T: std::str::FromStr + Into<f64> + Copy>(
+    text: &str,
+) -> Result<T, String> {
+    match text.parse::<T>() {
+        Ok(v) if v.into().is_finite() && v.into() >= 0.0 => Ok(v),
         _ => Err("a finite number, 0 or more".to_string()),
     }
 }

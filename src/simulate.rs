@@ -112,7 +112,7 @@ pub struct SimulateArgs {
     /// director doubts the prediction: the next frame is then not overlapped and renders in
     /// small pieces.
     #[arg(long, default_value_t = runtime_core::director::Config::default().doubt_error,
-          value_parser = doubt_error)]
+          value_parser = crate::cli::finite_non_negative::<f64>)]
     pub doubt_error: f64,
     /// While the prediction is doubted, peers render pieces of at most this many times the
     /// frame's mean tile area; `off` uses `--render-pieces`.
@@ -337,12 +337,4 @@ fn validate(args: &SimulateArgs, trace: &Trace, stats_path: &Path) -> anyhow::Re
         .with_context(|| format!("writing {}", path.display()))?;
     println!("{}; wrote {}", validation.totals(), path.display());
     Ok(())
-}
-
-/// `--doubt-error`: a relative error, finite and not negative.
-fn doubt_error(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(e) if e.is_finite() && e >= 0.0 => Ok(e),
-        _ => Err("a finite relative error, 0 or more".to_string()),
-    }
 }
