@@ -13,6 +13,7 @@ mod format;
 mod keys;
 mod load;
 mod materials;
+mod media;
 mod motion;
 mod mtl;
 mod nesting;
