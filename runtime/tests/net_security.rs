@@ -19,6 +19,14 @@ use runtime::net::{
 };
 use tokio::sync::mpsc::Receiver;
 
+/// The transport's limits on messages and connections.
+#[path = "net_security/limits.rs"]
+mod limits;
+
+/// Malformed bytes from a peer with a good certificate.
+#[path = "net_security/malformed.rs"]
+mod malformed;
+
 /// Test messages carry this prefix; the test decoder refuses anything without it.
 const MAGIC: &[u8] = b"TT1:";
 /// A small limit, so that oversized messages are cheap to make.
@@ -311,85 +319,6 @@ async fn client_without_certificate_is_refused() {
     .await;
 }
 
-/// Has a peer with a good certificate write `bytes` on one stream, then checks that both ends see
-/// the connection closed with `expected`, and that the server still serves a good peer.
-async fn assert_stream_closes_connection(bytes: Vec<u8>, expected: CloseCode) {
-    let cluster = cluster(3);
-    let mut server = node(&cluster.peers()[0]);
-    let connection = raw_peer(&cluster.peers()[1], addr(&server.0)).await;
-    let (conn, _) = expect_connected(&mut server.1).await;
-    write_stream(&connection, &bytes).await;
-    match connection.closed().await {
-        ConnectionError::ApplicationClosed(close) => {
-            assert_eq!(
-                close.error_code,
-                expected.varint(),
-                "reason: {:?}",
-                close.reason
-            );
-        }
-        other => panic!("expected an application close, got {other:?}"),
-    }
-    let local = CloseReason::Local(expected);
-    assert_eq!(expect_closed(&mut server.1).await, (conn, local));
-    assert_serves(&mut server, &cluster.peers()[2]).await;
-}
-
-#[tokio::test]
-async fn random_bytes_in_a_frame_are_malformed() {
-    let payload = noise(512, 0x5eed);
-    assert!(decode(&payload).is_err(), "the noise must not decode");
-    bounded(assert_stream_closes_connection(
-        framed(&payload),
-        CloseCode::Malformed,
-    ))
-    .await;
-}
-
-#[tokio::test]
-async fn unframed_random_bytes_close_the_connection() {
-    let bytes = noise(4096, 0xfeed);
-    // Read as a frame, the noise declares a length far over the limit.
-    let declared = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
-    assert!(declared as usize > LIMIT);
-    bounded(assert_stream_closes_connection(bytes, CloseCode::TooLarge)).await;
-}
-
-#[tokio::test]
-async fn truncated_frame_closes_the_connection() {
-    let mut cut = framed(&message(&[7; 100]));
-    cut.truncate(50);
-    bounded(assert_stream_closes_connection(cut, CloseCode::Truncated)).await;
-}
-
-#[tokio::test]
-async fn truncated_header_closes_the_connection() {
-    bounded(assert_stream_closes_connection(
-        vec![9, 0],
-        CloseCode::Truncated,
-    ))
-    .await;
-}
-
-#[tokio::test]
-async fn oversized_message_closes_the_connection() {
-    let big = framed(&message(&vec![1; LIMIT]));
-    bounded(assert_stream_closes_connection(big, CloseCode::TooLarge)).await;
-}
-
-#[tokio::test]
-async fn bytes_beyond_the_declared_length_are_malformed() {
-    let mut long = framed(&message(b"short"));
-    long.extend_from_slice(b"and then some");
-    bounded(assert_stream_closes_connection(long, CloseCode::Malformed)).await;
-}
-
-#[tokio::test]
-async fn a_decoder_panic_costs_only_that_connection() {
-    let bytes = framed(b"TT1:panic");
-    bounded(assert_stream_closes_connection(bytes, CloseCode::Malformed)).await;
-}
-
 #[tokio::test]
 async fn an_abandoned_message_is_dropped_and_the_connection_lives() {
     bounded(async {
@@ -425,99 +354,6 @@ async fn an_abandoned_message_is_dropped_and_the_connection_lives() {
             "the connection was closed"
         );
         assert!(server.1.try_recv().is_err(), "the server reported more");
-    })
-    .await;
-}
-
-#[tokio::test]
-async fn sending_over_the_limit_is_refused_locally() {
-    bounded(async {
-        let cluster = cluster(2);
-        let (a, _a_events) = node(&cluster.peers()[0]);
-        let (b, mut b_events) = node(&cluster.peers()[1]);
-        let conn = a
-            .connect(addr(&b), Expect::Peer(1))
-            .await
-            .expect("connecting");
-        let refused = a.send(conn, &vec![0; LIMIT + 1]).await;
-        let expected = LIMIT + 1;
-        assert!(matches!(refused, Err(SendError::TooLarge { len, max: LIMIT }) if len == expected));
-        a.send(conn, &message(b"fits")).await.expect("sending");
-        expect_connected(&mut b_events).await;
-        assert_eq!(expect_message(&mut b_events).await.1, b"fits");
-    })
-    .await;
-}
-
-#[tokio::test]
-async fn a_cancelled_send_resets_its_stream() {
-    bounded(async {
-        let cluster = cluster(2);
-        let config = Config {
-            max_message_bytes: 4 << 20,
-            ..Config::default()
-        };
-        let (a, _a_events) = bind(&cluster.peers()[0], config);
-        // A bare server that takes the stream but reads nothing, so that flow control stalls the
-        // sender after 64 KiB, mid-message.
-        let mut transport = quinn::TransportConfig::default();
-        transport.stream_receive_window((64u32 * 1024).into());
-        let crypto = tls::server_config(&cluster.peers()[1]).expect("a server configuration");
-        let mut server_config = quinn::ServerConfig::with_crypto(Arc::new(crypto));
-        server_config.transport_config(Arc::new(transport));
-        let server = Endpoint::server(server_config, loopback()).expect("binding");
-        let server_addr = server.local_addr().expect("a bound endpoint");
-        let accepting = tokio::spawn(async move {
-            let incoming = server.accept().await.expect("an incoming connection");
-            let connection = incoming.await.expect("a handshake");
-            let stream = connection.accept_uni().await.expect("a stream");
-            (server, connection, stream)
-        });
-
-        let conn = a
-            .connect(server_addr, Expect::Peer(1))
-            .await
-            .expect("connecting");
-        let big = message(&vec![5; 1 << 20]);
-        let stalled = tokio::time::timeout(Duration::from_millis(300), a.send(conn, &big)).await;
-        assert!(stalled.is_err(), "the send should stall on flow control");
-
-        let (_server, _connection, mut stream) = accepting.await.expect("the server task");
-        match stream.read_to_end(4 << 20).await {
-            Err(quinn::ReadToEndError::Read(quinn::ReadError::Reset(_))) => {}
-            other => panic!("a cancelled send must reset its stream, got {other:?}"),
-        }
-    })
-    .await;
-}
-
-#[tokio::test]
-async fn connections_over_the_limit_are_refused() {
-    bounded(async {
-        let cluster = cluster(3);
-        let config = Config {
-            max_connections: 1,
-            ..Config::default()
-        };
-        let (server, mut server_events) = bind(&cluster.peers()[0], config);
-        let (a, _a_events) = node(&cluster.peers()[1]);
-        let (b, _b_events) = node(&cluster.peers()[2]);
-
-        let a_conn = a.connect(addr(&server), Expect::AnyPeer).await;
-        let a_conn = a_conn.expect("the first gets in");
-        expect_connected(&mut server_events).await;
-        let second = b.connect(addr(&server), Expect::AnyPeer).await;
-        assert!(second.is_err(), "the second got in");
-
-        a.send(a_conn, &message(b"still served"))
-            .await
-            .expect("sending");
-        assert_eq!(expect_message(&mut server_events).await.1, b"still served");
-
-        a.close(a_conn, CloseCode::Normal, "making room");
-        expect_closed(&mut server_events).await;
-        let third = b.connect(addr(&server), Expect::AnyPeer).await;
-        third.expect("a freed place is taken again");
     })
     .await;
 }

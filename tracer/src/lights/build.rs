@@ -11,7 +11,6 @@ use moving::{locate, moving_first};
 use std::f32::consts::PI;
 
 impl Lights {
-
     /// [`Lights::new`] with the environment sampled as `sampling` says.
     pub fn with_sampling(scene: &Scene, effects: &Effects, sampling: EnvironmentSampling) -> Self {
         let radius = bounding_radius(scene);

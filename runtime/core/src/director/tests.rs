@@ -8,6 +8,9 @@ use super::*;
 use crate::peer::PeerStats;
 use crate::peer::testing::{Cluster, Record, cost_renderer};
 
+mod membership;
+mod resumed;
+
 const OWNER: PeerId = PeerId(0);
 const SIDE: u32 = 32;
 
@@ -444,119 +447,6 @@ fn the_last_frame_waits_for_statistics_leavers_or_the_grace_period() {
 }
 
 #[test]
-fn a_peer_that_keeps_sending_faulty_results_stops_the_render() {
-    let mut director = director(grid(2, 2), 2, 1);
-    director.poll_deal(Duration::ZERO).unwrap();
-    let faulty = crate::peer::Event::FaultyPeer {
-        frame: FrameId(0),
-        peer: PeerId(1),
-        tile: TileId(0),
-        fault: crate::peer::Fault::UnknownTile,
-    };
-    let allowed = 2 * 4 + Config::default().fault_allowance;
-    for _ in 0..allowed {
-        director
-            .handle_core_event(Duration::ZERO, faulty.clone())
-            .unwrap();
-    }
-    assert!(matches!(
-        director.handle_core_event(Duration::ZERO, faulty.clone()),
-        Err(DirectorError::Faulty { .. })
-    ));
-}
-
-#[test]
-fn peers_that_join_or_leave_are_dealt_from_the_next_frame() {
-    let mut director = director(grid(4, 4), 2, 3);
-    let first = director.poll_deal(Duration::ZERO).unwrap().unwrap();
-    assert_eq!(
-        first.participants().collect::<Vec<_>>(),
-        [PeerId(0), PeerId(1)]
-    );
-    director.handle_peer_joined(Duration::ZERO, PeerId(7));
-    director.handle_peer_left(Duration::ZERO, PeerId(1));
-    let complete = empty_completion();
-    director
-        .handle_core_event(Duration::ZERO, complete)
-        .unwrap();
-    director
-        .handle_measured(Duration::ZERO, FrameId(0), &halves(1))
-        .unwrap();
-    let second = director.poll_deal(Duration::ZERO).unwrap().unwrap();
-    assert_eq!(
-        second.participants().collect::<Vec<_>>(),
-        [PeerId(0), PeerId(7)]
-    );
-}
-
-/// A peer whose work was backed up as overdue is dealt nothing until its statistics show it
-/// alive again: a frozen peer would hold up every frame dealt to it.
-#[test]
-fn an_overdue_peer_is_dealt_nothing_until_it_is_heard_of() {
-    let t = Duration::ZERO;
-    let mut director = director_in_flight(grid(4, 4), 3, 3, 1);
-    let participants = |deal: &Deal| deal.participants().map(|p| p.0).collect::<Vec<_>>();
-    let first = director.poll_deal(t).unwrap().unwrap();
-    assert_eq!(participants(&first), [0, 1, 2]);
-    let overdue = crate::peer::Event::PeerOverdue {
-        frame: FrameId(0),
-        peer: PeerId(2),
-    };
-    assert!(director.handle_core_event(t, overdue).unwrap().is_none());
-    director.handle_core_event(t, completion(0)).unwrap();
-    director.handle_measured(t, FrameId(0), &halves(1)).unwrap();
-    let second = director.poll_deal(t).unwrap().unwrap();
-    assert_eq!(participants(&second), [0, 1], "peer 2 is overdue");
-    let alive = crate::peer::Event::PeerStats {
-        frame: FrameId(0),
-        peer: PeerId(2),
-        stats: PeerStats::default(),
-    };
-    director.handle_core_event(t, alive).unwrap();
-    director.handle_core_event(t, completion(1)).unwrap();
-    director.handle_measured(t, FrameId(1), &halves(1)).unwrap();
-    let third = director.poll_deal(t).unwrap().unwrap();
-    assert_eq!(participants(&third), [0, 1, 2], "peer 2 was heard of");
-}
-
-/// A resumed render deals from its first missing frame on, numbered as in the whole animation;
-/// one with nothing left finishes without dealing.
-#[test]
-fn a_resumed_render_deals_from_its_first_frame() {
-    let mut cluster = cluster(2);
-    let config = Config {
-        frames: 4,
-        first: 2,
-        ..Config::default()
-    };
-    let mut resumed = Director::new(OWNER, pbt(8), config.clone());
-    resumed.handle_peer_joined(Duration::ZERO, PeerId(1));
-    let (deals, events) = drive(&mut resumed, &mut cluster, &|_| halves(3));
-    let dealt: Vec<u32> = deals.iter().map(|d| d.frame.0).collect();
-    assert_eq!(dealt, [2, 3]);
-    let completed: Vec<u32> = events
-        .iter()
-        .filter_map(|e| match e {
-            Event::FrameComplete { frame, .. } => Some(frame.0),
-            _ => None,
-        })
-        .collect();
-    assert_eq!(completed, [2, 3]);
-    assert_eq!(events.last(), Some(&Event::Finished));
-    // Frame 2 is cut as frame 0 would be: the balancer has no costs of frame 1.
-    let fresh = director(pbt(8), 2, 1)
-        .poll_deal(Duration::ZERO)
-        .unwrap()
-        .unwrap();
-    assert_eq!(deals[0].tiles, fresh.tiles);
-
-    let mut done = Director::new(OWNER, pbt(8), Config { first: 4, ..config });
-    assert!(done.is_finished());
-    assert_eq!(done.poll_deal(Duration::ZERO).unwrap(), None);
-    assert_eq!(done.poll_event(), Some(Event::Finished));
-}
-
-#[test]
 fn frames_dealt_ahead_are_predicted_where_a_moving_spot_will_be() {
     // A spot crossing a 256-pixel image by 3 blocks a frame, on a grid of 8 x 8 tiles of 4 x 4
     // blocks. From frame 2 on (two measurements show the motion), the tile predicted costliest
@@ -606,35 +496,5 @@ fn frames_dealt_ahead_are_predicted_where_a_moving_spot_will_be() {
             !hottest_holds_the_spot(None, in_flight),
             "{in_flight} in flight, no motion"
         );
-    }
-}
-
-#[test]
-fn a_resumed_first_frame_is_cut_into_its_checkpoints_tiles_and_the_rest_as_usual() {
-    // The checkpoint's tiles: a 4x2 grid, not what a 16-leaf PBT cuts.
-    let kept: Vec<balancer::Tile> = grid(4, 2).tiles();
-    for first in [0, 3] {
-        let config = Config {
-            frames: first + 3,
-            first,
-            ..Config::default()
-        };
-        let mut director = Director::new(OWNER, pbt(16), config);
-        director.handle_peer_joined(Duration::ZERO, PeerId(1));
-        director.resume_with(kept.clone());
-        let mut cluster = cluster(2);
-        let (deals, _) = drive(&mut director, &mut cluster, &|_| halves(4));
-        assert_eq!(deals.len(), 3);
-        assert_eq!(deals[0].frame, FrameId(first));
-        assert_eq!(deals[0].tiles, kept, "first {first}");
-        let dealt: usize = deals[0].assignments.values().map(Vec::len).sum();
-        assert_eq!(dealt, kept.len());
-        for deal in &deals[1..] {
-            assert_eq!(
-                deal.tiles.len(),
-                16,
-                "first {first}: later frames are the PBT's"
-            );
-        }
     }
 }
