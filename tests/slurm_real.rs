@@ -11,7 +11,7 @@
 mod common;
 
 use common::slurm::Cluster;
-use common::{frames, keygen, render_alone, repo, spawn_reading, tiles_of, wait_for};
+use common::{frames, keygen, render_alone, repo, spawn_reading, tiles_of};
 use runtime::slurm::{Env, Overrides, Role, Step, default_port};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -84,9 +84,9 @@ fn a_task_killed_mid_frame_costs_time_not_frames() {
     };
     let job = Job::new(&cluster);
     let out = cluster.dir().join("killed");
-    let (child, lines) = spawn(job.srun(&SRUN, &out, ""));
+    let (child, lines) = spawn(job.srun_sized(&SRUN, &out, "", &SLOW));
     assert!(
-        wait_for(&lines, "frame 0 done", STEP_TIMEOUT),
+        wait_for_frame(&out, 0, &lines),
         "the step never finished frame 0"
     );
     job.task(0, 2).kill();
@@ -99,10 +99,17 @@ fn a_task_killed_mid_frame_costs_time_not_frames() {
         "{log}"
     );
     assert!(log.contains(&format!("rendered {FRAMES} frames")), "{log}");
-    assert_frames_match_reference(&out);
+    assert_frames_match(&out, reference_slow().to_vec());
     let tiles = tiles_of(&out, 2);
-    assert!(tiles[0] > 0, "task 2 rendered nothing before it died");
-    assert_eq!(tiles[FRAMES - 1], 0, "task 2 rendered after it was killed");
+    assert!(
+        tiles[0] > 0,
+        "task 2 rendered nothing before it died: {tiles:?}"
+    );
+    assert_eq!(
+        tiles[FRAMES - 1],
+        0,
+        "task 2 rendered after it was killed: {tiles:?}"
+    );
 }
 
 /// What docs/cluster.md warns of: with `srun -K` (`--kill-on-bad-exit`) one task killed
@@ -116,9 +123,10 @@ fn with_kill_on_bad_exit_one_killed_task_ends_the_step() {
     };
     let job = Job::new(&cluster);
     let out = cluster.dir().join("kill-on-bad-exit");
-    let (child, lines) = spawn(job.srun(&["-N3", "-n3", "--kill-on-bad-exit=1"], &out, ""));
+    let on_bad_exit = ["-N3", "-n3", "--kill-on-bad-exit=1"];
+    let (child, lines) = spawn(job.srun_sized(&on_bad_exit, &out, "", &SLOW));
     assert!(
-        wait_for(&lines, "frame 0 done", STEP_TIMEOUT),
+        wait_for_frame(&out, 0, &lines),
         "the step never finished frame 0"
     );
     job.task(0, 2).kill();
@@ -170,7 +178,7 @@ fn a_peer_joining_a_running_step_takes_part_and_changes_no_pixel() {
     let two = ["-N2", "-n2", "--kill-on-bad-exit=0", "--wait=0"];
     let (child, lines) = spawn(job.srun_sized(&two, &out, "", &SLOW));
     assert!(
-        wait_for(&lines, "frame 0 done", STEP_TIMEOUT),
+        wait_for_frame(&out, 0, &lines),
         "the step never finished frame 0"
     );
     let owner = job.task(0, 0);
@@ -191,7 +199,7 @@ fn a_peer_joining_a_running_step_takes_part_and_changes_no_pixel() {
         "the late peer failed: {late_status}\n{late_log}"
     );
     assert!(log.contains("peer joined the render"), "{log}");
-    assert_frames_match(&out, reference_sized(&SLOW));
+    assert_frames_match(&out, reference_slow().to_vec());
     let tiles = tiles_of(&out, 2);
     assert_eq!(tiles[0], 0, "the late peer rendered in frame 0");
     // Taking part is rendering in some frame after it joined. Not necessarily the last: under
@@ -217,7 +225,7 @@ fn a_task_sent_sigterm_hands_back_its_work_and_the_step_succeeds() {
     let out = cluster.dir().join("terminated");
     let (child, lines) = spawn(job.srun_sized(&SRUN, &out, "", &SLOW));
     assert!(
-        wait_for(&lines, "frame 0 done", STEP_TIMEOUT),
+        wait_for_frame(&out, 0, &lines),
         "the step never finished frame 0"
     );
     job.task(0, 2).signal("-TERM");
@@ -226,7 +234,7 @@ fn a_task_sent_sigterm_hands_back_its_work_and_the_step_succeeds() {
     assert!(log.contains("left the render when asked"), "{log}");
     assert!(log.contains("peer leaving the render"), "{log}");
     assert!(!log.contains("peer failed"), "{log}");
-    assert_frames_match(&out, reference_sized(&SLOW));
+    assert_frames_match(&out, reference_slow().to_vec());
     let tiles = tiles_of(&out, 2);
     assert!(tiles[0] > 0, "task 2 rendered nothing before it left");
     assert_eq!(tiles[FRAMES - 1], 0, "task 2 rendered after it left");

@@ -184,7 +184,13 @@ pub(super) fn reference() -> &'static [(String, Vec<u8>)] {
     REFERENCE.get_or_init(|| reference_sized(&SIZE))
 }
 
-pub(super) fn reference_sized(size: &[&str]) -> Vec<(String, Vec<u8>)> {
+/// The frames of one peer alone at the [`SLOW`] size, rendered once per test binary.
+pub(super) fn reference_slow() -> &'static [(String, Vec<u8>)] {
+    static REFERENCE: OnceLock<Vec<(String, Vec<u8>)>> = OnceLock::new();
+    REFERENCE.get_or_init(|| reference_sized(&SLOW))
+}
+
+fn reference_sized(size: &[&str]) -> Vec<(String, Vec<u8>)> {
     let dir = tempfile::tempdir().unwrap();
     render_alone(SCENE, size, dir.path());
     frames(dir.path())
@@ -205,4 +211,26 @@ pub(super) fn assert_frames_match(out: &Path, expected: Vec<(String, Vec<u8>)>) 
             out.display()
         );
     }
+}
+
+/// Waits until frame `frame`'s image is in `out`, where the owner renames it once whole, or
+/// [`STEP_TIMEOUT`] has passed; `false` also when the step ended first (`lines` closed). The
+/// file, not the owner's "frame N done" that srun forwards: that line can arrive a second or
+/// more late on a loaded machine, and a test that kills a task "after frame 0" must not kill
+/// it after the render (seen once in CI: a task killed once the line came had rendered 11
+/// tiles of the last frame).
+pub(super) fn wait_for_frame(out: &Path, frame: u32, lines: &mpsc::Receiver<String>) -> bool {
+    let path = runtime::frames::resume::frame_path(out, frame, "exr");
+    let deadline = Instant::now() + STEP_TIMEOUT;
+    while Instant::now() < deadline {
+        if path.exists() {
+            return true;
+        }
+        if let Err(mpsc::RecvTimeoutError::Disconnected) =
+            lines.recv_timeout(Duration::from_millis(10))
+        {
+            return path.exists();
+        }
+    }
+    false
 }
