@@ -306,8 +306,16 @@ fn bad_maps_are_errors_that_name_the_file_and_line() {
             "missing.exr",
             "cannot read missing.exr (referenced at scene.toml:8)",
         ),
-        ("map = \"text.exr\"", "text.exr", "not a readable OpenEXR"),
-        ("map = \"nan.exr\"", "nan.exr", "texel (3, 0)"),
+        (
+            "map = \"text.exr\"",
+            "text.exr",
+            "text.exr (referenced at scene.toml:8): not a readable OpenEXR",
+        ),
+        (
+            "map = \"nan.exr\"",
+            "nan.exr",
+            "nan.exr (referenced at scene.toml:8): texel (3, 0)",
+        ),
         ("map = \"good.exr\"\nradiance = 1", "scene.toml", "not both"),
         (
             "radiance = 1\nrotate = 3",

@@ -256,22 +256,37 @@ fn an_unlimited_depth_without_roulette_ends_in_a_lossless_closed_box() {
 #[test]
 fn an_image_that_does_not_decode_names_the_line_that_asked_for_it() {
     let camera = camera(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y);
+    let scene = format!("{camera}[[object]]\nobj = \"m.obj\"\n");
+    let set: [(&str, &str); 4] = [
+        ("scene.toml", &scene),
+        (
+            "m.obj",
+            "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nusemtl t\nf 1/1 2/1 3/1\n",
+        ),
+        ("m.mtl", "newmtl t\nKd 0.5 0.5 0.5\n\nmap_Kd wall.png\n"),
+        ("wall.png", "\u{89}PNG but not an image"),
+    ];
     let mut files = MemoryFiles::new();
-    files.insert(
-        "scene.toml",
-        format!("{camera}[[object]]\nobj = \"m.obj\"\n").as_str(),
-    );
-    files.insert(
-        "m.obj",
-        "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nusemtl t\nf 1/1 2/1 3/1\n",
-    );
-    files.insert("m.mtl", "newmtl t\nKd 0.5 0.5 0.5\n\nmap_Kd wall.png\n");
-    files.insert("wall.png", "\u{89}PNG but not an image");
+    for (name, text) in set {
+        files.insert(name, text);
+    }
     let e = scene::load_from(&files, "scene.toml").err().unwrap();
     let message = e.to_string();
     assert_eq!(e.file(), "wall.png", "{message}");
     assert!(
-        message.contains("cannot decode the image (referenced at m.mtl:4)"),
+        message.starts_with("wall.png (referenced at m.mtl:4): cannot decode the image"),
         "{message}"
     );
+
+    // From disk, both the image and the line that asked for it are full paths.
+    let dir = tempfile::tempdir().unwrap();
+    for (name, text) in set {
+        std::fs::write(dir.path().join(name), text).unwrap();
+    }
+    let e = scene::load(&dir.path().join("scene.toml")).err().unwrap();
+    let message = e.to_string();
+    let (image, mtl) = (dir.path().join("wall.png"), dir.path().join("m.mtl"));
+    assert_eq!(e.file(), image.to_str().unwrap(), "{message}");
+    let at = format!("{} (referenced at {}:4)", image.display(), mtl.display());
+    assert!(message.starts_with(&at), "{message}");
 }

@@ -2,8 +2,10 @@
 //!
 //! A scene is written by hand or exported by tools that disagree about the formats, so every error
 //! says where to look: the file (relative to the scene's folder, or the full path when loaded from
-//! disk), the 1-based line when one applies, and the problem in words. Two variants are enough:
-//! a file that cannot be read at all, and a file whose contents are wrong.
+//! disk), the 1-based line when one applies, and the problem in words. Three variants: a file
+//! that cannot be read at all, an image that was read but cannot be used (named with the line
+//! that asked for it, since the fix is as often there as in the image), and a file whose
+//! contents are wrong.
 
 use std::fmt;
 use std::io;
@@ -22,6 +24,19 @@ pub enum SceneError {
         /// What the file source said (the operating system's error, or not found in memory).
         #[source]
         source: io::Error,
+    },
+    /// An image (a texture, an environment map) was read but cannot be used: it does not decode,
+    /// or holds what it must not (an environment map's negative texel).
+    #[error("{file} (referenced at {referenced_at}): {detail}")]
+    Image {
+        /// The image: relative to the scene's folder, or its full path when the scene was
+        /// loaded from disk.
+        file: String,
+        /// Where the image is named (the `map_Kd` line, the environment's `map` key): a scene
+        /// may use one image from several places, and the fix is often there.
+        referenced_at: Location,
+        /// The problem in words: what the decoder said, or what the image holds.
+        detail: String,
     },
     /// A file was read but its contents are invalid.
     #[error("{at}: {detail}")]
@@ -47,7 +62,7 @@ impl SceneError {
     /// The file the error is about (the unreadable file, or the file with the bad contents).
     pub fn file(&self) -> &str {
         match self {
-            SceneError::Read { file, .. } => file,
+            SceneError::Read { file, .. } | SceneError::Image { file, .. } => file,
             SceneError::Invalid { at, .. } => &at.file,
         }
     }
@@ -55,7 +70,7 @@ impl SceneError {
     /// The 1-based line of the problem in [`SceneError::file`], when one applies.
     pub fn line(&self) -> Option<usize> {
         match self {
-            SceneError::Read { .. } => None,
+            SceneError::Read { .. } | SceneError::Image { .. } => None,
             SceneError::Invalid { at, .. } => at.line,
         }
     }
@@ -90,6 +105,15 @@ impl SceneError {
                 file: rename(&file),
                 referenced_at: referenced_at.map(fix),
                 source,
+            },
+            SceneError::Image {
+                file,
+                referenced_at,
+                detail,
+            } => SceneError::Image {
+                file: rename(&file),
+                referenced_at: fix(referenced_at),
+                detail,
             },
             SceneError::Invalid { at, detail } => SceneError::Invalid {
                 at: fix(at),

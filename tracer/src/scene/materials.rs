@@ -355,14 +355,10 @@ impl<'a> MaterialTable<'a> {
         if let Some(&id) = self.texture_ids.get(&path) {
             return Ok(id);
         }
-        // Named with the line that asked for it, as an unreadable file is: a scene may use a
-        // texture from several materials, and the fix is often in the MTL file, not the image.
-        let texture = decode_texture(&bytes).map_err(|e| {
-            let at = Location::line(from.0, from.1);
-            SceneError::in_file(
-                &path,
-                format!("cannot decode the image (referenced at {at}): {e}"),
-            )
+        let texture = decode_texture(&bytes).map_err(|e| SceneError::Image {
+            file: path.clone(),
+            referenced_at: Location::line(from.0, from.1),
+            detail: format!("cannot decode the image: {e}"),
         })?;
         let id = self.textures.len() as u32;
         self.textures.push(texture);
