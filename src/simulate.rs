@@ -49,7 +49,9 @@ pub struct SimulateArgs {
     /// Rendering slots (threads) per peer (default 1; with --validate, the render's).
     #[arg(long)]
     pub slots: Option<usize>,
-    /// One-way latency of every link, in milliseconds.
+    /// One-way latency of every link, in milliseconds. With --jitter and --link-spread, a round
+    /// trip must stay under the peers' silence timeout, after which the owner declares a peer
+    /// failed.
     #[arg(long, default_value_t = 0.0)]
     pub latency: f64,
     /// Extra delay of each message, uniform up to this many milliseconds.
@@ -295,6 +297,10 @@ fn base_scenario(args: &SimulateArgs, slots: usize, rate: f64) -> anyhow::Result
         anyhow::bail!("--waning {}: give a share from 0 to 1", args.waning);
     }
     scenario.core.waning = args.waning;
+    scenario
+        .network
+        .check_round_trip(scenario.core.peer_timeout)
+        .map_err(|e| anyhow::anyhow!("--latency, --jitter and --link-spread: {e}"))?;
     Ok(scenario)
 }
 

@@ -283,7 +283,7 @@ fn accuracy_refuses_images_past_memory_and_knobs_named_twice() {
 
 /// The simulator, the bench and keygen refuse values that panicked, aborted or ran away, each
 /// naming its flag: times too long for the simulator's clock (1e300 milliseconds panicked in
-/// `Duration`), a bandwidth so small a transfer never ends, a crash at 1e300 seconds, zero
+/// `Duration`), links whose round trip reaches the peers' silence timeout, a bandwidth so small a transfer never ends, a crash at 1e300 seconds, zero
 /// frames, a NaN doubt threshold, a trace of an image 4294967295 pixels a side (which aborted
 /// allocating exabytes), 2^32 timed steal exchanges (32 GB), a bench image past this
 /// machine's memory, and a hundred million certificates.
@@ -316,6 +316,24 @@ fn simulator_bench_and_keygen_values_that_cannot_work_are_refused() {
         let stderr = user_error(&mut simulate(&[flag, "1e300"]));
         assert!(stderr.contains(&format!("{flag} must be")), "{stderr}");
     }
+    // A round trip as long as the peers' silence timeout (10 s): the owner would declare every
+    // peer failed before it could answer (such a run of 16 peers did not end). Just under it, a
+    // run works.
+    for flags in [
+        &["--latency", "5000"][..],
+        &["--latency", "4000", "--jitter", "1000"],
+        &["--latency", "4000", "--link-spread", "0.25"],
+    ] {
+        let stderr = user_error(&mut simulate(flags));
+        assert!(
+            stderr.contains(
+                "--latency, --jitter and --link-spread: a message may take up to 5000 ms"
+            ),
+            "{flags:?}: {stderr}"
+        );
+    }
+    let status = simulate(&["--latency", "4999"]).output().unwrap().status;
+    assert!(status.success(), "a round trip just under the timeout");
     let stderr = user_error(&mut simulate(&["--bandwidth", "1e-300"]));
     assert!(stderr.contains("--bandwidth must be"), "{stderr}");
     let stderr = user_error(&mut simulate(&["--crash", "1@1e300"]));

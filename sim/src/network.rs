@@ -73,6 +73,31 @@ impl Network {
         }
         Ok(())
     }
+
+    /// The longest a message can take on any link, transfer time and losses aside: the latency
+    /// at the widest spread, plus all the jitter.
+    pub fn slowest_delay(&self) -> Duration {
+        self.latency.mul_f64(1.0 + self.link_spread.clamp(0.0, 1.0)) + self.jitter
+    }
+
+    /// Checks that a round trip on the slowest link stays under `peer_timeout`, the silence
+    /// after which the owner declares failed a peer that may hold work. A peer is first heard
+    /// from a round trip after it is dealt work, so on slower links live peers are declared
+    /// failed before they can answer, which is not the cluster a study means to model (and at
+    /// 16 peers and 5 s of latency against the default 10 s, the run did not end).
+    pub fn check_round_trip(&self, peer_timeout: Duration) -> Result<(), String> {
+        let slowest = self.slowest_delay();
+        if slowest * 2 < peer_timeout {
+            return Ok(());
+        }
+        Err(format!(
+            "a message may take up to {} ms one way, and a round trip must stay under the {} s \
+             of silence after which the owner declares a peer failed: every peer would be \
+             declared failed before it could answer",
+            slowest.as_secs_f64() * 1e3,
+            peer_timeout.as_secs_f64()
+        ))
+    }
 }
 
 /// The links' state during a run: queues, per-link latencies and the loss generator.

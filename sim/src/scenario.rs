@@ -149,7 +149,10 @@ impl Scenario {
         {
             return bad("a crash on starting a tile counts tiles from 1");
         }
-        self.network.validate().map_err(Error::Scenario)
+        self.network.validate().map_err(Error::Scenario)?;
+        self.network
+            .check_round_trip(self.core.peer_timeout)
+            .map_err(Error::Scenario)
     }
 
     /// Each peer's speed factor.
