@@ -291,6 +291,73 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
     }
 }
 
+/// A peer stopped for longer than the owner's silence timeout has its tiles backed up on the
+/// others and is dropped when its connection times out; the render goes on and ends, the
+/// resumed peer finds its owner gone and fails, and no frame changes: a peer lost for good or
+/// for a while costs time, never a tile. Twelve slow frames, so that the render outlasts the
+/// timeout by seconds.
+#[test]
+fn a_peer_stopped_past_the_timeout_is_dropped_and_the_render_ends_unchanged() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    keygen(&certs, 3);
+    let port = free_port();
+    let out = dir.path().join("cluster");
+    let long = [
+        "--width", "96", "--height", "80", "--spp", "96", "--frames", "12",
+    ];
+    let (server, lines) = serve_sized(&certs, &out, port, 2, &long);
+    let steady = peer(&certs, port, 1).spawn().unwrap();
+    let paused = peer(&certs, port, 2).spawn().unwrap();
+    assert!(
+        wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
+        "the cluster never finished frame 0"
+    );
+    let signal = |name: &str| {
+        let status = Command::new("kill")
+            .args([name, &paused.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success(), "kill {name} failed");
+    };
+    signal("-STOP");
+    // Well past the owner's 2 s silence timeout (`serve_sized` above).
+    std::thread::sleep(Duration::from_millis(3500));
+    signal("-CONT");
+    let mut log = Vec::new();
+    let deadline = std::time::Instant::now() + Duration::from_secs(120);
+    while std::time::Instant::now() < deadline {
+        match lines.recv_timeout(Duration::from_millis(100)) {
+            Ok(line) => log.push(line),
+            Err(mpsc::RecvTimeoutError::Timeout) => continue,
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+    }
+    let log = log.join("\n");
+    wait_success(server, "serve", Duration::from_secs(30));
+    wait_success(steady, "peer 1", Duration::from_secs(30));
+    let mut paused = paused;
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(status) = paused.try_wait().unwrap() {
+            break status;
+        }
+        if std::time::Instant::now() > deadline {
+            paused.kill().ok();
+            panic!("the peer declared failed never exited\n{log}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    // The owner's QUIC connection to it timed out (after the same 2 s); the peer, finding its
+    // owner gone when it resumes, fails as `peers_report_a_lost_owner_and_fail` expects.
+    assert!(
+        log.contains("peer left peer=peer 2 reason=TimedOut"),
+        "the stopped peer was not dropped:\n{log}"
+    );
+    assert!(!status.success(), "the dropped peer exited 0");
+    assert_frames_match(&out, reference_sized(dir.path(), &long));
+}
+
 /// The frames (numbered from 0, as these renders are) in which `peer` rendered a tile.
 fn frames_rendered_by(out: &Path, peer: u64) -> Vec<u64> {
     (0u64..)
