@@ -7,7 +7,7 @@
 mod common;
 
 use common::{
-    frames, free_port, keygen, repo, run_ok, spawn_reading, tessera, tiles_of, wait_for,
+    frames, free_port, keygen, repo, run_ok, spawn_reading, tessera, tiles_of, wait_exit, wait_for,
     wait_success,
 };
 use std::path::Path;
@@ -255,26 +255,11 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
         first: steady,
         second: paused,
     } = trio_past_frame_0(dir.path());
-    let signal = |name: &str| {
-        let status = Command::new("kill")
-            .args([name, &paused.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(status.success(), "kill {name} failed");
-    };
-    signal("-STOP");
+    signal(&paused, "-STOP");
     // Under the owner's 2 s silence timeout (`serve` above).
     std::thread::sleep(Duration::from_millis(1200));
-    signal("-CONT");
-    let mut log = Vec::new();
-    let deadline = std::time::Instant::now() + Duration::from_secs(120);
-    while std::time::Instant::now() < deadline {
-        match lines.recv_timeout(Duration::from_millis(100)) {
-            Ok(line) => log.push(line),
-            Err(mpsc::RecvTimeoutError::Timeout) => continue,
-            Err(mpsc::RecvTimeoutError::Disconnected) => break,
-        }
-    }
+    signal(&paused, "-CONT");
+    let log = log_until_closed(&lines, Duration::from_secs(120));
     wait_success(server, "serve", Duration::from_secs(30));
     wait_success(steady, "peer 1", Duration::from_secs(30));
     wait_success(paused, "peer 2", Duration::from_secs(30));
@@ -308,46 +293,19 @@ fn a_peer_stopped_past_the_timeout_is_dropped_and_the_render_ends_unchanged() {
     ];
     let (server, lines) = serve_sized(&certs, &out, port, 2, &long);
     let steady = peer(&certs, port, 1).spawn().unwrap();
-    let paused = peer(&certs, port, 2).spawn().unwrap();
+    let mut paused = peer(&certs, port, 2).spawn().unwrap();
     assert!(
         wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
         "the cluster never finished frame 0"
     );
-    let signal = |name: &str| {
-        let status = Command::new("kill")
-            .args([name, &paused.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(status.success(), "kill {name} failed");
-    };
-    signal("-STOP");
+    signal(&paused, "-STOP");
     // Well past the owner's 2 s silence timeout (`serve_sized` above).
     std::thread::sleep(Duration::from_millis(3500));
-    signal("-CONT");
-    let mut log = Vec::new();
-    let deadline = std::time::Instant::now() + Duration::from_secs(120);
-    while std::time::Instant::now() < deadline {
-        match lines.recv_timeout(Duration::from_millis(100)) {
-            Ok(line) => log.push(line),
-            Err(mpsc::RecvTimeoutError::Timeout) => continue,
-            Err(mpsc::RecvTimeoutError::Disconnected) => break,
-        }
-    }
-    let log = log.join("\n");
+    signal(&paused, "-CONT");
+    let log = log_until_closed(&lines, Duration::from_secs(120)).join("\n");
     wait_success(server, "serve", Duration::from_secs(30));
     wait_success(steady, "peer 1", Duration::from_secs(30));
-    let mut paused = paused;
-    let deadline = std::time::Instant::now() + Duration::from_secs(30);
-    let status = loop {
-        if let Some(status) = paused.try_wait().unwrap() {
-            break status;
-        }
-        if std::time::Instant::now() > deadline {
-            paused.kill().ok();
-            panic!("the peer declared failed never exited\n{log}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let status = wait_exit(&mut paused, "the dropped peer", Duration::from_secs(30));
     // The owner's QUIC connection to it timed out (after the same 2 s); the peer, finding its
     // owner gone when it resumes, fails as `peers_report_a_lost_owner_and_fail` expects.
     assert!(
@@ -356,6 +314,29 @@ fn a_peer_stopped_past_the_timeout_is_dropped_and_the_render_ends_unchanged() {
     );
     assert!(!status.success(), "the dropped peer exited 0");
     assert_frames_match(&out, reference_sized(dir.path(), &long));
+}
+
+/// Sends `child` the signal `name` (`-STOP`, `-CONT`) with kill(1).
+fn signal(child: &Child, name: &str) {
+    let status = Command::new("kill")
+        .args([name, &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success(), "kill {name} failed");
+}
+
+/// Every line `lines` brings until its sender closes (the owner exited), or `timeout`.
+fn log_until_closed(lines: &mpsc::Receiver<String>, timeout: Duration) -> Vec<String> {
+    let mut log = Vec::new();
+    let deadline = std::time::Instant::now() + timeout;
+    while std::time::Instant::now() < deadline {
+        match lines.recv_timeout(Duration::from_millis(100)) {
+            Ok(line) => log.push(line),
+            Err(mpsc::RecvTimeoutError::Timeout) => continue,
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+    }
+    log
 }
 
 /// The frames (numbered from 0, as these renders are) in which `peer` rendered a tile.

@@ -7,7 +7,7 @@ pub mod slurm;
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, ExitStatus, Output, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -121,11 +121,16 @@ pub fn wait_for(lines: &mpsc::Receiver<String>, needle: &str, timeout: Duration)
 
 /// Waits for `child` (called `what` in failures) to exit successfully within `timeout`.
 pub fn wait_success(mut child: Child, what: &str, timeout: Duration) {
+    let status = wait_exit(&mut child, what, timeout);
+    assert!(status.success(), "{what} failed: {status}");
+}
+
+/// Waits for `child` (called `what` in failures) to exit within `timeout`, and says how it did.
+pub fn wait_exit(child: &mut Child, what: &str, timeout: Duration) -> ExitStatus {
     let deadline = Instant::now() + timeout;
     loop {
         if let Some(status) = child.try_wait().unwrap() {
-            assert!(status.success(), "{what} failed: {status}");
-            return;
+            return status;
         }
         if Instant::now() > deadline {
             child.kill().ok();
