@@ -7,8 +7,8 @@
 mod common;
 
 use common::{
-    frames, free_port, keygen, repo, run_ok, spawn_reading, tessera, tiles_of, wait_exit, wait_for,
-    wait_success,
+    frames, free_port, keygen, repo, run_ok, signal, spawn_reading, tessera, tiles_of, wait_exit,
+    wait_for, wait_success,
 };
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -111,11 +111,16 @@ struct Trio {
 }
 
 fn trio_past_frame_0(dir: &Path) -> Trio {
+    trio_past_frame_0_sized(dir, &SIZE)
+}
+
+/// [`trio_past_frame_0`] rendering frames of another size.
+fn trio_past_frame_0_sized(dir: &Path, size: &[&str]) -> Trio {
     let certs = dir.join("certs");
     keygen(&certs, 3);
     let port = free_port();
     let out = dir.join("cluster");
-    let (server, lines) = serve(&certs, &out, port, 2);
+    let (server, lines) = serve_sized(&certs, &out, port, 2, size);
     let first = peer(&certs, port, 1).spawn().unwrap();
     let second = peer(&certs, port, 2).spawn().unwrap();
     assert!(
@@ -255,10 +260,10 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
         first: steady,
         second: paused,
     } = trio_past_frame_0(dir.path());
-    signal(&paused, "-STOP");
+    signal(paused.id(), "-STOP");
     // Under the owner's 2 s silence timeout (`serve` above).
     std::thread::sleep(Duration::from_millis(1200));
-    signal(&paused, "-CONT");
+    signal(paused.id(), "-CONT");
     let log = log_until_closed(&lines, Duration::from_secs(120));
     wait_success(server, "serve", Duration::from_secs(30));
     wait_success(steady, "peer 1", Duration::from_secs(30));
@@ -284,24 +289,20 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
 #[test]
 fn a_peer_stopped_past_the_timeout_is_dropped_and_the_render_ends_unchanged() {
     let dir = tempfile::tempdir().unwrap();
-    let certs = dir.path().join("certs");
-    keygen(&certs, 3);
-    let port = free_port();
-    let out = dir.path().join("cluster");
     let long = [
         "--width", "96", "--height", "80", "--spp", "96", "--frames", "12",
     ];
-    let (server, lines) = serve_sized(&certs, &out, port, 2, &long);
-    let steady = peer(&certs, port, 1).spawn().unwrap();
-    let mut paused = peer(&certs, port, 2).spawn().unwrap();
-    assert!(
-        wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
-        "the cluster never finished frame 0"
-    );
-    signal(&paused, "-STOP");
+    let Trio {
+        out,
+        server,
+        lines,
+        first: steady,
+        second: mut paused,
+    } = trio_past_frame_0_sized(dir.path(), &long);
+    signal(paused.id(), "-STOP");
     // Well past the owner's 2 s silence timeout (`serve_sized` above).
     std::thread::sleep(Duration::from_millis(3500));
-    signal(&paused, "-CONT");
+    signal(paused.id(), "-CONT");
     let log = log_until_closed(&lines, Duration::from_secs(120)).join("\n");
     wait_success(server, "serve", Duration::from_secs(30));
     wait_success(steady, "peer 1", Duration::from_secs(30));
@@ -314,15 +315,6 @@ fn a_peer_stopped_past_the_timeout_is_dropped_and_the_render_ends_unchanged() {
     );
     assert!(!status.success(), "the dropped peer exited 0");
     assert_frames_match(&out, reference_sized(dir.path(), &long));
-}
-
-/// Sends `child` the signal `name` (`-STOP`, `-CONT`) with kill(1).
-fn signal(child: &Child, name: &str) {
-    let status = Command::new("kill")
-        .args([name, &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success(), "kill {name} failed");
 }
 
 /// Every line `lines` brings until its sender closes (the owner exited), or `timeout`.
@@ -403,11 +395,7 @@ fn a_peer_sent_sigterm_hands_back_its_work_and_leaves_cleanly() {
         wait_for(&lines, "frame 0 done", Duration::from_secs(60)),
         "the cluster never finished frame 0"
     );
-    let status = Command::new("kill")
-        .args(["-TERM", &leaver.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    signal(leaver.id(), "-TERM");
     let asked = std::time::Instant::now();
     let mut log = Vec::new();
     let mut left_after = None;

@@ -119,6 +119,16 @@ pub fn wait_for(lines: &mpsc::Receiver<String>, needle: &str, timeout: Duration)
     false
 }
 
+/// Sends process `pid` the signal `name` (`-STOP`, `-CONT`, `-TERM`, `-KILL`) with kill(1):
+/// for processes started elsewhere too (srun's tasks), which `Child::kill` cannot reach.
+pub fn signal(pid: u32, name: &str) {
+    let status = Command::new("kill")
+        .args([name, &pid.to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success(), "kill {name} {pid} failed");
+}
+
 /// Waits for `child` (called `what` in failures) to exit successfully within `timeout`.
 pub fn wait_success(mut child: Child, what: &str, timeout: Duration) {
     let status = wait_exit(&mut child, what, timeout);

@@ -124,11 +124,7 @@ impl Task {
 
     /// Sends the task `signal` (`-TERM`, `-KILL`).
     pub(super) fn signal(&self, signal: &str) {
-        let status = Command::new("kill")
-            .args([signal, &self.pid.to_string()])
-            .status()
-            .unwrap();
-        assert!(status.success(), "kill {signal} {} failed", self.pid);
+        common::signal(self.pid, signal);
     }
 }
 
@@ -141,17 +137,7 @@ pub(super) fn spawn(mut command: Command) -> (Child, mpsc::Receiver<String>) {
 /// Waits for a spawned srun or salloc to end; its status, and its stdout and the stderr lines
 /// not yet read, as one text for assertions and failure messages.
 pub(super) fn finish((mut child, lines): (Child, mpsc::Receiver<String>)) -> (ExitStatus, String) {
-    let deadline = Instant::now() + STEP_TIMEOUT;
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        if Instant::now() > deadline {
-            child.kill().ok();
-            panic!("the step did not end within {STEP_TIMEOUT:?}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let status = common::wait_exit(&mut child, "the step", STEP_TIMEOUT);
     let mut log = String::new();
     child
         .stdout

@@ -89,6 +89,15 @@ impl SceneError {
         }
     }
 
+    /// An image `file` that was read but cannot be used, named at `from` (file, line).
+    pub(crate) fn image(file: &str, from: (&str, usize), detail: impl Into<String>) -> Self {
+        SceneError::Image {
+            file: file.to_owned(),
+            referenced_at: Location::line(from.0, from.1),
+            detail: detail.into(),
+        }
+    }
+
     /// The same error with every file name passed through `rename`: used to turn names relative
     /// to a disk root into full paths.
     pub(crate) fn rename_files(self, rename: impl Fn(&str) -> String) -> Self {

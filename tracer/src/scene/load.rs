@@ -5,7 +5,7 @@
 //! bit, on every peer. Everything a TOML names is checked against what exists (materials, files,
 //! shape keys) and reported with the TOML line of the reference.
 
-use super::error::{Location, SceneError, line_of};
+use super::error::{SceneError, line_of};
 use super::files::{DiskFiles, FileLog, MemoryFiles, SceneFiles};
 use super::format::{self, ObjectSpec, SceneSpec};
 use super::keys::{camera_track, key_pose, object_track, shutter};
@@ -391,17 +391,10 @@ fn environment(
     };
     let at = (file, line_of(text, map.span().start));
     let (resolved, bytes) = log.read(Some(at), map.get_ref())?;
-    let (width, height, mut texels) = decode_exr(&bytes).map_err(|detail| SceneError::Image {
-        file: resolved.clone(),
-        referenced_at: Location::line(at.0, at.1),
-        detail,
-    })?;
+    let (width, height, mut texels) =
+        decode_exr(&bytes).map_err(|detail| SceneError::image(&resolved, at, detail))?;
     if width == 0 || height == 0 {
-        return Err(SceneError::Image {
-            file: resolved,
-            referenced_at: Location::line(at.0, at.1),
-            detail: "the image has no texels".into(),
-        });
+        return Err(SceneError::image(&resolved, at, "the image has no texels"));
     }
     if let Some(scale) = e.scale {
         for t in &mut texels {

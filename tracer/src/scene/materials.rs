@@ -19,7 +19,7 @@
 //! refused.
 
 use super::Texture;
-use super::error::{Location, SceneError, line_of};
+use super::error::{SceneError, line_of};
 use super::files::FileLog;
 use super::format::{MaterialKind, MaterialSpec, MediumSpec};
 use super::media::MediumTable;
@@ -355,11 +355,8 @@ impl<'a> MaterialTable<'a> {
         if let Some(&id) = self.texture_ids.get(&path) {
             return Ok(id);
         }
-        let texture = decode_texture(&bytes).map_err(|e| SceneError::Image {
-            file: path.clone(),
-            referenced_at: Location::line(from.0, from.1),
-            detail: format!("cannot decode the image: {e}"),
-        })?;
+        let texture = decode_texture(&bytes)
+            .map_err(|e| SceneError::image(&path, from, format!("cannot decode the image: {e}")))?;
         let id = self.textures.len() as u32;
         self.textures.push(texture);
         self.texture_ids.insert(path, id);
