@@ -290,11 +290,11 @@ def fmt_load(load):
 # --- The Mitsuba side, run in a process of its own per (variant, scene). ---
 
 
-def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto"):
-    import drjit as dr
+def mitsuba_description(toml, size, spp, segments, integrator="auto"):
+    """The Mitsuba scene dictionary of a tessera TOML (MTL_MAPPING, MEDIA_MAPPING) and its
+    triangle count; the variant must be set. Shared with scripts/traversal_compare.py."""
     import mitsuba as mi
 
-    mi.set_variant(variant)
     scene_toml = tomllib.loads(toml.read_text())
     camera = scene_toml["camera"]
     unsupported = set(camera) - {"position", "look_at", "up", "vfov", "medium"}
@@ -359,6 +359,15 @@ def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto"):
         radiance = environment["radiance"]
         radiance = [float(radiance)] * 3 if isinstance(radiance, (int, float)) else [float(c) for c in radiance]
         description["environment"] = {"type": "constant", "radiance": {"type": "rgb", "value": radiance}}
+    return description, triangles
+
+
+def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto"):
+    import drjit as dr
+    import mitsuba as mi
+
+    mi.set_variant(variant)
+    description, triangles = mitsuba_description(toml, size, spp, segments, integrator)
     # Resident memory (KiB) before Mitsuba builds its scene, which holds this script's own
     # Python lists of the OBJ's vertices and faces, and after the scene and the render: the
     # growth is about what Mitsuba's scene (meshes and BVH) and render took.

@@ -159,15 +159,23 @@ impl Bvh8 {
     }
 }
 
+/// A child waiting on the traversal's stack, or the one being visited: an inner node, or a
+/// leaf's run of triangle groups.
 #[derive(Clone, Copy)]
 struct StackEntry {
-    node: u32,
+    /// An inner node's index in `Bvh8::nodes`, or a leaf's first group in `Bvh8::quads`.
+    child: u32,
+    /// The leaf's triangles; 0 for an inner node.
+    count: u32,
+    /// Where the ray enters the child's box.
     t_near: f32,
 }
 
-/// Stack entries held in place: a level pushes at most seven, and obvhs's trees of real scenes
-/// collapse to far fewer than 30 levels.
-const INLINE_STACK: usize = (WIDTH - 1) * 30;
+/// Stack entries held in place: a node pushes its entered children (at most eight) and pops
+/// the nearest at once, so each level of the current path leaves at most seven, and the
+/// deepest node briefly eight; obvhs's trees of real scenes collapse to far fewer than 30
+/// levels.
+const INLINE_STACK: usize = (WIDTH - 1) * 30 + 1;
 
 impl Accel {
     /// Closest hit (or, with `ANY_HIT`, the first certain hit found) by the wide traversal,
@@ -229,20 +237,27 @@ impl Accel {
         ray: &Ray,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
-        let needed = WIDTH - 1;
-        if self.wide.depth * needed <= INLINE_STACK {
+        let needed = (WIDTH - 1) * self.wide.depth + 1;
+        if needed <= INLINE_STACK {
             // Uninitialised: filling 210 entries per ray would cost more than a node test.
             let mut stack = [MaybeUninit::<StackEntry>::uninit(); INLINE_STACK];
             self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, stats, &mut stack)
         } else {
-            let mut stack = vec![MaybeUninit::uninit(); self.wide.depth * needed];
+            let mut stack = vec![MaybeUninit::uninit(); needed];
             self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, stats, &mut stack)
         }
     }
 
-    /// The traversal proper. `stack` holds at least `7 * depth` entries: each level of the
-    /// current path leaves at most seven postponed siblings on it. Entries below `len` are
-    /// always initialised: every push writes one before `len` grows past it.
+    /// The traversal proper: Embree's order. A node's entered children go onto the stack
+    /// sorted by entry distance, the nearest on top, and the walk goes on at the top: an inner
+    /// node is tested, a leaf's triangles are, then the next nearest child that may still hold
+    /// a closer hit. Leaves are children like the others, so a leaf behind a nearer subtree
+    /// waits until that subtree has had its chance to move the closest hit in front of it.
+    /// An any-hit query stops at any hit, so it tests a node's leaves at once and leaves the
+    /// rest unsorted.
+    ///
+    /// `stack` holds at least `7 * depth + 1` entries (see [`INLINE_STACK`]). Entries below
+    /// `len` are always initialised: every push writes one before `len` grows past it.
     #[inline(always)]
     fn wide_with_stack<const ANY_HIT: bool, const CERTAIN: bool, B: BoxTest>(
         &self,
@@ -256,70 +271,77 @@ impl Accel {
         let quad_ray = QuadRay::new(&sheared);
         let mut closest = Closest::new(ray, CERTAIN);
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
-        let mut node = &nodes[0];
+        let mut current = StackEntry {
+            child: 0,
+            count: 0,
+            t_near: 0.0,
+        };
         let mut len = 0usize;
         loop {
-            stats.nodes += u64::from(node.children);
-            let (mut entered, t_near) = B::enter(&wide, node, cull(&closest));
-            self.prefetch_children(node, entered);
-            // The entered children, nearest first for closest-hit queries; an any-hit query
-            // stops at any hit, so it skips the sort.
-            let mut order = [(0usize, 0f32); WIDTH];
-            let mut n = 0;
-            while entered != 0 {
-                let lane = entered.trailing_zeros() as usize;
-                entered &= entered - 1;
-                let mut k = n;
-                if !ANY_HIT {
-                    while k > 0 && order[k - 1].1 > t_near[lane] {
-                        order[k] = order[k - 1];
-                        k -= 1;
-                    }
+            if current.count > 0 {
+                if self.test_leaf::<ANY_HIT, B>(
+                    current.child,
+                    current.count,
+                    &sheared,
+                    &quad_ray,
+                    &mut closest,
+                    stats,
+                ) && ANY_HIT
+                {
+                    return closest.best;
                 }
-                order[k] = (lane, t_near[lane]);
-                n += 1;
-            }
-            // Leaves are tested at once, as in the binary traversal; the nearest inner child
-            // is next, the others are postponed farthest first, so the nearest pops first.
-            let mut next = None;
-            let mut postponed = [(0u32, 0f32); WIDTH];
-            let mut p = 0;
-            for &(lane, t) in &order[..n] {
-                let count = u32::from(node.count[lane]);
-                if count > 0 {
-                    // A nearer leaf may have moved the closest hit in front of this one.
-                    if t <= cull(&closest)
-                        && self.test_leaf::<ANY_HIT, B>(
-                            node.index[lane],
-                            count,
+            } else {
+                let node = &nodes[current.child as usize];
+                stats.nodes += u64::from(node.children);
+                let (mut entered, t_near) = B::enter(&wide, node, cull(&closest));
+                let base = len;
+                while entered != 0 {
+                    let lane = entered.trailing_zeros() as usize;
+                    entered &= entered - 1;
+                    let entry = StackEntry {
+                        child: node.index[lane],
+                        count: u32::from(node.count[lane]),
+                        t_near: t_near[lane],
+                    };
+                    self.prefetch_child(entry);
+                    if ANY_HIT && entry.count > 0 {
+                        if self.test_leaf::<ANY_HIT, B>(
+                            entry.child,
+                            entry.count,
                             &sheared,
                             &quad_ray,
                             &mut closest,
                             stats,
-                        )
-                        && ANY_HIT
-                    {
-                        return closest.best;
+                        ) {
+                            return closest.best;
+                        }
+                        continue;
                     }
-                } else if next.is_none() {
-                    next = Some(node.index[lane]);
-                } else {
-                    postponed[p] = (node.index[lane], t);
-                    p += 1;
+                    // Insert, keeping this node's run of the stack farthest first.
+                    let mut k = len;
+                    if !ANY_HIT {
+                        while k > base {
+                            // SAFETY: `base <= k - 1 < len`: written by this node's pushes.
+                            let below = unsafe { stack[k - 1].assume_init() };
+                            if below.t_near >= entry.t_near {
+                                break;
+                            }
+                            stack[k].write(below);
+                            k -= 1;
+                        }
+                    }
+                    stack[k].write(entry);
+                    len += 1;
+                }
+                if len > base {
+                    // The nearest entered child, entered within the current search interval.
+                    len -= 1;
+                    // SAFETY: written by the pushes above.
+                    current = unsafe { stack[len].assume_init() };
+                    continue;
                 }
             }
-            for &(index, t_near) in postponed[..p].iter().rev() {
-                stack[len].write(StackEntry {
-                    node: index,
-                    t_near,
-                });
-                len += 1;
-            }
-            if let Some(index) = next {
-                node = &nodes[index as usize];
-                continue;
-            }
-            // Resume at the nearest postponed box that may still hold a closer hit.
+            // Resume at the nearest postponed child that may still hold a closer hit.
             loop {
                 if len == 0 {
                     return closest.best;
@@ -328,46 +350,41 @@ impl Accel {
                 // SAFETY: entries below the old `len` were written by the pushes above.
                 let entry = unsafe { stack[len].assume_init() };
                 if entry.t_near <= cull(&closest) {
-                    node = &nodes[entry.node as usize];
+                    current = entry;
                     break;
                 }
             }
         }
     }
 
-    /// Asks for the memory of every child the ray entered (an inner node's four cache lines, a
-    /// leaf's first two groups) before any of it is read. On large meshes the traversal waits mostly
-    /// on cache misses, one at a time: the next node's address is known only once its parent is
-    /// tested, and a leaf's triangles only once its box is. Prefetching all of a node's entered
-    /// children at once lets their misses overlap, and the leaf tests that come first hide
-    /// part of the next node's. A prefetch reads nothing into the computation, so it cannot
-    /// change a result.
+    /// Asks for the memory of a child the ray entered (an inner node's four cache lines, a
+    /// leaf's first two groups) before any of it is read. On large meshes the traversal waits
+    /// mostly on cache misses: the next node's address is known only once its parent is
+    /// tested, and a leaf's triangles only once its box is. Asking for all of a node's entered
+    /// children at once lets their misses overlap. A prefetch reads nothing into the
+    /// computation, so it cannot change a result.
     #[inline(always)]
-    fn prefetch_children(&self, node: &Node8, mut entered: u32) {
-        while entered != 0 {
-            let lane = entered.trailing_zeros() as usize;
-            entered &= entered - 1;
-            let index = node.index[lane] as usize;
-            if node.count[lane] > 0 {
-                if let Some(quad) = self.wide.quads.get(index) {
-                    // A group is three whole lines (`Quad` is aligned to them); a leaf of five
-                    // or more triangles has a second group, tested in the same step with AVX.
-                    let groups = if node.count[lane] as usize > LANES {
-                        2
-                    } else {
-                        1
-                    };
-                    let start = (quad as *const Quad).cast::<u8>();
-                    for line in 0..3 * groups {
-                        prefetch(start.wrapping_add(64 * line));
-                    }
-                }
-            } else if let Some(child) = self.wide.nodes.get(index) {
-                let start = (child as *const Node8).cast::<u8>();
-                for line in 0..4 {
-                    prefetch(start.wrapping_add(64 * line));
-                }
+    fn prefetch_child(&self, entry: StackEntry) {
+        // Written out line by line: a loop over a count costs more instructions than the
+        // prefetches themselves, once per entered child.
+        if entry.count > 0 {
+            // A group is three whole lines (`Quad` is aligned to them); a leaf of five or more
+            // triangles has a second group, tested in the same step with AVX.
+            let start = self.wide.quads.as_ptr().wrapping_add(entry.child as usize).cast::<u8>();
+            prefetch(start);
+            prefetch(start.wrapping_add(64));
+            prefetch(start.wrapping_add(128));
+            if entry.count as usize > LANES {
+                prefetch(start.wrapping_add(192));
+                prefetch(start.wrapping_add(256));
+                prefetch(start.wrapping_add(320));
             }
+        } else {
+            let start = self.wide.nodes.as_ptr().wrapping_add(entry.child as usize).cast::<u8>();
+            prefetch(start);
+            prefetch(start.wrapping_add(64));
+            prefetch(start.wrapping_add(128));
+            prefetch(start.wrapping_add(192));
         }
     }
 }
