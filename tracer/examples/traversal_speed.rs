@@ -18,17 +18,9 @@ use std::path::Path;
 use tracer::geometry::{Accel, BuildQuality, Traversal};
 use tracer::{FrameConfig, World, render_frame};
 
-/// This thread's CPU time in seconds, from the first field of `schedstat` (nanoseconds on CPU).
-fn thread_cpu_seconds() -> f64 {
-    let stat = std::fs::read_to_string("/proc/thread-self/schedstat")
-        .expect("Linux's /proc/thread-self/schedstat: this example measures with it");
-    let nanos: f64 = stat
-        .split_whitespace()
-        .next()
-        .and_then(|n| n.parse().ok())
-        .expect("schedstat starts with the nanoseconds on CPU");
-    nanos / 1e9
-}
+#[path = "support/thread_cpu.rs"]
+mod thread_cpu;
+use thread_cpu::thread_cpu_seconds;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
