@@ -26,6 +26,7 @@ writing the answers), a few nanoseconds a ray; ours read the rays from a vector 
 Embree's build settings Mitsuba's, ours our default (`BuildQuality::Medium`).
 
 Usage (from the repository root):
+    pip install mitsuba numpy      # llvm_ad_rgb also needs Debian's libllvm19
     cargo build --release -p tracer --example trace_rays
     python3 scripts/traversal_compare.py scenes/shared/sponza.toml --out out/bench/traversal
 """
