@@ -30,7 +30,10 @@ fn read_rays(path: &str) -> (Vec<Ray>, Vec<f32>) {
     });
     let count = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes")) as usize;
     if bytes.len() != 8 + count * 32 {
-        eprintln!("{path}: {} bytes, not a count and {count} rays", bytes.len());
+        eprintln!(
+            "{path}: {} bytes, not a count and {count} rays",
+            bytes.len()
+        );
         std::process::exit(1);
     }
     let floats: Vec<f32> = bytes[8..]
@@ -60,7 +63,9 @@ fn main() {
     });
     let files = if quality.is_some() { 4 } else { 3 };
     if args.len() < files + 2 || (args.len() - files) % 2 != 0 {
-        eprintln!("usage: trace_rays SCENE.toml ROUNDS [QUALITY] FILE.rays closest|any [FILE.rays closest|any ...]");
+        eprintln!(
+            "usage: trace_rays SCENE.toml ROUNDS [QUALITY] FILE.rays closest|any [FILE.rays closest|any ...]"
+        );
         std::process::exit(2);
     }
     let scene = tracer::scene::load(Path::new(&args[1])).unwrap_or_else(|e| {
@@ -95,12 +100,16 @@ fn main() {
             stats = TraversalStats::default();
             let start = thread_cpu_seconds();
             if any {
-                answers.extend(rays.iter().map(|ray| f32::from(u8::from(accel.occluded(ray, &mut stats)))));
-            } else {
                 answers.extend(
                     rays.iter()
-                        .map(|ray| accel.intersect(ray, &mut stats).map_or(f32::INFINITY, |h| h.t)),
+                        .map(|ray| f32::from(u8::from(accel.occluded(ray, &mut stats)))),
                 );
+            } else {
+                answers.extend(rays.iter().map(|ray| {
+                    accel
+                        .intersect(ray, &mut stats)
+                        .map_or(f32::INFINITY, |h| h.t)
+                }));
             }
             best = best.min(thread_cpu_seconds() - start);
         }

@@ -10,8 +10,9 @@
 //!   start ([`spawn_ray`], [`OffsetMethod`]).
 //! - `bvh`: the [`Accel`] API, and brute force for tests.
 //! - `build`: building the tree with obvhs, deterministically and without cracks.
-//! - `wide`: the tree collapsed into 8-wide nodes, and our robust traversal of it: what renders
-//!   use.
+//! - `wide`: the tree of 8-wide nodes, and our robust traversal of it: what renders use.
+//! - `collapse`: which binary nodes become 8-wide nodes (least summed surface area, Ylitie et
+//!   al. 2017), and the leaves packed for the SIMD tests.
 //! - `packed_hit`: the wide traversal's answer in two registers, so that it reaches the
 //!   renderer without a trip through memory.
 //! - `leaf`: a leaf's triangles through the SIMD filters (four lanes, or eight with AVX) and
@@ -32,6 +33,7 @@
 
 mod build;
 mod bvh;
+mod collapse;
 mod leaf;
 mod memory;
 mod motion;

@@ -1,6 +1,7 @@
 //! The wide tree the renderer traverses: obvhs's binary tree collapsed into nodes of up to eight
-//! children, whose eight boxes are tested against a ray at once (`node8.rs`: one AVX step where
-//! the processor has AVX, two SSE steps where not, with the same results bit for bit).
+//! children (`collapse.rs` chooses which), whose eight boxes are tested against a ray at once
+//! (`node8.rs`: one AVX step where the processor has AVX, two SSE steps where not, with the same
+//! results bit for bit).
 //!
 //! Why 8 wide: on large meshes the traversal waits mostly on memory, one node after another, and
 //! a tree of eight-child nodes is about two thirds as deep as one of four; on x86-64 with AVX its
@@ -32,7 +33,6 @@ use super::traverse::FAR_SCALE;
 use super::triangle::ShearedRay;
 use super::{Hit, Ray, TraversalStats};
 use glam::Vec3;
-use obvhs::bvh2::Bvh2;
 use std::mem::MaybeUninit;
 
 /// The instructions that test a node's boxes and a leaf's triangles: AVX where the processor
@@ -70,92 +70,11 @@ impl Default for Bvh8 {
 }
 
 /// The fastest box test this processor runs.
-fn best_simd() -> BoxSimd {
+pub(super) fn best_simd() -> BoxSimd {
     if avx_available() {
         BoxSimd::Avx
     } else {
         BoxSimd::Sse
-    }
-}
-
-impl Bvh8 {
-    /// Collapses `bvh`: each node takes its binary node's two children, then repeatedly
-    /// replaces the inner child with the largest surface area by its two children, until it has
-    /// eight or only leaves. Deterministic: ties go to the first such child.
-    /// Leaves are packed into groups of four triangles from `vertices` (`Accel::vertices`),
-    /// with their input triangles from `original` (`Accel::original`).
-    pub(super) fn collapse(bvh: &Bvh2, vertices: &[[Vec3; 3]], original: &[u32]) -> Bvh8 {
-        if bvh.nodes.is_empty() {
-            return Bvh8::default();
-        }
-        let mut nodes = vec![Node8::EMPTY];
-        // A root that is a leaf becomes a root with that one leaf as its child.
-        let root = &bvh.nodes[0];
-        let root_children = if root.is_leaf() {
-            vec![0]
-        } else {
-            let first = root.first_index as usize;
-            vec![first, first + 1]
-        };
-        // (slot of the node being made, its binary children so far, its level)
-        let mut pending = vec![(0usize, root_children, 1usize)];
-        let mut depth = 0;
-        let mut quads = Vec::with_capacity(vertices.len() / 2);
-        while let Some((slot, mut children, level)) = pending.pop() {
-            depth = depth.max(level);
-            while children.len() < WIDTH {
-                let widest = children
-                    .iter()
-                    .enumerate()
-                    .filter(|&(_, &c)| !bvh.nodes[c].is_leaf())
-                    .fold(None, |best: Option<(usize, f32)>, (i, &c)| {
-                        let area = bvh.nodes[c].aabb().half_area();
-                        match best {
-                            Some((_, a)) if a >= area => best,
-                            _ => Some((i, area)),
-                        }
-                    });
-                let Some((i, _)) = widest else { break };
-                let first = bvh.nodes[children[i]].first_index as usize;
-                children[i] = first;
-                children.insert(i + 1, first + 1);
-            }
-            let mut node = Node8::EMPTY;
-            for (lane, &c) in children.iter().enumerate() {
-                let child = &bvh.nodes[c];
-                let aabb = child.aabb();
-                node.set_bounds(lane, aabb.min.to_array(), aabb.max.to_array());
-                node.valid |= 1 << lane;
-                node.children += 1;
-                if child.is_leaf() {
-                    let first = child.first_index as usize;
-                    node.index[lane] =
-                        u32::try_from(quads.len()).expect("fewer groups than leaf entries");
-                    node.count[lane] = u8::try_from(child.prim_count)
-                        .expect("build.rs clamps leaves to 255 triangles");
-                    let end = first + child.prim_count as usize;
-                    quads.extend(Quad::pack(
-                        &vertices[first..end],
-                        &original[first..end],
-                        child.first_index,
-                    ));
-                } else {
-                    let index = nodes.len();
-                    nodes.push(Node8::EMPTY);
-                    node.index[lane] =
-                        u32::try_from(index).expect("fewer wide nodes than binary ones");
-                    let first = child.first_index as usize;
-                    pending.push((index, vec![first, first + 1], level + 1));
-                }
-            }
-            nodes[slot] = node;
-        }
-        Bvh8 {
-            nodes,
-            quads,
-            depth,
-            simd: best_simd(),
-        }
     }
 }
 
@@ -237,15 +156,20 @@ impl Accel {
         ray: &Ray,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
+        // Counted in a local copy, written back once: through `stats` itself, every node's
+        // count was a store to the caller's memory, which LLVM may not keep in a register.
+        let mut counted = *stats;
         let needed = (WIDTH - 1) * self.wide.depth + 1;
-        if needed <= INLINE_STACK {
+        let hit = if needed <= INLINE_STACK {
             // Uninitialised: filling 210 entries per ray would cost more than a node test.
             let mut stack = [MaybeUninit::<StackEntry>::uninit(); INLINE_STACK];
-            self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, stats, &mut stack)
+            self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, &mut stack)
         } else {
             let mut stack = vec![MaybeUninit::uninit(); needed];
-            self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, stats, &mut stack)
-        }
+            self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, &mut stack)
+        };
+        *stats = counted;
+        hit
     }
 
     /// The traversal proper: Embree's order. A node's entered children go onto the stack
@@ -291,7 +215,9 @@ impl Accel {
                     return closest.best;
                 }
             } else {
-                let node = &nodes[current.child as usize];
+                // SAFETY: `current.child` of an entry with no triangles is an inner node's
+                // index, which `Bvh8::collapse` set to a slot of `nodes` it had pushed.
+                let node = unsafe { nodes.get_unchecked(current.child as usize) };
                 stats.nodes += u64::from(node.children);
                 let (mut entered, t_near) = B::enter(&wide, node, cull(&closest));
                 let base = len;
@@ -322,22 +248,26 @@ impl Accel {
                     if !ANY_HIT {
                         while k > base {
                             // SAFETY: `base <= k - 1 < len`: written by this node's pushes.
-                            let below = unsafe { stack[k - 1].assume_init() };
+                            let below = unsafe { stack.get_unchecked(k - 1).assume_init() };
                             if below.t_near >= entry.t_near {
                                 break;
                             }
-                            stack[k].write(below);
+                            // SAFETY: `k <= len < stack.len()` (the stack's bound above).
+                            unsafe { stack.get_unchecked_mut(k) }.write(below);
                             k -= 1;
                         }
                     }
-                    stack[k].write(entry);
+                    // SAFETY: `k <= len`, and `len < stack.len()`: each level of the current
+                    // path leaves at most seven entries and the deepest pushes eight, so
+                    // `len` never passes `7 * depth + 1`, which the stack holds.
+                    unsafe { stack.get_unchecked_mut(k) }.write(entry);
                     len += 1;
                 }
                 if len > base {
                     // The nearest entered child, entered within the current search interval.
                     len -= 1;
                     // SAFETY: written by the pushes above.
-                    current = unsafe { stack[len].assume_init() };
+                    current = unsafe { stack.get_unchecked(len).assume_init() };
                     continue;
                 }
             }
@@ -348,7 +278,7 @@ impl Accel {
                 }
                 len -= 1;
                 // SAFETY: entries below the old `len` were written by the pushes above.
-                let entry = unsafe { stack[len].assume_init() };
+                let entry = unsafe { stack.get_unchecked(len).assume_init() };
                 if entry.t_near <= cull(&closest) {
                     current = entry;
                     break;
@@ -370,7 +300,12 @@ impl Accel {
         if entry.count > 0 {
             // A group is three whole lines (`Quad` is aligned to them); a leaf of five or more
             // triangles has a second group, tested in the same step with AVX.
-            let start = self.wide.quads.as_ptr().wrapping_add(entry.child as usize).cast::<u8>();
+            let start = self
+                .wide
+                .quads
+                .as_ptr()
+                .wrapping_add(entry.child as usize)
+                .cast::<u8>();
             prefetch(start);
             prefetch(start.wrapping_add(64));
             prefetch(start.wrapping_add(128));
@@ -380,7 +315,12 @@ impl Accel {
                 prefetch(start.wrapping_add(320));
             }
         } else {
-            let start = self.wide.nodes.as_ptr().wrapping_add(entry.child as usize).cast::<u8>();
+            let start = self
+                .wide
+                .nodes
+                .as_ptr()
+                .wrapping_add(entry.child as usize)
+                .cast::<u8>();
             prefetch(start);
             prefetch(start.wrapping_add(64));
             prefetch(start.wrapping_add(128));
@@ -434,75 +374,4 @@ fn prefetch(address: *const u8) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = address;
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::geometry::BuildQuality;
-    use crate::scene::Triangle;
-
-    /// A grid of `n * n` bumpy quads, two triangles each.
-    fn grid(n: usize) -> Vec<Triangle> {
-        let v = |i: usize, j: usize| Vec3::new(i as f32, j as f32, ((i * 7 + j * 13) % 5) as f32);
-        let mut out = Vec::new();
-        for i in 0..n {
-            for j in 0..n {
-                for p in [
-                    [v(i, j), v(i + 1, j), v(i + 1, j + 1)],
-                    [v(i, j), v(i + 1, j + 1), v(i, j + 1)],
-                ] {
-                    out.push(Triangle {
-                        p,
-                        n: None,
-                        uv: None,
-                        material: 0,
-                    });
-                }
-            }
-        }
-        out
-    }
-
-    #[test]
-    fn the_wide_tree_holds_every_leaf_entry_once_in_nodes_of_up_to_eight() {
-        for n in [1, 3, 40] {
-            let triangles = grid(n);
-            let accel = Accel::build(&triangles, BuildQuality::Medium);
-            let wide = &accel.wide;
-            let mut seen = vec![0u32; accel.leaf_entries()];
-            for node in &wide.nodes {
-                assert!(node.valid != 0 && node.valid.count_ones() as usize <= WIDTH);
-                assert_eq!(u32::from(node.children), node.valid.count_ones());
-                for lane in (0..WIDTH).filter(|&l| node.valid & (1 << l) != 0) {
-                    if node.count[lane] == 0 {
-                        continue;
-                    }
-                    let groups = (node.count[lane] as usize).div_ceil(LANES);
-                    let first = node.index[lane] as usize;
-                    for quad in &wide.quads[first..first + groups] {
-                        for i in 0..LANES as u32 {
-                            if quad.valid & (1 << i) != 0 {
-                                seen[(quad.entry + i) as usize] += 1;
-                            }
-                        }
-                    }
-                }
-            }
-            assert!(seen.iter().all(|&c| c == 1), "n = {n}: {seen:?}");
-            assert!(wide.depth <= accel.depth());
-            if n == 40 {
-                // A full 8-wide node replaces seven binary inner nodes. Near the leaves the
-                // binary tree has too few levels left to fill one (a node above two leaf pairs
-                // gets four children), so on this grid each replaces about 2.8 (a full 4-wide
-                // node, three).
-                let inner = accel.node_count() / 2;
-                assert!(
-                    wide.nodes.len() * 5 < inner * 2,
-                    "{} wide nodes for {inner} binary inner ones",
-                    wide.nodes.len(),
-                );
-            }
-        }
-    }
 }
