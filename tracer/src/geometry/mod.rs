@@ -17,7 +17,8 @@
 //!   renderer without a trip through memory.
 //! - `leaf`: a leaf's triangles through the SIMD filters (four lanes, or eight with AVX) and
 //!   the scalar test on what they leave.
-//! - `memory`: the BVH's large arrays on transparent huge pages, where Linux offers them.
+//! - `memory`: the BVH's large arrays on transparent huge pages, where Linux offers them, and
+//!   the prefetch hint.
 //! - `node8`: the 8-wide node and its box test, in AVX where the processor has it and in SSE
 //!   where not, with the same results bit for bit ([`BoxSimd`]).
 //! - `quad`: leaves packed four triangles to a group, and the SIMD filter that rejects four at
@@ -48,7 +49,7 @@ mod triangle;
 mod wide;
 
 pub use bvh::{Accel, BuildQuality, Traversal, intersect_brute_force, occluded_brute_force};
-pub(crate) use memory::on_huge_pages;
+pub(crate) use memory::{on_huge_pages, prefetch};
 pub use motion::{Moment, MotionAccel, MovingTriangle, placed_point};
 pub use offset::{
     OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, plane_normal, spawn_ray, spawn_ray_to,

@@ -24,6 +24,7 @@
 //! settles what the SIMD one leaves.
 
 use super::bvh::{Accel, Closest};
+use super::memory::prefetch;
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
 use super::node8::{BoxTest, Node8, Portable, WIDTH, WideRay, avx_available};
@@ -359,19 +360,4 @@ impl Accel {
             prefetch(at.wrapping_add(size.saturating_sub(1)) as *const u8);
         }
     }
-}
-
-/// A hint to bring the cache line holding `address` closer; it never faults, even for an
-/// address outside any allocation, and does nothing on targets without one.
-#[inline(always)]
-fn prefetch(address: *const u8) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: `prefetcht0` (SSE, part of x86-64's baseline) only hints the cache; it reads no
-    // value into the program and cannot fault, whatever the address.
-    unsafe {
-        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        _mm_prefetch::<_MM_HINT_T0>(address.cast::<i8>());
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = address;
 }

@@ -100,29 +100,71 @@ impl World {
         &self,
         scatter: &impl Scatterer,
         at: &SurfacePoint,
-        (medium, spectrum): (Option<u32>, &PathSpectrum),
+        media: (Option<u32>, &PathSpectrum),
+        moment: &Moment,
+        numbers: (f32, Vec2),
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        let samples = self.sample_lights(at, moment, numbers, stats);
+        self.direct_from(&samples, scatter, at, media, moment, numbers, stats)
+    }
+
+    /// The first half of [`World::direct_light`]: where its light samples land, which does not
+    /// depend on the scatterer, so that a surface's texel can be on its way from memory
+    /// meanwhile (`World::radiance`). Inlined, as `direct_light` was: returned through a call
+    /// the samples were copied through memory, two percent of a Cornell box's instructions.
+    #[inline(always)]
+    pub(super) fn sample_lights(
+        &self,
+        at: &SurfacePoint,
+        moment: &Moment,
+        (u_choice, u): (f32, Vec2),
+        stats: &mut PathStats,
+    ) -> LightSamples {
+        stats.light_samples += 1;
+        let Some(own) = self.lights.sample(&self.scene, moment, at.p, u_choice, u) else {
+            return LightSamples::default();
+        };
+        // The environment with portals takes a second sample, through them (`Lights::
+        // portal_sample`); both are weighed by the power heuristic over the three strategies.
+        let through = if own.distance.is_infinite() && self.lights.has_portals() {
+            self.lights.portal_sample(&self.scene, at.p, u_choice, u)
+        } else {
+            None
+        };
+        if through.is_some() {
+            stats.light_samples += 1;
+        }
+        LightSamples {
+            own: Some(own),
+            through,
+        }
+    }
+
+    /// The second half of [`World::direct_light`]: what `samples` bring through `scatter`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub(super) fn direct_from(
+        &self,
+        samples: &LightSamples,
+        scatter: &impl Scatterer,
+        at: &SurfacePoint,
+        media: (Option<u32>, &PathSpectrum),
         moment: &Moment,
         (u_choice, u): (f32, Vec2),
         stats: &mut PathStats,
     ) -> Vec3 {
-        stats.light_samples += 1;
-        let Some(light) = self.lights.sample(&self.scene, moment, at.p, u_choice, u) else {
+        let Some(own) = &samples.own else {
             return Vec3::ZERO;
         };
         let numbers = [u_choice, u.x, u.y];
-        let media = (medium, spectrum);
-        let own = self.light_contribution(scatter, at, &light, media, moment, &numbers, stats);
-        // The environment with portals takes a second sample, through them (`Lights::
-        // portal_sample`); both are weighed by the power heuristic over the three strategies.
-        if light.distance.is_infinite()
-            && self.lights.has_portals()
-            && let Some(through) = self.lights.portal_sample(&self.scene, at.p, u_choice, u)
-        {
-            stats.light_samples += 1;
-            return own
-                + self.light_contribution(scatter, at, &through, media, moment, &numbers, stats);
+        let own = self.light_contribution(scatter, at, own, media, moment, &numbers, stats);
+        match &samples.through {
+            Some(through) => {
+                own + self.light_contribution(scatter, at, through, media, moment, &numbers, stats)
+            }
+            None => own,
         }
-        own
     }
 
     /// What the light sample `light` brings to `at` through `scatter`, weighed; `numbers` drive
@@ -177,6 +219,15 @@ impl World {
             spawn_ray(at, light.wi, self.offset)
         }
     }
+}
+
+/// The light samples of one next-event estimation ([`World::sample_lights`]): none where no
+/// light could be sampled; a second, through the environment's portals, where the first is the
+/// environment and the scene declares portals.
+#[derive(Default)]
+pub(super) struct LightSamples {
+    own: Option<LightSample>,
+    through: Option<LightSample>,
 }
 
 /// Whether `light` lies on an area light: of the lights that are not deltas, every one but the

@@ -52,7 +52,7 @@ use crate::medium::{Flight, hero_channel, mean_ratio, sample_henyey_greenstein};
 use crate::sampler::PixelSampler;
 use crate::scene::Scene;
 use crate::spectrum::{PathSpectrum, SpectralSampling};
-use direct::power_heuristic;
+use direct::{LightSamples, power_heuristic};
 use glam::Vec3;
 use hits::Surface;
 use scatter::{BounceNumbers, Phase, SurfaceScatter};
@@ -378,19 +378,30 @@ impl World {
             if effects.dispersion && material.bsdf.is_dispersive() {
                 spectrum.disperse(sampler, &mut beta, &mut radiance);
             }
-            let bsdf = spectrum.bsdf(self.resolve(&material.bsdf, &surface));
+            // A textured surface's texel is, on scenes whose textures outgrow the caches, a
+            // wait on main memory. Ask for it now, and read it only after what does not need
+            // it: the frame, the bounce's numbers, and where the light samples land.
+            self.prefetch_texel(&material.bsdf, &surface);
             let frame = Frame::from_normal(surface.shading_normal);
             let wo = frame.to_local(-ray.dir);
             let u = BounceNumbers::draw(sampler);
+            let shadows = effects.shadows && !material.bsdf.is_delta();
+            let lights = if shadows {
+                self.sample_lights(&surface.at, moment, (u.light_choice, u.light), stats)
+            } else {
+                LightSamples::default()
+            };
+            let bsdf = spectrum.bsdf(self.resolve(&material.bsdf, &surface));
 
-            if effects.shadows && !bsdf.is_delta() {
+            if shadows {
                 let scatter = SurfaceScatter {
                     bsdf: &bsdf,
                     frame: &frame,
                     wo,
                 };
                 radiance += self.weighed(beta, ratio)
-                    * self.direct_light(
+                    * self.direct_from(
+                        &lights,
                         &scatter,
                         &surface.at,
                         (medium, &spectrum),
@@ -455,6 +466,19 @@ impl World {
             *beta /= survive;
         }
         true
+    }
+
+    /// Asks for the texel [`World::resolve`] will read for `bsdf` at `surface`, if any.
+    fn prefetch_texel(&self, bsdf: &Bsdf, surface: &Surface) {
+        if let Bsdf::Diffuse {
+            texture: Some(texture),
+            ..
+        } = *bsdf
+            && self.effects.textures
+            && let Some(uv) = surface.uv
+        {
+            self.scene.textures[texture as usize].prefetch(uv);
+        }
     }
 
     fn resolve(&self, bsdf: &Bsdf, surface: &Surface) -> Bsdf {
