@@ -301,12 +301,7 @@ impl Accel {
         if entry.count > 0 {
             // A group is three whole lines (`Quad` is aligned to them); a leaf of five or more
             // triangles has a second group, tested in the same step with AVX.
-            let start = self
-                .wide
-                .quads
-                .as_ptr()
-                .wrapping_add(entry.child as usize)
-                .cast::<u8>();
+            let start = address_of(&self.wide.quads, entry.child);
             prefetch(start);
             prefetch(start.wrapping_add(64));
             prefetch(start.wrapping_add(128));
@@ -316,18 +311,20 @@ impl Accel {
                 prefetch(start.wrapping_add(320));
             }
         } else {
-            let start = self
-                .wide
-                .nodes
-                .as_ptr()
-                .wrapping_add(entry.child as usize)
-                .cast::<u8>();
+            let start = address_of(&self.wide.nodes, entry.child);
             prefetch(start);
             prefetch(start.wrapping_add(64));
             prefetch(start.wrapping_add(128));
             prefetch(start.wrapping_add(192));
         }
     }
+}
+
+/// Where `items[index]` starts, for a prefetch: computed without a bounds check, since a hint
+/// never reads (and never faults, even past the end).
+#[inline(always)]
+fn address_of<T>(items: &[T], index: u32) -> *const u8 {
+    items.as_ptr().wrapping_add(index as usize).cast()
 }
 
 impl Accel {
