@@ -378,8 +378,8 @@ impl World {
             if effects.dispersion && material.bsdf.is_dispersive() {
                 spectrum.disperse(sampler, &mut beta, &mut radiance);
             }
-            // A textured surface's texel is, on scenes whose textures outgrow the caches, a
-            // wait on main memory. Ask for it now, and read it only after what does not need
+            // A textured surface's texel is, on scenes whose textures outgrow a core's caches,
+            // a long wait on memory. Ask for it now, and read it only after what does not need
             // it: the frame, the bounce's numbers, and where the light samples land.
             self.prefetch_texel(&material.bsdf, &surface);
             let frame = Frame::from_normal(surface.shading_normal);

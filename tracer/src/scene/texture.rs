@@ -52,9 +52,9 @@ impl Texture {
     }
 
     /// Asks for the memory [`Texture::lookup`] of `uv` will read. On scenes whose textures
-    /// outgrow the caches (Sponza's), a texel read by a bounce lands anywhere in them and
-    /// waits on main memory; the integrator asks for it as soon as it knows `uv` and reads
-    /// it once other work has overlapped the wait. A hint only: it reads nothing.
+    /// outgrow a core's caches (Sponza's), a texel read by a bounce lands anywhere in them and
+    /// waits long on memory; the integrator asks for it as soon as it knows `uv` and reads it
+    /// once other work has overlapped the wait. A hint only: it reads nothing.
     #[inline]
     pub fn prefetch(&self, uv: Vec2) {
         crate::geometry::prefetch(self.srgb.as_ptr().wrapping_add(3 * self.nearest(uv)));
