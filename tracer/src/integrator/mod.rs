@@ -50,7 +50,7 @@ use crate::lights::{EnvironmentSampling, Lights};
 use crate::material::{Bsdf, Frame};
 use crate::medium::{Flight, hero_channel, mean_ratio, sample_henyey_greenstein};
 use crate::sampler::PixelSampler;
-use crate::scene::Scene;
+use crate::scene::{Scene, Texture};
 use crate::spectrum::{PathSpectrum, SpectralSampling};
 use direct::{LightSamples, power_heuristic};
 use glam::Vec3;
@@ -470,29 +470,30 @@ impl World {
 
     /// Asks for the texel [`World::resolve`] will read for `bsdf` at `surface`, if any.
     fn prefetch_texel(&self, bsdf: &Bsdf, surface: &Surface) {
-        if let Bsdf::Diffuse {
-            texture: Some(texture),
-            ..
-        } = *bsdf
-            && self.effects.textures
-            && let Some(uv) = surface.uv
-        {
-            self.scene.textures[texture as usize].prefetch(uv);
+        if let (Some(texture), Some(uv)) = (self.texture(bsdf), surface.uv) {
+            texture.prefetch(uv);
         }
     }
 
     fn resolve(&self, bsdf: &Bsdf, surface: &Surface) -> Bsdf {
+        match self.texture(bsdf) {
+            Some(texture) => {
+                let texel = surface.uv.map_or(Vec3::ONE, |uv| texture.lookup(uv));
+                bsdf.with_texture_value(texel)
+            }
+            None => *bsdf,
+        }
+    }
+
+    /// The texture `bsdf` reads its albedo from, where textures are simulated: the one owner
+    /// of that rule for [`World::prefetch_texel`] and [`World::resolve`].
+    fn texture(&self, bsdf: &Bsdf) -> Option<&Texture> {
         match *bsdf {
             Bsdf::Diffuse {
                 texture: Some(texture),
                 ..
-            } if self.effects.textures => {
-                let texel = surface.uv.map_or(Vec3::ONE, |uv| {
-                    self.scene.textures[texture as usize].lookup(uv)
-                });
-                bsdf.with_texture_value(texel)
-            }
-            other => other,
+            } if self.effects.textures => Some(&self.scene.textures[texture as usize]),
+            _ => None,
         }
     }
 }
