@@ -37,35 +37,44 @@ impl Accel {
         let mut found = false;
         let mut g = 0;
         while g < groups {
-            // Only a leaf's last group is partial, so a pair's first group is full: counting
-            // a pair's lanes up to a stop counts what testing its groups one by one counts.
-            let (stopped, step) = if B::PAIRS && g + 1 < groups {
-                let pair = &quads[g..g + 2];
-                let hits = B::intersect_pair(quad_ray, &pair[0], &pair[1]);
-                let stopped = self
-                    .offer_lanes::<ANY_HIT, 8>(&hits, pair, sheared, closest, &mut found, stats);
-                (stopped, pair)
+            let step = if B::PAIRS && g + 1 < groups { 2 } else { 1 };
+            let stop = if step == 2 {
+                let hits = B::intersect_pair(quad_ray, &quads[g], &quads[g + 1]);
+                self.offer_lanes::<ANY_HIT, 8>(
+                    &hits,
+                    &quads[g..g + 2],
+                    sheared,
+                    closest,
+                    &mut found,
+                )
             } else {
-                let single = &quads[g..g + 1];
-                let hits = quad_ray.intersect(&single[0]);
-                let stopped = self.offer_lanes::<ANY_HIT, LANES>(
-                    &hits, single, sheared, closest, &mut found, stats,
-                );
-                (stopped, single)
+                let hits = quad_ray.intersect(&quads[g]);
+                self.offer_lanes::<ANY_HIT, LANES>(
+                    &hits,
+                    &quads[g..g + 1],
+                    sheared,
+                    closest,
+                    &mut found,
+                )
             };
-            if stopped {
+            if let Some(lane) = stop {
+                // Only a leaf's last group is partial, so the groups before this step are
+                // full: this counts what testing one triangle after another up to the stop
+                // counts.
+                stats.triangles += (g * LANES) as u64 + u64::from(lane) + 1;
                 return true;
             }
-            g += step.len();
-            stats.triangles += step.iter().map(|q| u64::from(q.len)).sum::<u64>();
+            g += step;
         }
+        // Every group tested: the leaf's triangles, counted once rather than group by group.
+        stats.triangles += u64::from(count);
         found
     }
 
     /// Offers the candidate lanes of `hits` (lane `i` is lane `i % 4` of `groups[i / 4]`) to
     /// `closest`, lowest lane first: a lane settled in SIMD with its hit, the others through
-    /// the scalar test. Sets `found` when one is kept; returns whether an any-hit query stops
-    /// here, having counted the lanes up to the stopping one as tested.
+    /// the scalar test. Sets `found` when one is kept; returns the lane where an any-hit query
+    /// stops.
     #[inline(always)]
     fn offer_lanes<const ANY_HIT: bool, const N: usize>(
         &self,
@@ -74,8 +83,7 @@ impl Accel {
         sheared: &ShearedRay,
         closest: &mut Closest,
         found: &mut bool,
-        stats: &mut TraversalStats,
-    ) -> bool {
+    ) -> Option<u32> {
         let mut candidates = hits.candidates;
         while candidates != 0 {
             let lane = candidates.trailing_zeros();
@@ -92,13 +100,12 @@ impl Accel {
             if kept {
                 *found = true;
                 if ANY_HIT {
-                    stats.triangles += u64::from(lane + 1);
-                    return true;
+                    return Some(lane);
                 }
                 self.prefetch_hit(original);
             }
         }
-        false
+        None
     }
 }
 

@@ -26,7 +26,7 @@
 //! NaN); a NaN in any of their inputs makes the lane's `t` NaN, which goes to the scalar test.
 //! So no hit changes: tests compare every lane with the scalar test.
 
-use super::triangle::{ShearedRay, TriangleHit, gamma};
+use super::triangle::{AXES, ShearedRay, TriangleHit, gamma};
 use glam::Vec3;
 use wide::{CmpEq, CmpGe, CmpGt, CmpLe, CmpLt, f32x4};
 
@@ -83,29 +83,23 @@ impl Quad {
     }
 }
 
-/// The per-ray part of the test: the scalar test's permutation, origin and shear, splatted.
+/// The per-ray part of the test: the scalar test's permutation, origin and shear. Kept as
+/// scalars and splatted where a test uses them: a splat from memory is one instruction, as
+/// loading a splat kept here would be, and a ray that tests few triangles (most of them, on
+/// small scenes) does not pay for splats it never uses.
 pub(super) struct QuadRay {
     /// Which input axes become x, y and z.
     axes: [usize; 3],
-    origin: [f32x4; 3],
-    sx: f32x4,
-    sy: f32x4,
-    sz: f32x4,
-    /// The same origin and shear as scalars (`sx`, `sy`, `sz`), which the eight-lane test of
-    /// `quad_avx.rs` splats into its own registers.
+    /// The permuted origin, then the shear (`sx`, `sy`, `sz`), as `ShearedRay` has them.
     pub(super) scalars: [f32; 6],
 }
 
 impl QuadRay {
+    #[inline(always)]
     pub(super) fn new(sheared: &ShearedRay) -> Self {
-        let kz = sheared.kz;
         let o = sheared.origin;
         QuadRay {
-            axes: [(kz + 1) % 3, (kz + 2) % 3, kz],
-            origin: [o.x, o.y, o.z].map(f32x4::splat),
-            sx: f32x4::splat(sheared.sx),
-            sy: f32x4::splat(sheared.sy),
-            sz: f32x4::splat(sheared.sz),
+            axes: AXES[sheared.kz],
             scalars: [o.x, o.y, o.z, sheared.sx, sheared.sy, sheared.sz],
         }
     }
@@ -120,13 +114,14 @@ impl QuadRay {
     #[inline(always)]
     pub(super) fn intersect(&self, quad: &Quad) -> QuadHits {
         let [kx, ky, kz] = self.axes;
+        let [ox, oy, oz, sx, sy, sz] = self.scalars.map(f32x4::splat);
         // The scalar `transform` of each permuted vertex: `v = p - origin`, then
         // `(v.x + sx * v.z, v.y + sy * v.z, v.z)`.
         let sheared = |v: usize| {
-            let x = quad.p[v][kx] - self.origin[0];
-            let y = quad.p[v][ky] - self.origin[1];
-            let z = quad.p[v][kz] - self.origin[2];
-            (x + self.sx * z, y + self.sy * z, z)
+            let x = quad.p[v][kx] - ox;
+            let y = quad.p[v][ky] - oy;
+            let z = quad.p[v][kz] - oz;
+            (x + sx * z, y + sy * z, z)
         };
         let (p0, p1, p2) = (sheared(0), sheared(1), sheared(2));
         // The scalar `edge_function(a, b)` in f32: `a.x * b.y - a.y * b.x`.
@@ -146,9 +141,9 @@ impl QuadRay {
         let zero_edge = e0.cmp_eq(zero) | e1.cmp_eq(zero) | e2.cmp_eq(zero);
 
         let det = e0 + e1 + e2;
-        let z0 = p0.2 * self.sz;
-        let z1 = p1.2 * self.sz;
-        let z2 = p2.2 * self.sz;
+        let z0 = p0.2 * sz;
+        let z1 = p1.2 * sz;
+        let z2 = p2.2 * sz;
         let t_scaled = e0 * z0 + e1 * z1 + e2 * z2;
         let behind =
             (det.cmp_lt(zero) & t_scaled.cmp_ge(zero)) | (det.cmp_gt(zero) & t_scaled.cmp_le(zero));

@@ -94,13 +94,14 @@ impl ShearedRay {
         } else {
             2
         };
-        let kx = (kz + 1) % 3;
-        let ky = (kx + 1) % 3;
-        let d = ray.dir;
+        // Indexing arrays by a table, rather than `permute`'s match and glam's checked
+        // indexing, keeps this per-ray set-up free of branches; the values are the same.
+        let [kx, ky, _] = AXES[kz];
+        let (o, d) = (ray.origin.to_array(), ray.dir.to_array());
         ShearedRay {
             kz,
-            origin: permute(ray.origin, kz),
-            dir: permute(d, kz),
+            origin: Vec3::new(o[kx], o[ky], o[kz]),
+            dir: Vec3::new(d[kx], d[ky], d[kz]),
             sx: -d[kx] / d[kz],
             sy: -d[ky] / d[kz],
             sz: 1.0 / d[kz],
@@ -211,6 +212,10 @@ impl ShearedRay {
         (t > 0.0 && t.is_finite()).then_some(t)
     }
 }
+
+/// The axes that become x, y and z for each `ShearedRay::kz`: x and y follow z cyclically,
+/// as [`permute`] moves them.
+pub(super) const AXES: [[usize; 3]; 3] = [[1, 2, 0], [2, 0, 1], [0, 1, 2]];
 
 /// `v` with axis `kz` moved to z and the others following cyclically.
 fn permute(v: Vec3, kz: usize) -> Vec3 {
