@@ -347,6 +347,10 @@ fn brute_force<const ANY_HIT: bool>(triangles: &[Triangle], ray: &Ray) -> Option
 /// The closest hit found so far, and the rule by which a new hit replaces it.
 pub(super) struct Closest {
     pub(super) best: Option<Hit>,
+    /// The end of the search interval: `best`'s `t`, or the ray's own `t_max` while there is
+    /// no hit. Kept beside `best` rather than read from it, which cost a test of the option at
+    /// every node a traversal culls against it.
+    t_max: f32,
     ray_t_max: f32,
     /// For occlusion queries: a hit counts only if its `t` plus its error bound is below the
     /// ray's `t_max` (see [`Accel::occluded`]).
@@ -357,6 +361,7 @@ impl Closest {
     pub(super) fn new(ray: &Ray, certain: bool) -> Self {
         Closest {
             best: None,
+            t_max: ray.t_max,
             ray_t_max: ray.t_max,
             certain,
         }
@@ -365,7 +370,7 @@ impl Closest {
     /// The current end of the search interval: the best `t`, or the ray's own `t_max`.
     #[inline(always)]
     pub(super) fn t_max(&self) -> f32 {
-        self.best.map_or(self.ray_t_max, |h| h.t)
+        self.t_max
     }
 
     /// Tests one triangle and keeps its hit if closer; returns whether it was kept. A hit
@@ -397,6 +402,7 @@ impl Closest {
             Some(best) => h.t < best.t || (h.t == best.t && triangle < best.triangle),
         };
         if better {
+            self.t_max = h.t;
             self.best = Some(Hit {
                 t: h.t,
                 triangle,
