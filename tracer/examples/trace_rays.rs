@@ -62,7 +62,7 @@ fn main() {
             .find(|q| format!("{q:?}").eq_ignore_ascii_case(&a.replace('-', "")))
     });
     let files = if quality.is_some() { 4 } else { 3 };
-    if args.len() < files + 2 || (args.len() - files) % 2 != 0 {
+    if args.len() < files + 2 || !(args.len() - files).is_multiple_of(2) {
         eprintln!(
             "usage: trace_rays SCENE.toml ROUNDS [QUALITY] FILE.rays closest|any [FILE.rays closest|any ...]"
         );
