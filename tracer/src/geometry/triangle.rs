@@ -254,6 +254,19 @@ fn edge_function_f64(a: Vec3, b: Vec3) -> f32 {
 mod tests {
     use super::*;
 
+    #[test]
+    fn the_axes_table_moves_coordinates_as_permute_does() {
+        // Two owners of one permutation: the table the per-ray set-up and the SIMD tests index
+        // by, and the match the scalar test permutes whole vertices with.
+        let v = Vec3::new(1.0, 2.0, 3.0);
+        for kz in 0..3 {
+            let [x, y, z] = AXES[kz];
+            let a = v.to_array();
+            assert_eq!(Vec3::new(a[x], a[y], a[z]), permute(v, kz), "kz {kz}");
+            assert_eq!(z, kz, "z is the axis kz names");
+        }
+    }
+
     fn ray(origin: Vec3, dir: Vec3) -> Ray {
         Ray {
             origin,
