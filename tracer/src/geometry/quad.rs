@@ -114,7 +114,11 @@ impl QuadRay {
     #[inline(always)]
     pub(super) fn intersect(&self, quad: &Quad) -> QuadHits {
         let [kx, ky, kz] = self.axes;
-        let [ox, oy, oz, sx, sy, sz] = self.scalars.map(f32x4::splat);
+        // Splatted one by one: through an array's `map` they were a call (its `try_map`, left
+        // out of line in the AVX traversal), one per group tested.
+        let [ox, oy, oz, sx, sy, sz] = self.scalars;
+        let (ox, oy, oz) = (f32x4::splat(ox), f32x4::splat(oy), f32x4::splat(oz));
+        let (sx, sy, sz) = (f32x4::splat(sx), f32x4::splat(sy), f32x4::splat(sz));
         // The scalar `transform` of each permuted vertex: `v = p - origin`, then
         // `(v.x + sx * v.z, v.y + sy * v.z, v.z)`.
         let sheared = |v: usize| {
