@@ -77,7 +77,7 @@ impl World {
     /// The triangle `hit` names and where it is at `moment`.
     // Inlined: its result, returned through memory, stalled on store forwarding at every
     // hit (docs/bench.md, issue 12, eighth round).
-    #[inline]
+    #[inline(always)]
     pub(super) fn placed<'a>(&'a self, hit: &Hit, moment: &'a Moment) -> Placed<'a> {
         match self.motion.locate(hit.triangle) {
             None => {
