@@ -381,7 +381,7 @@ impl World {
             // A textured surface's texel is, on scenes whose textures outgrow a core's caches,
             // a long wait on memory. Ask for it now, and read it only after what does not need
             // it: the frame, the bounce's numbers, and where the light samples land.
-            self.prefetch_texel(&material.bsdf, &surface);
+            let texel = self.texel_ahead(&material.bsdf, &surface);
             let frame = Frame::from_normal(surface.shading_normal);
             let wo = frame.to_local(-ray.dir);
             let u = BounceNumbers::draw(sampler);
@@ -391,7 +391,7 @@ impl World {
             } else {
                 LightSamples::default()
             };
-            let bsdf = spectrum.bsdf(self.resolve(&material.bsdf, &surface));
+            let bsdf = spectrum.bsdf(resolve(&material.bsdf, texel));
 
             if shadows {
                 let scatter = SurfaceScatter {
@@ -468,32 +468,32 @@ impl World {
         true
     }
 
-    /// Asks for the texel [`World::resolve`] will read for `bsdf` at `surface`, if any.
-    fn prefetch_texel(&self, bsdf: &Bsdf, surface: &Surface) {
-        if let (Some(texture), Some(uv)) = (self.texture(bsdf), surface.uv) {
-            texture.prefetch(uv);
-        }
-    }
-
-    fn resolve(&self, bsdf: &Bsdf, surface: &Surface) -> Bsdf {
-        match self.texture(bsdf) {
-            Some(texture) => {
-                let texel = surface.uv.map_or(Vec3::ONE, |uv| texture.lookup(uv));
-                bsdf.with_texture_value(texel)
-            }
-            None => *bsdf,
-        }
-    }
-
-    /// The texture `bsdf` reads its albedo from, where textures are simulated: the one owner
-    /// of that rule for [`World::prefetch_texel`] and [`World::resolve`].
-    fn texture(&self, bsdf: &Bsdf) -> Option<&Texture> {
-        match *bsdf {
+    /// The texel a textured `bsdf` reads at `surface`, where textures are simulated: its
+    /// texture and index (none for a surface without coordinates, which reads white), found
+    /// once here and asked for from memory now, so that [`resolve`] reads it after other work
+    /// has overlapped the wait.
+    fn texel_ahead(&self, bsdf: &Bsdf, surface: &Surface) -> Option<(&Texture, Option<usize>)> {
+        let texture = match *bsdf {
             Bsdf::Diffuse {
                 texture: Some(texture),
                 ..
-            } if self.effects.textures => Some(&self.scene.textures[texture as usize]),
-            _ => None,
+            } if self.effects.textures => &self.scene.textures[texture as usize],
+            _ => return None,
+        };
+        let index = surface.uv.map(|uv| texture.nearest(uv));
+        if let Some(index) = index {
+            texture.prefetch(index);
         }
+        Some((texture, index))
+    }
+}
+
+/// `bsdf` with the texel [`World::texel_ahead`] found for it, if any.
+fn resolve(bsdf: &Bsdf, texel: Option<(&Texture, Option<usize>)>) -> Bsdf {
+    match texel {
+        Some((texture, index)) => {
+            bsdf.with_texture_value(index.map_or(Vec3::ONE, |index| texture.texel(index)))
+        }
+        None => *bsdf,
     }
 }

@@ -51,18 +51,18 @@ impl Texture {
         self.texel(self.nearest(uv))
     }
 
-    /// Asks for the memory [`Texture::lookup`] of `uv` will read. On scenes whose textures
+    /// Asks for the memory of texel `index` ([`Texture::nearest`]). On scenes whose textures
     /// outgrow a core's caches (Sponza's), a texel read by a bounce lands anywhere in them and
-    /// waits long on memory; the integrator asks for it as soon as it knows `uv` and reads it
-    /// once other work has overlapped the wait. A hint only: it reads nothing.
+    /// waits long on memory; the integrator asks for it as soon as it knows the coordinates and
+    /// reads it once other work has overlapped the wait. A hint only: it reads nothing.
     #[inline]
-    pub fn prefetch(&self, uv: Vec2) {
-        crate::geometry::prefetch(self.srgb.as_ptr().wrapping_add(3 * self.nearest(uv)));
+    pub fn prefetch(&self, index: usize) {
+        crate::geometry::prefetch(self.srgb.as_ptr().wrapping_add(3 * index));
     }
 
-    /// The index of the texel nearest `uv`, wrapping around.
+    /// The index of the texel nearest `uv`, wrapping around: what [`Texture::lookup`] reads.
     #[inline]
-    fn nearest(&self, uv: Vec2) -> usize {
+    pub fn nearest(&self, uv: Vec2) -> usize {
         let u = uv.x - uv.x.floor();
         let v = uv.y - uv.y.floor();
         let x = ((u * self.width as f32) as u32).min(self.width - 1);
