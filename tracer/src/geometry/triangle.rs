@@ -259,8 +259,7 @@ mod tests {
         // Two owners of one permutation: the table the per-ray set-up and the SIMD tests index
         // by, and the match the scalar test permutes whole vertices with.
         let v = Vec3::new(1.0, 2.0, 3.0);
-        for kz in 0..3 {
-            let [x, y, z] = AXES[kz];
+        for (kz, [x, y, z]) in AXES.into_iter().enumerate() {
             let a = v.to_array();
             assert_eq!(Vec3::new(a[x], a[y], a[z]), permute(v, kz), "kz {kz}");
             assert_eq!(z, kz, "z is the axis kz names");
