@@ -5,6 +5,7 @@
 //! any partition add up to one map for the whole frame; the balancer predicts the next frame from
 //! it. A block cut by tile borders simply receives contributions from several tiles.
 
+use crate::geometry::{PACKET, Ray};
 use crate::integrator::{PathStats, World};
 use crate::sampler::PixelSampler;
 use serde::{Deserialize, Serialize};
@@ -95,33 +96,57 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
         for x in rect.x..rect.x + rect.w {
             let mut pixel_stats = PathStats::default();
             let mut sum = glam::Vec3::ZERO;
-            for sample in 0..spp {
-                let mut sampler = PixelSampler::new(settings.seed, frame, x, y, sample);
-                let jitter = sampler.next_2d();
-                let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
-                let time = if blur {
-                    shutter.time(frame, sampler.time())
-                } else {
-                    instant
-                };
-                let camera = if camera_moves {
-                    track.at_time(time).rays(settings.width, settings.height)
-                } else {
-                    still
-                };
-                // A pinhole never draws the lens's numbers, so it traces exactly the rays it
-                // traced before lenses existed.
-                let lens = world.effects.depth_of_field && camera.has_lens();
-                let ray = if lens {
-                    camera.ray_through_lens(px, py, sampler.lens())
-                } else {
-                    camera.ray(px, py)
-                };
-                let radiance = world.radiance(ray, time, &mut sampler, &mut pixel_stats);
-                if radiance.is_finite() {
-                    sum += radiance;
-                } else {
-                    pixel_stats.invalid_samples += 1;
+            // The pixel's samples in packets of up to eight, whose camera rays the world may
+            // trace together; each sample's radiance is added in sample order, as ever.
+            for first in (0..spp).step_by(PACKET) {
+                let n = (spp - first).min(PACKET as u32) as usize;
+                let mut samples: [Option<(PixelSampler, f64)>; PACKET] = [const { None }; PACKET];
+                let mut rays = [UNUSED_RAY; PACKET];
+                for (k, (slot, ray)) in samples.iter_mut().zip(&mut rays).take(n).enumerate() {
+                    let mut sampler =
+                        PixelSampler::new(settings.seed, frame, x, y, first + k as u32);
+                    let jitter = sampler.next_2d();
+                    let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
+                    let time = if blur {
+                        shutter.time(frame, sampler.time())
+                    } else {
+                        instant
+                    };
+                    let camera = if camera_moves {
+                        track.at_time(time).rays(settings.width, settings.height)
+                    } else {
+                        still
+                    };
+                    // A pinhole never draws the lens's numbers, so it traces exactly the rays
+                    // it traced before lenses existed.
+                    let lens = world.effects.depth_of_field && camera.has_lens();
+                    *ray = if lens {
+                        camera.ray_through_lens(px, py, sampler.lens())
+                    } else {
+                        camera.ray(px, py)
+                    };
+                    *slot = Some((sampler, time));
+                }
+                let mut hits = [None; PACKET];
+                let found =
+                    world.camera_hits(&rays[..n], &mut hits[..n], &mut pixel_stats.traversal);
+                for k in 0..n {
+                    let (mut sampler, time) = samples[k]
+                        .take()
+                        .expect("the first n slots were filled just above");
+                    let first_hit = found.then_some(hits[k]);
+                    let radiance = world.radiance_from(
+                        rays[k],
+                        first_hit,
+                        time,
+                        &mut sampler,
+                        &mut pixel_stats,
+                    );
+                    if radiance.is_finite() {
+                        sum += radiance;
+                    } else {
+                        pixel_stats.invalid_samples += 1;
+                    }
                 }
             }
             let value = sum / spp as f32;
@@ -143,6 +168,13 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
         stats,
     }
 }
+
+/// What fills a packet's slots past its samples; never traced.
+const UNUSED_RAY: Ray = Ray {
+    origin: glam::Vec3::ZERO,
+    dir: glam::Vec3::Z,
+    t_max: 0.0,
+};
 
 /// A whole frame being assembled from tiles: pixels and the per-block cost map.
 #[derive(Clone, Debug, PartialEq)]

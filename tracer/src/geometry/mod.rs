@@ -13,6 +13,10 @@
 //! - `wide`: the tree of 8-wide nodes, and our robust traversal of it: what renders use.
 //! - `collapse`: which binary nodes become 8-wide nodes (least summed surface area, Ylitie et
 //!   al. 2017), and the leaves packed for the SIMD tests.
+//! - `packet`: up to eight rays that travel side by side (a pixel's camera rays) walked
+//!   through the wide tree together, each tested as it would be alone ([`PACKET`]).
+//! - `packet_box`: a packet's box tests: one box against eight rays, exactly as each alone,
+//!   and a conservative filter of a node's boxes against the interval the rays span.
 //! - `packed_hit`: the wide traversal's answer in two registers, so that it reaches the
 //!   renderer without a trip through memory.
 //! - `leaf`: a leaf's triangles through the SIMD filters (four lanes, or eight with AVX) and
@@ -41,6 +45,8 @@ mod motion;
 mod node8;
 mod offset;
 mod packed_hit;
+mod packet;
+mod packet_box;
 mod quad;
 #[cfg(target_arch = "x86_64")]
 mod quad_avx;
@@ -54,6 +60,7 @@ pub use motion::{Moment, MotionAccel, MovingTriangle, placed_point};
 pub use offset::{
     OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, plane_normal, spawn_ray, spawn_ray_to,
 };
+pub use packet::PACKET;
 pub use triangle::{TriangleHit, intersect_triangle, is_degenerate};
 pub use wide::BoxSimd;
 

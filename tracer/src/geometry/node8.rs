@@ -21,6 +21,9 @@
 //! `tracer/tests/wide_traversal.rs` renders through both and compares.
 
 use super::Ray;
+use super::packet_box::{PacketBound, PacketRays, enter_bound_portable, enter_child_portable};
+#[cfg(target_arch = "x86_64")]
+use super::packet_box::{enter_bound_avx, enter_child_avx};
 use super::quad::{LaneHits, Quad, QuadRay};
 use super::traverse::FAR_SCALE;
 use wide::{CmpGt, CmpLe, CmpLt, f32x4};
@@ -77,12 +80,12 @@ impl Node8 {
 /// A ray prepared for 8-wide slab tests: the binary test's origin and reciprocal direction,
 /// and for each axis which of a box's planes is near.
 pub(super) struct WideRay {
-    origin: [f32; 3],
-    inv_dir: [f32; 3],
+    pub(super) origin: [f32; 3],
+    pub(super) inv_dir: [f32; 3],
     /// Per axis, the index in [`Node8::bounds`] of the near plane and of the far plane: the max
     /// when the reciprocal direction is negative (including -0.0's -inf), else the min.
-    near: [usize; 3],
-    far: [usize; 3],
+    pub(super) near: [usize; 3],
+    pub(super) far: [usize; 3],
 }
 
 /// Which instructions test a node's boxes, and a leaf's triangles eight at a time. The
@@ -96,6 +99,26 @@ pub(super) trait BoxTest {
     /// For each child of `node`, whether the ray enters its box within `(0, t_max]` (bit `i`)
     /// and the entry distance: lane by lane, the binary traversal's `SlabRay::enter`.
     fn enter(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDTH]);
+
+    /// For each ray of `rays` (bit `r`), whether it enters the box of `node`'s child `child`
+    /// within `(0, end[r]]`, and its entry distance: lane by lane, what [`BoxTest::enter`]
+    /// computes for that box and that ray, to the bit (the same operations on the same values
+    /// in the same order; only the lanes hold rays instead of boxes).
+    fn enter_child(
+        rays: &PacketRays,
+        node: &Node8,
+        child: usize,
+        end: &[f32; WIDTH],
+    ) -> (u32, [f32; WIDTH]);
+
+    /// A superset of the children of `node` that some ray of the packet `bound` describes
+    /// enters within `(0, end]`: bit `i` clear only where no such ray can enter child `i`'s
+    /// box. Why it is conservative: rounding is monotonic, so each ray's entry distance on
+    /// each axis, `(plane - origin) * inv_dir` rounded twice, is at least the same expression
+    /// at the corner of the packet's interval that makes it least (and its exit distance at
+    /// most the one at the corner that makes it greatest); with finite reciprocals no NaN
+    /// arises. A filter only: what it lets through is tested exactly, ray by ray.
+    fn enter_bound(bound: &PacketBound, node: &Node8, end: f32) -> u32;
 
     /// The SIMD triangle test of two consecutive groups of a leaf, `a` in lanes 0 to 3 and `b`
     /// in lanes 4 to 7: [`QuadRay::intersect_pair`], lane for lane.
@@ -145,6 +168,21 @@ impl BoxTest for Portable {
         t_near[4..].copy_from_slice(&t_high);
         ((low | (high << 4)) & u32::from(node.valid), t_near)
     }
+
+    #[inline(always)]
+    fn enter_child(
+        rays: &PacketRays,
+        node: &Node8,
+        child: usize,
+        end: &[f32; WIDTH],
+    ) -> (u32, [f32; WIDTH]) {
+        enter_child_portable(rays, node, child, end)
+    }
+
+    #[inline(always)]
+    fn enter_bound(bound: &PacketBound, node: &Node8, end: f32) -> u32 {
+        enter_bound_portable(bound, node, end)
+    }
 }
 
 /// AVX's eight lanes. Only ever used where the processor was found to have AVX.
@@ -166,6 +204,23 @@ impl BoxTest for Avx {
         // SAFETY: `Avx` is only used by `Accel::traverse_avx`, which runs only where
         // `is_x86_feature_detected!("avx")` said yes.
         unsafe { enter_avx(ray, node, t_max) }
+    }
+
+    #[inline(always)]
+    fn enter_child(
+        rays: &PacketRays,
+        node: &Node8,
+        child: usize,
+        end: &[f32; WIDTH],
+    ) -> (u32, [f32; WIDTH]) {
+        // SAFETY: as for `enter` above (`Accel::packet_avx`).
+        unsafe { enter_child_avx(rays, node, child, end) }
+    }
+
+    #[inline(always)]
+    fn enter_bound(bound: &PacketBound, node: &Node8, end: f32) -> u32 {
+        // SAFETY: as for `enter` above.
+        unsafe { enter_bound_avx(bound, node, end) }
     }
 }
 

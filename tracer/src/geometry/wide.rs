@@ -95,7 +95,7 @@ struct StackEntry {
 /// the nearest at once, so each level of the current path leaves at most seven, and the
 /// deepest node briefly eight; obvhs's trees of real scenes collapse to far fewer than 30
 /// levels.
-const INLINE_STACK: usize = (WIDTH - 1) * 30 + 1;
+pub(super) const INLINE_STACK: usize = (WIDTH - 1) * 30 + 1;
 
 impl Accel {
     /// Closest hit (or, with `ANY_HIT`, the first certain hit found) by the wide traversal,
@@ -230,7 +230,7 @@ impl Accel {
                         count: u32::from(node.count[lane]),
                         t_near: t_near[lane],
                     };
-                    self.prefetch_child(entry);
+                    self.prefetch_child(entry.child, entry.count);
                     if ANY_HIT && entry.count > 0 {
                         if self.test_leaf::<ANY_HIT, B>(
                             entry.child,
@@ -295,23 +295,23 @@ impl Accel {
     /// children at once lets their misses overlap. A prefetch reads nothing into the
     /// computation, so it cannot change a result.
     #[inline(always)]
-    fn prefetch_child(&self, entry: StackEntry) {
+    pub(super) fn prefetch_child(&self, child: u32, count: u32) {
         // Written out line by line: a loop over a count costs more instructions than the
         // prefetches themselves, once per entered child.
-        if entry.count > 0 {
+        if count > 0 {
             // A group is three whole lines (`Quad` is aligned to them); a leaf of five or more
             // triangles has a second group, tested in the same step with AVX.
-            let start = address_of(&self.wide.quads, entry.child);
+            let start = address_of(&self.wide.quads, child);
             prefetch(start);
             prefetch(start.wrapping_add(64));
             prefetch(start.wrapping_add(128));
-            if entry.count as usize > LANES {
+            if count as usize > LANES {
                 prefetch(start.wrapping_add(192));
                 prefetch(start.wrapping_add(256));
                 prefetch(start.wrapping_add(320));
             }
         } else {
-            let start = address_of(&self.wide.nodes, entry.child);
+            let start = address_of(&self.wide.nodes, child);
             prefetch(start);
             prefetch(start.wrapping_add(64));
             prefetch(start.wrapping_add(128));

@@ -7,9 +7,16 @@
 //! Hits on moving triangles are numbered after the static ones, so the tie rule (the lower
 //! index wins) carries over, and the geometry of such a hit is placed in the world at the
 //! path's time, with the error bound that spawning from it needs.
+//!
+//! A pixel's camera rays leave the same point (or the same lens) in nearly the same direction,
+//! so their first hits are found together, up to eight samples at a time
+//! ([`World::camera_hits`], `crate::geometry`'s packets): each ray is tested exactly as it
+//! would be alone, so the hits are the same bits. Packets are made of one pixel's samples, never
+//! of neighbouring pixels, so that what a pixel counts as work depends on the pixel alone, not
+//! on the tile it falls in: the cost map stays the same for every partition.
 
 use super::World;
-use crate::geometry::{Hit, Moment, Ray, SurfacePoint, TraversalStats};
+use crate::geometry::{Hit, Moment, Ray, SurfacePoint, Traversal, TraversalStats};
 use crate::scene::{Placement, Triangle};
 use glam::{Vec2, Vec3};
 
@@ -32,7 +39,39 @@ pub(super) struct Placed<'a> {
     pub placement: Option<&'a Placement>,
 }
 
+/// How a pixel's camera rays meet the BVH (a comparison knob: both find the same hits).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum CameraRays {
+    /// Up to eight of a pixel's samples walked through the tree together
+    /// ([`crate::geometry::Accel::intersect_packet`]), where the default traversal is used and
+    /// nothing moves; one by one otherwise.
+    #[default]
+    Packets,
+    /// One by one, as every other ray.
+    OneByOne,
+}
+
 impl World {
+    /// The closest hits of a pixel's camera rays `rays` (at most [`crate::geometry::PACKET`]),
+    /// found together into `hits`, their work counted in `stats`; `false`, with nothing done,
+    /// where this world traces them one by one instead (then [`World::radiance`] finds each).
+    pub fn camera_hits(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        stats: &mut TraversalStats,
+    ) -> bool {
+        // Moving objects would be asked at each ray's own time after the tree: left to the
+        // single-ray path, as are the traversals kept for comparison.
+        let together = self.camera_rays == CameraRays::Packets
+            && self.traversal == Traversal::Robust
+            && self.motion.is_empty();
+        if together {
+            self.accel.intersect_packet(rays, hits, stats);
+        }
+        together
+    }
+
     /// The closest hit of `ray` at `moment`.
     #[inline]
     pub(super) fn closest(

@@ -18,7 +18,8 @@
 //! lights: [`AreaLightSampling`]); `scatter` (a BSDF or a phase function as next-event
 //! estimation sees it, the bounce's random numbers, which medium a path is in, and shadow-ray
 //! transmittance); `hits` (where rays meet the static and the moving geometry at the path's
-//! time, and the local geometry at a hit).
+//! time, a pixel's camera rays walked together, and the local geometry at a hit); `stats`
+//! (the per-sample counters, [`PathStats`]).
 //!
 //! Dispersion ([`crate::spectrum`]): a path is RGB until it meets dispersive glass, where it
 //! turns spectral; from then on every RGB value it meets goes through its [`PathSpectrum`],
@@ -43,8 +44,8 @@ pub const UNLIMITED_DEPTH: u32 = 1 << 16;
 
 use crate::effects::Effects;
 use crate::geometry::{
-    Accel, Moment, MotionAccel, OffsetMethod, Ray, SurfacePoint, Traversal, TraversalStats,
-    on_huge_pages, spawn_ray,
+    Accel, Hit, Moment, MotionAccel, OffsetMethod, Ray, SurfacePoint, Traversal, on_huge_pages,
+    spawn_ray,
 };
 use crate::lights::{EnvironmentSampling, Lights};
 use crate::material::{Bsdf, Frame};
@@ -60,8 +61,11 @@ use scatter::{BounceNumbers, Phase, SurfaceScatter};
 mod direct;
 mod hits;
 mod scatter;
+mod stats;
 
 pub use direct::AreaLightSampling;
+pub use hits::CameraRays;
+pub use stats::PathStats;
 
 /// A scene prepared for rendering: its acceleration structure, lights and effect set.
 pub struct World {
@@ -89,74 +93,9 @@ pub struct World {
     /// Which strategies find area lights: both, weighted (the default), or one alone
     /// (comparison knobs, [`AreaLightSampling`]).
     pub area_lights: AreaLightSampling,
-}
-
-/// Per-sample counters: the counted work that becomes a tile's cost, and the effect counters the
-/// tests read to check that absent effects cost nothing.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct PathStats {
-    /// BVH nodes and triangles the traversals of closest-hit and shadow rays visited.
-    pub traversal: TraversalStats,
-    /// Closest-hit rays (camera and bounce rays).
-    pub rays: u64,
-    /// Of those, the ones that hit a surface (and were shaded); the rest escaped.
-    pub hits: u64,
-    /// Occlusion rays towards sampled lights (and the closest-hit queries that stand in for
-    /// them where shadows cross interfaces).
-    pub shadow_rays: u64,
-    /// Lights sampled by next-event estimation (each may or may not need a shadow ray).
-    pub light_samples: u64,
-    /// BSDF samples that crossed a surface (refraction through glass).
-    pub refractions: u64,
-    /// Escaped rays that looked up the environment.
-    pub environment_lookups: u64,
-    /// Samples whose radiance came out non-finite and were dropped (a bug if ever non-zero).
-    pub invalid_samples: u64,
-    /// Free flights sampled through a medium (one per ray where media are tracked, vacuum
-    /// included).
-    pub flights: u64,
-    /// Of those, the ones that scattered in the medium (and were shaded there).
-    pub medium_scatters: u64,
-    /// Paths that ended spectral (met dispersive glass, or sampled wavelengths from the start).
-    pub spectral_paths: u64,
-}
-
-impl PathStats {
-    /// Adds `other`'s counts to these, as a tile sums its samples'.
-    pub fn add(&mut self, other: &PathStats) {
-        self.traversal.nodes += other.traversal.nodes;
-        self.traversal.triangles += other.traversal.triangles;
-        self.rays += other.rays;
-        self.hits += other.hits;
-        self.shadow_rays += other.shadow_rays;
-        self.light_samples += other.light_samples;
-        self.refractions += other.refractions;
-        self.environment_lookups += other.environment_lookups;
-        self.invalid_samples += other.invalid_samples;
-        self.flights += other.flights;
-        self.medium_scatters += other.medium_scatters;
-        self.spectral_paths += other.spectral_paths;
-    }
-
-    /// The deterministic cost of the work counted here, in abstract units of about one BVH node
-    /// visit: one per node visited and per triangle tested, 12 per ray that is shaded (a
-    /// closest-hit ray that hits a surface, or a scattering in a medium: BSDF or phase sampling
-    /// and light choice) and per shadow ray
-    /// (light sampling and the any-hit query's set-up), 4 per ray that escapes. The weights come
-    /// from timing every 16x16 tile of the shipped and shared scenes alone
-    /// (`cargo run --release -p sim --example fit_work`): a single charge of 16 for every ray
-    /// priced escaping rays like shaded ones, and the 95th-percentile tile of scenes with much
-    /// sky or background came out more than twice as slow as predicted; with these weights it is
-    /// within about +30% in every scene.
-    pub fn work(&self) -> u64 {
-        const SHADED: u64 = 12;
-        const ESCAPED: u64 = 4;
-        let escaped = self.rays - self.hits;
-        self.traversal.nodes
-            + self.traversal.triangles
-            + SHADED * (self.hits + self.shadow_rays + self.medium_scatters)
-            + ESCAPED * escaped
-    }
+    /// How a pixel's camera rays meet the BVH: walked together, up to eight samples at a time
+    /// (the default), or one by one (for comparison); the same hits either way.
+    pub camera_rays: CameraRays,
 }
 
 impl World {
@@ -192,6 +131,7 @@ impl World {
             offset: OffsetMethod::default(),
             spectral: SpectralSampling::default(),
             area_lights: AreaLightSampling::default(),
+            camera_rays: CameraRays::default(),
         }
     }
 
@@ -215,6 +155,19 @@ impl World {
     pub fn radiance(
         &self,
         ray: Ray,
+        time: f64,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        self.radiance_from(ray, None, time, sampler, stats)
+    }
+
+    /// [`World::radiance`], with the closest hit of `ray` already found where `first` is
+    /// `Some` (by [`World::camera_hits`], which counted its work).
+    pub fn radiance_from(
+        &self,
+        ray: Ray,
+        mut first: Option<Option<Hit>>,
         time: f64,
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
@@ -250,7 +203,10 @@ impl World {
             sampler.start_bounce(segment);
             segment += 1;
             stats.rays += 1;
-            let found = self.closest(&ray, moment, &mut stats.traversal);
+            let found = match first.take() {
+                Some(found) => found,
+                None => self.closest(&ray, moment, &mut stats.traversal),
+            };
             if effects.media {
                 stats.flights += 1;
             }

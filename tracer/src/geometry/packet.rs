@@ -1,0 +1,302 @@
+//! Closest hits of up to eight rays walked through the wide tree together: a packet. Meant for
+//! rays that travel side by side, as the camera rays of one pixel's samples do, so that each
+//! node on their common way is fetched from memory, tested and put on the stack once for all
+//! of them: each of a node's boxes is tested against the eight rays in one step
+//! ([`BoxTest::enter_child`]), where the single-ray traversal tests eight boxes against one.
+//! Rays whose directions do not share their signs (whose boxes' near planes differ) are not
+//! made into a packet: each is traced alone.
+//!
+//! **Exactness.** A packet changes only which nodes each ray is tested against and in which
+//! order, never how: lane `r` of a packet's box test computes exactly what the single-ray box
+//! test computes for ray `r` and that box, with the ray's own current end of search, and a
+//! leaf is tested for each ray by the very leaf test ([`Accel::test_leaf`], with its own
+//! sheared ray and its own [`Closest`]). A ray goes down to a child only if its own box test
+//! entered the child's box, and culling is conservative, so the leaf holding its closest hit
+//! is always tested for it. Since [`Closest`] breaks ties in `t` by triangle index, each ray's
+//! hit is the one the single-ray traversal (and brute force) finds, to the bit, whatever its
+//! companions. `tracer/tests/packet_traversal.rs` holds the two to each other ray by ray and
+//! image by image.
+//!
+//! Work is counted per ray, as done: a node's boxes for every ray that reached it, a leaf's
+//! triangles for every ray tested against it. It depends on the companions (the order of the
+//! walk is the packet's), so the renderer makes packets of one pixel's samples only.
+
+use super::bvh::{Accel, Closest};
+#[cfg(target_arch = "x86_64")]
+use super::node8::Avx;
+use super::node8::{BoxTest, Portable, WIDTH, WideRay};
+use super::packet_box::{PacketBound, PacketRays};
+use super::quad::QuadRay;
+use super::traverse::FAR_SCALE;
+use super::triangle::ShearedRay;
+use super::wide::{BoxSimd, INLINE_STACK};
+use super::{Hit, Ray, TraversalStats};
+use std::mem::MaybeUninit;
+
+/// The most rays in one packet: one bit each in a byte of ray masks.
+pub const PACKET: usize = 8;
+
+/// A child waiting on the packet's stack, or the one being visited.
+#[derive(Clone, Copy)]
+struct PacketEntry {
+    /// An inner node's index in `Bvh8::nodes`, or a leaf's first group in `Bvh8::quads`.
+    child: u32,
+    /// The leaf's triangles; 0 for an inner node.
+    count: u32,
+    /// Bit `r` set when ray `r` entered the child's box.
+    rays: u32,
+    /// The entry distance of the lowest of those rays, by which the stack is ordered.
+    order: f32,
+    /// Each ray's entry distance (meaningful for the rays in `rays`).
+    t_near: [f32; WIDTH],
+}
+
+impl Accel {
+    /// The closest hit of each of `rays` (one to [`PACKET`] of them) into the same slot of
+    /// `hits`, as [`Accel::intersect`] finds it, to the bit: by the wide traversal, the rays
+    /// walked together where their directions share their signs, else one by one. Worth it
+    /// for rays that travel side by side; any rays give the right hits.
+    pub fn intersect_packet(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        stats: &mut TraversalStats,
+    ) {
+        assert!(
+            !rays.is_empty() && rays.len() <= PACKET && hits.len() == rays.len(),
+            "a packet holds one to eight rays, with a slot for each one's hit"
+        );
+        if self.wide.nodes.is_empty() {
+            hits.fill(None);
+            return;
+        }
+        #[cfg(target_arch = "x86_64")]
+        let together = if self.wide.simd == BoxSimd::Avx {
+            // SAFETY: `simd` is `Avx` only where `is_x86_feature_detected!("avx")` said yes
+            // (`best_simd`, `Accel::set_box_simd`).
+            unsafe { self.packet_avx(rays, hits, stats) }
+        } else {
+            self.packet_portable(rays, hits, stats)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let together = self.packet_portable(rays, hits, stats);
+        if !together {
+            for (ray, hit) in rays.iter().zip(hits) {
+                *hit = self.intersect(ray, stats);
+            }
+        }
+    }
+
+    /// The packet walk with the portable box test (SSE on x86-64).
+    #[inline(never)]
+    fn packet_portable(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        stats: &mut TraversalStats,
+    ) -> bool {
+        self.packet_with::<Portable>(rays, hits, stats)
+    }
+
+    /// The packet walk compiled with AVX, as `Accel::traverse_avx` is and for the same reasons.
+    ///
+    /// # Safety
+    /// The processor must support AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline(never)]
+    unsafe fn packet_avx(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        stats: &mut TraversalStats,
+    ) -> bool {
+        self.packet_with::<Avx>(rays, hits, stats)
+    }
+
+    #[inline(always)]
+    fn packet_with<B: BoxTest>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        stats: &mut TraversalStats,
+    ) -> bool {
+        let mut counted = *stats;
+        let needed = (WIDTH - 1) * self.wide.depth + 1;
+        let together = if needed <= INLINE_STACK {
+            let mut stack = [MaybeUninit::<PacketEntry>::uninit(); INLINE_STACK];
+            self.packet_with_stack::<B>(rays, hits, &mut counted, &mut stack)
+        } else {
+            let mut stack = vec![MaybeUninit::uninit(); needed];
+            self.packet_with_stack::<B>(rays, hits, &mut counted, &mut stack)
+        };
+        *stats = counted;
+        together
+    }
+
+    /// The walk proper, in the single-ray traversal's order (`Accel::wide_with_stack`): a
+    /// node's entered children onto the stack sorted by entry distance, the nearest on top,
+    /// then on at the top. `stack` holds at least `7 * depth + 1` entries, as there. Returns
+    /// `false`, having done nothing, where the rays' directions do not share their signs.
+    #[inline(always)]
+    fn packet_with_stack<B: BoxTest>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        stats: &mut TraversalStats,
+        stack: &mut [MaybeUninit<PacketEntry>],
+    ) -> bool {
+        let last = rays.len() - 1;
+        let ray = |r: usize| &rays[r.min(last)];
+        let wide: [WideRay; PACKET] = std::array::from_fn(|r| WideRay::new(ray(r)));
+        let packet = PacketRays {
+            origin: [0, 1, 2].map(|axis| wide.each_ref().map(|w| w.origin[axis])),
+            inv_dir: [0, 1, 2].map(|axis| wide.each_ref().map(|w| w.inv_dir[axis])),
+            near: wide[0].near,
+            far: wide[0].far,
+        };
+        if wide.iter().any(|w| w.near != wide[0].near) {
+            return false;
+        }
+        let bound = packet_bound(&packet);
+        let sheared: [ShearedRay; PACKET] = std::array::from_fn(|r| ShearedRay::new(ray(r)));
+        let quad: [QuadRay; PACKET] = std::array::from_fn(|r| QuadRay::new(&sheared[r]));
+        let mut closest: [Closest; PACKET] = std::array::from_fn(|r| Closest::new(ray(r), false));
+        let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
+        // Each ray's current end of search for the box tests.
+        let mut end: [f32; PACKET] = std::array::from_fn(|r| cull(&closest[r]));
+        let nodes = &self.wide.nodes;
+        let mut current = PacketEntry {
+            child: 0,
+            count: 0,
+            rays: (1u32 << rays.len()) - 1,
+            order: 0.0,
+            t_near: [0.0; WIDTH],
+        };
+        let mut len = 0usize;
+        loop {
+            if current.count > 0 {
+                let mut rays = current.rays;
+                while rays != 0 {
+                    let r = rays.trailing_zeros() as usize;
+                    rays &= rays - 1;
+                    if self.test_leaf::<false, B>(
+                        current.child,
+                        current.count,
+                        &sheared[r],
+                        &quad[r],
+                        &mut closest[r],
+                        stats,
+                    ) {
+                        end[r] = cull(&closest[r]);
+                    }
+                }
+            } else {
+                // SAFETY: `current.child` of an entry with no triangles is an inner node's
+                // index, which `Bvh8::collapse` set to a slot of `nodes` it had pushed.
+                let node = unsafe { nodes.get_unchecked(current.child as usize) };
+                stats.nodes += u64::from(node.children) * u64::from(current.rays.count_ones());
+                let base = len;
+                let mut children = match &bound {
+                    Some(bound) => {
+                        let farthest = end.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+                        B::enter_bound(bound, node, farthest)
+                    }
+                    None => u32::from(node.valid),
+                };
+                while children != 0 {
+                    let lane = children.trailing_zeros() as usize;
+                    children &= children - 1;
+                    let (entered, t_near) = B::enter_child(&packet, node, lane, &end);
+                    let entered = entered & current.rays;
+                    if entered == 0 {
+                        continue;
+                    }
+                    let entry = PacketEntry {
+                        child: node.index[lane],
+                        count: u32::from(node.count[lane]),
+                        rays: entered,
+                        order: t_near[entered.trailing_zeros() as usize],
+                        t_near,
+                    };
+                    self.prefetch_child(entry.child, entry.count);
+                    // Insert, keeping this node's run of the stack farthest first.
+                    let mut k = len;
+                    while k > base {
+                        // SAFETY: `base <= k - 1 < len`: written by this node's pushes.
+                        let below = unsafe { stack.get_unchecked(k - 1).assume_init() };
+                        if below.order >= entry.order {
+                            break;
+                        }
+                        // SAFETY: `k <= len < stack.len()` (the stack's bound above).
+                        unsafe { stack.get_unchecked_mut(k) }.write(below);
+                        k -= 1;
+                    }
+                    // SAFETY: `k <= len < stack.len()`, as in `Accel::wide_with_stack`: each
+                    // level of the current path leaves at most seven entries.
+                    unsafe { stack.get_unchecked_mut(k) }.write(entry);
+                    len += 1;
+                }
+            }
+            // On at the nearest waiting child that may still hold a closer hit for one of
+            // the rays that entered it; the others leave the entry.
+            loop {
+                if len == 0 {
+                    for (hit, closest) in hits.iter_mut().zip(&closest) {
+                        *hit = closest.best;
+                    }
+                    return true;
+                }
+                len -= 1;
+                // SAFETY: entries below the old `len` were written by the pushes above.
+                let mut entry = unsafe { stack.get_unchecked(len).assume_init() };
+                // Every lane compared, in one step where the compiler makes it one: no
+                // arithmetic, so nothing a lane computes could differ.
+                let mut within = 0u32;
+                for (r, (t_near, end)) in entry.t_near.iter().zip(&end).enumerate() {
+                    within |= u32::from(t_near <= end) << r;
+                }
+                entry.rays &= within;
+                if entry.rays != 0 {
+                    current = entry;
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// The interval the rays of `packet` span (all its lanes: slots past its rays repeat its last
+/// one), for the test that rejects at once the boxes none of them enters; `None` where a
+/// reciprocal direction is infinite or zero, for which that test's argument (no NaN) does not
+/// hold. Plain loops over the lanes, which the compiler turns into a few vector steps.
+#[inline(always)]
+pub(super) fn packet_bound(packet: &PacketRays) -> Option<PacketBound> {
+    let mut bound = PacketBound {
+        origin_near: [0.0; 3],
+        origin_far: [0.0; 3],
+        inv_low: [0.0; 3],
+        inv_high: [0.0; 3],
+    };
+    let mut usable = true;
+    for axis in 0..3 {
+        let (origin, inv) = (&packet.origin[axis], &packet.inv_dir[axis]);
+        let (mut origin_low, mut origin_high) = (origin[0], origin[0]);
+        let (mut inv_low, mut inv_high) = (inv[0], inv[0]);
+        for r in 1..PACKET {
+            origin_low = origin_low.min(origin[r]);
+            origin_high = origin_high.max(origin[r]);
+            inv_low = inv_low.min(inv[r]);
+            inv_high = inv_high.max(inv[r]);
+        }
+        usable &= inv_low.is_finite() && inv_high.is_finite() && inv_low != 0.0 && inv_high != 0.0;
+        // With positive reciprocals the entry distance is least from the greatest origin and
+        // the exit distance greatest from the least; with negative ones the other way round.
+        let positive = inv_low > 0.0;
+        bound.origin_near[axis] = if positive { origin_high } else { origin_low };
+        bound.origin_far[axis] = if positive { origin_low } else { origin_high };
+        bound.inv_low[axis] = inv_low;
+        bound.inv_high[axis] = inv_high;
+    }
+    usable.then_some(bound)
+}

@@ -1,0 +1,336 @@
+//! The box tests of a packet (`packet.rs`): one box against up to eight rays at once, exactly
+//! as the single-ray test computes each pair (`BoxTest::enter_child`), and a conservative
+//! filter of a node's eight boxes against the interval the rays span
+//! (`BoxTest::enter_bound`); each in two SSE steps of four lanes and in one AVX step of
+//! eight, which `node8.rs`'s `Portable` and `Avx` call.
+
+use super::node8::{Node8, WIDTH};
+use super::traverse::FAR_SCALE;
+use wide::{CmpGt, CmpLe, CmpLt, f32x4};
+
+/// Up to eight rays prepared for testing one box against all of them at once: lane `r` holds
+/// ray `r`'s `WideRay` origin and reciprocal direction, and the near and far planes are the
+/// same for all (a packet is made only of rays whose reciprocal directions have the same signs).
+pub(super) struct PacketRays {
+    pub(super) origin: [[f32; WIDTH]; 3],
+    pub(super) inv_dir: [[f32; WIDTH]; 3],
+    pub(super) near: [usize; 3],
+    pub(super) far: [usize; 3],
+}
+
+/// The interval a packet's rays span on each axis, for a test that rejects at once the boxes
+/// none of them can enter (`BoxTest::enter_bound`). For each axis: the origin coordinate
+/// that makes the entry distance least and the one that makes the exit distance greatest
+/// (which depends on the direction's sign, the same for all the packet's rays), and the least
+/// and greatest reciprocal direction. Only ever made from finite reciprocal directions.
+pub(super) struct PacketBound {
+    pub(super) origin_near: [f32; 3],
+    pub(super) origin_far: [f32; 3],
+    pub(super) inv_low: [f32; 3],
+    pub(super) inv_high: [f32; 3],
+}
+
+/// `BoxTest::enter_child` in two SSE steps of four lanes (plain code off x86-64).
+#[inline(always)]
+pub(super) fn enter_child_portable(
+    rays: &PacketRays,
+    node: &Node8,
+    child: usize,
+    end: &[f32; WIDTH],
+) -> (u32, [f32; WIDTH]) {
+    let half = |h: usize| {
+        let lanes = |row: &[f32; WIDTH]| -> f32x4 {
+            f32x4::new(
+                row[4 * h..4 * h + 4]
+                    .try_into()
+                    .expect("a half of eight lanes is four"),
+            )
+        };
+        let zero = f32x4::ZERO;
+        let end = lanes(end);
+        let scale = f32x4::splat(FAR_SCALE);
+        let mut t0 = zero;
+        let mut t1 = end;
+        for axis in 0..3 {
+            let origin = lanes(&rays.origin[axis]);
+            let inv_dir = lanes(&rays.inv_dir[axis]);
+            let near_plane = f32x4::splat(node.bounds[rays.near[axis]][child]);
+            let far_plane = f32x4::splat(node.bounds[rays.far[axis]][child]);
+            let near = (near_plane - origin) * inv_dir;
+            let far = (far_plane - origin) * inv_dir * scale;
+            t0 = t0.fast_max(near.cmp_gt(zero).blend(near, zero));
+            t1 = t1.fast_min(far.cmp_lt(end).blend(far, end));
+        }
+        (t0.cmp_le(t1).move_mask() as u32, t0.to_array())
+    };
+    let (low, t_low) = half(0);
+    let (high, t_high) = half(1);
+    let mut t_near = [0.0; WIDTH];
+    t_near[..4].copy_from_slice(&t_low);
+    t_near[4..].copy_from_slice(&t_high);
+    (low | (high << 4), t_near)
+}
+
+/// `BoxTest::enter_bound` in two SSE steps of four lanes (plain code off x86-64).
+#[inline(always)]
+pub(super) fn enter_bound_portable(bound: &PacketBound, node: &Node8, end: f32) -> u32 {
+    let half = |h: usize| {
+        let plane = |row: usize| -> f32x4 {
+            f32x4::new(
+                node.bounds[row][4 * h..4 * h + 4]
+                    .try_into()
+                    .expect("a half of eight lanes is four"),
+            )
+        };
+        let scale = f32x4::splat(FAR_SCALE);
+        let mut t0 = f32x4::ZERO;
+        let mut t1 = f32x4::splat(end);
+        for axis in 0..3 {
+            let (near_row, far_row) = near_far_rows(bound, axis);
+            let (low, high) = (
+                f32x4::splat(bound.inv_low[axis]),
+                f32x4::splat(bound.inv_high[axis]),
+            );
+            let near = plane(near_row) - f32x4::splat(bound.origin_near[axis]);
+            let far = plane(far_row) - f32x4::splat(bound.origin_far[axis]);
+            t0 = t0.fast_max((near * low).fast_min(near * high));
+            t1 = t1.fast_min((far * low).fast_max(far * high) * scale);
+        }
+        t0.cmp_le(t1).move_mask() as u32
+    };
+    (half(0) | (half(1) << 4)) & u32::from(node.valid)
+}
+
+/// The rows of a node's near and far planes on `axis` for the rays `bound` describes: the max
+/// first where their reciprocal directions are negative, as `WideRay::new` chooses.
+#[inline(always)]
+fn near_far_rows(bound: &PacketBound, axis: usize) -> (usize, usize) {
+    if bound.inv_high[axis] < 0.0 {
+        (3 + axis, axis)
+    } else {
+        (axis, 3 + axis)
+    }
+}
+
+/// [`enter_bound_portable`] in one step of eight lanes.
+///
+/// # Safety
+/// The processor must support AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+pub(super) unsafe fn enter_bound_avx(bound: &PacketBound, node: &Node8, end: f32) -> u32 {
+    use std::arch::x86_64::*;
+    let scale = _mm256_set1_ps(FAR_SCALE);
+    let mut t0 = _mm256_setzero_ps();
+    let mut t1 = _mm256_set1_ps(end);
+    for axis in 0..3 {
+        let (near_row, far_row) = near_far_rows(bound, axis);
+        let low = _mm256_set1_ps(bound.inv_low[axis]);
+        let high = _mm256_set1_ps(bound.inv_high[axis]);
+        // SAFETY: each row is eight f32 in bounds of `node`, 32-byte aligned.
+        let (near_plane, far_plane) = unsafe {
+            (
+                _mm256_load_ps(node.bounds[near_row].as_ptr()),
+                _mm256_load_ps(node.bounds[far_row].as_ptr()),
+            )
+        };
+        let near = _mm256_sub_ps(near_plane, _mm256_set1_ps(bound.origin_near[axis]));
+        let far = _mm256_sub_ps(far_plane, _mm256_set1_ps(bound.origin_far[axis]));
+        let least = _mm256_min_ps(_mm256_mul_ps(near, low), _mm256_mul_ps(near, high));
+        let greatest = _mm256_max_ps(_mm256_mul_ps(far, low), _mm256_mul_ps(far, high));
+        t0 = _mm256_max_ps(least, t0);
+        t1 = _mm256_min_ps(_mm256_mul_ps(greatest, scale), t1);
+    }
+    let entered = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
+    entered & u32::from(node.valid)
+}
+
+/// `BoxTest::enter_child` in one step of eight lanes: `node8::enter_avx`'s operations, in its order, on one box and eight rays.
+///
+/// # Safety
+/// The processor must support AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+pub(super) unsafe fn enter_child_avx(
+    rays: &PacketRays,
+    node: &Node8,
+    child: usize,
+    end: &[f32; WIDTH],
+) -> (u32, [f32; WIDTH]) {
+    use std::arch::x86_64::*;
+    // SAFETY (the loads and the store): every row is eight f32 in bounds; unaligned access.
+    let zero = _mm256_setzero_ps();
+    let scale = _mm256_set1_ps(FAR_SCALE);
+    let mut t0 = zero;
+    let mut t1 = unsafe { _mm256_loadu_ps(end.as_ptr()) };
+    for axis in 0..3 {
+        let (origin, inv_dir) = unsafe {
+            (
+                _mm256_loadu_ps(rays.origin[axis].as_ptr()),
+                _mm256_loadu_ps(rays.inv_dir[axis].as_ptr()),
+            )
+        };
+        let near_plane = _mm256_set1_ps(node.bounds[rays.near[axis]][child]);
+        let far_plane = _mm256_set1_ps(node.bounds[rays.far[axis]][child]);
+        let near = _mm256_mul_ps(_mm256_sub_ps(near_plane, origin), inv_dir);
+        let far = _mm256_mul_ps(
+            _mm256_mul_ps(_mm256_sub_ps(far_plane, origin), inv_dir),
+            scale,
+        );
+        t0 = _mm256_max_ps(near, t0);
+        t1 = _mm256_min_ps(far, t1);
+    }
+    let entered = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
+    let mut t_near = [0.0f32; WIDTH];
+    unsafe { _mm256_storeu_ps(t_near.as_mut_ptr(), t0) };
+    (entered, t_near)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Ray;
+    #[cfg(target_arch = "x86_64")]
+    use crate::geometry::node8::Avx;
+    use crate::geometry::node8::{BoxTest, Portable, WideRay, avx_available};
+    use glam::Vec3;
+
+    /// A small fixed stream (splitmix64), so every run checks the same cases.
+    struct Stream(u64);
+
+    impl Stream {
+        fn unit(&mut self) -> f32 {
+            self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let z = crate::sampler::splitmix_finalise(self.0);
+            (z >> 40) as f32 / (1u64 << 24) as f32
+        }
+
+        fn range(&mut self, low: f32, high: f32) -> f32 {
+            low + (high - low) * self.unit()
+        }
+    }
+
+    /// A node of eight random boxes near `centre` at `scale`: some flat on an axis, some
+    /// holding the packet's origin, some with a face through it.
+    fn node(stream: &mut Stream, centre: Vec3, scale: f32, origin: Vec3) -> Node8 {
+        let mut node = Node8::EMPTY;
+        for lane in 0..WIDTH {
+            let mut min = [0.0; 3];
+            let mut max = [0.0; 3];
+            for axis in 0..3 {
+                let a = centre[axis] + scale * stream.range(-1.0, 1.0);
+                let b = centre[axis] + scale * stream.range(-1.0, 1.0);
+                (min[axis], max[axis]) = (a.min(b), a.max(b));
+                match (lane + axis) % 5 {
+                    0 => max[axis] = min[axis],
+                    1 => min[axis] = origin[axis],
+                    _ => {}
+                }
+                if lane == 7 {
+                    (min[axis], max[axis]) = (origin[axis] - scale, origin[axis] + scale);
+                }
+            }
+            node.set_bounds(lane, min, max);
+        }
+        node.valid = 0xff;
+        node.children = 8;
+        node
+    }
+
+    /// Eight rays from about `origin` towards about `target`: a pixel's samples or a lens's.
+    fn packet(stream: &mut Stream, origin: Vec3, target: Vec3, spread: f32) -> [Ray; WIDTH] {
+        std::array::from_fn(|_| {
+            let jitter = |s: &mut Stream| {
+                Vec3::new(s.range(-1.0, 1.0), s.range(-1.0, 1.0), s.range(-1.0, 1.0))
+            };
+            let from = origin + jitter(stream) * spread;
+            let to = target + jitter(stream) * spread;
+            Ray {
+                origin: from,
+                dir: to - from,
+                t_max: f32::INFINITY,
+            }
+        })
+    }
+
+    /// For each box test: lane `r` of the packet test is ray `r`'s own test of that box, to
+    /// the bit, and the filter never drops a box some ray enters.
+    fn check<B: BoxTest>(what: &str) {
+        let mut stream = Stream(0x9ac4_b0c5);
+        let mut checked = (0, 0);
+        for round in 0..3000 {
+            let scale = [1e-3, 1.0, 1e3][round % 3];
+            let far = [0.0, 1e4][round / 3 % 2];
+            let origin = Vec3::new(far, -far, far * 0.5) + Vec3::splat(scale * 0.3);
+            let target = origin
+                + Vec3::new(
+                    stream.range(-1.0, 1.0),
+                    stream.range(-1.0, 1.0),
+                    stream.range(0.2, 1.0),
+                ) * (4.0 * scale);
+            let spread = scale * [1e-5, 1e-3, 0.1][round / 6 % 3];
+            let rays = packet(&mut stream, origin, target, spread);
+            let wide: [WideRay; WIDTH] = std::array::from_fn(|r| WideRay::new(&rays[r]));
+            if wide.iter().any(|w| w.near != wide[0].near) {
+                continue;
+            }
+            let packet = PacketRays {
+                origin: [0, 1, 2].map(|axis| wide.each_ref().map(|w| w.origin[axis])),
+                inv_dir: [0, 1, 2].map(|axis| wide.each_ref().map(|w| w.inv_dir[axis])),
+                near: wide[0].near,
+                far: wide[0].far,
+            };
+            let Some(bound) = crate::geometry::packet::packet_bound(&packet) else {
+                continue;
+            };
+            let node = node(&mut stream, target, 2.0 * scale, origin);
+            let end: [f32; WIDTH] = std::array::from_fn(|r| {
+                if r % 3 == 0 {
+                    f32::INFINITY
+                } else {
+                    scale * stream.range(0.5, 8.0)
+                }
+            });
+            let farthest = end.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+            let filter = B::enter_bound(&bound, &node, farthest);
+            for child in 0..WIDTH {
+                let (entered, t_near) = B::enter_child(&packet, &node, child, &end);
+                for r in 0..WIDTH {
+                    let (alone, alone_t) = B::enter(&wide[r], &node, end[r]);
+                    let by_itself = alone & (1 << child) != 0;
+                    assert_eq!(
+                        entered & (1 << r) != 0,
+                        by_itself,
+                        "{what}: ray {r}, box {child}"
+                    );
+                    if by_itself {
+                        assert_eq!(t_near[r].to_bits(), alone_t[child].to_bits(), "{what}");
+                        assert!(
+                            filter & (1 << child) != 0,
+                            "{what}: the filter dropped box {child}, which ray {r} enters"
+                        );
+                        checked.0 += 1;
+                    }
+                }
+                checked.1 += (entered == 0 && filter & (1 << child) == 0) as u32;
+            }
+        }
+        // Enough boxes entered to test the filter on, and enough it rightly dropped to show it
+        // filters at all.
+        assert!(
+            checked.0 > 10_000 && checked.1 > 1_000,
+            "{what}: {checked:?}"
+        );
+    }
+
+    #[test]
+    fn a_packets_box_tests_are_each_rays_own_and_its_filter_drops_no_box_a_ray_enters() {
+        check::<Portable>("SSE");
+        #[cfg(target_arch = "x86_64")]
+        if avx_available() {
+            check::<Avx>("AVX");
+        }
+    }
+}
