@@ -14,7 +14,7 @@ use std::time::Instant;
 use tracer::geometry::{Accel, BuildQuality, OffsetMethod, Traversal};
 use tracer::output::RgbImage;
 use tracer::scene::RenderSettings;
-use tracer::{FrameConfig, World};
+use tracer::{CameraRays, FrameConfig, World};
 
 /// The side of the square tiles a frame is cut into.
 pub const TILE: u32 = 32;
@@ -55,6 +55,8 @@ pub struct Row {
     pub bvh: BuildQuality,
     /// The traversal of this rung.
     pub traversal: Traversal,
+    /// How this rung's camera rays met the tree: in packets (the default) or one by one.
+    pub camera_rays: CameraRays,
     /// Seconds to build the BVH (the BVH ladder only; 0 elsewhere).
     pub build_seconds: f64,
     /// Seconds to render the frame (the fastest of the repeats).
@@ -272,20 +274,29 @@ impl<'a> Bench<'a> {
         rows
     }
 
-    /// Our robust traversal (4-wide, what renders use), the same tests over the binary tree,
-    /// and obvhs's own, at `spp`; each image is compared with the first's.
+    /// Our robust traversal (8-wide, what renders use; a pixel's camera rays in packets), the
+    /// same with camera rays one by one, the same tests over the binary tree, and obvhs's own,
+    /// at `spp`; each image is compared with the first's.
     pub fn traversal_ladder(&mut self, spp: u32) -> Vec<Row> {
         let settings = self.at_spp(spp);
+        let rungs = [
+            (Traversal::Robust, CameraRays::Packets),
+            (Traversal::Robust, CameraRays::OneByOne),
+            (Traversal::RobustBinary, CameraRays::Packets),
+            (Traversal::Obvhs, CameraRays::Packets),
+        ];
         let rows = self.compared_ladder(
             Knob::Traversal,
-            Traversal::ALL,
+            rungs,
             "the robust traversal's image",
-            |bench, traversal| {
+            |bench, (traversal, camera_rays)| {
                 bench.world.traversal = traversal;
-                (format!("{traversal:?}").to_lowercase(), settings.clone())
+                bench.world.camera_rays = camera_rays;
+                (rung_name(traversal, camera_rays), settings.clone())
             },
         );
         self.world.traversal = Traversal::Robust;
+        self.world.camera_rays = CameraRays::default();
         rows
     }
 
@@ -382,6 +393,7 @@ impl<'a> Bench<'a> {
             settings,
             bvh: BuildQuality::default(),
             traversal: self.world.traversal,
+            camera_rays: self.world.camera_rays,
             build_seconds: 0.0,
             render_seconds: timed.seconds,
             rays: timed.rays,
@@ -391,6 +403,16 @@ impl<'a> Bench<'a> {
             note,
         };
         (row, timed.image)
+    }
+}
+
+/// A traversal rung's name: the traversal's ("robust", "robustbinary", "obvhs"), and
+/// "robust-one-by-one" for ours with camera rays one by one (packets are used only by ours).
+pub fn rung_name(traversal: Traversal, camera_rays: CameraRays) -> String {
+    let name = format!("{traversal:?}").to_lowercase();
+    match camera_rays {
+        CameraRays::Packets => name,
+        CameraRays::OneByOne => format!("{name}-one-by-one"),
     }
 }
 

@@ -132,7 +132,8 @@ pub enum Knob {
     Roulette,
     /// Each BVH build quality.
     Bvh,
-    /// Our robust traversal, 8-wide (what renders use) and binary, against obvhs's own.
+    /// Our robust traversal, 8-wide (what renders use, a pixel's camera rays in packets), the
+    /// same with every ray alone, and binary, against obvhs's own.
     Traversal,
     /// Spawn offsets from each hit point's error bound against the fixed 256 ULPs.
     Offset,

@@ -16,6 +16,7 @@ use super::reference::{Reference, Source};
 use crate::LabError;
 use std::fmt::Write as _;
 use std::path::Path;
+use tracer::CameraRays;
 use tracer::geometry::Traversal;
 use tracer::scene::RenderSettings;
 
@@ -74,7 +75,8 @@ pub fn csv(run: &Run) -> String {
     out.push('\n');
     for r in run.rows {
         let m = &r.metrics;
-        let check = (r.knob == Knob::Traversal)
+        // The closed-sphere check is of the traversal, whatever the camera rays.
+        let check = (r.knob == Knob::Traversal && r.camera_rays == CameraRays::default())
             .then(|| run.leak_check(r.traversal))
             .flatten();
         let fields = [
