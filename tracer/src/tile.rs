@@ -100,46 +100,46 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
             // trace together; each sample's radiance is added in sample order, as ever.
             for first in (0..spp).step_by(PACKET) {
                 let n = (spp - first).min(PACKET as u32) as usize;
-                let mut samples: [Option<(PixelSampler, f64)>; PACKET] = [const { None }; PACKET];
+                // Slots past the pixel's last sample repeat it and are never used.
+                let mut samplers: [PixelSampler; PACKET] = std::array::from_fn(|k| {
+                    let sample = first + k.min(n - 1) as u32;
+                    PixelSampler::new(settings.seed, frame, x, y, sample)
+                });
+                let mut times = [instant; PACKET];
                 let mut rays = [UNUSED_RAY; PACKET];
-                for (k, (slot, ray)) in samples.iter_mut().zip(&mut rays).take(n).enumerate() {
-                    let mut sampler =
-                        PixelSampler::new(settings.seed, frame, x, y, first + k as u32);
+                for k in 0..n {
+                    let sampler = &mut samplers[k];
                     let jitter = sampler.next_2d();
                     let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
-                    let time = if blur {
-                        shutter.time(frame, sampler.time())
-                    } else {
-                        instant
-                    };
+                    if blur {
+                        times[k] = shutter.time(frame, sampler.time());
+                    }
+                    let moved;
                     let camera = if camera_moves {
-                        track.at_time(time).rays(settings.width, settings.height)
+                        moved = track.at_time(times[k]).rays(settings.width, settings.height);
+                        &moved
                     } else {
-                        still
+                        &still
                     };
                     // A pinhole never draws the lens's numbers, so it traces exactly the rays
                     // it traced before lenses existed.
                     let lens = world.effects.depth_of_field && camera.has_lens();
-                    *ray = if lens {
+                    rays[k] = if lens {
                         camera.ray_through_lens(px, py, sampler.lens())
                     } else {
                         camera.ray(px, py)
                     };
-                    *slot = Some((sampler, time));
                 }
                 let mut hits = [None; PACKET];
                 let found =
                     world.camera_hits(&rays[..n], &mut hits[..n], &mut pixel_stats.traversal);
                 for k in 0..n {
-                    let (mut sampler, time) = samples[k]
-                        .take()
-                        .expect("the first n slots were filled just above");
                     let first_hit = found.then_some(hits[k]);
                     let radiance = world.radiance_from(
                         rays[k],
                         first_hit,
-                        time,
-                        &mut sampler,
+                        times[k],
+                        &mut samplers[k],
                         &mut pixel_stats,
                     );
                     if radiance.is_finite() {
