@@ -116,7 +116,9 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
                     }
                     let moved;
                     let camera = if camera_moves {
-                        moved = track.at_time(times[k]).rays(settings.width, settings.height);
+                        moved = track
+                            .at_time(times[k])
+                            .rays(settings.width, settings.height);
                         &moved
                     } else {
                         &still

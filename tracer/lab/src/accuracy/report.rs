@@ -53,6 +53,15 @@ impl Run<'_> {
     pub fn leak_check(&self, traversal: Traversal) -> Option<&LeakCheck> {
         self.leak_checks.iter().find(|c| c.traversal == traversal)
     }
+
+    /// The closed-sphere check shown beside a traversal rung: its traversal's, once per
+    /// traversal (on the rung with camera rays in packets, not again beside the one without,
+    /// since the check traces single rays either way).
+    pub fn leak_check_of(&self, row: &Row) -> Option<&LeakCheck> {
+        (row.knob == Knob::Traversal && row.camera_rays == CameraRays::default())
+            .then(|| self.leak_check(row.traversal))
+            .flatten()
+    }
 }
 
 pub fn write_all(out: &Path, run: &Run) -> Result<(), LabError> {
@@ -75,10 +84,7 @@ pub fn csv(run: &Run) -> String {
     out.push('\n');
     for r in run.rows {
         let m = &r.metrics;
-        // The closed-sphere check is of the traversal, whatever the camera rays.
-        let check = (r.knob == Knob::Traversal && r.camera_rays == CameraRays::default())
-            .then(|| run.leak_check(r.traversal))
-            .flatten();
+        let check = run.leak_check_of(r);
         let fields = [
             r.knob.name().to_owned(),
             r.setting.clone(),
@@ -304,22 +310,22 @@ pub fn markdown(run: &Run) -> String {
         ),
         run.rows_of(Knob::Traversal)
             .map(|r| {
-                let check =
-                    run.leak_check(r.traversal)
-                        .map_or("- | - | - | - | -".to_owned(), |c| {
-                            let primary = format!(
-                                "{} of {}",
-                                c.edge_leaks + c.aimed_leaks,
-                                c.edge_rays + c.aimed_rays
-                            );
-                            let bounce = format!("{} of {}", c.bounce_leaks, c.bounce_rays);
-                            format!(
-                                "{} | {:.2} | {primary} | {bounce} | {}",
-                                c.rays,
-                                c.mrays_per_second(),
-                                c.self_hits
-                            )
-                        });
+                let check = run
+                    .leak_check_of(r)
+                    .map_or("- | - | - | - | -".to_owned(), |c| {
+                        let primary = format!(
+                            "{} of {}",
+                            c.edge_leaks + c.aimed_leaks,
+                            c.edge_rays + c.aimed_rays
+                        );
+                        let bounce = format!("{} of {}", c.bounce_leaks, c.bounce_rays);
+                        format!(
+                            "{} | {:.2} | {primary} | {bounce} | {}",
+                            c.rays,
+                            c.mrays_per_second(),
+                            c.self_hits
+                        )
+                    });
                 format!(
                     "{} | {} | {:.2} | {} | {}",
                     r.setting,
