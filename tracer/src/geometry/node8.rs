@@ -141,32 +141,25 @@ impl BoxTest for Portable {
         let half = |h: usize| {
             let zero = f32x4::ZERO;
             let end = f32x4::splat(t_max);
-            let scale = f32x4::splat(FAR_SCALE);
             let plane = |row: usize| {
                 let lanes: &[f32; 4] = node.bounds[row][4 * h..4 * h + 4]
                     .try_into()
                     .expect("a half of eight lanes is four");
                 f32x4::new(*lanes)
             };
-            let mut t0 = zero;
-            let mut t1 = end;
+            let mut t = (zero, end);
             for axis in 0..3 {
-                let origin = f32x4::splat(ray.origin[axis]);
-                let inv_dir = f32x4::splat(ray.inv_dir[axis]);
-                let near = (plane(ray.near[axis]) - origin) * inv_dir;
-                let far = (plane(ray.far[axis]) - origin) * inv_dir * scale;
-                // `a > b ? a : b` drops a NaN `a`, as in the binary test.
-                t0 = t0.fast_max(near.cmp_gt(zero).blend(near, zero));
-                t1 = t1.fast_min(far.cmp_lt(end).blend(far, end));
+                let planes = (plane(ray.near[axis]), plane(ray.far[axis]));
+                let (origin, inv_dir) = (
+                    f32x4::splat(ray.origin[axis]),
+                    f32x4::splat(ray.inv_dir[axis]),
+                );
+                t = slab_step_sse(t, planes, (origin, inv_dir), end);
             }
-            (t0.cmp_le(t1).move_mask() as u32, t0.to_array())
+            (t.0.cmp_le(t.1).move_mask() as u32, t.0.to_array())
         };
-        let (low, t_low) = half(0);
-        let (high, t_high) = half(1);
-        let mut t_near = [0.0; WIDTH];
-        t_near[..4].copy_from_slice(&t_low);
-        t_near[4..].copy_from_slice(&t_high);
-        ((low | (high << 4)) & u32::from(node.valid), t_near)
+        let (entered, t_near) = join_halves(half(0), half(1));
+        (entered & u32::from(node.valid), t_near)
     }
 
     #[inline(always)]
@@ -246,11 +239,8 @@ impl BoxTest for Avx {
 #[inline]
 unsafe fn enter_avx(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDTH]) {
     use std::arch::x86_64::*;
-    let zero = _mm256_setzero_ps();
-    let end = _mm256_set1_ps(t_max);
-    let scale = _mm256_set1_ps(FAR_SCALE);
-    let mut t0 = zero;
-    let mut t1 = end;
+    let mut t0 = _mm256_setzero_ps();
+    let mut t1 = _mm256_set1_ps(t_max);
     for axis in 0..3 {
         let origin = _mm256_set1_ps(ray.origin[axis]);
         let inv_dir = _mm256_set1_ps(ray.inv_dir[axis]);
@@ -262,23 +252,89 @@ unsafe fn enter_avx(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDT
                 _mm256_load_ps(node.bounds[ray.far[axis]].as_ptr()),
             )
         };
-        let near = _mm256_mul_ps(_mm256_sub_ps(near_plane, origin), inv_dir);
-        let far = _mm256_mul_ps(
-            _mm256_mul_ps(_mm256_sub_ps(far_plane, origin), inv_dir),
-            scale,
-        );
-        // The portable test's select-then-maximum in one instruction: `vmaxps(a, b)` returns
-        // its second operand when either is NaN, so with the running value second a NaN
-        // distance is dropped, as the select drops it. See [`enter_avx`] for why the results
-        // are the same bits.
-        t0 = _mm256_max_ps(near, t0);
-        t1 = _mm256_min_ps(far, t1);
+        // SAFETY: this function runs only where AVX is (its own contract).
+        (t0, t1) = unsafe { slab_step_avx((t0, t1), (near_plane, far_plane), (origin, inv_dir)) };
     }
+    // SAFETY: as above.
+    let (entered, t_near) = unsafe { slab_result_avx(t0, t1) };
+    (entered & u32::from(node.valid), t_near)
+}
+
+/// The results of a slab test's two four-lane halves as one of eight lanes: the entered
+/// bits of the low half, then the high's, and the entry distances in lane order.
+#[inline(always)]
+pub(super) fn join_halves(
+    (low, t_low): (u32, [f32; 4]),
+    (high, t_high): (u32, [f32; 4]),
+) -> (u32, [f32; WIDTH]) {
+    let mut t_near = [0.0; WIDTH];
+    t_near[..4].copy_from_slice(&t_low);
+    t_near[4..].copy_from_slice(&t_high);
+    (low | (high << 4), t_near)
+}
+
+/// One axis of the slab test in four lanes, the one place its operations are written for SSE:
+/// from the running entry and exit distances `t`, and the planes `(near, far)` of that axis,
+/// the new ones, for a ray with `origin` and `inv_dir` on that axis (lane by lane: a ray's
+/// eight boxes, or a box's eight rays). `a > b ? a : b` drops a NaN `a`, as in the binary test.
+#[inline(always)]
+pub(super) fn slab_step_sse(
+    (t0, t1): (f32x4, f32x4),
+    (near_plane, far_plane): (f32x4, f32x4),
+    (origin, inv_dir): (f32x4, f32x4),
+    end: f32x4,
+) -> (f32x4, f32x4) {
+    let zero = f32x4::ZERO;
+    let near = (near_plane - origin) * inv_dir;
+    let far = (far_plane - origin) * inv_dir * f32x4::splat(FAR_SCALE);
+    (
+        t0.fast_max(near.cmp_gt(zero).blend(near, zero)),
+        t1.fast_min(far.cmp_lt(end).blend(far, end)),
+    )
+}
+
+/// [`slab_step_sse`] in eight AVX lanes, the one place its operations are written for AVX,
+/// with the select folded into the maximum and the minimum ([`enter_avx`] says why that gives
+/// the same bits): `vmaxps(a, b)` returns its second operand when either is NaN, so with the
+/// running value second a NaN distance is dropped, as the select drops it.
+///
+/// # Safety
+/// The processor must support AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+pub(super) unsafe fn slab_step_avx(
+    (t0, t1): (std::arch::x86_64::__m256, std::arch::x86_64::__m256),
+    (near_plane, far_plane): (std::arch::x86_64::__m256, std::arch::x86_64::__m256),
+    (origin, inv_dir): (std::arch::x86_64::__m256, std::arch::x86_64::__m256),
+) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+    use std::arch::x86_64::*;
+    let near = _mm256_mul_ps(_mm256_sub_ps(near_plane, origin), inv_dir);
+    let far = _mm256_mul_ps(
+        _mm256_mul_ps(_mm256_sub_ps(far_plane, origin), inv_dir),
+        _mm256_set1_ps(FAR_SCALE),
+    );
+    (_mm256_max_ps(near, t0), _mm256_min_ps(far, t1))
+}
+
+/// The end of an eight-lane slab test: which lanes are entered (`t0 <= t1`, ordered) and
+/// their entry distances.
+///
+/// # Safety
+/// The processor must support AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+pub(super) unsafe fn slab_result_avx(
+    t0: std::arch::x86_64::__m256,
+    t1: std::arch::x86_64::__m256,
+) -> (u32, [f32; WIDTH]) {
+    use std::arch::x86_64::*;
     let entered = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
     let mut t_near = [0.0f32; WIDTH];
     // SAFETY: `t_near` holds eight f32; the store is unaligned.
     unsafe { _mm256_storeu_ps(t_near.as_mut_ptr(), t0) };
-    (entered & u32::from(node.valid), t_near)
+    (entered, t_near)
 }
 
 impl WideRay {

@@ -29,7 +29,7 @@ use super::packet_box::{PacketBound, PacketRays};
 use super::quad::QuadRay;
 use super::traverse::FAR_SCALE;
 use super::triangle::ShearedRay;
-use super::wide::{BoxSimd, INLINE_STACK};
+use super::wide::{BoxSimd, INLINE_STACK, push_sorted};
 use super::{Hit, Ray, TraversalStats};
 use std::mem::MaybeUninit;
 
@@ -220,21 +220,10 @@ impl Accel {
                         t_near,
                     };
                     self.prefetch_child(entry.child, entry.count);
-                    // Insert, keeping this node's run of the stack farthest first.
-                    let mut k = len;
-                    while k > base {
-                        // SAFETY: `base <= k - 1 < len`: written by this node's pushes.
-                        let below = unsafe { stack.get_unchecked(k - 1).assume_init() };
-                        if below.order >= entry.order {
-                            break;
-                        }
-                        // SAFETY: `k <= len < stack.len()` (the stack's bound above).
-                        unsafe { stack.get_unchecked_mut(k) }.write(below);
-                        k -= 1;
-                    }
-                    // SAFETY: `k <= len < stack.len()`, as in `Accel::wide_with_stack`: each
-                    // level of the current path leaves at most seven entries.
-                    unsafe { stack.get_unchecked_mut(k) }.write(entry);
+                    // SAFETY: `base <= len`, entries below `len` are written, and `len <
+                    // stack.len()`, as in `Accel::wide_with_stack`: each level of the current
+                    // path leaves at most seven entries.
+                    unsafe { push_sorted(stack, base, len, entry, |e| e.order) };
                     len += 1;
                 }
             }

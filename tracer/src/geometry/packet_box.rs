@@ -4,9 +4,11 @@
 //! (`BoxTest::enter_bound`); each in two SSE steps of four lanes and in one AVX step of
 //! eight, which `node8.rs`'s `Portable` and `Avx` call.
 
-use super::node8::{Node8, WIDTH};
+use super::node8::{Node8, WIDTH, join_halves, slab_step_sse};
+#[cfg(target_arch = "x86_64")]
+use super::node8::{slab_result_avx, slab_step_avx};
 use super::traverse::FAR_SCALE;
-use wide::{CmpGt, CmpLe, CmpLt, f32x4};
+use wide::{CmpLe, f32x4};
 
 /// Up to eight rays prepared for testing one box against all of them at once: lane `r` holds
 /// ray `r`'s `WideRay` origin and reciprocal direction, and the near and far planes are the
@@ -46,29 +48,19 @@ pub(super) fn enter_child_portable(
                     .expect("a half of eight lanes is four"),
             )
         };
-        let zero = f32x4::ZERO;
         let end = lanes(end);
-        let scale = f32x4::splat(FAR_SCALE);
-        let mut t0 = zero;
-        let mut t1 = end;
+        let mut t = (f32x4::ZERO, end);
         for axis in 0..3 {
-            let origin = lanes(&rays.origin[axis]);
-            let inv_dir = lanes(&rays.inv_dir[axis]);
-            let near_plane = f32x4::splat(node.bounds[rays.near[axis]][child]);
-            let far_plane = f32x4::splat(node.bounds[rays.far[axis]][child]);
-            let near = (near_plane - origin) * inv_dir;
-            let far = (far_plane - origin) * inv_dir * scale;
-            t0 = t0.fast_max(near.cmp_gt(zero).blend(near, zero));
-            t1 = t1.fast_min(far.cmp_lt(end).blend(far, end));
+            let planes = (
+                f32x4::splat(node.bounds[rays.near[axis]][child]),
+                f32x4::splat(node.bounds[rays.far[axis]][child]),
+            );
+            let ray = (lanes(&rays.origin[axis]), lanes(&rays.inv_dir[axis]));
+            t = slab_step_sse(t, planes, ray, end);
         }
-        (t0.cmp_le(t1).move_mask() as u32, t0.to_array())
+        (t.0.cmp_le(t.1).move_mask() as u32, t.0.to_array())
     };
-    let (low, t_low) = half(0);
-    let (high, t_high) = half(1);
-    let mut t_near = [0.0; WIDTH];
-    t_near[..4].copy_from_slice(&t_low);
-    t_near[4..].copy_from_slice(&t_high);
-    (low | (high << 4), t_near)
+    join_halves(half(0), half(1))
 }
 
 /// `BoxTest::enter_bound` in two SSE steps of four lanes (plain code off x86-64).
@@ -161,9 +153,7 @@ pub(super) unsafe fn enter_child_avx(
 ) -> (u32, [f32; WIDTH]) {
     use std::arch::x86_64::*;
     // SAFETY (the loads and the store): every row is eight f32 in bounds; unaligned access.
-    let zero = _mm256_setzero_ps();
-    let scale = _mm256_set1_ps(FAR_SCALE);
-    let mut t0 = zero;
+    let mut t0 = _mm256_setzero_ps();
     let mut t1 = unsafe { _mm256_loadu_ps(end.as_ptr()) };
     for axis in 0..3 {
         let (origin, inv_dir) = unsafe {
@@ -172,20 +162,15 @@ pub(super) unsafe fn enter_child_avx(
                 _mm256_loadu_ps(rays.inv_dir[axis].as_ptr()),
             )
         };
-        let near_plane = _mm256_set1_ps(node.bounds[rays.near[axis]][child]);
-        let far_plane = _mm256_set1_ps(node.bounds[rays.far[axis]][child]);
-        let near = _mm256_mul_ps(_mm256_sub_ps(near_plane, origin), inv_dir);
-        let far = _mm256_mul_ps(
-            _mm256_mul_ps(_mm256_sub_ps(far_plane, origin), inv_dir),
-            scale,
+        let planes = (
+            _mm256_set1_ps(node.bounds[rays.near[axis]][child]),
+            _mm256_set1_ps(node.bounds[rays.far[axis]][child]),
         );
-        t0 = _mm256_max_ps(near, t0);
-        t1 = _mm256_min_ps(far, t1);
+        // SAFETY: this function runs only where AVX is (its own contract).
+        (t0, t1) = unsafe { slab_step_avx((t0, t1), planes, (origin, inv_dir)) };
     }
-    let entered = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
-    let mut t_near = [0.0f32; WIDTH];
-    unsafe { _mm256_storeu_ps(t_near.as_mut_ptr(), t0) };
-    (entered, t_near)
+    // SAFETY: as above.
+    unsafe { slab_result_avx(t0, t1) }
 }
 
 #[cfg(test)]

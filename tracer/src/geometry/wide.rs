@@ -244,24 +244,14 @@ impl Accel {
                         }
                         continue;
                     }
-                    // Insert, keeping this node's run of the stack farthest first.
-                    let mut k = len;
-                    if !ANY_HIT {
-                        while k > base {
-                            // SAFETY: `base <= k - 1 < len`: written by this node's pushes.
-                            let below = unsafe { stack.get_unchecked(k - 1).assume_init() };
-                            if below.t_near >= entry.t_near {
-                                break;
-                            }
-                            // SAFETY: `k <= len < stack.len()` (the stack's bound above).
-                            unsafe { stack.get_unchecked_mut(k) }.write(below);
-                            k -= 1;
-                        }
-                    }
-                    // SAFETY: `k <= len`, and `len < stack.len()`: each level of the current
-                    // path leaves at most seven entries and the deepest pushes eight, so
-                    // `len` never passes `7 * depth + 1`, which the stack holds.
-                    unsafe { stack.get_unchecked_mut(k) }.write(entry);
+                    // Keeping this node's run of the stack farthest first; an any-hit query
+                    // leaves it unsorted (a run that starts at the top sorts nothing).
+                    let run = if ANY_HIT { len } else { base };
+                    // SAFETY: `run <= len`, entries below `len` are written, and `len <
+                    // stack.len()`: each level of the current path leaves at most seven
+                    // entries and the deepest pushes eight, so `len` never passes
+                    // `7 * depth + 1`, which the stack holds.
+                    unsafe { push_sorted(stack, run, len, entry, |e| e.t_near) };
                     len += 1;
                 }
                 if len > base {
@@ -318,6 +308,36 @@ impl Accel {
             prefetch(start.wrapping_add(192));
         }
     }
+}
+
+/// Pushes `entry` onto `stack` above its `len` entries, keeping the run from `run` (a node's
+/// entered children) ordered farthest first by `distance`, so that the nearest is on top: an
+/// insertion, which for the few children of a node beats any sort. The single-ray and the
+/// packet traversals both push through it.
+///
+/// # Safety
+/// `run <= len < stack.len()`, and the entries below `len` are initialised.
+#[inline(always)]
+pub(super) unsafe fn push_sorted<E: Copy>(
+    stack: &mut [MaybeUninit<E>],
+    run: usize,
+    len: usize,
+    entry: E,
+    distance: impl Fn(&E) -> f32,
+) {
+    let mut k = len;
+    while k > run {
+        // SAFETY: `run <= k - 1 < len`: initialised (the contract).
+        let below = unsafe { stack.get_unchecked(k - 1).assume_init() };
+        if distance(&below) >= distance(&entry) {
+            break;
+        }
+        // SAFETY: `k <= len < stack.len()` (the contract).
+        unsafe { stack.get_unchecked_mut(k) }.write(below);
+        k -= 1;
+    }
+    // SAFETY: as above.
+    unsafe { stack.get_unchecked_mut(k) }.write(entry);
 }
 
 /// Where `items[index]` starts, for a prefetch: computed without a bounds check, since a hint
