@@ -184,6 +184,19 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         !args.peers.is_empty() && !args.tiles.is_empty(),
         "--peers and --tiles need at least one value"
     );
+    // Runs go one after another, so the largest is the peak; past the machine's memory it would
+    // abort allocating, naming no flag (`--peers 100000000` did).
+    let most = args.peers.iter().copied().max().unwrap_or(0);
+    let needed = sim::scenario::memory_estimate(most);
+    if let Some(available) = runtime::node::limits::available_memory() {
+        anyhow::ensure!(
+            needed <= available,
+            "--peers {most}: a run of {most} peers needs about {} MiB (each keeps what it knows of \
+             every other), and this machine has {} MiB free",
+            needed >> 20,
+            available >> 20
+        );
+    }
     let base = base_scenario(
         args,
         args.slots.unwrap_or(1),

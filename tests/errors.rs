@@ -285,8 +285,9 @@ fn accuracy_refuses_images_past_memory_and_knobs_named_twice() {
 /// naming its flag: times too long for the simulator's clock (1e300 milliseconds panicked in
 /// `Duration`), links whose round trip reaches the peers' silence timeout, a bandwidth so small a transfer never ends, a crash at 1e300 seconds, zero
 /// frames, a NaN doubt threshold, a trace of an image 4294967295 pixels a side (which aborted
-/// allocating exabytes), 2^32 timed steal exchanges (32 GB), a bench image past this
-/// machine's memory, and a hundred million certificates.
+/// allocating exabytes), 2^32 timed steal exchanges (32 GB), a hundred million simulated peers
+/// (which aborted allocating), a bench image past this machine's memory, and a hundred million
+/// certificates.
 #[test]
 fn simulator_bench_and_keygen_values_that_cannot_work_are_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -334,6 +335,24 @@ fn simulator_bench_and_keygen_values_that_cannot_work_are_refused() {
     }
     let status = simulate(&["--latency", "4999"]).output().unwrap().status;
     assert!(status.success(), "a round trip just under the timeout");
+    // A hundred million simulated peers would keep state about each other past any memory.
+    let stderr = user_error(
+        tessera()
+            .args([
+                "simulate",
+                "synthetic:16x12:2",
+                "--peers",
+                "2,100000000",
+                "--tiles",
+                "4",
+                "--out",
+            ])
+            .arg(dir.path()),
+    );
+    assert!(
+        stderr.contains("--peers 100000000") && stderr.contains("MiB free"),
+        "{stderr}"
+    );
     let stderr = user_error(&mut simulate(&["--bandwidth", "1e-300"]));
     assert!(stderr.contains("--bandwidth must be"), "{stderr}");
     let stderr = user_error(&mut simulate(&["--crash", "1@1e300"]));
