@@ -165,6 +165,11 @@ impl Accel {
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         // Each ray's current end of search for the box tests.
         let mut end: [f32; PACKET] = std::array::from_fn(|r| cull(&closest[r]));
+        // The farthest of those ends, for the filter; kept, and taken again only when a leaf
+        // has moved an end (ends only ever come nearer).
+        let farthest_of =
+            |end: &[f32; PACKET]| end.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        let mut farthest = farthest_of(&end);
         let nodes = &self.wide.nodes;
         let mut current = PacketEntry {
             child: 0,
@@ -177,6 +182,7 @@ impl Accel {
         loop {
             if current.count > 0 {
                 let mut rays = current.rays;
+                let mut moved = false;
                 while rays != 0 {
                     let r = rays.trailing_zeros() as usize;
                     rays &= rays - 1;
@@ -189,7 +195,11 @@ impl Accel {
                         stats,
                     ) {
                         end[r] = cull(&closest[r]);
+                        moved = true;
                     }
+                }
+                if moved {
+                    farthest = farthest_of(&end);
                 }
             } else {
                 // SAFETY: `current.child` of an entry with no triangles is an inner node's
@@ -198,10 +208,7 @@ impl Accel {
                 stats.nodes += u64::from(node.children) * u64::from(current.rays.count_ones());
                 let base = len;
                 let mut children = match &bound {
-                    Some(bound) => {
-                        let farthest = end.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
-                        B::enter_bound(bound, node, farthest)
-                    }
+                    Some(bound) => B::enter_bound(bound, node, farthest),
                     None => u32::from(node.valid),
                 };
                 while children != 0 {
