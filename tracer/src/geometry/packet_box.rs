@@ -4,7 +4,7 @@
 //! (`BoxTest::enter_bound`); each in two SSE steps of four lanes and in one AVX step of
 //! eight, which `node8.rs`'s `Portable` and `Avx` call.
 
-use super::node8::{Node8, WIDTH, join_halves, slab_step_sse};
+use super::node8::{Node8, WIDTH, WideRay, join_halves, slab_step_sse};
 #[cfg(target_arch = "x86_64")]
 use super::node8::{slab_result_avx, slab_step_avx};
 use super::traverse::FAR_SCALE;
@@ -20,16 +20,40 @@ pub(super) struct PacketRays {
     pub(super) far: [usize; 3],
 }
 
+impl PacketRays {
+    /// Whether the prepared rays `wide` can make a packet: their near planes are the same
+    /// (their directions' signs are, as `WideRay::new` reads them). Rays that cannot are
+    /// traced one by one.
+    #[inline(always)]
+    pub(super) fn share_planes(wide: &[WideRay; WIDTH]) -> bool {
+        wide.iter().all(|w| w.near == wide[0].near)
+    }
+
+    /// The prepared rays `wide`, which [`PacketRays::share_planes`], in lanes.
+    #[inline(always)]
+    pub(super) fn new(wide: &[WideRay; WIDTH]) -> Self {
+        PacketRays {
+            origin: [0, 1, 2].map(|axis| wide.each_ref().map(|w| w.origin[axis])),
+            inv_dir: [0, 1, 2].map(|axis| wide.each_ref().map(|w| w.inv_dir[axis])),
+            near: wide[0].near,
+            far: wide[0].far,
+        }
+    }
+}
+
 /// The interval a packet's rays span on each axis, for a test that rejects at once the boxes
 /// none of them can enter (`BoxTest::enter_bound`). For each axis: the origin coordinate
 /// that makes the entry distance least and the one that makes the exit distance greatest
 /// (which depends on the direction's sign, the same for all the packet's rays), and the least
-/// and greatest reciprocal direction. Only ever made from finite reciprocal directions.
+/// and greatest reciprocal direction; and the near and far planes' rows, the packet's own.
+/// Only ever made from finite reciprocal directions.
 pub(super) struct PacketBound {
     pub(super) origin_near: [f32; 3],
     pub(super) origin_far: [f32; 3],
     pub(super) inv_low: [f32; 3],
     pub(super) inv_high: [f32; 3],
+    pub(super) near: [usize; 3],
+    pub(super) far: [usize; 3],
 }
 
 /// `BoxTest::enter_child` in two SSE steps of four lanes (plain code off x86-64).
@@ -78,7 +102,7 @@ pub(super) fn enter_bound_portable(bound: &PacketBound, node: &Node8, end: f32) 
         let mut t0 = f32x4::ZERO;
         let mut t1 = f32x4::splat(end);
         for axis in 0..3 {
-            let (near_row, far_row) = near_far_rows(bound, axis);
+            let (near_row, far_row) = (bound.near[axis], bound.far[axis]);
             let (low, high) = (
                 f32x4::splat(bound.inv_low[axis]),
                 f32x4::splat(bound.inv_high[axis]),
@@ -91,17 +115,6 @@ pub(super) fn enter_bound_portable(bound: &PacketBound, node: &Node8, end: f32) 
         t0.cmp_le(t1).move_mask() as u32
     };
     (half(0) | (half(1) << 4)) & u32::from(node.valid)
-}
-
-/// The rows of a node's near and far planes on `axis` for the rays `bound` describes: the max
-/// first where their reciprocal directions are negative, as `WideRay::new` chooses.
-#[inline(always)]
-fn near_far_rows(bound: &PacketBound, axis: usize) -> (usize, usize) {
-    if bound.inv_high[axis] < 0.0 {
-        (3 + axis, axis)
-    } else {
-        (axis, 3 + axis)
-    }
 }
 
 /// [`enter_bound_portable`] in one step of eight lanes.
@@ -117,7 +130,7 @@ pub(super) unsafe fn enter_bound_avx(bound: &PacketBound, node: &Node8, end: f32
     let mut t0 = _mm256_setzero_ps();
     let mut t1 = _mm256_set1_ps(end);
     for axis in 0..3 {
-        let (near_row, far_row) = near_far_rows(bound, axis);
+        let (near_row, far_row) = (bound.near[axis], bound.far[axis]);
         let low = _mm256_set1_ps(bound.inv_low[axis]);
         let high = _mm256_set1_ps(bound.inv_high[axis]);
         // SAFETY: each row is eight f32 in bounds of `node`, 32-byte aligned.
@@ -179,7 +192,7 @@ mod tests {
     use crate::geometry::Ray;
     #[cfg(target_arch = "x86_64")]
     use crate::geometry::node8::Avx;
-    use crate::geometry::node8::{BoxTest, Portable, WideRay, avx_available};
+    use crate::geometry::node8::{BoxTest, Portable, avx_available};
     use glam::Vec3;
 
     /// A small fixed stream (splitmix64), so every run checks the same cases.
@@ -258,15 +271,10 @@ mod tests {
             let spread = scale * [1e-5, 1e-3, 0.1][round / 6 % 3];
             let rays = packet(&mut stream, origin, target, spread);
             let wide: [WideRay; WIDTH] = std::array::from_fn(|r| WideRay::new(&rays[r]));
-            if wide.iter().any(|w| w.near != wide[0].near) {
+            if !PacketRays::share_planes(&wide) {
                 continue;
             }
-            let packet = PacketRays {
-                origin: [0, 1, 2].map(|axis| wide.each_ref().map(|w| w.origin[axis])),
-                inv_dir: [0, 1, 2].map(|axis| wide.each_ref().map(|w| w.inv_dir[axis])),
-                near: wide[0].near,
-                far: wide[0].far,
-            };
+            let packet = PacketRays::new(&wide);
             let Some(bound) = crate::geometry::packet::packet_bound(&packet) else {
                 continue;
             };
