@@ -9,7 +9,10 @@
 //! triangle's edges ([`SurfacePoint::on_triangle`]), so moving the origin along the normal by the
 //! bound's projection, then one float further on every axis, puts it strictly on the side the
 //! ray leaves to. The distance moved is as small as the rounding requires and no smaller:
-//! nothing in it depends on the scene's scale.
+//! nothing in it depends on the scene's scale. A point computed without error (on a plane
+//! through the world's origin, such as a floor at `y = 0`) is already exactly on its plane and
+//! is not moved ([`offset_ray_origin`]'s helper says why that is safe, and why stepping off
+//! would be slow).
 //!
 //! The fixed offset moved every coordinate by 256 ULPs of *itself*, which grows with the
 //! distance from the world's origin rather than with the geometry: at x = 1e5 an ULP is 0.0078,
@@ -152,8 +155,9 @@ pub fn hit_point(p: &[Vec3; 3], b1: f32, b2: f32) -> Vec3 {
 /// no surface (zero normal) is returned unchanged. A point on a moving object gives the origin
 /// it carries for that side, whatever `method` (the comparison offset is for still geometry).
 // Inlined into the spawns, so that the origin stays in registers (docs/bench.md, issue 12,
-// eighth round: a store-forwarding stall per ray when it was returned through memory).
-#[inline]
+// eighth round: a store-forwarding stall per ray when it was returned through memory). Always:
+// under a plain `#[inline]` it was left a call, whose direction was read back through memory.
+#[inline(always)]
 pub fn offset_ray_origin(point: &SurfacePoint, toward: Vec3, method: OffsetMethod) -> Vec3 {
     let below = point.normal.dot(toward) < 0.0;
     if let Some([above_origin, below_origin]) = point.spawn {
@@ -212,13 +216,27 @@ pub fn plane_normal(v: &[Vec3; 3]) -> Vec3 {
 
 /// pbrt-v4's `OffsetRayOrigin`: `p` moved along the unit normal `n` by `d = |n| . error`, the
 /// largest distance from the plane that the error box around `p` reaches, then one float
-/// further on every axis along which `n` moves it. The last step is what makes the result
-/// strictly off the plane: the addition rounds to nearest, possibly back toward the plane, and
-/// the step away is larger than that rounding; a point with no error (a vertex at zero) moves
-/// by the step alone.
+/// further on every axis along which that offset moves it. The last step is what makes the
+/// result strictly off the plane: the addition rounds to nearest, possibly back toward the
+/// plane, and the step away is larger than that rounding.
+///
+/// A point with no error along the normal (`d = 0`) is exactly on its plane, which then passes
+/// through the world's origin along every axis the normal has (the floor `y = 0` of the
+/// Cornell scenes, a vertex at the origin): it stays there, as in pbrt-v4. Rays from it find
+/// that plane at `t = 0` exactly, which the triangle test rejects (for a grazing ray, through
+/// its f64 plane distance, which is not certainly positive), so nothing hits the surface it
+/// leaves; `tests/offsets.rs` probes closed boxes with faces on those planes at every scale.
+/// Stepping one float off it anyway, as we once did, gave a coordinate of 1.4e-45, a
+/// subnormal: every triangle and box test reading that origin then took a microcode assist
+/// per operation, and the Cornell box rendered 18 % slower (docs/bench.md, issue 12,
+/// eighteenth round).
+// Inlined, as `offset_ray_origin` is: called through memory, the normal and the direction
+// were read back from the caller's stores at every spawn.
+#[inline(always)]
 fn offset_by_error(p: Vec3, error: Vec3, n: Vec3) -> Vec3 {
     let d = n.abs().dot(error);
-    let moved = p + d * n;
+    let offset = d * n;
+    let moved = p + offset;
     let step = |x: f32, n: f32| {
         if n > 0.0 {
             x.next_up()
@@ -228,7 +246,11 @@ fn offset_by_error(p: Vec3, error: Vec3, n: Vec3) -> Vec3 {
             x
         }
     };
-    Vec3::new(step(moved.x, n.x), step(moved.y, n.y), step(moved.z, n.z))
+    Vec3::new(
+        step(moved.x, offset.x),
+        step(moved.y, offset.y),
+        step(moved.z, offset.z),
+    )
 }
 
 /// Coordinates closer to zero than this get the fixed offset `FLOAT_SCALE * n` (Wachter-Binder).
@@ -286,11 +308,24 @@ mod tests {
     }
 
     #[test]
-    fn a_point_without_error_still_moves_one_float_off_the_plane() {
-        let point = SurfacePoint::on_triangle(&flat(0.0, 0.0), 0.0, 0.0);
-        assert_eq!((point.p, point.error), (Vec3::ZERO, Vec3::ZERO));
+    fn a_point_without_error_stays_exactly_on_its_plane_and_never_turns_subnormal() {
+        // On the plane z = 0 every computed point is exact along z: its error there is zero,
+        // so the offset is zero, and the origin stays on the plane, where the triangle test's
+        // distance to that plane is exactly zero and is rejected. One float up from zero
+        // would have been 1.4e-45, a subnormal that slows every operation reading it.
+        for (b1, b2) in [(0.0, 0.0), (0.25, 0.5), (1.0, 0.0), (0.3, 0.7)] {
+            let point = SurfacePoint::on_triangle(&flat(0.0, 0.0), b1, b2);
+            assert_eq!((point.p.z, point.error.z), (0.0, 0.0));
+            for toward in [Vec3::Z, -Vec3::Z, Vec3::new(0.3, -0.2, 1e-6)] {
+                let origin = offset_ray_origin(&point, toward, OffsetMethod::ErrorBound);
+                assert_eq!(origin, point.p, "({b1}, {b2}) toward {toward}");
+                assert!(origin.to_array().iter().all(|c| !c.is_subnormal()));
+            }
+        }
+        // A plane beside zero has an error along its normal, and the origin moves off it.
+        let point = SurfacePoint::on_triangle(&flat(0.0, 1e-3), 0.25, 0.25);
         let up = offset_ray_origin(&point, Vec3::Z, OffsetMethod::ErrorBound);
-        assert_eq!(up, Vec3::new(0.0, 0.0, f32::from_bits(1)));
+        assert!(up.z > 1e-3 && up.z < 1e-3 + 1e-9, "{up}");
     }
 
     #[test]
