@@ -27,7 +27,7 @@ use glam::Vec3;
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
 use tracer::geometry::{
-    Accel, BuildQuality, OffsetMethod, SurfacePoint, TraversalStats, hit_point, is_degenerate,
+    Accel, BuildQuality, OffsetMethod, Ray, SurfacePoint, TraversalStats, hit_point, is_degenerate,
     offset_ray_origin, spawn_ray, spawn_ray_to,
 };
 
@@ -141,22 +141,47 @@ impl Counts {
             self.subnormal_ends,
         ]
     }
+
+    /// Traces `bounce`, spawned from a hit on triangle `left`: a miss is a leak, a hit on
+    /// `left` a self-hit; an origin with a subnormal coordinate counts too.
+    fn bounce(&mut self, accel: &Accel, bounce: &Ray, left: u32, stats: &mut TraversalStats) {
+        self.subnormal_ends += subnormal(bounce.origin) as u32;
+        match accel.intersect(bounce, stats) {
+            None => self.bounce_leaks += 1,
+            Some(h) if h.triangle == left => self.self_hits += 1,
+            Some(_) => {}
+        }
+    }
+
+    /// Counts `shadow` if either of its ends has a subnormal coordinate.
+    fn shadow_ends(&mut self, shadow: &Ray) {
+        self.subnormal_ends +=
+            (subnormal(shadow.origin) || subnormal(shadow.origin + shadow.dir)) as u32;
+    }
 }
 
-/// A closed icosphere of radius `radius` around `center`, built by the scene loader.
-fn sphere(center: Vec3, radius: f32, subdivisions: u32) -> Vec<[Vec3; 3]> {
+/// The triangles of one object of material `m`, described by `object` (its shape's keys), as
+/// the scene loader builds them.
+fn shape(object: &str) -> Vec<[Vec3; 3]> {
     let toml = format!(
         "[camera]\nposition = [0, 0, 0]\nlook_at = [0, 0, 1]\n[materials.m]\ntype = \"diffuse\"\n\
-         [[object]]\nshape = \"sphere\"\nmaterial = \"m\"\ncenter = [{}, {}, {}]\n\
-         radius = {radius:e}\nsubdivisions = {subdivisions}\n",
-        center.x, center.y, center.z
+         [[object]]\nmaterial = \"m\"\n{object}"
     );
-    let scene = tracer::scene::load_str(&toml).expect("the sphere scene loads");
+    let scene = tracer::scene::load_str(&toml).expect("the shape's scene loads");
     scene.triangles.iter().map(|t| t.p).collect()
 }
 
-/// Probes the sphere `v` (around `center`, radius `radius`) with rays spawned by `method`.
-fn probe(v: &[[Vec3; 3]], center: Vec3, radius: f32, method: OffsetMethod, n: u32) -> Counts {
+/// A closed icosphere of radius `radius` around `center`.
+fn sphere(center: Vec3, radius: f32, subdivisions: u32) -> Vec<[Vec3; 3]> {
+    shape(&format!(
+        "shape = \"sphere\"\ncenter = [{}, {}, {}]\nradius = {radius:e}\n\
+         subdivisions = {subdivisions}\n",
+        center.x, center.y, center.z
+    ))
+}
+
+/// The tree over the triangles `v`, as a scene of them would have it.
+fn tree(v: &[[Vec3; 3]]) -> Accel {
     let triangles: Vec<_> = v
         .iter()
         .map(|&p| tracer::scene::Triangle {
@@ -166,7 +191,12 @@ fn probe(v: &[[Vec3; 3]], center: Vec3, radius: f32, method: OffsetMethod, n: u3
             material: 0,
         })
         .collect();
-    let accel = Accel::build(&triangles, BuildQuality::Medium);
+    Accel::build(&triangles, BuildQuality::Medium)
+}
+
+/// Probes the sphere `v` (around `center`, radius `radius`) with rays spawned by `method`.
+fn probe(v: &[[Vec3; 3]], center: Vec3, radius: f32, method: OffsetMethod, n: u32) -> Counts {
+    let accel = tree(v);
     let mut stats = TraversalStats::default();
     let mut rng = Rng(u64::from(n) ^ radius.to_bits() as u64);
     let mut counts = Counts::default();
@@ -177,7 +207,7 @@ fn probe(v: &[[Vec3; 3]], center: Vec3, radius: f32, method: OffsetMethod, n: u3
         let k = rng.index(v.len());
         let (b1, b2) = rng.barycentrics();
         let target = hit_point(&v[k], b1, b2);
-        let primary = tracer::geometry::Ray {
+        let primary = Ray {
             origin,
             dir: target - origin,
             t_max: f32::INFINITY,
@@ -203,12 +233,7 @@ fn probe(v: &[[Vec3; 3]], center: Vec3, radius: f32, method: OffsetMethod, n: u3
             tangent + inward * angle
         };
         let bounce = spawn_ray(&at, dir, method);
-        counts.subnormal_ends += subnormal(bounce.origin) as u32;
-        match accel.intersect(&bounce, &mut stats) {
-            None => counts.bounce_leaks += 1,
-            Some(h) if h.triangle == hit.triangle => counts.self_hits += 1,
-            Some(_) => {}
-        }
+        counts.bounce(&accel, &bounce, hit.triangle, &mut stats);
         let lamp = SurfacePoint::exact(inside(&mut rng));
         let other = (hit.triangle as usize + 1 + rng.index(v.len() - 1)) % v.len();
         // On a facet that shares a vertex with the one left, the target stays off the shared
@@ -226,8 +251,7 @@ fn probe(v: &[[Vec3; 3]], center: Vec3, radius: f32, method: OffsetMethod, n: u3
         let facet = SurfacePoint::on_triangle(&v[other], c1, c2);
         for to in [lamp, facet] {
             let shadow = spawn_ray_to(&at, &to, method);
-            counts.subnormal_ends +=
-                (subnormal(shadow.origin) || subnormal(shadow.origin + shadow.dir)) as u32;
+            counts.shadow_ends(&shadow);
             let blocked = accel.occluded(&shadow, &mut stats);
             counts.false_occlusions += blocked as u32;
         }
@@ -316,16 +340,12 @@ fn spheres_from_1e_minus_5_to_1e6_at_a_thousand_radii_away_are_clean() {
     }
 }
 
-/// A closed box from `min` to `max`, built by the scene loader, outward facing.
+/// A closed box from `min` to `max`, outward facing.
 fn cuboid(min: Vec3, max: Vec3) -> Vec<[Vec3; 3]> {
-    let toml = format!(
-        "[camera]\nposition = [0, 0, 0]\nlook_at = [0, 0, 1]\n[materials.m]\ntype = \"diffuse\"\n\
-         [[object]]\nshape = \"box\"\nmaterial = \"m\"\nmin = [{:e}, {:e}, {:e}]\n\
-         max = [{:e}, {:e}, {:e}]\n",
+    shape(&format!(
+        "shape = \"box\"\nmin = [{:e}, {:e}, {:e}]\nmax = [{:e}, {:e}, {:e}]\n",
         min.x, min.y, min.z, max.x, max.y, max.z
-    );
-    let scene = tracer::scene::load_str(&toml).expect("the box scene loads");
-    scene.triangles.iter().map(|t| t.p).collect()
+    ))
 }
 
 /// Probes the closed box `v` from `min` to `max` as [`probe`] probes a sphere, with the
@@ -336,16 +356,7 @@ fn cuboid(min: Vec3, max: Vec3) -> Vec<[Vec3; 3]> {
 /// to interior points only: a segment to another face could run along a face the point is on;
 /// and only those from points off the box's edges count (the comment at the count says why).
 fn probe_box(v: &[[Vec3; 3]], min: Vec3, max: Vec3, n: u32) -> Counts {
-    let triangles: Vec<_> = v
-        .iter()
-        .map(|&p| tracer::scene::Triangle {
-            p,
-            n: None,
-            uv: None,
-            material: 0,
-        })
-        .collect();
-    let accel = Accel::build(&triangles, BuildQuality::Medium);
+    let accel = tree(v);
     let mut stats = TraversalStats::default();
     let mut rng = Rng(u64::from(n) ^ u64::from(max.x.to_bits()));
     let mut counts = Counts::default();
@@ -359,7 +370,7 @@ fn probe_box(v: &[[Vec3; 3]], min: Vec3, max: Vec3, n: u32) -> Counts {
         let origin = inside(&mut rng);
         let k = rng.index(v.len());
         let (b1, b2) = rng.barycentrics();
-        let primary = tracer::geometry::Ray {
+        let primary = Ray {
             origin,
             dir: hit_point(&v[k], b1, b2) - origin,
             t_max: f32::INFINITY,
@@ -381,16 +392,10 @@ fn probe_box(v: &[[Vec3; 3]], min: Vec3, max: Vec3, n: u32) -> Counts {
             toward = Vec3::from_array(t);
         }
         let bounce = spawn_ray(&at, toward - at.p, OffsetMethod::ErrorBound);
-        counts.subnormal_ends += subnormal(bounce.origin) as u32;
-        match accel.intersect(&bounce, &mut stats) {
-            None => counts.bounce_leaks += 1,
-            Some(h) if h.triangle == hit.triangle => counts.self_hits += 1,
-            Some(_) => {}
-        }
+        counts.bounce(&accel, &bounce, hit.triangle, &mut stats);
         let lamp = SurfacePoint::exact(inside(&mut rng));
         let shadow = spawn_ray_to(&at, &lamp, OffsetMethod::ErrorBound);
-        counts.subnormal_ends +=
-            (subnormal(shadow.origin) || subnormal(shadow.origin + shadow.dir)) as u32;
+        counts.shadow_ends(&shadow);
         // At an edge the computed point may lie an ULP beyond the neighbouring face, which
         // the offset along the hit face's normal does not undo, and a shadow ray from there
         // can be blocked by that face: a limitation of the offset at sharp creases, the same
