@@ -21,9 +21,10 @@
 //! bound widened by the roundings still to come (placing the origin in the world, and taking
 //! the next ray back), before placing the two origins (one per side) in the world. Once back
 //! in object space the origin is strictly on the side of the object-space triangle it leaves
-//! to: the argument is at [`placed_point`], and `tracer/tests/motion_offsets.rs` checks it with
-//! an exact predicate at every scale, distance and placement. Nothing here depends on the
-//! scene's size.
+//! to (or exactly on its plane where its widened bound along the normal is zero, as still
+//! geometry's points without error are): the argument is at [`placed_point`], and
+//! `tracer/tests/motion_offsets.rs` checks it with an exact predicate at every scale, distance
+//! and placement. Nothing here depends on the scene's size.
 
 use super::offset::SurfacePoint;
 use super::{Accel, BuildQuality, Hit, Ray, Traversal, TraversalStats};
