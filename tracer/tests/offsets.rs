@@ -380,11 +380,12 @@ fn probe_box(v: &[[Vec3; 3]], min: Vec3, max: Vec3, n: u32) -> Counts {
             continue;
         };
         let at = hit.surface_point(&v[hit.triangle as usize]);
+        // The axis the hit face is perpendicular to.
+        let axis = at.normal.abs().max_position();
         let mut toward = inside(&mut rng);
         if rng.index(2) == 0 {
             // Nearly along the face: the target's coordinate across it moved next to the
             // face's plane, still a hundredth of the side inside every other face.
-            let axis = at.normal.abs().max_position();
             let angle = [1e-2, 1e-4, 1e-6][rng.index(3)];
             let mut t = toward.to_array();
             let side = size.to_array()[axis];
@@ -400,7 +401,6 @@ fn probe_box(v: &[[Vec3; 3]], min: Vec3, max: Vec3, n: u32) -> Counts {
         // the offset along the hit face's normal does not undo, and a shadow ray from there
         // can be blocked by that face: a limitation of the offset at sharp creases, the same
         // before the change to points without error. Only points off the edges count here.
-        let axis = at.normal.abs().max_position();
         let near = |a: usize| {
             let (p, lo, hi) = (at.p.to_array()[a], min.to_array()[a], max.to_array()[a]);
             (p - lo).abs().min((p - hi).abs()) <= size.to_array()[a] * 1e-5

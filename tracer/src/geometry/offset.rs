@@ -237,10 +237,10 @@ fn offset_by_error(p: Vec3, error: Vec3, n: Vec3) -> Vec3 {
     let d = n.abs().dot(error);
     let offset = d * n;
     let moved = p + offset;
-    let step = |x: f32, n: f32| {
-        if n > 0.0 {
+    let step = |x: f32, along: f32| {
+        if along > 0.0 {
             x.next_up()
-        } else if n < 0.0 {
+        } else if along < 0.0 {
             x.next_down()
         } else {
             x
