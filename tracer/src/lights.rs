@@ -181,7 +181,10 @@ impl Lights {
     /// picks the light, `u` the point on it.
     // Inlined where the renderer calls it, so that its sample need not go through memory
     // (a store-forwarding stall per shadow ray; docs/bench.md, issue 12, eighth round).
-    #[inline]
+    // Always, with the still triangle's case alone: under a plain `#[inline]` the whole match
+    // was left a call, and the sample came back through memory at every bounce (docs/bench.md,
+    // issue 12, nineteenth round). The other lights are sampled out of line.
+    #[inline(always)]
     pub fn sample(
         &self,
         scene: &Scene,
@@ -201,17 +204,31 @@ impl Lights {
         if choice <= 0.0 {
             return None;
         }
+        if let Light::Triangle(t) = self.lights[index] {
+            let triangle = &scene.triangles[t as usize];
+            let shape = &self.shapes[index];
+            let su = u.x.sqrt();
+            let (b1, b2) = (su * (1.0 - u.y), su * u.y);
+            let at = SurfacePoint::on_triangle_with_normal(&triangle.p, b1, b2, shape.plane_normal);
+            let radiance = scene.materials[triangle.material as usize].emission;
+            return area_sample(p, at, (shape.area, shape.normal), radiance, choice);
+        }
+        self.sample_other(scene, moment, p, (index, choice), u)
+    }
+
+    /// [`Lights::sample`] of light `index`, chosen with probability `choice`, where it is not a
+    /// still triangle.
+    #[inline(never)]
+    fn sample_other(
+        &self,
+        scene: &Scene,
+        moment: &Moment,
+        p: Vec3,
+        (index, choice): (usize, f32),
+        u: Vec2,
+    ) -> Option<LightSample> {
         match self.lights[index] {
-            Light::Triangle(t) => {
-                let triangle = &scene.triangles[t as usize];
-                let shape = &self.shapes[index];
-                let su = u.x.sqrt();
-                let (b1, b2) = (su * (1.0 - u.y), su * u.y);
-                let at =
-                    SurfacePoint::on_triangle_with_normal(&triangle.p, b1, b2, shape.plane_normal);
-                let radiance = scene.materials[triangle.material as usize].emission;
-                area_sample(p, at, (shape.area, shape.normal), radiance, choice)
-            }
+            Light::Triangle(_) => unreachable!("still triangles are sampled inline by `sample`"),
             Light::Moving { object, triangle } => {
                 moving::sample(scene, moment, (object, triangle), p, u, choice)
             }
