@@ -31,10 +31,21 @@ impl PacketRays {
 
     /// The prepared rays `wide`, which [`PacketRays::share_planes`], in lanes.
     #[inline(always)]
+    // A plain loop: written as nested `array::map`s, the transpose was left as out-of-line
+    // `try_map` calls, 1.6 % of a Cornell box's render (docs/bench.md, issue 12, nineteenth
+    // round).
     pub(super) fn new(wide: &[WideRay; WIDTH]) -> Self {
+        let mut origin = [[0.0; WIDTH]; 3];
+        let mut inv_dir = [[0.0; WIDTH]; 3];
+        for (lane, ray) in wide.iter().enumerate() {
+            for axis in 0..3 {
+                origin[axis][lane] = ray.origin[axis];
+                inv_dir[axis][lane] = ray.inv_dir[axis];
+            }
+        }
         PacketRays {
-            origin: [0, 1, 2].map(|axis| wide.each_ref().map(|w| w.origin[axis])),
-            inv_dir: [0, 1, 2].map(|axis| wide.each_ref().map(|w| w.inv_dir[axis])),
+            origin,
+            inv_dir,
             near: wide[0].near,
             far: wide[0].far,
         }
