@@ -72,7 +72,12 @@ pub struct Material {
 }
 
 /// The closed set of scattering models.
+// Aligned to 16 bytes, so that its size (44 bytes unaligned) is three whole vector registers:
+// a copy of 44 bytes is three overlapping 16-byte moves, and a later read of the last one
+// spans two stores, which the processor cannot forward; the shading point's BSDF is copied
+// and read back at every bounce (docs/bench.md, issue 12, nineteenth round).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(align(16))]
 pub enum Bsdf {
     /// Lambertian reflection; `texture` (an index into `Scene::textures`) multiplies `albedo`.
     /// The BSDF methods ignore `texture`: the integrator resolves it first with
