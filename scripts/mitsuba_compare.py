@@ -11,8 +11,10 @@ speed figure means nothing unless both renderers drew the same picture, so this 
    MTL_MAPPING below), `[environment] radiance` as a `constant` emitter;
 2. renders it with Mitsuba (each variant in a fresh process, so that its CPU-seconds are its
    own) and writes an EXR;
-3. runs `tessera bench` on the same TOMLs at the same size, samples and depth, which writes our EXR
-   and our timings (CPU-seconds of the whole process, BVH build and render);
+3. runs `tessera bench` on the same TOML at the same size, samples and depth, which writes our EXR
+   and our timings (CPU-seconds of the whole process, BVH build and render); scene by scene, after
+   Mitsuba's run of it, and `--repeats N` times over, each renderer's fastest run reported (a
+   machine shared with others disturbs single runs by up to a third);
 4. runs `tessera compare OURS.exr MITSUBA.exr --json` and checks the per-channel means;
 5. prints one table and writes OUT/compare.json and OUT/compare.md.
 
@@ -111,6 +113,15 @@ def main():
         help="Mitsuba's integrator: auto is volpath where the scene has media, else path; forcing volpath "
         "on a scene without media measures what a renderer that always tracks media pays",
     )
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        help="runs of each renderer on each scene, alternated scene by scene (Mitsuba, then tessera); the "
+        "table shows each renderer's fastest run and lists every run's CPU-seconds below it: on a shared "
+        "machine the fastest is the one others disturbed least, and alternating exposes both renderers "
+        "to the same disturbances",
+    )
     parser.add_argument("--worker", nargs=3, metavar=("VARIANT", "TOML", "EXR"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
@@ -124,29 +135,46 @@ def main():
             print(f"{s}: skipped, its OBJ (under ../shared/scenes) is absent", file=sys.stderr)
     if not present:
         sys.exit("no scene to compare")
+    if args.repeats < 1:
+        sys.exit("--repeats must be at least 1")
     args.out.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()
-    mitsuba = {}
-    for variant in [v for v in args.variants.split(",") if v]:
+    variants = [v for v in args.variants.split(",") if v]
+    # Every run, scene by scene, Mitsuba's variants then ours, so that a disturbance of the
+    # machine falls on both renderers alike; both are deterministic, so each repeat writes the
+    # same images over the last.
+    mitsuba_runs = {}
+    our_runs = {}
+    for _ in range(args.repeats):
         for toml in present:
-            exr = args.out / f"mitsuba-{variant}" / f"{toml.stem}.exr"
-            exr.parent.mkdir(parents=True, exist_ok=True)
-            result = run_worker(variant, toml, exr, args)
-            mitsuba[(variant, toml.stem)] = result
-            print(f"mitsuba {variant} {toml.stem}: {describe(result)}", file=sys.stderr)
-    ours = run_tessera(present, args)
+            for variant in variants:
+                exr = args.out / f"mitsuba-{variant}" / f"{toml.stem}.exr"
+                exr.parent.mkdir(parents=True, exist_ok=True)
+                result = run_worker(variant, toml, exr, args)
+                mitsuba_runs.setdefault((variant, toml.stem), []).append(result)
+                print(f"mitsuba {variant} {toml.stem}: {describe(result)}", file=sys.stderr)
+            our_runs.setdefault(str(toml), []).append(run_tessera([toml], args)[str(toml)])
     rows = []
     for toml in present:
-        our = ours[str(toml)]
-        for variant in [v for v in args.variants.split(",") if v]:
-            theirs = mitsuba[(variant, toml.stem)]
-            row = {"scene": toml.stem, "variant": variant, "mitsuba": theirs, "tessera": our}
+        our = fastest(our_runs[str(toml)])
+        for variant in variants:
+            theirs = fastest(mitsuba_runs[(variant, toml.stem)])
+            row = {
+                "scene": toml.stem,
+                "variant": variant,
+                "mitsuba": theirs,
+                "tessera": our,
+                "runs": {
+                    "tessera": [r["cpu_seconds"] for r in our_runs[str(toml)]],
+                    "mitsuba": [r["cpu_seconds"] for r in mitsuba_runs[(variant, toml.stem)] if "error" not in r],
+                },
+            }
             if "error" not in theirs:
                 row["comparison"] = compare(args.tessera, our["image"], theirs["exr"], args.tolerance)
             rows.append(row)
     report = {
         "settings": {"size": args.size, "spp": args.spp, "segments": args.segments, "tessera_max_depth": args.segments - 1,
-                     "tolerance": args.tolerance, "mitsuba_integrator": args.integrator},
+                     "tolerance": args.tolerance, "mitsuba_integrator": args.integrator, "repeats": args.repeats},
         "mtl_mapping": MTL_MAPPING,
         "media_mapping": MEDIA_MAPPING,
         "cores": os.cpu_count(),
@@ -159,6 +187,12 @@ def main():
     table = markdown(report)
     (args.out / "compare.md").write_text(table)
     print(table)
+
+
+def fastest(runs):
+    """The run of least CPU-seconds, or the first failure where every run failed."""
+    done = [r for r in runs if "error" not in r]
+    return min(done, key=lambda r: r["cpu_seconds"]) if done else runs[0]
 
 
 def scene_files_present(toml):
@@ -275,6 +309,15 @@ def markdown(report):
             f"({m['load_cpu_seconds']:.2f} + {m['render_cpu_seconds']:.2f}) | {m['wall_seconds']:.2f} | "
             f"{fmt_means(c['mean_mitsuba'])} | {diff} ({verdict} {tolerance}; RMSE {c['rmse']:.4f}) |"
         )
+    if s.get("repeats", 1) > 1:
+        lines += ["", f"Each renderer's fastest of {s['repeats']} runs, alternated scene by scene; every run's CPU-s:", ""]
+        for row in report["rows"]:
+            if "error" in row["mitsuba"]:
+                continue
+            ratio = row["tessera"]["cpu_seconds"] / row["mitsuba"]["cpu_seconds"]
+            ours = ", ".join(f"{v:.2f}" for v in row["runs"]["tessera"])
+            theirs = ", ".join(f"{v:.2f}" for v in row["runs"]["mitsuba"])
+            lines.append(f"- {row['scene']}: tessera {ours}; Mitsuba {row['variant']} {theirs}; fastest against fastest {ratio:.2f}x")
     lines += ["", "MTL mapping: " + report["mtl_mapping"] + ".", "", "Media mapping: " + report["media_mapping"] + ".", ""]
     return "\n".join(lines)
 
