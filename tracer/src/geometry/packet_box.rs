@@ -30,10 +30,10 @@ impl PacketRays {
     }
 
     /// The prepared rays `wide`, which [`PacketRays::share_planes`], in lanes.
-    #[inline(always)]
     // A plain loop: written as nested `array::map`s, the transpose was left as out-of-line
     // `try_map` calls, 1.6 % of a Cornell box's render (docs/bench.md, issue 12, nineteenth
     // round).
+    #[inline(always)]
     pub(super) fn new(wide: &[WideRay; WIDTH]) -> Self {
         let mut origin = [[0.0; WIDTH]; 3];
         let mut inv_dir = [[0.0; WIDTH]; 3];
