@@ -162,22 +162,31 @@ fn assert_frames_match(out: &Path, expected: Vec<(String, Vec<u8>)>) {
     }
 }
 
+/// A peer killed mid-render (SIGKILL: no goodbye, no connection close) costs time, not tiles:
+/// the owner notices it gone and the frames are bit-identical. The slow frames keep the render
+/// going for seconds after the kill, so that the owner must notice the loss before it can end
+/// (with the fast ones the render could end first, and the test then proved nothing).
 #[test]
 fn a_peer_killed_mid_render_costs_time_not_tiles() {
     let dir = tempfile::tempdir().unwrap();
     let Trio {
         out,
         server,
-        // Kept open: serve writes its log into this pipe until it exits.
-        lines: _lines,
+        lines,
         first: survivor,
         second: mut victim,
-    } = trio_past_frame_0(dir.path());
+    } = trio_past_frame_0_sized(dir.path(), &SLOW);
     victim.kill().unwrap(); // SIGKILL: no goodbye, no connection close.
     victim.wait().unwrap();
-    wait_success(server, "serve", Duration::from_secs(120));
+    let log = log_until_closed(&lines, Duration::from_secs(120)).join("\n");
+    wait_success(server, "serve", Duration::from_secs(30));
     wait_success(survivor, "peer 1", Duration::from_secs(30));
-    assert_frames_match_reference(dir.path(), &out);
+    assert!(
+        log.lines().any(|line| line.contains("peer=peer 2")
+            && (line.contains("peer left") || line.contains("peer failed"))),
+        "the owner never noticed the killed peer:\n{log}"
+    );
+    assert_frames_match(&out, reference_sized(dir.path(), &SLOW));
     // The victim did take part before it died.
     let stats: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
@@ -225,7 +234,9 @@ fn peers_report_a_lost_owner_and_fail() {
     let certs = dir.path().join("certs");
     keygen(&certs, 2);
     let port = free_port();
-    let (mut server, lines) = serve(&certs, &dir.path().join("cluster"), port, 1);
+    // Slow frames: the owner is killed once frame 0 is done, and the render must still have
+    // seconds to go then, or the peer would finish it and rightly exit with success.
+    let (mut server, lines) = serve_sized(&certs, &dir.path().join("cluster"), port, 1, &SLOW);
     let mut orphan = peer(&certs, port, 1)
         .stderr(Stdio::piped())
         .spawn()
