@@ -303,6 +303,14 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
     for frame in stats["frames"].as_array().unwrap() {
         assert_eq!(frame["duplicates_disagreed"], 0, "{frame}");
     }
+    // The stopped peer's tiles were backed up on the other, not waited for: without this the
+    // test would pass as well had the pause missed the render.
+    assert!(
+        log.iter()
+            .any(|line| line.contains("backing up overdue tiles on idle peers")),
+        "no tile was backed up:\n{}",
+        log.join("\n")
+    );
 }
 
 /// A peer stopped for longer than the owner's silence timeout has its tiles backed up on the
