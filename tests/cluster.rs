@@ -178,13 +178,14 @@ fn a_peer_killed_mid_render_costs_time_not_tiles() {
     } = trio_past_frame_0_sized(dir.path(), &SLOW);
     victim.kill().unwrap(); // SIGKILL: no goodbye, no connection close.
     victim.wait().unwrap();
-    let log = log_until_closed(&lines, Duration::from_secs(120)).join("\n");
+    let log = log_until_closed(&lines, Duration::from_secs(120));
     wait_success(server, "serve", Duration::from_secs(30));
     wait_success(survivor, "peer 1", Duration::from_secs(30));
     assert!(
-        log.lines().any(|line| line.contains("peer=peer 2")
+        log.iter().any(|line| line.contains("peer=peer 2")
             && (line.contains("peer left") || line.contains("peer failed"))),
-        "the owner never noticed the killed peer:\n{log}"
+        "the owner never noticed the killed peer:\n{}",
+        log.join("\n")
     );
     assert_frames_match(&out, reference_sized(dir.path(), &SLOW));
     // The victim did take part before it died.
