@@ -66,6 +66,12 @@ pub struct FrameReport {
     /// Duplicate results the owner compared with the first and found bit-identical.
     #[serde(default)]
     pub duplicates_agreed: u32,
+    /// Tiles the owner gave again because no live holder was rendering them.
+    #[serde(default)]
+    pub tiles_reissued: u32,
+    /// Tiles of overdue peers the owner copied to idle peers.
+    #[serde(default)]
+    pub tiles_backed_up: u32,
     /// The owner's completion covered every tile exactly once, in tile order.
     pub results_ok: bool,
     /// Steal requests sent by all peers in the frame.

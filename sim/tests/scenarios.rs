@@ -128,6 +128,12 @@ fn every_tile_completes_exactly_once_under_every_policy_and_fault() {
                         frame.renders, frame.pieces,
                         "{policy}, {name}: a piece rendered twice"
                     );
+                    // Nothing was given out twice either, and the report says so.
+                    assert_eq!(
+                        (frame.tiles_reissued, frame.tiles_backed_up),
+                        (0, 0),
+                        "{policy}, {name}"
+                    );
                 }
             }
             if name == "crashing" {
@@ -139,6 +145,10 @@ fn every_tile_completes_exactly_once_under_every_policy_and_fault() {
                     (3..=3 * in_flight).contains(&failures),
                     "{policy}: every crash must be noticed, {failures} failures"
                 );
+                // The crashed peers' unfinished tiles were given again, and the report counts
+                // them (a crash may find a peer with nothing left to lose, hence the sum).
+                let reissued: u32 = report.frames.iter().map(|f| f.tiles_reissued).sum();
+                assert!(reissued > 0, "{policy}: no tile was re-issued");
                 // The three crashed peers get no tiles in the last frame (live ones whose work
                 // was backed up as overdue over lossy links may sit it out as well, until they
                 // are heard of again).

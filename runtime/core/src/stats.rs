@@ -95,6 +95,12 @@ pub struct FrameStats {
     pub duplicates_agreed: u32,
     /// Results that differed from the first: a peer is broken, as rendering is deterministic.
     pub duplicates_disagreed: u32,
+    /// Tiles the owner gave again because no live holder was rendering them (their holders
+    /// were lost, or every peer was idle with the tile still missing).
+    pub tiles_reissued: u32,
+    /// Tiles of overdue peers the owner copied to idle peers. Their duplicates are compared
+    /// above only where they arrive before the frame is done.
+    pub tiles_backed_up: u32,
 }
 
 /// One peer's account of one frame (times in seconds of slot time: a peer with 2 rendering

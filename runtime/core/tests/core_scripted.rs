@@ -13,7 +13,7 @@ use runtime_core::peer::testing::{
     Cluster, Happening, Record, Rendered, cost_renderer, synthetic_result,
 };
 use runtime_core::peer::{
-    Config, Core, Event, Failure, Fault, FrameError, PeerStats, ProtocolError, VictimOrder,
+    Audit, Config, Core, Event, Failure, Fault, FrameError, PeerStats, ProtocolError, VictimOrder,
 };
 use runtime_core::wire::{FrameId, Message, PeerId, TileId, TileResult, TileSpec};
 
@@ -116,6 +116,19 @@ fn completion(cluster: &Cluster, frame: FrameId) -> (Duration, Vec<TileResult>) 
         .unwrap_or_else(|| panic!("{frame} did not complete"));
     assert!(found.next().is_none(), "{frame} completed twice");
     first
+}
+
+/// The owner's audit of `frame`: what it gave out twice, and how the duplicates compared.
+fn audit(cluster: &Cluster, frame: FrameId) -> Audit {
+    cluster
+        .events()
+        .find_map(|(_, event)| match event {
+            Event::FrameComplete {
+                frame: f, audit, ..
+            } if *f == frame => Some(*audit),
+            _ => None,
+        })
+        .unwrap_or_else(|| panic!("{frame} did not complete"))
 }
 
 /// Who the owner says rendered each tile of `frame`, by tile id.

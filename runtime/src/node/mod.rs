@@ -148,6 +148,8 @@ impl CompletedFrame {
             tiles: TileStats::per_tile(&self.tiles),
             duplicates_agreed: self.audit.agreed,
             duplicates_disagreed: self.audit.disagreed,
+            tiles_reissued: self.audit.reissued,
+            tiles_backed_up: self.audit.backed_up,
             ..FrameStats::default()
         };
         stats.summarise_leaves();
@@ -236,6 +238,8 @@ mod tests {
             audit: runtime_core::peer::Audit {
                 agreed: 2,
                 disagreed: 0,
+                reissued: 3,
+                backed_up: 1,
             },
         };
         let stats = done.stats();
@@ -250,6 +254,7 @@ mod tests {
             (stats.duplicates_agreed, stats.duplicates_disagreed),
             (2, 0)
         );
+        assert_eq!((stats.tiles_reissued, stats.tiles_backed_up), (3, 1));
         // Tiles of 12 and 4: mean 8, variance 16, the largest 1.5 times the mean.
         assert_eq!(stats.leaf_cost_variance, 16.0);
         assert_eq!(stats.leaf_cost_max_over_mean, 1.5);

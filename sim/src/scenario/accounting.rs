@@ -116,6 +116,8 @@ pub(super) fn frame_report(
         renders: tally.renders,
         pieces: tally.pieces,
         duplicates_agreed: tally.audit.agreed,
+        tiles_reissued: tally.audit.reissued,
+        tiles_backed_up: tally.audit.backed_up,
         results_ok: tally.results_ok,
         steal_requests: tally.steal_requests,
         grants: tally.grants,

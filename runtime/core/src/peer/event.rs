@@ -88,14 +88,24 @@ pub enum Event {
     Left,
 }
 
-/// A free audit of determinism: every result that overlapped one already received (a backup
-/// of a straggler's work, a re-issued tile) was compared with it pixel for pixel.
+/// The owner's account of what it gave out twice in a frame, and a free audit of determinism:
+/// every result that overlapped one already received (a backup of a straggler's work, a
+/// re-issued tile) was compared with it pixel for pixel.
+///
+/// The counts of tiles given again are kept beside the comparisons because a duplicate that
+/// arrives after its frame is done (a stopped peer's, once it resumes) is compared with
+/// nothing: without them a frame that was rescued by backups would look untouched.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Audit {
     /// Duplicates whose pixels matched.
     pub agreed: u32,
     /// Duplicates whose pixels differed (each also reported as [`Fault::Mismatch`]).
     pub disagreed: u32,
+    /// Tiles whose missing parts were given again because no live holder was rendering them
+    /// (their holders were lost, or every peer was idle).
+    pub reissued: u32,
+    /// Tiles of overdue peers whose missing parts were copied to idle peers (speculation).
+    pub backed_up: u32,
 }
 
 /// Why the owner gave up on a peer.

@@ -299,7 +299,7 @@ impl Ledger {
                 orphans.push(*id);
             }
         }
-        self.reissue(now, orphans, out);
+        self.audit.reissued += self.reissue(now, orphans, out);
     }
 
     /// A liveness report, and an idle report if `idle`. Reports may arrive in any order; the
@@ -348,7 +348,7 @@ impl Ledger {
             }
         }
         let reissued = orphans.len();
-        self.reissue(now, orphans, out);
+        self.audit.reissued += self.reissue(now, orphans, out);
         let frame = self.frame;
         out.events.push_back(Event::PeerFailed {
             frame,

@@ -15,11 +15,31 @@ fn a_peer_lost_mid_frame_costs_time_not_tiles() {
         finish(&mut cluster);
         let (_, results) = completion(&cluster, FrameId(1));
         assert_all_results(&results, FrameId(1), 48);
-        let failed = cluster.events().any(|(peer, event)| {
-            peer == OWNER
-                && matches!(event, Event::PeerFailed { peer: PeerId(2), reason: Failure::Lost, reissued, .. } if *reissued > 0)
-        });
-        assert!(failed, "steal: {}", config.steal);
+        let reissued: Vec<usize> = cluster
+            .events()
+            .filter_map(|(peer, event)| match event {
+                Event::PeerFailed {
+                    peer: PeerId(2),
+                    reason: Failure::Lost,
+                    reissued,
+                    ..
+                } if peer == OWNER => Some(*reissued),
+                _ => None,
+            })
+            .collect();
+        assert!(
+            reissued.len() == 1 && reissued[0] > 0,
+            "steal: {}: {reissued:?}",
+            config.steal
+        );
+        // The frame's audit counts the same tiles, and no backup: nobody was overdue.
+        let audit = audit(&cluster, FrameId(1));
+        assert_eq!(
+            (audit.reissued as usize, audit.backed_up),
+            (reissued[0], 0),
+            "steal: {}",
+            config.steal
+        );
         assert_no_refusals_or_faults(&cluster);
     }
 }
@@ -152,6 +172,7 @@ fn a_silent_peer_is_declared_failed_and_its_tiles_reissued() {
         )
     });
     assert!(silent);
+    assert!(audit(&cluster, FrameId(1)).reissued > 0);
     // It comes back after the frame: its late messages are dropped quietly.
     cluster.thaw(PeerId(2));
     finish(&mut cluster);
@@ -207,6 +228,8 @@ fn a_duplicate_result_is_accepted_only_if_bit_identical() {
             let expected = runtime_core::peer::Audit {
                 agreed: 1,
                 disagreed: 1,
+                reissued: 0,
+                backed_up: 0,
             };
             assert_eq!(audit, expected, "both duplicates were compared and counted");
         }

@@ -190,6 +190,10 @@ fn a_frozen_peer_is_backed_up_long_before_its_timeout_and_welcomed_back() {
         let failed = cluster
             .events()
             .any(|(_, event)| matches!(event, Event::PeerFailed { .. }));
+        // The frame's audit says what rescued it: backups, and no re-issue.
+        let audit = audit(&cluster, FrameId(1));
+        assert_eq!(audit.reissued, 0, "{speculation:?}");
+        assert_eq!(audit.backed_up > 0, speculation.is_some(), "{audit:?}");
         match speculation {
             // 300 ms of work over two peers, plus the wait before backing up.
             Some(_) => {

@@ -45,21 +45,25 @@ impl Ledger {
                 .map(|(id, _)| *id)
                 .collect();
             tracing::info!(frame = %self.frame, tiles = missing.len(), "every peer is idle: re-issuing missing tiles");
-            self.reissue(now, missing, out);
+            self.audit.reissued += self.reissue(now, missing, out);
         }
     }
 
     /// Gives the missing parts of `tiles` (in id order) to live participants in contiguous
     /// runs: to the idle ones if any, else to all. With none left alive, the owner takes them
-    /// itself.
-    pub(super) fn reissue(&mut self, now: Duration, tiles: Vec<TileId>, out: &mut Outbox) {
-        let parts: Vec<TileSpec> = tiles
-            .iter()
-            .filter_map(|id| self.tiles.get(id))
-            .flat_map(|entry| entry.pieces.missing(&entry.spec))
-            .collect();
+    /// itself. Returns how many of `tiles` had parts to give, for the frame's [`Audit`].
+    ///
+    /// [`Audit`]: crate::peer::Audit
+    pub(super) fn reissue(&mut self, now: Duration, tiles: Vec<TileId>, out: &mut Outbox) -> u32 {
+        let mut given = 0;
+        let mut parts: Vec<TileSpec> = Vec::new();
+        for entry in tiles.iter().filter_map(|id| self.tiles.get(id)) {
+            let missing = entry.pieces.missing(&entry.spec);
+            given += u32::from(!missing.is_empty());
+            parts.extend(missing);
+        }
         if parts.is_empty() {
-            return;
+            return 0;
         }
         let live = self.live_peers();
         let idle: Vec<PeerId> = live
@@ -89,6 +93,7 @@ impl Ledger {
             }
             self.send_assign(now, target, participants.clone(), chunk.to_vec(), out);
         }
+        given
     }
 
     /// Looks for overdue participants once some participant is idle (see [`Speculation`]).
@@ -164,7 +169,7 @@ impl Ledger {
         }
         if !backups.is_empty() {
             tracing::info!(frame = %self.frame, tiles = backups.len(), "backing up overdue tiles on idle peers");
-            self.reissue(now, backups, out);
+            self.audit.backed_up += self.reissue(now, backups, out);
         }
         for peer in overdue {
             out.events.push_back(Event::PeerOverdue {
