@@ -29,6 +29,15 @@ const SLOW: [&str; 8] = [
     "--width", "96", "--height", "80", "--spp", "96", "--frames", "12",
 ];
 
+/// Frames that outlast the owner's 2 s silence timeout (`serve_sized`) by seconds after frame
+/// 0, so that a peer lost after it is noticed and declared failed before the render ends: at
+/// 96 spp (`SLOW`) the other two peers finished the last eleven frames within 1.7 s of a
+/// loss in a release build (the victim's tiles backed up on the survivor), and nobody had to
+/// notice it.
+const OUTLASTS_TIMEOUT: [&str; 8] = [
+    "--width", "96", "--height", "80", "--spp", "256", "--frames", "12",
+];
+
 /// The index of the last frame `size` renders (frames are numbered from 0 here).
 fn last_frame(size: &[&str]) -> u64 {
     let at = size
@@ -175,7 +184,7 @@ fn a_peer_killed_mid_render_costs_time_not_tiles() {
         lines,
         first: survivor,
         second: mut victim,
-    } = trio_past_frame_0_sized(dir.path(), &SLOW);
+    } = trio_past_frame_0_sized(dir.path(), &OUTLASTS_TIMEOUT);
     victim.kill().unwrap(); // SIGKILL: no goodbye, no connection close.
     victim.wait().unwrap();
     let log = log_until_closed(&lines, Duration::from_secs(120));
@@ -187,7 +196,7 @@ fn a_peer_killed_mid_render_costs_time_not_tiles() {
         "the owner never noticed the killed peer:\n{}",
         log.join("\n")
     );
-    assert_frames_match(&out, reference_sized(dir.path(), &SLOW));
+    assert_frames_match(&out, reference_sized(dir.path(), &OUTLASTS_TIMEOUT));
     // The victim did take part before it died.
     let stats: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
@@ -195,6 +204,18 @@ fn a_peer_killed_mid_render_costs_time_not_tiles() {
     assert!(
         frame0.as_array().unwrap().iter().any(|t| t["peer"] == 2),
         "peer 2 rendered nothing in frame 0"
+    );
+    // And the frame it died in had its unfinished work given again (re-issued once the owner
+    // noticed, or backed up before), which stats.json counts.
+    let given_again: u64 = stats["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["tiles_reissued"].as_u64().unwrap() + f["tiles_backed_up"].as_u64().unwrap())
+        .sum();
+    assert!(
+        given_again > 0,
+        "stats.json counts no tile given again: {stats}"
     );
 }
 
@@ -301,39 +322,43 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
     assert_frames_match_reference(dir.path(), &out);
     let stats: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
-    for frame in stats["frames"].as_array().unwrap() {
+    let frames = stats["frames"].as_array().unwrap();
+    for frame in frames {
         assert_eq!(frame["duplicates_disagreed"], 0, "{frame}");
     }
     // The stopped peer's tiles were backed up on the other, not waited for: without this the
-    // test would pass as well had the pause missed the render.
+    // test would pass as well had the pause missed the render. The owner says so in its log
+    // and in stats.json, whose duplicates do not show it (the stopped peer's copies arrive
+    // after their frames are done, and are compared with nothing).
     assert!(
         log.iter()
             .any(|line| line.contains("backing up overdue tiles on idle peers")),
         "no tile was backed up:\n{}",
         log.join("\n")
     );
+    let backed_up: u64 = frames
+        .iter()
+        .map(|f| f["tiles_backed_up"].as_u64().unwrap())
+        .sum();
+    assert!(backed_up > 0, "stats.json counts no backup: {stats}");
 }
 
 /// A peer stopped for longer than the owner's silence timeout has its tiles backed up on the
 /// others and is dropped when its connection times out; the render goes on and ends, the
 /// resumed peer finds its owner gone and fails, and no frame changes: a peer lost for good or
-/// for a while costs time, never a tile. Twelve slow frames, so that the render outlasts the
-/// timeout by seconds: at 96 spp, once the tracer had grown a quarter faster, the other two
-/// finished all twelve in 1.6 s of the stop, before the timeout, and the test failed; at 256
-/// the render outlasts it by about three times that.
+/// for a while costs time, never a tile. The render outlasts the timeout by seconds
+/// ([`OUTLASTS_TIMEOUT`]): at 96 spp, once the tracer had grown a quarter faster, the other
+/// two finished all twelve frames in 1.6 s of the stop, before the timeout, and the test failed.
 #[test]
 fn a_peer_stopped_past_the_timeout_is_dropped_and_the_render_ends_unchanged() {
     let dir = tempfile::tempdir().unwrap();
-    let long = [
-        "--width", "96", "--height", "80", "--spp", "256", "--frames", "12",
-    ];
     let Trio {
         out,
         server,
         lines,
         first: steady,
         second: mut paused,
-    } = trio_past_frame_0_sized(dir.path(), &long);
+    } = trio_past_frame_0_sized(dir.path(), &OUTLASTS_TIMEOUT);
     signal(paused.id(), "-STOP");
     // Well past the owner's 2 s silence timeout (`serve_sized` above).
     std::thread::sleep(Duration::from_millis(3500));
@@ -349,7 +374,7 @@ fn a_peer_stopped_past_the_timeout_is_dropped_and_the_render_ends_unchanged() {
         "the stopped peer was not dropped:\n{log}"
     );
     assert!(!status.success(), "the dropped peer exited 0");
-    assert_frames_match(&out, reference_sized(dir.path(), &long));
+    assert_frames_match(&out, reference_sized(dir.path(), &OUTLASTS_TIMEOUT));
 }
 
 /// Every line `lines` brings until its sender closes (the owner exited), or `timeout`.
