@@ -173,8 +173,9 @@ pub struct FrameArgs {
     /// Rendering threads of this process, shared evenly by its peers (default: all cores).
     #[arg(long, value_parser = threads)]
     pub threads: Option<usize>,
-    /// Seconds a peer may stay silent before the owner gives its tiles to others (also the
-    /// transport's idle timeout); 0.1 to 1000000.
+    /// Seconds a peer may stay silent before the owner gives its tiles to others, and at least
+    /// three round trips of its link (also the transport's idle timeout, which QUIC keeps at
+    /// least three probe timeouts long); 0.1 to 1000000.
     #[arg(long, default_value_t = 10.0, value_parser = peer_timeout)]
     pub peer_timeout: f64,
     /// Turn work stealing between peers off (each renders its initial set only).

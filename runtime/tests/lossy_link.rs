@@ -117,3 +117,46 @@ async fn a_link_that_drops_everything_never_connects() {
         other => panic!("a handshake through a dead link ended otherwise: {other:?}"),
     }
 }
+
+/// A LAN's silence timeout on a WAN's links: `--peer-timeout 0.1` (as the CLI maps it: the
+/// owner's silence timeout, heartbeats at a fifth of it, the transport's idle timeout and
+/// keep-alive likewise) over links that hold every datagram 150 ms, a 300 ms round trip. No
+/// peer is given up (none of its tiles re-issued): the owner keeps a peer's silence timeout at
+/// least three of its measured round trips long, as QUIC keeps its idle timeout, and counts it
+/// from a round trip after it gives the peer work. Before, it declared both other peers
+/// silent at every frame (a burst of results waits a round trip on QUIC's congestion window)
+/// and re-issued their work. Backups of tiles that look overdue from so far are the policy's
+/// and may happen.
+#[test]
+fn a_silence_timeout_shorter_than_the_round_trip_gives_up_no_peer() {
+    let reference = render(1, node::Options::default());
+    let timeout = Duration::from_millis(100);
+    let mut options = node::Options::default();
+    options.core.peer_timeout = timeout;
+    options.core.heartbeat_interval = timeout / 5;
+    options.net.idle_timeout = timeout;
+    options.net.keep_alive = timeout / 5;
+    options.net.impairment = Some(Impairment {
+        seed: 3,
+        drop: 0.0,
+        duplicate: 0.0,
+        delay: Duration::from_millis(150),
+        jitter: Duration::from_millis(1),
+    });
+    let far = render(3, options);
+    assert_eq!(far.len(), reference.len());
+    for (a, b) in far.iter().zip(&reference) {
+        assert!(bits(a) == bits(b), "frame {} differs", a.frame);
+        assert_eq!(
+            a.audit.reissued, 0,
+            "frame {}: live peers were given up",
+            a.frame
+        );
+    }
+    let remote = far
+        .iter()
+        .flat_map(|f| &f.tiles)
+        .filter(|t| t.peer != 0)
+        .count();
+    assert!(remote > 0, "peers 1 and 2 rendered nothing");
+}

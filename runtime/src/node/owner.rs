@@ -270,7 +270,7 @@ impl Owner {
                 Action::Joined { peer, conn } => {
                     tracing::info!(%peer, "peer joined the render");
                     self.session.peers.bind(conn, peer);
-                    self.session.core.handle_peer_connected(now, peer);
+                    self.session.connected(conn, peer);
                     director.handle_peer_joined(now, peer);
                 }
                 Action::Left { peer } => director.handle_peer_left(now, peer),

@@ -141,8 +141,7 @@ pub async fn run_peer(
                                 },
                             );
                             session.peers.bind(conn, peer);
-                            let now = session.now();
-                            session.core.handle_peer_connected(now, peer);
+                            session.connected(conn, peer);
                             session.flush();
                         }
                         Ok((peer, _)) => session.close(
@@ -162,8 +161,7 @@ pub async fn run_peer(
                             continue;
                         }
                         if conn != owner_conn {
-                            let now = session.now();
-                            session.core.handle_peer_connected(now, peer);
+                            session.connected(conn, peer);
                             session.flush();
                         }
                     }
@@ -195,8 +193,7 @@ pub async fn run_peer(
                         session.set_renderer(renderer, results);
                         tracing::info!(%me, "scene {digest} loaded");
                         session.send_conn(conn, &Message::SceneReady);
-                        let now = session.now();
-                        session.core.handle_peer_connected(now, PeerId(0));
+                        session.connected(conn, PeerId(0));
                         session.flush();
                     }
                     Message::Peers { peers } if conn == owner_conn => {

@@ -173,6 +173,17 @@ impl Session {
         self.epoch.elapsed()
     }
 
+    /// `peer` is connected on `conn`: the core learns of it with the round trip QUIC's handshake
+    /// measured, so that an owner times the peer's first answer by it (a silence timeout
+    /// shorter than the link's round trip would otherwise fail the peer at its first tiles).
+    pub(crate) fn connected(&mut self, conn: ConnId, peer: PeerId) {
+        let now = self.now();
+        if let Some(rtt) = self.link.rtt(conn) {
+            self.core.handle_rtt(peer, rtt);
+        }
+        self.core.handle_peer_connected(now, peer);
+    }
+
     /// The instant [`Session::now`] counts from, to turn a state machine's deadline into a timer.
     pub(crate) fn epoch(&self) -> Instant {
         self.epoch
@@ -319,13 +330,15 @@ impl Session {
                 let Some(peer) = self.peers.peer(conn) else {
                     return Some(Step::Control { conn, message });
                 };
-                if message.is_session() {
-                    return Some(Step::Control { conn, message });
-                }
                 // QUIC measures the path on every packet; the core's own samples come only from
                 // steal exchanges, so without this it would plan with `initial_rtt` for a while.
+                // Before the session check, so that an owner knows a new peer's round trip by
+                // the time it deals it its first tiles.
                 if let Some(rtt) = self.link.rtt(conn) {
-                    self.core.handle_rtt(rtt);
+                    self.core.handle_rtt(peer, rtt);
+                }
+                if message.is_session() {
+                    return Some(Step::Control { conn, message });
                 }
                 let now = self.now();
                 if let Err(error) = self.core.handle_message(now, peer, message) {

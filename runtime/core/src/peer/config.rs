@@ -53,7 +53,9 @@ pub struct Config {
     /// this long.
     pub heartbeat_interval: Duration,
     /// The owner declares a peer failed, and re-issues the tiles it holds, when the peer may hold
-    /// work and has sent nothing for this long. Keep it several heartbeat intervals long.
+    /// work and has sent nothing for this long, and for at least three round trips of its link
+    /// (`Core::handle_rtt`); after the owner sends it tiles, counted from a round trip later.
+    /// Keep it several heartbeat intervals long.
     pub peer_timeout: Duration,
     /// Whether a victim whose farthest tile is worth more than it should give cuts it in half
     /// (again and again, down to `min_piece_pixels`) and gives the far half, rather than giving

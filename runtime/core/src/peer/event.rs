@@ -1,4 +1,5 @@
-//! What the core reports to its driver, and the per-peer statistics behind `--stats`.
+//! What the core reports to its driver: events, the errors of its `handle_*` and `start_frame`
+//! calls, and the per-peer statistics behind `--stats`.
 
 use std::time::Duration;
 
@@ -171,4 +172,49 @@ pub struct PeerStats {
     pub bytes_sent: u64,
     /// Reported by the driver, like `bytes_sent`.
     pub bytes_received: u64,
+}
+
+/// A message the core cannot accept. The driver should close the connection it came on.
+#[derive(Debug, thiserror::Error)]
+pub enum ProtocolError {
+    /// A message the driver should have handled itself (handshake, scene, goodbye) reached the
+    /// core.
+    #[error("{kind} belongs to the connection's driver, not the scheduling core")]
+    NotForCore {
+        /// The message's kind.
+        kind: &'static str,
+    },
+    /// A message only a frame's owner may receive came for a frame this peer does not own.
+    #[error("{kind} for {frame}, which this peer does not own")]
+    NotOwner {
+        /// The message's kind.
+        kind: &'static str,
+        /// The frame it named.
+        frame: FrameId,
+    },
+}
+
+/// Why the owner could not start a frame.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    /// Frames are started in increasing order; this one is not.
+    #[error("{frame} is not newer than {newest}, which this peer has already seen")]
+    NotNewer {
+        /// The frame asked for.
+        frame: FrameId,
+        /// The newest frame already started.
+        newest: FrameId,
+    },
+    /// The deal names a peer this core has no connection to.
+    #[error("{0} is not connected")]
+    UnknownPeer(PeerId),
+    /// The deal gives one tile id twice.
+    #[error("{0} is assigned twice")]
+    DuplicateTile(TileId),
+    /// A tile with an empty rectangle or a predicted cost that is not finite and non-negative.
+    #[error("{0} has an invalid rectangle or predicted cost")]
+    InvalidTile(TileId),
+    /// The deal has no tiles, so the frame could never complete.
+    #[error("a frame needs at least one tile")]
+    NoTiles,
 }

@@ -31,6 +31,8 @@ pub(super) struct Ledger {
     missing: usize,
     peers: BTreeMap<PeerId, PeerView>,
     peer_timeout: Duration,
+    /// The round trip to each peer, as the transport last measured it ([`PeerView::silent_since`]).
+    round_trips: BTreeMap<PeerId, Duration>,
     /// The largest piece a participant hands its renderer at once (sent with every `Assign`).
     render_pixels: u64,
     speculation: Option<Speculation>,
@@ -71,7 +73,9 @@ struct PeerView {
     /// The highest grant count in the peer's steal notices.
     grants_seen: u32,
     results_received: u32,
-    last_heard: Duration,
+    /// When the peer's silence starts to count: its last message, or the earliest its answer to
+    /// the owner's last `Assign` could arrive (a round trip after it was sent), if later.
+    silent_since: Duration,
     /// When the peer last sent a result or was given work (an `Assign`, a grant it told of):
     /// how long it has gone without progress, for speculation.
     last_progress: Duration,
@@ -90,6 +94,7 @@ impl Ledger {
         assignments: BTreeMap<PeerId, Vec<TileSpec>>,
         render_pixels: u64,
         config: &Config,
+        round_trips: &BTreeMap<PeerId, Duration>,
         done: Vec<TileResult>,
         out: &mut Outbox,
     ) -> Self {
@@ -101,6 +106,7 @@ impl Ledger {
             missing: 0,
             peers: BTreeMap::new(),
             peer_timeout: config.peer_timeout,
+            round_trips: round_trips.clone(),
             render_pixels,
             speculation: config.speculation,
             predicted_received: 0.0,
@@ -174,7 +180,7 @@ impl Ledger {
     /// Notes that `peer` is alive.
     pub(super) fn heard(&mut self, now: Duration, peer: PeerId) {
         if let Some(view) = self.peers.get_mut(&peer) {
-            view.last_heard = now;
+            view.silent_since = view.silent_since.max(now);
         }
     }
 
@@ -283,7 +289,7 @@ impl Ledger {
             None => false,
         };
         // The thief holds work again, so its silence matters again.
-        self.watch(now + self.peer_timeout);
+        self.watch(now + self.silence_timeout(thief));
         let mut orphans = Vec::new();
         for (id, piece) in tiles {
             let Some(entry) = self.tiles.get_mut(id).filter(|e| !e.complete) else {
@@ -396,14 +402,16 @@ impl Ledger {
         tiles: Vec<TileSpec>,
         out: &mut Outbox,
     ) {
+        let round_trip = self.round_trip(peer);
         let view = self
             .peers
             .get_mut(&peer)
             .expect("invariant: tiles go to participants");
         view.assigns_sent += 1;
-        view.last_heard = view.last_heard.max(now);
+        let answer = now + round_trip;
+        view.silent_since = view.silent_since.max(answer);
         view.last_progress = view.last_progress.max(now);
-        self.watch(now + self.peer_timeout);
+        self.watch(answer + self.silence_timeout(peer));
         out.send(
             peer,
             Message::Assign {
@@ -459,7 +467,7 @@ impl PeerView {
             assigns_sent: 0,
             grants_seen: 0,
             results_received: 0,
-            last_heard: now,
+            silent_since: now,
             last_progress: now,
         }
     }

@@ -24,10 +24,10 @@ use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::Duration;
 
 pub use config::{Config, RELEARN_BOUND, Speculation, VictimOrder};
-pub use event::{Audit, Event, Failure, Fault, PeerStats};
+pub use event::{Audit, Event, Failure, Fault, FrameError, PeerStats, ProtocolError};
 
 use crate::rng::SplitMix;
-use crate::wire::{self, FrameId, Message, PeerId, TileId, TileResult, TileSpec};
+use crate::wire::{self, FrameId, Message, PeerId, TileResult, TileSpec};
 use ledger::Ledger;
 use steal::Estimates;
 use worker::Worker;
@@ -43,55 +43,12 @@ pub struct WorkItem {
     pub tile: TileSpec,
 }
 
-/// A message the core cannot accept. The driver should close the connection it came on.
-#[derive(Debug, thiserror::Error)]
-pub enum ProtocolError {
-    /// A message the driver should have handled itself (handshake, scene, goodbye) reached the
-    /// core.
-    #[error("{kind} belongs to the connection's driver, not the scheduling core")]
-    NotForCore {
-        /// The message's kind.
-        kind: &'static str,
-    },
-    /// A message only a frame's owner may receive came for a frame this peer does not own.
-    #[error("{kind} for {frame}, which this peer does not own")]
-    NotOwner {
-        /// The message's kind.
-        kind: &'static str,
-        /// The frame it named.
-        frame: FrameId,
-    },
-}
-
-/// Why the owner could not start a frame.
-#[derive(Debug, thiserror::Error)]
-pub enum FrameError {
-    /// Frames are started in increasing order; this one is not.
-    #[error("{frame} is not newer than {newest}, which this peer has already seen")]
-    NotNewer {
-        /// The frame asked for.
-        frame: FrameId,
-        /// The newest frame already started.
-        newest: FrameId,
-    },
-    /// The deal names a peer this core has no connection to.
-    #[error("{0} is not connected")]
-    UnknownPeer(PeerId),
-    /// The deal gives one tile id twice.
-    #[error("{0} is assigned twice")]
-    DuplicateTile(TileId),
-    /// A tile with an empty rectangle or a predicted cost that is not finite and non-negative.
-    #[error("{0} has an invalid rectangle or predicted cost")]
-    InvalidTile(TileId),
-    /// The deal has no tiles, so the frame could never complete.
-    #[error("a frame needs at least one tile")]
-    NoTiles,
-}
-
 /// One peer's scheduling state. See the module documentation and `README.md`.
 pub struct Core {
     config: Config,
     connected: BTreeSet<PeerId>,
+    /// The round trip to each peer, as the transport last measured it (`handle_rtt`).
+    round_trips: BTreeMap<PeerId, Duration>,
     worker: Worker,
     /// The ledgers of the frames this peer owns that are still running, oldest first.
     ledgers: BTreeMap<FrameId, Ledger>,
@@ -108,6 +65,7 @@ impl Core {
         Self {
             config,
             connected: BTreeSet::new(),
+            round_trips: BTreeMap::new(),
             worker: Worker::new(me, slots, estimates),
             ledgers: BTreeMap::new(),
             newest_owned: None,
@@ -207,6 +165,7 @@ impl Core {
             assignments,
             render_pixels.max(1),
             &self.config,
+            &self.round_trips,
             done,
             &mut self.out,
         );
@@ -292,9 +251,15 @@ impl Core {
         self.settle(now);
     }
 
-    /// A round-trip measurement from the transport (quinn's path RTT, for instance).
-    pub fn handle_rtt(&mut self, rtt: Duration) {
+    /// A round-trip measurement of the link to `peer` from the transport (quinn's path RTT,
+    /// for instance): it paces this peer's steal requests, and an owner counts `peer`'s
+    /// silence from a round trip after each assignment it sends it.
+    pub fn handle_rtt(&mut self, peer: PeerId, rtt: Duration) {
         self.worker.estimates.sample_rtt(rtt);
+        self.round_trips.insert(peer, rtt);
+        for ledger in self.ledgers.values_mut() {
+            ledger.set_round_trip(peer, rtt);
+        }
     }
 
     /// Bytes the driver moved for this peer since its last report, for the frame's statistics.

@@ -50,6 +50,10 @@ pub struct Cluster<W: World = Scripted> {
     /// Each message is delayed by up to this much more, uniformly at random (from the
     /// cluster's seed), so that messages overtake each other as they do on QUIC streams.
     pub jitter: Duration,
+    /// Whether each delivered message also reports the link's round trip (twice `latency`) to
+    /// the receiving core, as the QUIC driver reports the path's (`Core::handle_rtt`). Off by
+    /// default: the cores then plan with their own steal exchanges' samples, as the simulator's.
+    pub report_rtt: bool,
     /// How long after a peer dies the others learn of it.
     pub loss_detection: Duration,
     /// Pass every message through the wire encoding.
@@ -106,6 +110,7 @@ impl<W: World> Cluster<W> {
             world,
             latency: Duration::from_micros(500),
             jitter: Duration::ZERO,
+            report_rtt: false,
             loss_detection: Duration::from_millis(20),
             encode: true,
         };
@@ -160,6 +165,14 @@ impl<W: World> Cluster<W> {
         render_pixels: u64,
     ) -> Result<(), FrameError> {
         let now = self.now;
+        if self.report_rtt {
+            // As the driver reports each connection's round trip when it comes up.
+            let round_trip = self.latency * 2;
+            let others: Vec<PeerId> = self.nodes.keys().copied().filter(|&p| p != owner).collect();
+            for peer in others {
+                self.node(owner).core.handle_rtt(peer, round_trip);
+            }
+        }
         self.node(owner)
             .core
             .start_frame(now, frame, assignments, render_pixels)?;
@@ -310,6 +323,7 @@ impl<W: World> Cluster<W> {
             | Happening::Timeout { peer } => *peer,
         };
         let (now, encode) = (self.now, self.encode);
+        let (report_rtt, round_trip) = (self.report_rtt, self.latency * 2);
         let node = self
             .nodes
             .get_mut(&peer)
@@ -338,6 +352,9 @@ impl<W: World> Cluster<W> {
                     message
                 };
                 node.core.record_bytes(0, bytes);
+                if report_rtt {
+                    node.core.handle_rtt(from, round_trip);
+                }
                 if let Err(error) = node.core.handle_message(now, from, message) {
                     let seen = Seen::Refused { peer, from, error };
                     self.world.observe(now, seen);

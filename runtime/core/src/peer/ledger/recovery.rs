@@ -14,6 +14,14 @@ use crate::peer::Outbox;
 use crate::peer::event::Event;
 use crate::wire::{PeerId, TileId, TileSpec};
 
+/// The fewest round trips a peer's silence may last before the owner declares it failed,
+/// whatever `Config::peer_timeout` says. On a link of long round trips a live peer falls
+/// silent for about one whenever its messages wait on QUIC's congestion window (a burst of
+/// results beyond it waits for acknowledgements), so a timeout of a LAN's length there failed
+/// live peers at every frame. Three, as QUIC's own idle timeout is kept at least three probe
+/// timeouts long for the same reason (RFC 9000, section 10.1).
+const SILENCE_ROUND_TRIPS: u32 = 3;
+
 impl Ledger {
     /// Makes sure the owner looks for silent peers by `deadline`.
     pub(super) fn watch(&mut self, deadline: Duration) {
@@ -23,12 +31,30 @@ impl Ledger {
         );
     }
 
+    /// The transport's latest measurement of the round trip to `peer`.
+    pub(in crate::peer) fn set_round_trip(&mut self, peer: PeerId, rtt: Duration) {
+        self.round_trips.insert(peer, rtt);
+    }
+
+    /// The round trip to `peer` as last measured; zero before any measurement, which counts
+    /// silence from the instant work was given, as the owner did before it knew round trips.
+    pub(super) fn round_trip(&self, peer: PeerId) -> Duration {
+        self.round_trips.get(&peer).copied().unwrap_or_default()
+    }
+
+    /// How long `peer` may stay silent while it may hold work: `Config::peer_timeout`, and at
+    /// least [`SILENCE_ROUND_TRIPS`] round trips of its link.
+    pub(super) fn silence_timeout(&self, peer: PeerId) -> Duration {
+        self.peer_timeout
+            .max(self.round_trip(peer) * SILENCE_ROUND_TRIPS)
+    }
+
     /// Participants that may hold work, with the instant their silence becomes a failure.
     pub(super) fn suspects(&self) -> impl Iterator<Item = (PeerId, Duration)> + '_ {
         self.peers
             .iter()
             .filter(|(peer, view)| **peer != self.me && view.alive && !view.idle())
-            .map(|(peer, view)| (*peer, view.last_heard + self.peer_timeout))
+            .map(|(peer, view)| (*peer, view.silent_since + self.silence_timeout(*peer)))
     }
 
     pub(super) fn reissue_if_all_idle(&mut self, now: Duration, out: &mut Outbox) {
