@@ -84,7 +84,10 @@ impl Network {
     /// after which the owner declares failed a peer that may hold work. A peer is first heard
     /// from a round trip after it is dealt work, so on slower links live peers are declared
     /// failed before they can answer, which is not the cluster a study means to model (and at
-    /// 16 peers and 5 s of latency against the default 10 s, the run did not end).
+    /// 16 peers and 5 s of latency against the default 10 s, the run did not end). This holds
+    /// here because the simulated cores are told no round trips (`Core::handle_rtt`); the QUIC
+    /// driver tells them, and there the owner keeps a peer's silence timeout at least three
+    /// round trips long, counted from a round trip after it deals it work.
     pub fn check_round_trip(&self, peer_timeout: Duration) -> Result<(), String> {
         let slowest = self.slowest_delay();
         if slowest * 2 < peer_timeout {

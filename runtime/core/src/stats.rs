@@ -99,8 +99,12 @@ pub struct FrameStats {
     /// were lost, or every peer was idle with the tile still missing).
     pub tiles_reissued: u32,
     /// Tiles of overdue peers the owner copied to idle peers. Their duplicates are compared
-    /// above only where they arrive before the frame is done.
+    /// above only where they arrive before the frame is done. Both counts are of times given:
+    /// a tile given again twice counts twice.
     pub tiles_backed_up: u32,
+    /// Peers the owner gave up on during the frame (lost, or silent past their timeout; not
+    /// those that left when asked).
+    pub peers_failed: u32,
 }
 
 /// One peer's account of one frame (times in seconds of slot time: a peer with 2 rendering

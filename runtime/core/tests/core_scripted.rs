@@ -21,6 +21,10 @@ use runtime_core::wire::{FrameId, Message, PeerId, TileId, TileResult, TileSpec}
 #[path = "core_scripted/faults.rs"]
 mod faults;
 
+/// Far links: silence timeouts against round trips.
+#[path = "core_scripted/links.rs"]
+mod links;
+
 /// Peers that join a running render, and peers that leave it when asked.
 #[path = "core_scripted/elastic.rs"]
 mod elastic;

@@ -150,6 +150,7 @@ impl CompletedFrame {
             duplicates_disagreed: self.audit.disagreed,
             tiles_reissued: self.audit.reissued,
             tiles_backed_up: self.audit.backed_up,
+            peers_failed: self.audit.failed,
             ..FrameStats::default()
         };
         stats.summarise_leaves();
@@ -240,6 +241,7 @@ mod tests {
                 disagreed: 0,
                 reissued: 3,
                 backed_up: 1,
+                failed: 1,
             },
         };
         let stats = done.stats();
@@ -254,7 +256,14 @@ mod tests {
             (stats.duplicates_agreed, stats.duplicates_disagreed),
             (2, 0)
         );
-        assert_eq!((stats.tiles_reissued, stats.tiles_backed_up), (3, 1));
+        assert_eq!(
+            (
+                stats.tiles_reissued,
+                stats.tiles_backed_up,
+                stats.peers_failed
+            ),
+            (3, 1, 1)
+        );
         // Tiles of 12 and 4: mean 8, variance 16, the largest 1.5 times the mean.
         assert_eq!(stats.leaf_cost_variance, 16.0);
         assert_eq!(stats.leaf_cost_max_over_mean, 1.5);

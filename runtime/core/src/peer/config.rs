@@ -72,7 +72,7 @@ pub struct Config {
     /// keep the tile's prediction shared by area.
     pub relearn_pieces: bool,
     /// (Owner) When to render again, elsewhere, work that is overdue on a peer; `None`: never
-    /// (a peer that stops answering then costs `peer_timeout`).
+    /// (a peer that stops answering then costs its silence timeout, `peer_timeout` or more).
     pub speculation: Option<Speculation>,
     /// (Owner) The share of a frame's predicted cost still missing at which its ledger reports
     /// it waning ([`Event::FrameWaning`](crate::peer::Event::FrameWaning)), the director's cue

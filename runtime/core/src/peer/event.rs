@@ -103,10 +103,13 @@ pub struct Audit {
     /// Duplicates whose pixels differed (each also reported as [`Fault::Mismatch`]).
     pub disagreed: u32,
     /// Tiles whose missing parts were given again because no live holder was rendering them
-    /// (their holders were lost, or every peer was idle).
+    /// (their holders were lost, or every peer was idle); a tile given again twice counts twice.
     pub reissued: u32,
     /// Tiles of overdue peers whose missing parts were copied to idle peers (speculation).
     pub backed_up: u32,
+    /// Participants given up on during the frame: lost or silent (not those that left when
+    /// asked). A live peer counted here was given up on wrongly.
+    pub failed: u32,
 }
 
 /// Why the owner gave up on a peer.
@@ -114,7 +117,8 @@ pub struct Audit {
 pub enum Failure {
     /// The driver reported the connection lost.
     Lost,
-    /// The peer may hold work but sent nothing for `Config::peer_timeout`.
+    /// The peer may hold work but sent nothing for `Config::peer_timeout` and at least three
+    /// round trips of its link, counted from a round trip after it was last dealt tiles.
     Silent,
     /// The peer said it is leaving ([`Message::Leaving`](crate::wire::Message::Leaving)): what it
     /// held went to others at once, and the tiles in its renderer may still come.

@@ -48,8 +48,9 @@ pub(super) struct Ledger {
     waning: f64,
     waned: bool,
     audit: Audit,
-    /// No participant can have been silent too long before this instant: deadlines only move
-    /// later as peers are heard from, so the owner scans for silent peers only when it passes.
+    /// No participant can have been silent too long before this instant: deadlines move later
+    /// as peers are heard from, and where one moves earlier (a shorter round trip measured) the
+    /// check is brought forward, so the owner scans for silent peers only when it passes.
     next_check: Option<Duration>,
     /// When to look for overdue peers next; armed while some participant is idle.
     next_speculation: Option<Duration>,
@@ -289,7 +290,7 @@ impl Ledger {
             None => false,
         };
         // The thief holds work again, so its silence matters again.
-        self.watch(now + self.silence_timeout(thief));
+        self.watch(now.saturating_add(self.silence_timeout(thief)));
         let mut orphans = Vec::new();
         for (id, piece) in tiles {
             let Some(entry) = self.tiles.get_mut(id).filter(|e| !e.complete) else {
@@ -345,6 +346,9 @@ impl Ledger {
             return;
         };
         view.alive = false;
+        if reason != Failure::Left {
+            self.audit.failed += 1;
+        }
         let mut orphans = Vec::new();
         for (id, entry) in &mut self.tiles {
             let before = entry.holders.len();
@@ -393,7 +397,8 @@ impl Ledger {
             .min()
     }
 
-    /// Sends `peer` tiles. Its silence counts from now: an idle peer sends no heartbeats.
+    /// Sends `peer` tiles. Its silence counts from a round trip later, when its answer could
+    /// first arrive: an idle peer sends no heartbeats.
     fn send_assign(
         &mut self,
         now: Duration,
@@ -408,10 +413,10 @@ impl Ledger {
             .get_mut(&peer)
             .expect("invariant: tiles go to participants");
         view.assigns_sent += 1;
-        let answer = now + round_trip;
+        let answer = now.saturating_add(round_trip);
         view.silent_since = view.silent_since.max(answer);
         view.last_progress = view.last_progress.max(now);
-        self.watch(answer + self.silence_timeout(peer));
+        self.watch(answer.saturating_add(self.silence_timeout(peer)));
         out.send(
             peer,
             Message::Assign {

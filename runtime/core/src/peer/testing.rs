@@ -50,9 +50,11 @@ pub struct Cluster<W: World = Scripted> {
     /// Each message is delayed by up to this much more, uniformly at random (from the
     /// cluster's seed), so that messages overtake each other as they do on QUIC streams.
     pub jitter: Duration,
-    /// Whether each delivered message also reports the link's round trip (twice `latency`) to
-    /// the receiving core, as the QUIC driver reports the path's (`Core::handle_rtt`). Off by
-    /// default: the cores then plan with their own steal exchanges' samples, as the simulator's.
+    /// Whether cores are told their links' round trips (twice `latency`; jitter left out, as
+    /// QUIC reports a smoothed estimate) as the QUIC driver tells them (`Core::handle_rtt`):
+    /// with each delivered message, when a peer joins, and (standing in for the connections
+    /// made before) to an owner as it starts a frame. Off by default: the cores then plan with
+    /// their own steal exchanges' samples, as the simulator's do.
     pub report_rtt: bool,
     /// How long after a peer dies the others learn of it.
     pub loss_detection: Duration,
@@ -264,7 +266,12 @@ impl<W: World> Cluster<W> {
         };
         self.nodes.insert(peer, node);
         self.flush(peer);
+        let round_trip = self.latency * 2;
         for other in others {
+            if self.report_rtt {
+                self.node(other).core.handle_rtt(peer, round_trip);
+                self.node(peer).core.handle_rtt(other, round_trip);
+            }
             self.node(other).core.handle_peer_connected(now, peer);
             self.flush(other);
         }

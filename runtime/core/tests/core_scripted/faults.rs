@@ -32,11 +32,12 @@ fn a_peer_lost_mid_frame_costs_time_not_tiles() {
             "steal: {}: {reissued:?}",
             config.steal
         );
-        // The frame's audit counts the same tiles, and no backup: nobody was overdue.
+        // The frame's audit counts the same tiles and the one failure, and no backup: nobody
+        // was overdue.
         let audit = audit(&cluster, FrameId(1));
         assert_eq!(
-            (audit.reissued as usize, audit.backed_up),
-            (reissued[0], 0),
+            (audit.reissued as usize, audit.backed_up, audit.failed),
+            (reissued[0], 0, 1),
             "steal: {}",
             config.steal
         );
@@ -230,6 +231,7 @@ fn a_duplicate_result_is_accepted_only_if_bit_identical() {
                 disagreed: 1,
                 reissued: 0,
                 backed_up: 0,
+                failed: 0,
             };
             assert_eq!(audit, expected, "both duplicates were compared and counted");
         }
@@ -476,41 +478,4 @@ proptest! {
 fn next_event(core: &mut Core) -> Option<Event> {
     std::iter::from_fn(|| core.poll_event())
         .find(|event| !matches!(event, Event::FrameWaning { .. }))
-}
-
-/// A silence timeout shorter than a round trip (a LAN setting on a WAN: 0.1 s against 0.3 s)
-/// declares no live peer failed: the owner counts a peer's silence from when its answer to an
-/// assignment could first arrive, with the round trip the transport measured to that peer.
-/// Without that, every peer it dealt tiles to was declared failed at the start of every frame,
-/// and their tiles re-issued (the frame completed, but as if every peer had died).
-#[test]
-fn a_silence_timeout_shorter_than_the_round_trip_fails_no_live_peer() {
-    for steal in [true, false] {
-        let config = Config {
-            steal,
-            heartbeat_interval: Duration::from_millis(20),
-            peer_timeout: Duration::from_millis(100),
-            ..Config::default()
-        };
-        let mut cluster = cluster(&config, 3, 1, 4);
-        cluster.latency = Duration::from_millis(150);
-        cluster.report_rtt = true;
-        for frame in [FrameId(1), FrameId(2)] {
-            cluster
-                .start_frame(OWNER, frame, contiguous(3, &[20.0; 30]))
-                .unwrap();
-            finish(&mut cluster);
-            assert_all_results(&completion(&cluster, frame).1, frame, 30);
-        }
-        let failed: Vec<&Event> = cluster
-            .events()
-            .map(|(_, event)| event)
-            .filter(|event| matches!(event, Event::PeerFailed { .. }))
-            .collect();
-        assert!(failed.is_empty(), "steal {steal}: {failed:?}");
-        for frame in [FrameId(1), FrameId(2)] {
-            assert_eq!(audit(&cluster, frame).reissued, 0, "steal {steal}");
-        }
-        assert_no_refusals_or_faults(&cluster);
-    }
 }

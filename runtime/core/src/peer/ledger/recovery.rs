@@ -18,8 +18,9 @@ use crate::wire::{PeerId, TileId, TileSpec};
 /// whatever `Config::peer_timeout` says. On a link of long round trips a live peer falls
 /// silent for about one whenever its messages wait on QUIC's congestion window (a burst of
 /// results beyond it waits for acknowledgements), so a timeout of a LAN's length there failed
-/// live peers at every frame. Three, as QUIC's own idle timeout is kept at least three probe
-/// timeouts long for the same reason (RFC 9000, section 10.1).
+/// live peers at every frame. Three, after QUIC's rule for its own idle timeout, at least
+/// three probe timeouts (RFC 9000, section 10.1; a probe timeout is a little longer than a
+/// round trip, so this floor is a little shorter than QUIC's).
 const SILENCE_ROUND_TRIPS: u32 = 3;
 
 impl Ledger {
@@ -31,9 +32,14 @@ impl Ledger {
         );
     }
 
-    /// The transport's latest measurement of the round trip to `peer`.
+    /// The transport's latest measurement of the round trip to `peer`. A shorter one brings
+    /// the peer's deadline forward, so the next scan for silent peers comes no later than it.
     pub(in crate::peer) fn set_round_trip(&mut self, peer: PeerId, rtt: Duration) {
         self.round_trips.insert(peer, rtt);
+        if let Some(view) = self.peers.get(&peer).filter(|v| v.alive && !v.idle()) {
+            let deadline = view.silent_since.saturating_add(self.silence_timeout(peer));
+            self.watch(deadline);
+        }
     }
 
     /// The round trip to `peer` as last measured; zero before any measurement, which counts
@@ -46,7 +52,7 @@ impl Ledger {
     /// least [`SILENCE_ROUND_TRIPS`] round trips of its link.
     pub(super) fn silence_timeout(&self, peer: PeerId) -> Duration {
         self.peer_timeout
-            .max(self.round_trip(peer) * SILENCE_ROUND_TRIPS)
+            .max(self.round_trip(peer).saturating_mul(SILENCE_ROUND_TRIPS))
     }
 
     /// Participants that may hold work, with the instant their silence becomes a failure.
@@ -54,7 +60,12 @@ impl Ledger {
         self.peers
             .iter()
             .filter(|(peer, view)| **peer != self.me && view.alive && !view.idle())
-            .map(|(peer, view)| (*peer, view.silent_since + self.silence_timeout(*peer)))
+            .map(|(peer, view)| {
+                let deadline = view
+                    .silent_since
+                    .saturating_add(self.silence_timeout(*peer));
+                (*peer, deadline)
+            })
     }
 
     pub(super) fn reissue_if_all_idle(&mut self, now: Duration, out: &mut Outbox) {
