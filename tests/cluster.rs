@@ -207,16 +207,18 @@ fn a_peer_killed_mid_render_costs_time_not_tiles() {
     );
     // And the frame it died in had its unfinished work given again (re-issued once the owner
     // noticed, or backed up before), which stats.json counts.
-    let given_again: u64 = stats["frames"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|f| f["tiles_reissued"].as_u64().unwrap() + f["tiles_backed_up"].as_u64().unwrap())
-        .sum();
+    let given_again =
+        frame_total(&stats, "tiles_reissued") + frame_total(&stats, "tiles_backed_up");
     assert!(
         given_again > 0,
         "stats.json counts no tile given again: {stats}"
     );
+}
+
+/// The sum over `stats`'s frames of the count `field`.
+fn frame_total(stats: &serde_json::Value, field: &str) -> u64 {
+    let frames = stats["frames"].as_array().unwrap().iter();
+    frames.map(|frame| frame[field].as_u64().unwrap()).sum()
 }
 
 #[test]
@@ -336,11 +338,11 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
         "no tile was backed up:\n{}",
         log.join("\n")
     );
-    let backed_up: u64 = frames
-        .iter()
-        .map(|f| f["tiles_backed_up"].as_u64().unwrap())
-        .sum();
-    assert!(backed_up > 0, "stats.json counts no backup: {stats}");
+    assert!(
+        frame_total(&stats, "tiles_backed_up") > 0,
+        "stats.json counts no backup: {stats}"
+    );
+    assert_eq!(frame_total(&stats, "peers_failed"), 0, "{stats}");
 }
 
 /// A peer stopped for longer than the owner's silence timeout has its tiles backed up on the

@@ -102,8 +102,8 @@ pub struct FrameStats {
     /// above only where they arrive before the frame is done. Both counts are of times given:
     /// a tile given again twice counts twice.
     pub tiles_backed_up: u32,
-    /// Peers the owner gave up on during the frame (lost, or silent past their timeout; not
-    /// those that left when asked).
+    /// The frame's participants the owner gave up on while it ran (lost, or silent past their
+    /// timeout; not those that left when asked). A peer lost between frames counts in none.
     pub peers_failed: u32,
 }
 
