@@ -251,25 +251,15 @@ fn check_writable(flag: &str, path: &std::path::Path) -> anyhow::Result<()> {
 
 /// The node's options from the flags, with `threads` rendering threads per peer.
 pub fn options(args: &FrameArgs, threads: usize) -> node::Options {
-    // In range: the flag's parser (`cli::peer_timeout`) refuses the rest.
-    let timeout = std::time::Duration::from_secs_f64(args.peer_timeout);
-    let defaults = node::Options::default();
-    node::Options {
+    let mut options = node::Options {
         threads,
-        core: runtime_core::peer::Config {
-            steal: !args.no_steal,
-            peer_timeout: timeout,
-            heartbeat_interval: timeout / 5,
-            ..runtime_core::peer::Config::default()
-        },
-        net: runtime::net::Config {
-            idle_timeout: timeout,
-            keep_alive: timeout / 5,
-            ..defaults.net.clone()
-        },
         seed: args.seed.unwrap_or(0),
-        ..defaults
-    }
+        ..node::Options::default()
+    };
+    options.core.steal = !args.no_steal;
+    // In range: the flag's parser (`cli::peer_timeout`) refuses the rest.
+    options.set_peer_timeout(std::time::Duration::from_secs_f64(args.peer_timeout));
+    options
 }
 
 /// Every core this process may use.

@@ -67,11 +67,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "clean" => {}
         "lossy" => options.net.impairment = Some(Impairment::default()),
         "far" => {
-            let timeout = Duration::from_millis(100);
-            options.core.peer_timeout = timeout;
-            options.core.heartbeat_interval = timeout / 5;
-            options.net.idle_timeout = timeout;
-            options.net.keep_alive = timeout / 5;
+            options.set_peer_timeout(Duration::from_millis(100));
             options.net.impairment = Some(Impairment {
                 drop: 0.0,
                 duplicate: 0.0,

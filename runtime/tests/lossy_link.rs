@@ -135,12 +135,8 @@ async fn a_link_that_drops_everything_never_connects() {
 #[test]
 fn a_silence_timeout_shorter_than_the_round_trip_gives_up_no_peer() {
     let reference = render(1, node::Options::default());
-    let timeout = Duration::from_millis(100);
     let mut options = node::Options::default();
-    options.core.peer_timeout = timeout;
-    options.core.heartbeat_interval = timeout / 5;
-    options.net.idle_timeout = timeout;
-    options.net.keep_alive = timeout / 5;
+    options.set_peer_timeout(Duration::from_millis(100));
     options.net.impairment = Some(Impairment {
         seed: 3,
         drop: 0.0,

@@ -69,6 +69,18 @@ impl Default for Options {
     }
 }
 
+impl Options {
+    /// Sets the one silence a user names (`--peer-timeout`) everywhere it applies: the owner's
+    /// silence timeout for a peer that may hold work, and QUIC's idle timeout; heartbeats and
+    /// keep-alives go out at a fifth of it, so that a live peer sends several within it.
+    pub fn set_peer_timeout(&mut self, timeout: std::time::Duration) {
+        self.core.peer_timeout = timeout;
+        self.core.heartbeat_interval = timeout / 5;
+        self.net.idle_timeout = timeout;
+        self.net.keep_alive = timeout / 5;
+    }
+}
+
 /// Why a node stopped before the render was done.
 #[derive(Debug, thiserror::Error)]
 pub enum NodeError {
