@@ -198,8 +198,7 @@ fn a_peer_killed_mid_render_costs_time_not_tiles() {
     );
     assert_frames_match(&out, reference_sized(dir.path(), &OUTLASTS_TIMEOUT));
     // The victim did take part before it died.
-    let stats: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    let stats = common::stats(&out);
     let frame0 = &stats["frames"][0]["tiles"];
     assert!(
         frame0.as_array().unwrap().iter().any(|t| t["peer"] == 2),
@@ -322,8 +321,7 @@ fn a_peer_stopped_for_a_while_is_backed_up_and_welcomed_back() {
         log.join("\n")
     );
     assert_frames_match_reference(dir.path(), &out);
-    let stats: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    let stats = common::stats(&out);
     let frames = stats["frames"].as_array().unwrap();
     for frame in frames {
         assert_eq!(frame["duplicates_disagreed"], 0, "{frame}");

@@ -131,8 +131,7 @@ fn the_render_leaves_stats_tile_maps_and_a_gantt_chart() {
         overview.contains("busy share"),
         "the run's chart lacks its utilisation"
     );
-    let stats: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    let stats = common::stats(&out);
     let frames = stats["frames"].as_array().unwrap();
     assert_eq!(frames.len(), 3);
     let mut rendered = 0;

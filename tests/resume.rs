@@ -92,8 +92,7 @@ fn a_killed_render_resumes_from_its_first_missing_frame_with_the_same_bits() {
     for ((name, a), (_, b)) in got.iter().zip(&reference) {
         assert!(a == b, "{name} differs from the uninterrupted render");
     }
-    let stats: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    let stats = common::stats(&out);
     assert_eq!(stats["first_frame"], written);
     assert_eq!(stats["frames"][0]["frame"], written);
     assert_eq!(stats["render_hash"].as_str().map(str::len), Some(64));

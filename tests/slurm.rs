@@ -108,8 +108,7 @@ fn a_three_task_step_renders_what_one_peer_renders() {
         assert!(a == b, "{name} differs from the one-peer render");
     }
     // It was a cluster of three: every task rendered tiles.
-    let stats: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    let stats = common::stats(&out);
     let tiles: Vec<&serde_json::Value> = stats["frames"]
         .as_array()
         .unwrap()

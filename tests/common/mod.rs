@@ -150,10 +150,14 @@ pub fn wait_exit(child: &mut Child, what: &str, timeout: Duration) -> ExitStatus
     }
 }
 
+/// The owner's stats.json in `out`, parsed.
+pub fn stats(out: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap()
+}
+
 /// How many tiles peer `peer` rendered in each frame, from the owner's stats.json.
 pub fn tiles_of(out: &Path, peer: u64) -> Vec<usize> {
-    let stats: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    let stats = stats(out);
     stats["frames"]
         .as_array()
         .unwrap()
