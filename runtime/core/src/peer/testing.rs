@@ -123,6 +123,11 @@ impl<W: World> Cluster<W> {
         cluster
     }
 
+    /// The round trip reported to cores where `report_rtt` is on.
+    fn round_trip(&self) -> Duration {
+        self.latency * 2
+    }
+
     /// The current virtual time.
     pub fn now(&self) -> Duration {
         self.now
@@ -169,7 +174,7 @@ impl<W: World> Cluster<W> {
         let now = self.now;
         if self.report_rtt {
             // As the driver reports each connection's round trip when it comes up.
-            let round_trip = self.latency * 2;
+            let round_trip = self.round_trip();
             let others: Vec<PeerId> = self.nodes.keys().copied().filter(|&p| p != owner).collect();
             for peer in others {
                 self.node(owner).core.handle_rtt(peer, round_trip);
@@ -266,7 +271,7 @@ impl<W: World> Cluster<W> {
         };
         self.nodes.insert(peer, node);
         self.flush(peer);
-        let round_trip = self.latency * 2;
+        let round_trip = self.round_trip();
         for other in others {
             if self.report_rtt {
                 self.node(other).core.handle_rtt(peer, round_trip);
@@ -330,7 +335,7 @@ impl<W: World> Cluster<W> {
             | Happening::Timeout { peer } => *peer,
         };
         let (now, encode) = (self.now, self.encode);
-        let (report_rtt, round_trip) = (self.report_rtt, self.latency * 2);
+        let (report_rtt, round_trip) = (self.report_rtt, self.round_trip());
         let node = self
             .nodes
             .get_mut(&peer)
