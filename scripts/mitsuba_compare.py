@@ -122,11 +122,20 @@ def main():
         "machine the fastest is the one others disturbed least, and alternating exposes both renderers "
         "to the same disturbances",
     )
+    parser.add_argument(
+        "--mitsuba-lanes",
+        type=int,
+        choices=[4, 8, 16],
+        help="paths per instruction in Mitsuba's llvm variants (Dr.Jit's LLVM vector width, by default 16 "
+        "where the processor has AVX-512 and 8 where it has AVX2): 8 on an AVX-512 machine shows how much "
+        "of Mitsuba's time there is its wider vectors; the processor and its features stay the host's",
+    )
     parser.add_argument("--worker", nargs=3, metavar=("VARIANT", "TOML", "EXR"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         variant, toml, exr = args.worker
-        print(json.dumps(render_mitsuba(variant, Path(toml), Path(exr), args.size, args.spp, args.segments, args.integrator)))
+        print(json.dumps(render_mitsuba(variant, Path(toml), Path(exr), args.size, args.spp, args.segments,
+                                        args.integrator, args.mitsuba_lanes)))
         return
 
     present = [Path(s) for s in args.scenes if scene_files_present(Path(s))]
@@ -204,6 +213,8 @@ def run_worker(variant, toml, exr, args):
     command = [sys.executable, __file__, "--worker", variant, str(toml), str(exr)]
     command += ["--size", str(args.size), "--spp", str(args.spp), "--segments", str(args.segments)]
     command += ["--integrator", args.integrator]
+    if args.mitsuba_lanes:
+        command += ["--mitsuba-lanes", str(args.mitsuba_lanes)]
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode != 0:
         return {"error": done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"exit {done.returncode}"}
@@ -297,15 +308,16 @@ def markdown(report):
                 f"{fmt_means(means)} | |"
             )
         m = row["mitsuba"]
+        name = f"{row['variant']} ({m['llvm_lanes']} lanes)" if m.get("llvm_lanes") else row["variant"]
         if "error" in m:
-            lines.append(f"| {row['scene']} | | Mitsuba {row['variant']} | failed: {m['error']} | | | |")
+            lines.append(f"| {row['scene']} | | Mitsuba {name} | failed: {m['error']} | | | |")
             continue
         c = row["comparison"]
         diff = " / ".join(f"{d * 100:+.2f}%" for d in c["relative_difference"])
         verdict = "within" if c["within_tolerance"] else "OUTSIDE"
         tolerance = f"{s['tolerance'] * 100:g}%"
         lines.append(
-            f"| {row['scene']} | | Mitsuba {row['variant']} | {m['cpu_seconds']:.2f} "
+            f"| {row['scene']} | | Mitsuba {name} | {m['cpu_seconds']:.2f} "
             f"({m['load_cpu_seconds']:.2f} + {m['render_cpu_seconds']:.2f}) | {m['wall_seconds']:.2f} | "
             f"{fmt_means(c['mean_mitsuba'])} | {diff} ({verdict} {tolerance}; RMSE {c['rmse']:.4f}) |"
         )
@@ -405,11 +417,31 @@ def mitsuba_description(toml, size, spp, segments, integrator="auto"):
     return description, triangles
 
 
-def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto"):
+def llvm_lanes(lanes=None):
+    """Dr.Jit's LLVM vector width (paths per instruction in the llvm variants), set to `lanes`
+    first where given, the host's processor and features kept. Dr.Jit's Python interface exposes
+    neither `jit_llvm_set_target` nor `jit_llvm_vector_width`, so both are called in its library
+    by their (C++) names."""
+    import ctypes
+
+    import drjit as dr
+
+    lib = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+    cpu, features = lib._Z19jit_llvm_target_cpuv, lib._Z24jit_llvm_target_featuresv
+    width = lib._Z21jit_llvm_vector_widthv
+    cpu.restype = features.restype = ctypes.c_char_p
+    width.restype = ctypes.c_uint32
+    if lanes:
+        lib._Z19jit_llvm_set_targetPKcS0_j(cpu(), features(), ctypes.c_uint32(lanes))
+    return width()
+
+
+def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto", lanes=None):
     import drjit as dr
     import mitsuba as mi
 
     mi.set_variant(variant)
+    lanes = llvm_lanes(lanes) if variant.startswith("llvm") else None
     description, triangles = mitsuba_description(toml, size, spp, segments, integrator)
     # Resident memory (KiB) before Mitsuba builds its scene, which holds this script's own
     # Python lists of the OBJ's vertices and faces, and after the scene and the render: the
@@ -430,6 +462,7 @@ def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto"):
     return {
         "variant": variant,
         "mitsuba": mi.__version__,
+        "llvm_lanes": lanes,
         "triangles": triangles,
         "load_cpu_seconds": load_cpu,
         "render_cpu_seconds": render_cpu,
