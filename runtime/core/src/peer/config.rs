@@ -34,7 +34,8 @@ pub struct Config {
     /// bound, every idle peer of `P` asks all `P - 1` others at the end of each frame: `P²`
     /// requests a round, most of them to peers as idle as the thief.
     pub victims_per_round: usize,
-    /// Round-trip time assumed until one is measured (from steal exchanges or the driver).
+    /// Round-trip time steals are planned with until one is measured: the driver's of a link
+    /// (`Core::handle_rtt`), then this peer's own steal exchanges'.
     pub initial_rtt: Duration,
     /// A steal request unanswered for this long counts as refused; a grant arriving later is
     /// still kept, never dropped. The longest wait: see `steal_timeout_rtts`.

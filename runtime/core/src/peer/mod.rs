@@ -7,12 +7,14 @@
 //! tests script every race, and it makes a core's behaviour a pure function of its seed and
 //! its inputs: maps are ordered, randomness comes from a seeded generator.
 //!
-//! Every peer runs a worker (`worker.rs`, `steal.rs`); the peer that starts a frame also keeps
-//! its ledger (`ledger.rs`). The owner's worker and ledger talk through the same messages as
-//! remote peers do, delivered locally, so the owner needs no special cases. The protocol is
-//! described in `README.md` beside this file.
+//! Every peer runs a worker (`worker.rs`, `steal.rs`, and what it has measured in
+//! `estimates.rs`); the peer that starts a frame also keeps its ledger (`ledger.rs`). The
+//! owner's worker and ledger talk through the same messages as remote peers do, delivered
+//! locally, so the owner needs no special cases. The protocol is described in `README.md`
+//! beside this file.
 
 mod config;
+mod estimates;
 mod event;
 mod ledger;
 mod pieces;
@@ -28,8 +30,8 @@ pub use event::{Audit, Event, Failure, Fault, FrameError, PeerStats, ProtocolErr
 
 use crate::rng::SplitMix;
 use crate::wire::{self, FrameId, Message, PeerId, TileResult, TileSpec};
+use estimates::Estimates;
 use ledger::Ledger;
-use steal::Estimates;
 use worker::Worker;
 
 /// A tile for the local renderer. Render it and give the result to
@@ -252,10 +254,11 @@ impl Core {
     }
 
     /// A round-trip measurement of the link to `peer` from the transport (quinn's path RTT,
-    /// for instance): it paces this peer's steal requests, and an owner counts `peer`'s
-    /// silence from a round trip after each assignment it sends it.
+    /// for instance): an owner counts `peer`'s silence from a round trip after each assignment
+    /// it sends it, and this peer plans its steals with it until it has timed a steal exchange
+    /// of its own (which includes the victim's time to answer, as the link's does not).
     pub fn handle_rtt(&mut self, peer: PeerId, rtt: Duration) {
-        self.worker.estimates.sample_rtt(rtt);
+        self.worker.estimates.seed_rtt(rtt);
         self.round_trips.insert(peer, rtt);
         for ledger in self.ledgers.values_mut() {
             ledger.set_round_trip(peer, rtt);

@@ -109,61 +109,6 @@ fn pick_victim(
     }
 }
 
-/// What a peer has measured about itself and the network.
-pub(super) struct Estimates {
-    /// Predicted cost rendered per second by one slot; `None` before the first tile.
-    slot_rate: Option<f64>,
-    rtt: Duration,
-    rtt_measured: bool,
-    rng: SplitMix,
-}
-
-impl Estimates {
-    pub(super) fn new(config: &Config, rng: SplitMix) -> Self {
-        Self {
-            slot_rate: None,
-            rtt: config.initial_rtt,
-            rtt_measured: false,
-            rng,
-        }
-    }
-
-    /// Folds in one rendered tile: its predicted cost and how long a slot took over it.
-    pub(super) fn sample_rate(&mut self, predicted: f64, took: Duration) {
-        let secs = took.as_secs_f64();
-        if predicted > 0.0 && secs > 0.0 {
-            let sample = predicted / secs;
-            self.slot_rate = Some(self.slot_rate.map_or(sample, |r| r + (sample - r) * 0.25));
-        }
-    }
-
-    /// Folds in one round-trip measurement, smoothed as TCP does.
-    pub(super) fn sample_rtt(&mut self, rtt: Duration) {
-        self.rtt = if self.rtt_measured {
-            (self.rtt * 7 + rtt) / 8
-        } else {
-            rtt
-        };
-        self.rtt_measured = true;
-    }
-
-    /// How long a steal request may stay unanswered: `steal_timeout_rtts` round trips, at
-    /// least 2 ms, at most `steal_timeout`.
-    pub(super) fn steal_timeout(&self, config: &Config) -> Duration {
-        let floor = Duration::from_millis(2).min(config.steal_timeout);
-        self.rtt
-            .mul_f64(config.steal_timeout_rtts.max(0.0))
-            .clamp(floor, config.steal_timeout)
-    }
-
-    /// Seconds this peer needs for `work`, if it has measured its rate yet.
-    pub(super) fn seconds_for(&self, work: f64, slots: usize) -> Option<f64> {
-        self.slot_rate
-            .filter(|r| *r > 0.0)
-            .map(|r| work / (r * slots.max(1) as f64))
-    }
-}
-
 impl Worker {
     /// Predicted work this peer still holds over all its frames: its queues plus what is left
     /// of the tiles in its renderer (assuming they progress at the measured rate).

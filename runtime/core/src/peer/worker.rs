@@ -19,7 +19,8 @@
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::Duration;
 
-use super::steal::{Estimates, Round, Thief};
+use super::estimates::Estimates;
+use super::steal::{Round, Thief};
 use super::{Ctx, WorkItem};
 use crate::peer::event::{Event, PeerStats};
 use crate::wire::{FrameId, Message, PeerId, Piece, TileId, TileSpec};
