@@ -322,6 +322,9 @@ impl SimWorld {
             Event::PeerOverdue { frame, peer } => {
                 print.words(&[16, u64::from(frame.0), u64::from(peer.0)]);
             }
+            Event::PeerResumed { frame, peer } => {
+                print.words(&[19, u64::from(frame.0), u64::from(peer.0)]);
+            }
             Event::PeerStats { frame, peer, stats } => {
                 print.words(&[
                     11,

@@ -53,8 +53,8 @@ pub struct Director {
     /// checkpoint of it (see [`Director::resume_with`]).
     resumed: Option<Vec<balancer::Tile>>,
     /// Participants whose work was backed up as overdue and that have not been heard of since
-    /// (by their statistics): a frozen peer would hold up every frame dealt to it, so it is
-    /// dealt nothing until it shows it is alive.
+    /// (a result, or their statistics): a frozen peer would hold up every frame dealt to it, so
+    /// it is dealt nothing until it shows it is alive.
     overdue: BTreeSet<PeerId>,
     /// The next frame to deal.
     next: u32,
@@ -317,6 +317,10 @@ impl Director {
                 if peer != self.me {
                     self.overdue.insert(peer);
                 }
+                Ok(None)
+            }
+            CoreEvent::PeerResumed { peer, .. } => {
+                self.overdue.remove(&peer);
                 Ok(None)
             }
             CoreEvent::PeerLeaving { peer } => {

@@ -34,11 +34,21 @@ pub enum Event {
     },
     /// (Owner) `peer` made no progress on its work of `frame` for long past its prediction,
     /// and that work was backed up on idle peers. It is not declared failed (it may resume),
-    /// but the director deals it nothing more until it is heard of again.
+    /// but the director deals it nothing more until it is heard of again: a result
+    /// ([`Event::PeerResumed`]) or its statistics.
     PeerOverdue {
         /// The frame whose work was backed up.
         frame: FrameId,
         /// The peer that stalled.
+        peer: PeerId,
+    },
+    /// (Owner) a peer reported overdue in `frame` sent a result of it: it is progressing again
+    /// (a peer slowed by a lossy link, not a frozen one), and the director may deal it work
+    /// without waiting for the frame's end.
+    PeerResumed {
+        /// The frame it was overdue in.
+        frame: FrameId,
+        /// The peer heard of again.
         peer: PeerId,
     },
     /// (Owner) a participant's statistics for `frame`, its own included.

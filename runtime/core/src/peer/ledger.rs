@@ -80,6 +80,9 @@ struct PeerView {
     /// When the peer last sent a result or was given work (an `Assign`, a grant it told of):
     /// how long it has gone without progress, for speculation.
     last_progress: Duration,
+    /// Whether the peer was reported overdue ([`Event::PeerOverdue`]) and has sent no result
+    /// since: its next result is reported as [`Event::PeerResumed`].
+    overdue: bool,
 }
 
 impl Ledger {
@@ -195,6 +198,12 @@ impl Ledger {
         let counted = self.peers.get_mut(&from).map(|view| {
             view.results_received += 1;
             view.last_progress = now;
+            if std::mem::take(&mut view.overdue) {
+                out.events.push_back(Event::PeerResumed {
+                    frame: self.frame,
+                    peer: from,
+                });
+            }
             view.idle()
         });
         if let Some(fault) = self.record(now, from, result, out) {
@@ -474,6 +483,7 @@ impl PeerView {
             results_received: 0,
             silent_since: now,
             last_progress: now,
+            overdue: false,
         }
     }
 

@@ -51,7 +51,8 @@ fn peers_that_join_or_leave_are_dealt_from_the_next_frame() {
 }
 
 /// A peer whose work was backed up as overdue is dealt nothing until its statistics show it
-/// alive again: a frozen peer would hold up every frame dealt to it.
+/// alive again (or a result does: the next test): a frozen peer would hold up every frame
+/// dealt to it.
 #[test]
 fn an_overdue_peer_is_dealt_nothing_until_it_is_heard_of() {
     let t = Duration::ZERO;
@@ -78,4 +79,31 @@ fn an_overdue_peer_is_dealt_nothing_until_it_is_heard_of() {
     director.handle_measured(t, FrameId(1), &halves(1)).unwrap();
     let third = director.poll_deal(t).unwrap().unwrap();
     assert_eq!(participants(&third), [0, 1, 2], "peer 2 was heard of");
+}
+
+/// An overdue peer that delivers a result again ([`crate::peer::Event::PeerResumed`]) is
+/// dealt the next frame, without waiting for its statistics of the frame it was overdue in.
+#[test]
+fn an_overdue_peer_that_resumes_is_dealt_again() {
+    let t = Duration::ZERO;
+    let mut director = director_in_flight(grid(4, 4), 3, 3, 1);
+    let participants = |deal: &Deal| deal.participants().map(|p| p.0).collect::<Vec<_>>();
+    let first = director.poll_deal(t).unwrap().unwrap();
+    assert_eq!(participants(&first), [0, 1, 2]);
+    for event in [
+        crate::peer::Event::PeerOverdue {
+            frame: FrameId(0),
+            peer: PeerId(2),
+        },
+        crate::peer::Event::PeerResumed {
+            frame: FrameId(0),
+            peer: PeerId(2),
+        },
+    ] {
+        assert!(director.handle_core_event(t, event).unwrap().is_none());
+    }
+    director.handle_core_event(t, completion(0)).unwrap();
+    director.handle_measured(t, FrameId(0), &halves(1)).unwrap();
+    let second = director.poll_deal(t).unwrap().unwrap();
+    assert_eq!(participants(&second), [0, 1, 2], "peer 2 resumed");
 }

@@ -209,6 +209,9 @@ impl Ledger {
             self.audit.backed_up += self.reissue(now, backups, out);
         }
         for peer in overdue {
+            if let Some(view) = self.peers.get_mut(&peer) {
+                view.overdue = true;
+            }
             out.events.push_back(Event::PeerOverdue {
                 frame: self.frame,
                 peer,
