@@ -137,6 +137,10 @@ impl SimWorld {
 }
 
 impl World for SimWorld {
+    fn round_trip(&self, a: PeerId, b: PeerId, _base: Duration) -> Duration {
+        self.links.round_trip(a, b)
+    }
+
     fn render(&mut self, now: Duration, peer: PeerId, item: &WorkItem) -> Rendered {
         let frame = item.frame.0;
         let map = self.map(frame);

@@ -50,11 +50,12 @@ pub struct Cluster<W: World = Scripted> {
     /// Each message is delayed by up to this much more, uniformly at random (from the
     /// cluster's seed), so that messages overtake each other as they do on QUIC streams.
     pub jitter: Duration,
-    /// Whether cores are told their links' round trips (twice `latency`; jitter left out, as
-    /// QUIC reports a smoothed estimate) as the QUIC driver tells them (`Core::handle_rtt`):
-    /// with each delivered message, when a peer joins, and (standing in for the connections
-    /// made before) to an owner as it starts a frame. Off by default: the cores then plan with
-    /// their own steal exchanges' samples, as the simulator's do.
+    /// Whether cores are told their links' round trips ([`World::round_trip`], by default
+    /// twice `latency`; jitter left out, as QUIC reports a smoothed estimate) as the QUIC
+    /// driver tells them (`Core::handle_rtt`): with each delivered message, when a peer joins,
+    /// and (standing in for the connections made before) to an owner as it starts a frame. Off
+    /// by default, for tests that script races at a fixed `initial_rtt`: the cores then plan
+    /// with their own steal exchanges' samples. The simulator turns it on.
     pub report_rtt: bool,
     /// How long after a peer dies the others learn of it.
     pub loss_detection: Duration,
@@ -123,9 +124,10 @@ impl<W: World> Cluster<W> {
         cluster
     }
 
-    /// The round trip reported to cores where `report_rtt` is on.
-    fn round_trip(&self) -> Duration {
-        self.latency * 2
+    /// The round trip reported to `a`'s core for its link to `b` where `report_rtt` is on: the
+    /// world's ([`World::round_trip`]), by default twice `latency`.
+    fn round_trip(&self, a: PeerId, b: PeerId) -> Duration {
+        self.world.round_trip(a, b, self.latency * 2)
     }
 
     /// The current virtual time.
@@ -174,9 +176,11 @@ impl<W: World> Cluster<W> {
         let now = self.now;
         if self.report_rtt {
             // As the driver reports each connection's round trip when it comes up.
-            let round_trip = self.round_trip();
-            let others: Vec<PeerId> = self.nodes.keys().copied().filter(|&p| p != owner).collect();
-            for peer in others {
+            let links: Vec<(PeerId, Duration)> = (self.nodes.keys())
+                .filter(|&&peer| peer != owner)
+                .map(|&peer| (peer, self.round_trip(owner, peer)))
+                .collect();
+            for (peer, round_trip) in links {
                 self.node(owner).core.handle_rtt(peer, round_trip);
             }
         }
@@ -271,10 +275,11 @@ impl<W: World> Cluster<W> {
         };
         self.nodes.insert(peer, node);
         self.flush(peer);
-        let round_trip = self.round_trip();
         for other in others {
             if self.report_rtt {
+                let round_trip = self.round_trip(other, peer);
                 self.node(other).core.handle_rtt(peer, round_trip);
+                let round_trip = self.round_trip(peer, other);
                 self.node(peer).core.handle_rtt(other, round_trip);
             }
             self.node(other).core.handle_peer_connected(now, peer);
@@ -335,7 +340,13 @@ impl<W: World> Cluster<W> {
             | Happening::Timeout { peer } => *peer,
         };
         let (now, encode) = (self.now, self.encode);
-        let (report_rtt, round_trip) = (self.report_rtt, self.round_trip());
+        // The round trip the receiver's driver reports with a delivered message.
+        let reported = match &happening {
+            Happening::Deliver { from, .. } if self.report_rtt => {
+                Some(self.round_trip(peer, *from))
+            }
+            _ => None,
+        };
         let node = self
             .nodes
             .get_mut(&peer)
@@ -364,7 +375,7 @@ impl<W: World> Cluster<W> {
                     message
                 };
                 node.core.record_bytes(0, bytes);
-                if report_rtt {
+                if let Some(round_trip) = reported {
                     node.core.handle_rtt(from, round_trip);
                 }
                 if let Err(error) = node.core.handle_message(now, from, message) {

@@ -49,6 +49,15 @@ pub trait World {
         Transit { delay, bytes: 0 }
     }
 
+    /// The round trip the driver of `a` would report for its link to `b` where the cluster
+    /// reports round trips ([`Cluster::report_rtt`]): QUIC's smoothed estimate, the link's
+    /// delay both ways without jitter, losses or queues. `base` is the cluster's own, twice its
+    /// `latency`; by default the answer.
+    fn round_trip(&self, a: PeerId, b: PeerId, base: Duration) -> Duration {
+        let _ = (a, b);
+        base
+    }
+
     /// Sees what the cores do, in order, as it happens.
     fn observe(&mut self, at: Duration, seen: Seen<'_>);
 }
