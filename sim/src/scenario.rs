@@ -222,8 +222,9 @@ pub fn run(
     cluster.jitter = network.jitter;
     cluster.loss_detection = network.loss_detection;
     cluster.encode = false;
-    // The cores learn each link's round trip as the QUIC driver tells them, so that they plan
-    // steals and time their peers' silence by it (`Core::handle_rtt`), not by `initial_rtt`.
+    // The cores learn each link's round trip as the QUIC driver tells them (`Core::handle_rtt`):
+    // an owner times a peer's silence by it (told none, it timed silence as if links had no
+    // delay), and a peer seeds its steal plans with it until it has timed an exchange.
     cluster.report_rtt = true;
 
     let mut crashes: Vec<(Duration, u32)> = Vec::new();

@@ -140,12 +140,6 @@ fn every_tile_completes_exactly_once_under_every_policy_and_fault() {
                 // Each crash is noticed by the ledger of every frame it held work of: once,
                 // or twice when two frames were in flight.
                 let failures: u64 = report.frames.iter().map(|f| f.failures).sum();
-                for f in &report.frames {
-                    eprintln!(
-                        "DBG {policy} frame {} makespan {} failures {} reissued {} participants {}",
-                        f.frame, f.makespan, f.failures, f.tiles_reissued, f.participants
-                    );
-                }
                 let in_flight = scenario.frames_in_flight as u64;
                 assert!(
                     (3..=3 * in_flight).contains(&failures),
@@ -168,7 +162,8 @@ fn every_tile_completes_exactly_once_under_every_policy_and_fault() {
                 assert!(report.frames.last().unwrap().participants <= 5);
                 // A live peer reported overdue over the lossy links is dealt frames again once
                 // it delivers a result: no frame goes to a few of the five survivors (one went
-                // to the owner alone while resumption waited for the frame's statistics).
+                // to the owner alone while resumption waited for the frame's statistics). How
+                // many take part depends on this seed's losses; four or five did with it.
                 for frame in &report.frames {
                     assert!(frame.participants >= 4, "{policy}, frame {}", frame.frame);
                 }
@@ -325,8 +320,9 @@ fn a_slow_peer_is_helped_by_stealing() {
 /// 1 s timeout, the links spread by half and jittered): the simulated cores are told each
 /// link's round trip, as the QUIC driver tells real ones, so the owner gives up on no live
 /// peer and gives no tile out again, under every policy. Told none, the owner counted a
-/// peer's silence from `initial_rtt` and declared every peer it dealt tiles to failed before
-/// its first answer could arrive (the simulator refused such links for that reason).
+/// peer's silence from the moment it dealt it tiles, as if the link had no delay, and declared
+/// every peer it dealt tiles to failed before its first answer could arrive (the simulator
+/// refused such links for that reason).
 #[test]
 fn links_slower_than_the_silence_timeout_fail_no_live_peer() {
     let trace = hot_spot(3, true);

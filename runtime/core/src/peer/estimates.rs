@@ -13,10 +13,12 @@ pub(super) struct Estimates {
     /// The round trip steals are planned with (the low-water mark, whether a grant pays, how
     /// long a request may go unanswered): the smoothed time of this peer's own steal exchanges,
     /// request to answer, the victim's time to answer included; before the first, a link's
-    /// round trip as the driver measured it, or `Config::initial_rtt`.
+    /// links' round trips as the driver measured them, or `Config::initial_rtt`.
     pub(super) rtt: Duration,
     /// Whether `rtt` comes from a steal exchange yet.
     rtt_measured: bool,
+    /// Whether `rtt` comes from a link's round trip, before any exchange.
+    rtt_seeded: bool,
     /// Draws victims: a stream of its own per peer, so that thieves do not draw alike.
     pub(super) rng: SplitMix,
 }
@@ -27,6 +29,7 @@ impl Estimates {
             slot_rate: None,
             rtt: config.initial_rtt,
             rtt_measured: false,
+            rtt_seeded: false,
             rng,
         }
     }
@@ -40,16 +43,24 @@ impl Estimates {
         }
     }
 
-    /// A link's round trip as the driver measures it: the estimate until a steal exchange has
-    /// been timed, ignored after. Fed every link's (the QUIC driver reports one with every
-    /// message), the estimate followed the bare link and left out the victims' time to answer:
-    /// in the simulator the shipped scene on 64 peers (1024 tiles, contiguous runs, tiles
-    /// whole) ran at 0.656 of its capacity so, against 0.668 with links' round trips as seeds
-    /// only (docs/results.md, "Re-run on 2026-12-05").
+    /// A link's round trip as the driver measures it: until a steal exchange has been timed,
+    /// the estimate is these, smoothed as exchanges are (the links may differ); after, they
+    /// move it no more. Fed every link's round trip (the QUIC driver reports one with every
+    /// message), the estimate followed the bare links, which leave out the victims' time to
+    /// answer, and stealing in the simulator ran less efficiently than seeded only
+    /// (docs/results.md, "Re-run on 2026-12-05"). A zero round trip, an ideal link in the
+    /// simulator, is no measurement and is not taken: planned with it, a peer would never
+    /// ask before it ran dry and a victim would find every grant worth its transfer.
     pub(super) fn seed_rtt(&mut self, rtt: Duration) {
-        if !self.rtt_measured {
-            self.rtt = rtt;
+        if self.rtt_measured || rtt.is_zero() {
+            return;
         }
+        self.rtt = if self.rtt_seeded {
+            (self.rtt * 7 + rtt) / 8
+        } else {
+            rtt
+        };
+        self.rtt_seeded = true;
     }
 
     /// Folds in one steal exchange's round trip, smoothed as TCP does.
@@ -87,37 +98,43 @@ mod tests {
         Duration::from_millis(ms)
     }
 
-    /// The driver's round trips of links stand in until a steal exchange is timed, and change
-    /// nothing after: an exchange's time includes the victim's time to answer, which a link's
-    /// round trip leaves out.
+    /// The driver's round trips of links stand in, smoothed, until a steal exchange is timed,
+    /// and change nothing after: an exchange's time includes the victim's time to answer,
+    /// which a link's round trip leaves out. A zero round trip is no measurement.
     #[test]
     fn links_round_trips_seed_the_estimate_and_steal_exchanges_set_it() {
         let config = Config::default();
         let mut estimates = Estimates::new(&config, SplitMix(1));
         assert_eq!(estimates.rtt, config.initial_rtt);
+        estimates.seed_rtt(Duration::ZERO);
+        assert_eq!(
+            estimates.rtt, config.initial_rtt,
+            "a zero round trip is not taken"
+        );
         estimates.seed_rtt(ms(40));
-        estimates.seed_rtt(ms(30));
         assert_eq!(
             estimates.rtt,
-            ms(30),
-            "the newest link's round trip, before any exchange"
+            ms(40),
+            "the first link's round trip replaces the default"
+        );
+        estimates.seed_rtt(ms(120));
+        assert_eq!(
+            estimates.rtt,
+            ms(50),
+            "links' round trips are smoothed, 7/8 old and 1/8 new"
         );
         estimates.sample_rtt(ms(80));
         assert_eq!(
             estimates.rtt,
             ms(80),
-            "the first exchange replaces the seed"
+            "the first exchange replaces the seeds"
         );
         for _ in 0..100 {
             estimates.seed_rtt(ms(1));
         }
         assert_eq!(estimates.rtt, ms(80), "links' round trips move it no more");
         estimates.sample_rtt(ms(160));
-        assert_eq!(
-            estimates.rtt,
-            ms(90),
-            "exchanges are smoothed, 7/8 old and 1/8 new"
-        );
+        assert_eq!(estimates.rtt, ms(90), "exchanges are smoothed alike");
     }
 
     /// The timeout follows the estimate within its bounds: at least 2 ms, at most

@@ -198,16 +198,11 @@ impl Ledger {
         let counted = self.peers.get_mut(&from).map(|view| {
             view.results_received += 1;
             view.last_progress = now;
-            if std::mem::take(&mut view.overdue) {
-                out.events.push_back(Event::PeerResumed {
-                    frame: self.frame,
-                    peer: from,
-                });
-            }
             view.idle()
         });
-        if let Some(fault) = self.record(now, from, result, out) {
-            out.events.push_back(fault);
+        match self.record(now, from, result, out) {
+            Some(fault) => out.events.push_back(fault),
+            None => self.resume_if_overdue(from, out),
         }
         // The result may have been what kept the sender's idle report from counting.
         if counted == Some(true) {

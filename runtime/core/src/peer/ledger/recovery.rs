@@ -1,6 +1,6 @@
 //! How the owner's ledger gets missing work rendered after all: it watches for silent
-//! participants, re-issues tiles whose holders are gone or all idle, and backs up overdue tiles
-//! on idle peers (speculation).
+//! participants, re-issues tiles whose holders are gone or all idle, backs up overdue tiles on
+//! idle peers (speculation), and reports an overdue peer resumed once a result of it is accepted.
 //!
 //! One unit because these are the ledger's recovery rules, the part that acts on what it
 //! believes rather than keeping it up to date: who counts as silent, and where the missing
@@ -131,6 +131,22 @@ impl Ledger {
             self.send_assign(now, target, participants.clone(), chunk.to_vec(), out);
         }
         given
+    }
+
+    /// A live peer reported overdue whose result was just accepted is progressing again:
+    /// reported resumed, once. A result it sent before it stalled that arrives only now resumes
+    /// it too (the owner cannot tell when a result was sent); if it is still stalled, its work
+    /// in the next frame is backed up in turn.
+    pub(super) fn resume_if_overdue(&mut self, peer: PeerId, out: &mut Outbox) {
+        if let Some(view) = self.peers.get_mut(&peer)
+            && view.alive
+            && std::mem::take(&mut view.overdue)
+        {
+            out.events.push_back(Event::PeerResumed {
+                frame: self.frame,
+                peer,
+            });
+        }
     }
 
     /// Looks for overdue participants once some participant is idle (see [`Speculation`]).
