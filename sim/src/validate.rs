@@ -30,7 +30,7 @@ pub struct Given {
 /// One frame, measured and simulated.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrameComparison {
-    /// The frame's time in the real render, in seconds.
+    /// What the frame added to the real render's time, in seconds ([`frame_intervals`]).
     pub measured: f64,
     /// The frame's makespan in the simulation, in virtual seconds.
     pub simulated: f64,
@@ -129,13 +129,15 @@ pub fn validate(
     let config = balancer::Config::with_tiles(kind, tiles, order, motion);
     let partitioner = Partitioner::new(trace.width(), trace.height(), &config)?;
     let run = scenario::run(trace, partitioner, &scenario)?;
+    let measured = frame_intervals(&stats.frames);
     let compared = stats
         .frames
         .iter()
         .zip(&run.frames)
+        .zip(measured)
         .enumerate()
         .take(frames)
-        .map(|(index, (real, simulated))| {
+        .map(|(index, ((real, simulated), measured))| {
             let mut real_sets: Vec<_> = real.tiles.iter().collect();
             real_sets.sort_by_key(|t| t.tile);
             let dealt = &run.assignments[index];
@@ -145,7 +147,7 @@ pub fn validate(
                     .zip(dealt)
                     .all(|(t, (rect, peer))| t.rect == *rect && t.initial_peer == *peer);
             FrameComparison {
-                measured: real.seconds,
+                measured,
                 simulated: simulated.makespan,
                 tiles: real.tiles.len(),
                 same_initial_sets: same,
@@ -163,6 +165,28 @@ pub fn validate(
         asked: frames,
         frames: compared,
     })
+}
+
+/// What each frame added to the render's time, as the simulator's makespan counts it: from
+/// the later of the frame before's completion and its own first tile out, to its completion.
+/// Frames overlap (the next is dealt while one wanes), so a frame's own span, first tile out to
+/// last result in, counts the overlap twice: compared with it, the replays read 0.54 to 0.68
+/// (docs/results.md, "Validation"). The first frame starts at its first tile, not at the
+/// render's start, which includes peers joining. Files written before `completed_at` have only
+/// the spans, which were the intervals while frames did not overlap.
+fn frame_intervals(frames: &[runtime_core::stats::FrameStats]) -> Vec<f64> {
+    if frames.iter().any(|f| f.completed_at <= 0.0) {
+        return frames.iter().map(|f| f.seconds).collect();
+    }
+    let mut before = 0.0f64;
+    frames
+        .iter()
+        .map(|f| {
+            let start = before.max(f.completed_at - f.seconds);
+            before = f.completed_at;
+            f.completed_at - start
+        })
+        .collect()
 }
 
 /// A balancer's or deal's value by the name its files and flags use.
@@ -269,6 +293,24 @@ mod tests {
             frames: vec![frame(0), frame(1)],
             ..StatsFile::default()
         }
+    }
+
+    /// Frames overlap: each is measured from the completion of the one before (or its own
+    /// first tile, if later), as the simulator's makespan is, not by its own span; files
+    /// without completion times keep the spans.
+    #[test]
+    fn frames_are_measured_by_what_they_added_to_the_render() {
+        let mut file = stats("pbt", "", "off");
+        // Frame 0 (a span of 0.5 s) completes 2 s into the render, after the peers joined;
+        // frame 1 (0.5 s too) overlaps it by 0.2 s.
+        file.frames[0].completed_at = 2.0;
+        file.frames[1].completed_at = 2.3;
+        assert_eq!(frame_intervals(&file.frames), [0.5, 2.3 - 2.0]);
+        // A gap before the next frame's first tile is not the frame's.
+        file.frames[1].completed_at = 3.0;
+        assert_eq!(frame_intervals(&file.frames), [0.5, 0.5]);
+        file.frames[1].completed_at = 0.0;
+        assert_eq!(frame_intervals(&file.frames), [0.5, 0.5]);
     }
 
     /// The render's settings win over the flags': its rate (work over busy slot time), its
