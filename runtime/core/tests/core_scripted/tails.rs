@@ -158,20 +158,27 @@ fn a_victim_cuts_a_queued_tile_rather_than_give_it_whole_or_not_at_all() {
     }
 }
 
+/// Three peers share 30 tiles of 10 ms under a 10 s silence timeout, with `speculation`; peer
+/// 2 freezes 15 ms into the frame.
+fn peer_2_frozen_early(speculation: Option<Speculation>) -> Cluster {
+    let config = Config {
+        speculation,
+        peer_timeout: Duration::from_secs(10),
+        ..Config::default()
+    };
+    let mut cluster = cluster(&config, 3, 1, 5);
+    cluster
+        .start_frame(OWNER, FrameId(1), contiguous(3, &[10.0; 30]))
+        .unwrap();
+    cluster.run(Duration::from_millis(15));
+    cluster.freeze(PeerId(2));
+    cluster
+}
+
 #[test]
 fn a_frozen_peer_is_backed_up_long_before_its_timeout_and_welcomed_back() {
     for speculation in [Some(Speculation::default()), None] {
-        let config = Config {
-            speculation,
-            peer_timeout: Duration::from_secs(10),
-            ..Config::default()
-        };
-        let mut cluster = cluster(&config, 3, 1, 5);
-        cluster
-            .start_frame(OWNER, FrameId(1), contiguous(3, &[10.0; 30]))
-            .unwrap();
-        cluster.run(Duration::from_millis(15));
-        cluster.freeze(PeerId(2));
+        let mut cluster = peer_2_frozen_early(speculation);
         cluster.run(Duration::from_secs(2));
         let done = cluster.events().any(|(_, event)| {
             matches!(
@@ -216,16 +223,7 @@ fn a_frozen_peer_is_backed_up_long_before_its_timeout_and_welcomed_back() {
 /// as long).
 #[test]
 fn an_overdue_peer_that_delivers_again_is_reported_resumed() {
-    let config = Config {
-        peer_timeout: Duration::from_secs(10),
-        ..Config::default()
-    };
-    let mut cluster = cluster(&config, 3, 1, 5);
-    cluster
-        .start_frame(OWNER, FrameId(1), contiguous(3, &[10.0; 30]))
-        .unwrap();
-    cluster.run(Duration::from_millis(15));
-    cluster.freeze(PeerId(2));
+    let mut cluster = peer_2_frozen_early(Config::default().speculation);
     let reported = |cluster: &Cluster, resumed: bool| {
         cluster.events().any(|(peer, event)| {
             peer == OWNER
