@@ -74,6 +74,15 @@ pub fn validate(
     if stats.frames.is_empty() {
         return Err(bad("the statistics have no frames".into()));
     }
+    // A resumed render began at a later frame, cut from a checkpoint's tiles: the simulator
+    // replays from frame 0, so frame for frame it would compare different frames.
+    if stats.first_frame > 0 {
+        return Err(bad(format!(
+            "the statistics are of a render resumed at frame {}: only a render from frame 0 \
+             can be replayed",
+            stats.first_frame
+        )));
+    }
     let kind: Kind = by_name(&stats.balancer)
         .ok_or_else(|| bad(format!("unknown balancer {:?}", stats.balancer)))?;
     let order: Order = match stats.deal.as_str() {
@@ -360,6 +369,11 @@ mod tests {
             (v.rate, v.slots, v.motion, v.frames.len()),
             (5.0, 1, Some(4), 1)
         );
+
+        let mut resumed = stats("pbt", "", "off");
+        resumed.first_frame = 3;
+        let error = validate(&trace, &resumed, Scenario::default(), given).unwrap_err();
+        assert!(error.to_string().contains("resumed at frame 3"), "{error}");
 
         for (balancer, deal, motion, named) in [
             ("fastest", "", "off", "fastest"),
