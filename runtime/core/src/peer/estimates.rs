@@ -12,8 +12,8 @@ pub(super) struct Estimates {
     pub(super) slot_rate: Option<f64>,
     /// The round trip steals are planned with (the low-water mark, whether a grant pays, how
     /// long a request may go unanswered): the smoothed time of this peer's own steal exchanges,
-    /// request to answer, the victim's time to answer included; before the first, a link's
-    /// links' round trips as the driver measured them, or `Config::initial_rtt`.
+    /// request to answer, the victim's time to answer included; before the first, the links'
+    /// round trips as the driver measured them, or `Config::initial_rtt` before either.
     pub(super) rtt: Duration,
     /// Whether `rtt` comes from a steal exchange yet.
     rtt_measured: bool,
@@ -55,22 +55,16 @@ impl Estimates {
         if self.rtt_measured || rtt.is_zero() {
             return;
         }
-        self.rtt = if self.rtt_seeded {
-            (self.rtt * 7 + rtt) / 8
-        } else {
-            rtt
-        };
-        self.rtt_seeded = true;
+        self.rtt = smoothed(self.rtt, rtt, std::mem::replace(&mut self.rtt_seeded, true));
     }
 
     /// Folds in one steal exchange's round trip, smoothed as TCP does.
     pub(super) fn sample_rtt(&mut self, rtt: Duration) {
-        self.rtt = if self.rtt_measured {
-            (self.rtt * 7 + rtt) / 8
-        } else {
-            rtt
-        };
-        self.rtt_measured = true;
+        self.rtt = smoothed(
+            self.rtt,
+            rtt,
+            std::mem::replace(&mut self.rtt_measured, true),
+        );
     }
 
     /// How long a steal request may stay unanswered: `steal_timeout_rtts` round trips, at
@@ -87,6 +81,16 @@ impl Estimates {
         self.slot_rate
             .filter(|r| *r > 0.0)
             .map(|r| work / (r * slots.max(1) as f64))
+    }
+}
+
+/// `sample` folded into the estimate `old` as TCP smooths round trips (7/8 old, 1/8 new), or
+/// `sample` alone where `old` holds no sample of the same kind yet.
+fn smoothed(old: Duration, sample: Duration, old_is_a_sample: bool) -> Duration {
+    if old_is_a_sample {
+        (old * 7 + sample) / 8
+    } else {
+        sample
     }
 }
 

@@ -259,7 +259,11 @@ impl Core {
     /// of its own (which includes the victim's time to answer, as the link's does not).
     pub fn handle_rtt(&mut self, peer: PeerId, rtt: Duration) {
         self.worker.estimates.seed_rtt(rtt);
-        self.round_trips.insert(peer, rtt);
+        // The driver reports a round trip with every message, mostly the one it reported last:
+        // the ledgers, which took the table when they opened, need only the changes.
+        if self.round_trips.insert(peer, rtt) == Some(rtt) {
+            return;
+        }
         for ledger in self.ledgers.values_mut() {
             ledger.set_round_trip(peer, rtt);
         }
