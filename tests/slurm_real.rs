@@ -166,6 +166,11 @@ fn a_task_that_starts_late_is_waited_for() {
 /// Elastic membership under SLURM: a step of two tasks renders; once frame 0 is done, a job
 /// of its own puts a third peer on node n3 (`tessera peer --join`, as a later allocation
 /// would), which joins the running render, renders in the frames after, and changes no pixel.
+///
+/// The late job is allocated while frame 0 renders and its task waits for the owner's address,
+/// which the test writes once frame 0 is on disk: a join then takes a process start and a
+/// handshake, not an allocation, which under a loaded CI took longer than the five frames left
+/// (seen once: the render over before the peer came).
 #[test]
 fn a_peer_joining_a_running_step_takes_part_and_changes_no_pixel() {
     let Some(cluster) =
@@ -175,22 +180,32 @@ fn a_peer_joining_a_running_step_takes_part_and_changes_no_pixel() {
     };
     let job = Job::new(&cluster);
     let out = cluster.dir().join("joined");
-    let two = ["-N2", "-n2", "--kill-on-bad-exit=0", "--wait=0"];
+    // n3 is kept for the late job, so that neither allocation waits on the other.
+    let two = ["-N2", "-n2", "-x", "n3", "--kill-on-bad-exit=0", "--wait=0"];
     let (child, lines) = spawn(job.srun_sized(&two, &out, "", &SLOW));
-    assert!(
-        wait_for_frame(&out, 0, &lines),
-        "the step never finished frame 0"
+    // The step's job first, as in use, and as the cluster checked its first job's ports.
+    assert!(wait_for_task(&job, 0, &lines), "the step never started");
+    let address = cluster.dir().join("owner-address");
+    let wait_then_join = format!(
+        r#"while [ ! -e "{0}" ]; do sleep 0.01; done; exec "$0" peer --join "$(cat "{0}")" "$@""#,
+        address.display()
     );
-    let owner = job.task(0, 0);
-    let port = default_port(owner.job, 0);
     let mut late = cluster.command("srun");
-    late.args(["-N1", "-n1", "-w", "n3"])
+    late.args(["-N1", "-n1", "-w", "n3", "sh", "-c", &wait_then_join])
         .arg(env!("CARGO_BIN_EXE_tessera"))
-        .args(["peer", "--join", &format!("127.0.0.1:{port}")])
         .args(["--index", "2", "--threads", "1", "--certs"])
         .arg(&job.certs)
         .env("NO_COLOR", "1");
     let late = spawn(late);
+    assert!(
+        wait_for_frame(&out, 0, &lines),
+        "the step never finished frame 0"
+    );
+    let port = default_port(job.task(0, 0).job, 0);
+    // Written whole, then renamed, so the waiting task never reads half an address.
+    let partial = address.with_extension("partial");
+    std::fs::write(&partial, format!("127.0.0.1:{port}")).unwrap();
+    std::fs::rename(&partial, &address).unwrap();
     let (status, log) = finish((child, lines));
     assert!(status.success(), "the first step failed: {status}\n{log}");
     let (late_status, late_log) = finish(late);

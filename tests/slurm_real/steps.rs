@@ -206,7 +206,19 @@ pub(super) fn assert_frames_match(out: &Path, expected: Vec<(String, Vec<u8>)>) 
 /// it after the render (seen once in CI: a task killed once the line came had rendered 11
 /// tiles of the last frame).
 pub(super) fn wait_for_frame(out: &Path, frame: u32, lines: &mpsc::Receiver<String>) -> bool {
-    let path = runtime::frames::resume::frame_path(out, frame, "exr");
+    wait_for_file(
+        &runtime::frames::resume::frame_path(out, frame, "exr"),
+        lines,
+    )
+}
+
+/// Waits until a step's task `rank` has written where it runs (see [`Job::srun`]): its job
+/// is allocated and the task started. `false` as [`wait_for_frame`].
+pub(super) fn wait_for_task(job: &Job, rank: u32, lines: &mpsc::Receiver<String>) -> bool {
+    wait_for_file(&job.tasks.join(format!("0.{rank}")), lines)
+}
+
+fn wait_for_file(path: &Path, lines: &mpsc::Receiver<String>) -> bool {
     let deadline = Instant::now() + STEP_TIMEOUT;
     while Instant::now() < deadline {
         if path.exists() {
