@@ -27,7 +27,7 @@
 //!   where not, with the same results bit for bit ([`BoxSimd`]).
 //! - `quad`: leaves packed four triangles to a group, and the SIMD filter that rejects four at
 //!   a time what the watertight test would reject at its first step.
-//! - `motion`: moving objects, each in its own tree in object space, under a flat list of
+//! - `motion`: moving objects, each in its own tree in object space, under a tree of the
 //!   boxes swept over their keyframe segments; rays taken into object space at their time, and
 //!   hits brought back with error bounds that keep spawned rays off the surface
 //!   ([`MotionAccel`], [`placed_point`]).

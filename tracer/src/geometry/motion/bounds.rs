@@ -140,11 +140,29 @@ pub(super) fn swept_bounds(track: &TransformTrack, v: &[[Vec3; 3]]) -> Vec<Swept
 }
 
 impl SweptBox {
+    /// Half the box's surface area: what the tree's build weighs the chance of entering it by.
+    pub(super) fn area(&self) -> f32 {
+        let d = self.max - self.min;
+        d.x * d.y + d.y * d.z + d.z * d.x
+    }
+
+    /// The smallest box holding both, with the larger of each padding term: a test against it
+    /// passes wherever a test against either does (see `tree.rs`).
+    pub(super) fn union(&self, other: &SweptBox) -> SweptBox {
+        SweptBox {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+            condition: self.condition.max(other.condition),
+            reach: self.reach.max(other.reach),
+        }
+    }
+
     /// Whether `ray` may meet, in `(0, t_max)`, something this box holds, once the ray is taken
     /// into object space with its rounding. The rounding moves the object-space ray by a few
     /// ULPs of its origin and of the distance it travels, which the world sees multiplied by
     /// the placement's condition number; the box is widened by that before a slab test whose
     /// far distances are widened by `1 + 2 gamma(3)` (pbrt-v4's conservative test).
+    #[inline]
     pub(super) fn may_hit(&self, ray: &Ray, t_max: f32) -> bool {
         let origin = ray.origin.abs().max_element();
         let pad = gamma(4) * self.condition * (2.0 * origin + self.reach);

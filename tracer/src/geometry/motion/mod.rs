@@ -10,11 +10,12 @@
 //! swept over the whole frame around world-space triangles: a fast object's triangles would
 //! sweep boxes the length of its path, and every ray crossing the path would test them all.
 //!
-//! Above the objects sits a flat list, one world-space box per object and keyframe segment
-//! holding the object wherever the segment's interpolation puts it (see [`swept_bounds`]). A ray
-//! tests the box of its time's segment before it pays for the transform, so rays far from an
-//! object cost one box test. The list is flat rather than a tree: scenes move a few objects,
-//! and a tree over them would pay off only with tens; it is not done.
+//! Above the objects sits a tree (`tree.rs`) over one world-space box per object and keyframe
+//! segment, holding the object wherever the segment's interpolation puts it (see
+//! [`swept_bounds`]). A ray gathers the objects whose box of its time's segment it may meet
+//! before it pays for any transform, so rays far from the moving objects cost a few box tests
+//! however many there are, and a path computes the placement of an object only when one of
+//! its rays (or its light sampling) needs it ([`Moment`]).
 //!
 //! Numerics. A hit on a moving object is computed in object space, exactly as on static
 //! geometry, with its error bound there, and [`placed_point`] offsets it there too, by that
@@ -31,16 +32,24 @@ use super::{Accel, BuildQuality, Hit, Ray, Traversal, TraversalStats};
 use crate::scene::{MovingObject, Placement, TransformTrack};
 pub use bounds::placed_point;
 use bounds::{SweptBox, swept_bounds};
+use elsa::FrozenMap;
 use glam::Vec3;
+use std::cell::OnceCell;
+use std::collections::hash_map::DefaultHasher;
+use std::hash::BuildHasherDefault;
+use tree::{Candidates, ObjectTree};
 
 mod bounds;
 #[cfg(test)]
 mod tests;
+mod tree;
 
 /// The moving objects of a scene, each with its own tree, and their swept bounds.
 #[derive(Clone, Debug, Default)]
 pub struct MotionAccel {
     objects: Vec<Mover>,
+    /// Over every object's swept boxes: which objects a ray may meet.
+    tree: ObjectTree,
     /// The global index of the first moving triangle: hits on moving objects report
     /// `first + ` the triangle's index among all moving objects' triangles, in object order,
     /// so that they follow the static triangles and never share an index with one.
@@ -59,11 +68,45 @@ struct Mover {
     offset: u32,
 }
 
-/// The placements of every moving object at one time: what a path's rays share.
+/// The moving objects at one time: what a path's rays share. Each object's placement is
+/// computed when first needed and kept for the rest of the path; a placement is a pure function
+/// of the time, so when it is computed changes no bit.
 #[derive(Clone, Debug, Default)]
-pub struct Moment {
-    placements: Vec<(usize, Placement)>,
+pub struct Moment<'a> {
+    motion: Option<&'a MotionAccel>,
+    time: f64,
+    placements: Placements,
 }
+
+/// A path's placements, filled when first asked for.
+#[derive(Clone)]
+enum Placements {
+    /// For a few objects, a cell each: one allocation a path, as when every placement was
+    /// computed.
+    Inline(Vec<OnceCell<Placement>>),
+    /// For more, only those the path meets, by object: a cell per object would cost every
+    /// path its setting up and dropping, which a scene of 512 objects measured at a quarter
+    /// of its render's instructions.
+    Keyed(FrozenMap<u32, Box<Placement>, BuildHasherDefault<DefaultHasher>>),
+}
+
+impl std::fmt::Debug for Placements {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Placements::Inline(cells) => f.debug_list().entries(cells).finish(),
+            Placements::Keyed(_) => f.write_str("placements by object"),
+        }
+    }
+}
+
+impl Default for Placements {
+    fn default() -> Self {
+        Placements::Inline(Vec::new())
+    }
+}
+
+/// Most objects whose placements a path keeps inline ([`Placements::Inline`]): 4 KiB.
+const INLINE_PLACEMENTS: usize = 16;
 
 /// Where a ray met a moving object: which object and which of its triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -74,11 +117,31 @@ pub struct MovingTriangle {
     pub triangle: usize,
 }
 
-impl Moment {
+impl Moment<'_> {
     /// The placement of moving object `object` (its index in `Scene::moving`) at this moment:
     /// where light sampling finds a moving emitter ([`crate::lights`]).
     pub fn placement(&self, object: usize) -> &Placement {
-        &self.placements[object].1
+        let at = || {
+            let motion = self
+                .motion
+                .expect("a moment with placements was made by MotionAccel::moment");
+            motion.objects[object].track.at(self.time)
+        };
+        match &self.placements {
+            Placements::Inline(cells) => cells[object].get_or_init(at),
+            Placements::Keyed(map) => {
+                let key = object as u32;
+                match map.get(&key) {
+                    Some(placement) => placement,
+                    None => map.insert(key, Box::new(at())),
+                }
+            }
+        }
+    }
+
+    /// The keyframe segment of object `object` at this moment.
+    fn segment(&self, motion: &MotionAccel, object: usize) -> usize {
+        motion.objects[object].track.segment(self.time)
     }
 }
 
@@ -101,8 +164,13 @@ impl MotionAccel {
                     .expect("fewer than 2^32 triangles: Hit::triangle is a u32");
                 mover
             })
-            .collect();
-        MotionAccel { objects, first }
+            .collect::<Vec<Mover>>();
+        let tree = ObjectTree::build(objects.iter().map(|o| (&o.track, &o.bounds[..])));
+        MotionAccel {
+            objects,
+            tree,
+            first,
+        }
     }
 
     /// Whether there is anything that moves.
@@ -110,15 +178,32 @@ impl MotionAccel {
         self.objects.is_empty()
     }
 
-    /// Every object's placement at `time` (frames), for the rays of one path.
-    pub fn moment(&self, time: f64) -> Moment {
+    /// The objects at `time` (frames), for the rays of one path.
+    pub fn moment(&self, time: f64) -> Moment<'_> {
         Moment {
-            placements: self
-                .objects
-                .iter()
-                .map(|o| (o.track.segment(time), o.track.at(time)))
-                .collect(),
+            motion: Some(self),
+            time,
+            placements: if self.objects.len() <= INLINE_PLACEMENTS {
+                Placements::Inline(vec![OnceCell::new(); self.objects.len()])
+            } else {
+                Placements::Keyed(FrozenMap::default())
+            },
         }
+    }
+
+    /// The objects whose box of their segment at `moment` `ray` may meet before `t_max`, with
+    /// that segment, in object order: the order a flat list of their boxes would try them in.
+    fn candidates(&self, moment: &Moment, ray: &Ray, t_max: f32, tested: &mut u64) -> Candidates {
+        let mut found = Candidates::new();
+        let segment_of = |object| moment.segment(self, object);
+        let gather = |object, segment| {
+            found.push((object, segment));
+            t_max
+        };
+        self.tree
+            .walk(ray, t_max, moment.time, segment_of, gather, tested);
+        found.sort_unstable();
+        found
     }
 
     /// Which moving object and triangle the global index `triangle` names, or `None` for a
@@ -138,6 +223,15 @@ impl MotionAccel {
     /// The closest hit among the moving objects at `moment` that is closer than `best` (the
     /// static geometry's, say), or `best` itself. With `CERTAIN`, a first hit must be certain
     /// as [`Accel::occluded_with`] counts it; once one is found, closer ones need not be.
+    ///
+    /// The objects used to be tried in turn, each up to the closest hit so far, exclusive: of
+    /// equally close hits the first tried stayed, the still geometry's before any object's,
+    /// and an object's of lower index before a later one's (as within one tree). That is the
+    /// hit of least distance, then least triangle index, which the walk of the tree finds in
+    /// any order: an object numbered before the best hit's triangle searches up to and
+    /// including its distance. A certain query's result depends on the order itself (its first
+    /// hit must be certain, the later ones need not be), so its candidates are gathered and
+    /// tried in object order.
     pub fn closest<const CERTAIN: bool>(
         &self,
         moment: &Moment,
@@ -146,32 +240,73 @@ impl MotionAccel {
         traversal: Traversal,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
-        for (mover, (segment, placement)) in self.objects.iter().zip(&moment.placements) {
-            let t_max = best.map_or(ray.t_max, |h| h.t);
-            // The swept box counts as one node of work, as a box of the tree would.
-            stats.nodes += 1;
-            if !mover.bounds[*segment].may_hit(ray, t_max) {
-                continue;
+        let mut tested = 0;
+        if CERTAIN {
+            let limit = best.map_or(ray.t_max, |h| h.t);
+            for (object, segment) in self.candidates(moment, ray, limit, &mut tested) {
+                // Tried again at the closest hit so far, as the flat list tried each object:
+                // one that cannot hold a closer hit is not transformed into.
+                let t_max = best.map_or(ray.t_max, |h| h.t);
+                tested += 1;
+                if !self.objects[object as usize].bounds[segment as usize].may_hit(ray, t_max) {
+                    continue;
+                }
+                let first = best.is_none();
+                let query = |accel: &Accel, local: &Ray, stats: &mut TraversalStats| {
+                    if first {
+                        accel.intersect_certain_with(local, traversal, stats)
+                    } else {
+                        accel.intersect_with(local, traversal, stats)
+                    }
+                };
+                best = nearest(best, self.hit_on(moment, ray, object, t_max, query, stats));
             }
-            let local = Ray {
-                t_max,
-                ..to_object(placement, ray)
+        } else {
+            // The box test passes a box whose near side is at `t_max` itself, so testing at
+            // the best distance admits the objects that may tie with the best hit too.
+            let bound = |best: &Option<Hit>| best.map_or(ray.t_max, |h| h.t);
+            let start = bound(&best);
+            let segment_of = |object| moment.segment(self, object);
+            let visit = |object: u32, _| {
+                let first = self.first + self.objects[object as usize].offset;
+                let t_max = match best {
+                    None => ray.t_max,
+                    Some(h) if first < h.triangle => h.t.next_up(),
+                    Some(h) => h.t,
+                };
+                let query = |accel: &Accel, local: &Ray, stats: &mut TraversalStats| {
+                    accel.intersect_with(local, traversal, stats)
+                };
+                best = nearest(best, self.hit_on(moment, ray, object, t_max, query, stats));
+                bound(&best)
             };
-            let found = if CERTAIN && best.is_none() {
-                mover.accel.intersect_certain_with(&local, traversal, stats)
-            } else {
-                mover.accel.intersect_with(&local, traversal, stats)
-            };
-            // The object's t_max is exclusive, so an equally close hit stays with the lower
-            // index, as within one tree.
-            if let Some(hit) = found {
-                best = Some(Hit {
-                    triangle: self.first + mover.offset + hit.triangle,
-                    ..hit
-                });
-            }
+            self.tree
+                .walk(ray, start, moment.time, segment_of, visit, &mut tested);
         }
+        stats.nodes += tested;
         best
+    }
+
+    /// The hit `query` finds on `object`'s tree before `t_max`, `ray` taken into the object's
+    /// space at `moment`, numbered among all triangles.
+    fn hit_on(
+        &self,
+        moment: &Moment,
+        ray: &Ray,
+        object: u32,
+        t_max: f32,
+        query: impl FnOnce(&Accel, &Ray, &mut TraversalStats) -> Option<Hit>,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
+        let mover = &self.objects[object as usize];
+        let local = Ray {
+            t_max,
+            ..to_object(moment.placement(object as usize), ray)
+        };
+        query(&mover.accel, &local, stats).map(|hit| Hit {
+            triangle: self.first + mover.offset + hit.triangle,
+            ..hit
+        })
     }
 
     /// Whether any moving object at `moment` is certainly hit in `(0, ray.t_max)`.
@@ -182,16 +317,26 @@ impl MotionAccel {
         traversal: Traversal,
         stats: &mut TraversalStats,
     ) -> bool {
-        self.objects
-            .iter()
-            .zip(&moment.placements)
-            .any(|(mover, (segment, placement))| {
-                stats.nodes += 1;
-                mover.bounds[*segment].may_hit(ray, ray.t_max)
-                    && mover
-                        .accel
-                        .occluded_with(&to_object(placement, ray), traversal, stats)
-            })
+        // Any object certainly hit will do: the answer does not depend on the order, and once
+        // one is found a bound below zero ends the walk.
+        let mut blocked = false;
+        let mut tested = 0;
+        let segment_of = |object| moment.segment(self, object);
+        let visit = |object: u32, _| {
+            let local = to_object(moment.placement(object as usize), ray);
+            blocked = self.objects[object as usize]
+                .accel
+                .occluded_with(&local, traversal, stats);
+            if blocked {
+                f32::NEG_INFINITY
+            } else {
+                ray.t_max
+            }
+        };
+        self.tree
+            .walk(ray, ray.t_max, moment.time, segment_of, visit, &mut tested);
+        stats.nodes += tested;
+        blocked
     }
 
     /// The world-space hit point of `hit` on moving triangle `at`, with its bound and the
@@ -200,13 +345,22 @@ impl MotionAccel {
     /// still triangles).
     pub fn surface(&self, moment: &Moment, at: MovingTriangle, hit: &Hit) -> SurfacePoint {
         let mover = &self.objects[at.object];
-        let placement = &moment.placements[at.object].1;
+        let placement = moment.placement(at.object);
         placed_point(placement, &mover.vertices[at.triangle], hit.b1, hit.b2)
     }
 
     /// The placement of object `object` at `moment`: for shading normals.
     pub fn placement<'a>(&self, moment: &'a Moment, object: usize) -> &'a Placement {
-        &moment.placements[object].1
+        moment.placement(object)
+    }
+}
+
+/// Of two hits, the one first by distance, then by triangle index.
+fn nearest(best: Option<Hit>, hit: Option<Hit>) -> Option<Hit> {
+    match (best, hit) {
+        (Some(b), Some(h)) if (h.t, h.triangle) < (b.t, b.triangle) => Some(h),
+        (Some(b), _) => Some(b),
+        (None, h) => h,
     }
 }
 
