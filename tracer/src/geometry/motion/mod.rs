@@ -34,7 +34,6 @@ pub use bounds::placed_point;
 use bounds::{SweptBox, swept_bounds};
 use elsa::FrozenMap;
 use glam::Vec3;
-use std::cell::OnceCell;
 use std::collections::hash_map::DefaultHasher;
 use std::hash::BuildHasherDefault;
 use tree::{Candidates, ObjectTree};
@@ -68,9 +67,10 @@ struct Mover {
     offset: u32,
 }
 
-/// The moving objects at one time: what a path's rays share. Each object's placement is
-/// computed when first needed and kept for the rest of the path; a placement is a pure function
-/// of the time, so when it is computed changes no bit.
+/// The moving objects at one time: what a path's rays share. A scene of a few objects places
+/// them all when the path starts; a scene of more places each when first needed and keeps it
+/// for the rest of the path. A placement is a pure function of the time, so when it is
+/// computed changes no bit.
 #[derive(Clone, Debug, Default)]
 pub struct Moment<'a> {
     motion: Option<&'a MotionAccel>,
@@ -78,35 +78,36 @@ pub struct Moment<'a> {
     placements: Placements,
 }
 
-/// A path's placements, filled when first asked for.
+/// A path's placements.
 #[derive(Clone)]
 enum Placements {
-    /// For a few objects, a cell each: one allocation a path, as when every placement was
-    /// computed.
-    Inline(Vec<OnceCell<Placement>>),
+    /// For a few objects, every one's segment and placement, computed as the path starts:
+    /// independent of what its rays find, that work overlaps the first traversal, where
+    /// computed on first use it waited on it (10 % slower paths on `cornell-blur`).
+    All(Vec<(usize, Placement)>),
     /// For more, only those the path meets, by object: a cell per object would cost every
     /// path its setting up and dropping, which a scene of 512 objects measured at a quarter
     /// of its render's instructions.
-    Keyed(FrozenMap<u32, Box<Placement>, BuildHasherDefault<DefaultHasher>>),
+    Met(FrozenMap<u32, Box<Placement>, BuildHasherDefault<DefaultHasher>>),
 }
 
 impl std::fmt::Debug for Placements {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Placements::Inline(cells) => f.debug_list().entries(cells).finish(),
-            Placements::Keyed(_) => f.write_str("placements by object"),
+            Placements::All(all) => f.debug_list().entries(all).finish(),
+            Placements::Met(_) => f.write_str("the placements met"),
         }
     }
 }
 
 impl Default for Placements {
     fn default() -> Self {
-        Placements::Inline(Vec::new())
+        Placements::All(Vec::new())
     }
 }
 
-/// Most objects whose placements a path keeps inline ([`Placements::Inline`]): 4 KiB.
-const INLINE_PLACEMENTS: usize = 16;
+/// Most objects a path places as it starts ([`Placements::All`]).
+const PLACED_AT_START: usize = 16;
 
 /// Where a ray met a moving object: which object and which of its triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -121,19 +122,18 @@ impl Moment<'_> {
     /// The placement of moving object `object` (its index in `Scene::moving`) at this moment:
     /// where light sampling finds a moving emitter ([`crate::lights`]).
     pub fn placement(&self, object: usize) -> &Placement {
-        let at = || {
-            let motion = self
-                .motion
-                .expect("a moment with placements was made by MotionAccel::moment");
-            motion.objects[object].track.at(self.time)
-        };
         match &self.placements {
-            Placements::Inline(cells) => cells[object].get_or_init(at),
-            Placements::Keyed(map) => {
+            Placements::All(all) => &all[object].1,
+            Placements::Met(map) => {
                 let key = object as u32;
                 match map.get(&key) {
                     Some(placement) => placement,
-                    None => map.insert(key, Box::new(at())),
+                    None => {
+                        let motion = self
+                            .motion
+                            .expect("a moment that places lazily was made by MotionAccel::moment");
+                        map.insert(key, Box::new(motion.objects[object].track.at(self.time)))
+                    }
                 }
             }
         }
@@ -141,7 +141,10 @@ impl Moment<'_> {
 
     /// The keyframe segment of object `object` at this moment.
     fn segment(&self, motion: &MotionAccel, object: usize) -> usize {
-        motion.objects[object].track.segment(self.time)
+        match &self.placements {
+            Placements::All(all) => all[object].0,
+            Placements::Met(_) => motion.objects[object].track.segment(self.time),
+        }
     }
 }
 
@@ -183,10 +186,15 @@ impl MotionAccel {
         Moment {
             motion: Some(self),
             time,
-            placements: if self.objects.len() <= INLINE_PLACEMENTS {
-                Placements::Inline(vec![OnceCell::new(); self.objects.len()])
+            placements: if self.objects.len() <= PLACED_AT_START {
+                Placements::All(
+                    self.objects
+                        .iter()
+                        .map(|o| (o.track.segment(time), o.track.at(time)))
+                        .collect(),
+                )
             } else {
-                Placements::Keyed(FrozenMap::default())
+                Placements::Met(FrozenMap::default())
             },
         }
     }
@@ -231,7 +239,7 @@ impl MotionAccel {
     /// any order: an object numbered before the best hit's triangle searches up to and
     /// including its distance. A certain query's result depends on the order itself (its first
     /// hit must be certain, the later ones need not be), so its candidates are gathered and
-    /// tried in object order.
+    /// tried in object order, as are all objects where there are too few for a tree.
     pub fn closest<const CERTAIN: bool>(
         &self,
         moment: &Moment,
@@ -241,25 +249,16 @@ impl MotionAccel {
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
         let mut tested = 0;
-        if CERTAIN {
+        if self.tree.is_flat() {
+            for object in 0..self.objects.len() {
+                let segment = moment.segment(self, object);
+                let at = (object as u32, segment as u32);
+                self.try_in_order::<CERTAIN>(moment, ray, at, &mut best, traversal, stats);
+            }
+        } else if CERTAIN {
             let limit = best.map_or(ray.t_max, |h| h.t);
-            for (object, segment) in self.candidates(moment, ray, limit, &mut tested) {
-                // Tried again at the closest hit so far, as the flat list tried each object:
-                // one that cannot hold a closer hit is not transformed into.
-                let t_max = best.map_or(ray.t_max, |h| h.t);
-                tested += 1;
-                if !self.objects[object as usize].bounds[segment as usize].may_hit(ray, t_max) {
-                    continue;
-                }
-                let first = best.is_none();
-                let query = |accel: &Accel, local: &Ray, stats: &mut TraversalStats| {
-                    if first {
-                        accel.intersect_certain_with(local, traversal, stats)
-                    } else {
-                        accel.intersect_with(local, traversal, stats)
-                    }
-                };
-                best = nearest(best, self.hit_on(moment, ray, object, t_max, query, stats));
+            for at in self.candidates(moment, ray, limit, &mut tested) {
+                self.try_in_order::<CERTAIN>(moment, ray, at, &mut best, traversal, stats);
             }
         } else {
             // The box test passes a box whose near side is at `t_max` itself, so testing at
@@ -287,6 +286,36 @@ impl MotionAccel {
         best
     }
 
+    /// One step of trying the objects in order, as the flat list did: `(object, segment)`
+    /// tried up to the closest hit so far, exclusive, with a certain query while there is none
+    /// under `CERTAIN`.
+    #[inline(always)]
+    fn try_in_order<const CERTAIN: bool>(
+        &self,
+        moment: &Moment,
+        ray: &Ray,
+        (object, segment): (u32, u32),
+        best: &mut Option<Hit>,
+        traversal: Traversal,
+        stats: &mut TraversalStats,
+    ) {
+        // An object that cannot hold a closer hit is not transformed into.
+        let t_max = best.map_or(ray.t_max, |h| h.t);
+        stats.nodes += 1;
+        if !self.objects[object as usize].bounds[segment as usize].may_hit(ray, t_max) {
+            return;
+        }
+        let first = CERTAIN && best.is_none();
+        let query = |accel: &Accel, local: &Ray, stats: &mut TraversalStats| {
+            if first {
+                accel.intersect_certain_with(local, traversal, stats)
+            } else {
+                accel.intersect_with(local, traversal, stats)
+            }
+        };
+        *best = nearest(*best, self.hit_on(moment, ray, object, t_max, query, stats));
+    }
+
     /// The hit `query` finds on `object`'s tree before `t_max`, `ray` taken into the object's
     /// space at `moment`, numbered among all triangles.
     fn hit_on(
@@ -310,6 +339,7 @@ impl MotionAccel {
     }
 
     /// Whether any moving object at `moment` is certainly hit in `(0, ray.t_max)`.
+    #[inline]
     pub fn occluded(
         &self,
         moment: &Moment,
@@ -321,6 +351,21 @@ impl MotionAccel {
         // one is found a bound below zero ends the walk.
         let mut blocked = false;
         let mut tested = 0;
+        if self.tree.is_flat() {
+            for (object, mover) in self.objects.iter().enumerate() {
+                stats.nodes += 1;
+                if mover.bounds[moment.segment(self, object)].may_hit(ray, ray.t_max)
+                    && mover.accel.occluded_with(
+                        &to_object(moment.placement(object), ray),
+                        traversal,
+                        stats,
+                    )
+                {
+                    return true;
+                }
+            }
+            return false;
+        }
         let segment_of = |object| moment.segment(self, object);
         let visit = |object: u32, _| {
             let local = to_object(moment.placement(object as usize), ray);

@@ -30,7 +30,8 @@ use smallvec::SmallVec;
 const LEAF_SIZE: usize = 2;
 
 /// Up to this many objects a ray tests each one's box of its time in turn, which costs fewer
-/// box tests than a tree over their segments (one per object and keyframe segment).
+/// box tests than a tree over their segments (one per object and keyframe segment), and is
+/// what the tracer did before the tree, instruction for instruction.
 const FLAT_OBJECTS: usize = 8;
 
 /// Objects (with their segment) a query gathers without allocating; more spill to the heap.
@@ -41,9 +42,6 @@ pub(super) type Candidates = SmallVec<[(u32, u32); 16]>;
 pub(super) struct ObjectTree {
     /// Depth-first: a node's first child follows it, its second at `second`.
     nodes: Vec<Node>,
-    /// With at most [`FLAT_OBJECTS`] objects, no tree: each object's first segment, and a ray
-    /// tests each object's box of its time in turn.
-    runs: Vec<u32>,
     /// The leaves' segments, each leaf's a run of this.
     segments: Vec<Segment>,
 }
@@ -104,15 +102,11 @@ impl ObjectTree {
             .collect();
         let mut tree = ObjectTree::default();
         let objects = segments.last().map_or(0, |s| s.object as usize + 1);
-        if objects <= FLAT_OBJECTS {
-            // In object order, each object's segments in a run.
-            tree.runs = (0..objects)
-                .map(|o| segments.partition_point(|s| (s.object as usize) < o) as u32)
-                .collect();
-        } else {
-            // What the build weighs a node's time span by: its share of the keys' range,
-            // a frame wider each way, so that the holds before the first key and after the
-            // last count as a frame each rather than as forever.
+        // Up to FLAT_OBJECTS objects there is no tree: see `is_flat`.
+        if objects > FLAT_OBJECTS {
+            // What the build weighs a node's time span by: its share of the keys' range, a
+            // frame wider each way, so that the holds before the first key and after the last
+            // count as a frame each rather than as forever.
             let finite = segments
                 .iter()
                 .flat_map(|s| [s.earliest, s.latest])
@@ -128,6 +122,11 @@ impl ObjectTree {
         tree
     }
 
+    /// Whether there is no tree: a ray then tests each object's box of its time in turn.
+    pub(super) fn is_flat(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
     /// Calls `visit(object, segment)` for every object whose box for its segment at `time`
     /// (`segment_of(object)`) `ray` may meet before the current bound, each once; the bound
     /// starts at `t_max` and is what `visit` last returned. `tested` counts the boxes tested.
@@ -140,19 +139,6 @@ impl ObjectTree {
         mut visit: impl FnMut(u32, u32) -> f32,
         tested: &mut u64,
     ) {
-        if !self.runs.is_empty() {
-            for (object, &first) in self.runs.iter().enumerate() {
-                let segment = segment_of(object);
-                *tested += 1;
-                if self.segments[first as usize + segment]
-                    .bounds
-                    .may_hit(ray, t_max)
-                {
-                    t_max = visit(object as u32, segment as u32);
-                }
-            }
-            return;
-        }
         if self.nodes.is_empty() {
             return;
         }
