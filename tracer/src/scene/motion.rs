@@ -118,19 +118,7 @@ impl TransformTrack {
     /// The keyframe segment holding `time`: 0 before the first key, `i` between keys `i - 1`
     /// and `i`, `keys.len()` after the last. Segments are what swept bounds are kept per.
     pub fn segment(&self, time: f64) -> usize {
-        // The keys at or before `time`, counted without branches where there are few: a
-        // path's time is random, so a binary search's branches mispredict, and the tree of
-        // moving objects asks this of every object a ray may meet (13 % of a render's time on
-        // a scene of two keys per object). The keys are sorted, so the count is the search's
-        // answer.
-        if self.keys.len() <= 16 {
-            self.keys
-                .iter()
-                .map(|k| usize::from(f64::from(k.frame) <= time))
-                .sum()
-        } else {
-            self.keys.partition_point(|k| f64::from(k.frame) <= time)
-        }
+        self.keys.partition_point(|k| f64::from(k.frame) <= time)
     }
 
     /// The number of segments: one more than keys.

@@ -108,6 +108,7 @@ impl Default for Placements {
 
 /// Most objects a path places as it starts ([`Placements::All`]).
 const PLACED_AT_START: usize = 16;
+const _: () = assert!(tree::FLAT_OBJECTS <= PLACED_AT_START);
 
 /// Where a ray met a moving object: which object and which of its triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -136,6 +137,15 @@ impl Moment<'_> {
                     }
                 }
             }
+        }
+    }
+
+    /// Every object's segment and placement, where the path placed them all as it started:
+    /// always where there is no tree (`tree::FLAT_OBJECTS` is at most [`PLACED_AT_START`]).
+    fn all(&self) -> &[(usize, Placement)] {
+        match &self.placements {
+            Placements::All(all) => all,
+            Placements::Met(_) => unreachable!("a scene without a tree places every object"),
         }
     }
 
@@ -250,15 +260,16 @@ impl MotionAccel {
     ) -> Option<Hit> {
         let mut tested = 0;
         if self.tree.is_flat() {
-            for object in 0..self.objects.len() {
-                let segment = moment.segment(self, object);
-                let at = (object as u32, segment as u32);
-                self.try_in_order::<CERTAIN>(moment, ray, at, &mut best, traversal, stats);
+            for (mover, (segment, placement)) in self.objects.iter().zip(moment.all()) {
+                let at = (mover, *segment, placement);
+                self.try_in_order::<CERTAIN>(ray, at, &mut best, traversal, stats);
             }
         } else if CERTAIN {
             let limit = best.map_or(ray.t_max, |h| h.t);
-            for at in self.candidates(moment, ray, limit, &mut tested) {
-                self.try_in_order::<CERTAIN>(moment, ray, at, &mut best, traversal, stats);
+            for (object, segment) in self.candidates(moment, ray, limit, &mut tested) {
+                let (object, segment) = (object as usize, segment as usize);
+                let at = (&self.objects[object], segment, moment.placement(object));
+                self.try_in_order::<CERTAIN>(ray, at, &mut best, traversal, stats);
             }
         } else {
             // The box test passes a box whose near side is at `t_max` itself, so testing at
@@ -276,7 +287,9 @@ impl MotionAccel {
                 let query = |accel: &Accel, local: &Ray, stats: &mut TraversalStats| {
                     accel.intersect_with(local, traversal, stats)
                 };
-                best = nearest(best, self.hit_on(moment, ray, object, t_max, query, stats));
+                let object = object as usize;
+                let at = (&self.objects[object], moment.placement(object));
+                best = nearest(best, self.hit_on(at, ray, t_max, query, stats));
                 bound(&best)
             };
             self.tree
@@ -292,9 +305,8 @@ impl MotionAccel {
     #[inline(always)]
     fn try_in_order<const CERTAIN: bool>(
         &self,
-        moment: &Moment,
         ray: &Ray,
-        (object, segment): (u32, u32),
+        (mover, segment, placement): (&Mover, usize, &Placement),
         best: &mut Option<Hit>,
         traversal: Traversal,
         stats: &mut TraversalStats,
@@ -302,7 +314,7 @@ impl MotionAccel {
         // An object that cannot hold a closer hit is not transformed into.
         let t_max = best.map_or(ray.t_max, |h| h.t);
         stats.nodes += 1;
-        if !self.objects[object as usize].bounds[segment as usize].may_hit(ray, t_max) {
+        if !mover.bounds[segment].may_hit(ray, t_max) {
             return;
         }
         let first = CERTAIN && best.is_none();
@@ -313,24 +325,25 @@ impl MotionAccel {
                 accel.intersect_with(local, traversal, stats)
             }
         };
-        *best = nearest(*best, self.hit_on(moment, ray, object, t_max, query, stats));
+        *best = nearest(
+            *best,
+            self.hit_on((mover, placement), ray, t_max, query, stats),
+        );
     }
 
-    /// The hit `query` finds on `object`'s tree before `t_max`, `ray` taken into the object's
-    /// space at `moment`, numbered among all triangles.
+    /// The hit `query` finds on a moving object's tree before `t_max`, `ray` taken into its
+    /// space by `placement`, numbered among all triangles.
     fn hit_on(
         &self,
-        moment: &Moment,
+        (mover, placement): (&Mover, &Placement),
         ray: &Ray,
-        object: u32,
         t_max: f32,
         query: impl FnOnce(&Accel, &Ray, &mut TraversalStats) -> Option<Hit>,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
-        let mover = &self.objects[object as usize];
         let local = Ray {
             t_max,
-            ..to_object(moment.placement(object as usize), ray)
+            ..to_object(placement, ray)
         };
         query(&mover.accel, &local, stats).map(|hit| Hit {
             triangle: self.first + mover.offset + hit.triangle,
@@ -352,14 +365,12 @@ impl MotionAccel {
         let mut blocked = false;
         let mut tested = 0;
         if self.tree.is_flat() {
-            for (object, mover) in self.objects.iter().enumerate() {
+            for (mover, (segment, placement)) in self.objects.iter().zip(moment.all()) {
                 stats.nodes += 1;
-                if mover.bounds[moment.segment(self, object)].may_hit(ray, ray.t_max)
-                    && mover.accel.occluded_with(
-                        &to_object(moment.placement(object), ray),
-                        traversal,
-                        stats,
-                    )
+                if mover.bounds[*segment].may_hit(ray, ray.t_max)
+                    && mover
+                        .accel
+                        .occluded_with(&to_object(placement, ray), traversal, stats)
                 {
                     return true;
                 }

@@ -32,7 +32,7 @@ const LEAF_SIZE: usize = 2;
 /// Up to this many objects a ray tests each one's box of its time in turn, which costs fewer
 /// box tests than a tree over their segments (one per object and keyframe segment), and is
 /// what the tracer did before the tree, instruction for instruction.
-const FLAT_OBJECTS: usize = 8;
+pub(super) const FLAT_OBJECTS: usize = 8;
 
 /// Objects (with their segment) a query gathers without allocating; more spill to the heap.
 pub(super) type Candidates = SmallVec<[(u32, u32); 16]>;
