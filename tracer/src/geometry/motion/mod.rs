@@ -10,12 +10,13 @@
 //! swept over the whole frame around world-space triangles: a fast object's triangles would
 //! sweep boxes the length of its path, and every ray crossing the path would test them all.
 //!
-//! Above the objects sits a tree (`tree.rs`) over one world-space box per object and keyframe
-//! segment, holding the object wherever the segment's interpolation puts it (see
-//! [`swept_bounds`]). A ray gathers the objects whose box of its time's segment it may meet
-//! before it pays for any transform, so rays far from the moving objects cost a few box tests
-//! however many there are, and a path computes the placement of an object only when one of
-//! its rays (or its light sampling) needs it ([`Moment`]).
+//! Above the objects sit world-space boxes, one per object and keyframe segment, each holding
+//! the object wherever the segment's interpolation puts it (see [`swept_bounds`]). A ray tests
+//! the box of its time's segment before it pays for the transform. Up to eight objects it
+//! tests each object's in turn; beyond, a tree over the boxes (`tree.rs`) finds those it may
+//! meet, so rays far from the moving objects cost a few box tests however many there are, and
+//! beyond sixteen a path places an object only when one of its rays or light samples needs it
+//! ([`Moment`]).
 //!
 //! Numerics. A hit on a moving object is computed in object space, exactly as on static
 //! geometry, with its error bound there, and [`placed_point`] offsets it there too, by that
@@ -299,9 +300,9 @@ impl MotionAccel {
         best
     }
 
-    /// One step of trying the objects in order, as the flat list did: `(object, segment)`
-    /// tried up to the closest hit so far, exclusive, with a certain query while there is none
-    /// under `CERTAIN`.
+    /// One step of trying the objects in order, as the flat list did: the object of `mover`,
+    /// its box of `segment` and its `placement`, tried up to the closest hit so far, exclusive,
+    /// with a certain query while there is none under `CERTAIN`.
     #[inline(always)]
     fn try_in_order<const CERTAIN: bool>(
         &self,

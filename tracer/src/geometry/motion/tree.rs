@@ -128,8 +128,9 @@ impl ObjectTree {
     }
 
     /// Calls `visit(object, segment)` for every object whose box for its segment at `time`
-    /// (`segment_of(object)`) `ray` may meet before the current bound, each once; the bound
-    /// starts at `t_max` and is what `visit` last returned. `tested` counts the boxes tested.
+    /// (`segment_of(object)`) `ray` may meet by the current bound (inclusive), each once; the
+    /// bound starts at `t_max` and is what `visit` last returned; one below zero ends the
+    /// walk. `tested` counts the boxes tested.
     pub(super) fn walk(
         &self,
         ray: &Ray,
@@ -170,6 +171,9 @@ impl ObjectTree {
                             && (count == 1 || segment.bounds.may_hit(ray, t_max))
                         {
                             t_max = visit(segment.object, segment.segment);
+                            if t_max < 0.0 {
+                                return;
+                            }
                         }
                     }
                 }
