@@ -250,7 +250,8 @@ impl MotionAccel {
     /// any order: an object numbered before the best hit's triangle searches up to and
     /// including its distance. A certain query's result depends on the order itself (its first
     /// hit must be certain, the later ones need not be), so its candidates are gathered and
-    /// tried in object order, as are all objects where there are too few for a tree.
+    /// tried in object order, as are all objects where there are too few for a tree, and the
+    /// candidates of obvhs's comparison traversal (below).
     pub fn closest<const CERTAIN: bool>(
         &self,
         moment: &Moment,
@@ -262,14 +263,17 @@ impl MotionAccel {
         let mut tested = 0;
         if self.tree.is_flat() {
             for (mover, (segment, placement)) in self.objects.iter().zip(moment.all()) {
-                let at = (mover, *segment, placement);
+                let at = (mover, *segment, || placement);
                 self.try_in_order::<CERTAIN>(ray, at, &mut best, traversal, stats);
             }
-        } else if CERTAIN {
+        } else if CERTAIN || traversal == Traversal::Obvhs {
+            // obvhs's traversal (a comparison knob) culls a box whose entry is not strictly
+            // before `t_max`, unpadded: searched up to just past the best distance, an object
+            // may lose a tie it wins in order, so it too is tried in order.
             let limit = best.map_or(ray.t_max, |h| h.t);
             for (object, segment) in self.candidates(moment, ray, limit, &mut tested) {
                 let (object, segment) = (object as usize, segment as usize);
-                let at = (&self.objects[object], segment, moment.placement(object));
+                let at = (&self.objects[object], segment, || moment.placement(object));
                 self.try_in_order::<CERTAIN>(ray, at, &mut best, traversal, stats);
             }
         } else {
@@ -301,13 +305,14 @@ impl MotionAccel {
     }
 
     /// One step of trying the objects in order, as the flat list did: the object of `mover`,
-    /// its box of `segment` and its `placement`, tried up to the closest hit so far, exclusive,
-    /// with a certain query while there is none under `CERTAIN`.
+    /// its box of `segment` and its `placement` (asked for only once the box is passed), tried
+    /// up to the closest hit so far, exclusive, with a certain query while there is none under
+    /// `CERTAIN`.
     #[inline(always)]
-    fn try_in_order<const CERTAIN: bool>(
+    fn try_in_order<'p, const CERTAIN: bool>(
         &self,
         ray: &Ray,
-        (mover, segment, placement): (&Mover, usize, &Placement),
+        (mover, segment, placement): (&Mover, usize, impl FnOnce() -> &'p Placement),
         best: &mut Option<Hit>,
         traversal: Traversal,
         stats: &mut TraversalStats,
@@ -328,7 +333,7 @@ impl MotionAccel {
         };
         *best = nearest(
             *best,
-            self.hit_on((mover, placement), ray, t_max, query, stats),
+            self.hit_on((mover, placement()), ray, t_max, query, stats),
         );
     }
 

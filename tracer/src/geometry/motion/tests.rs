@@ -96,16 +96,18 @@ fn swept_boxes_hold_the_object_at_every_time_of_their_segment() {
     }
 }
 
-/// Three objects, as most scenes move, and forty, where the tree over their boxes prunes (its
-/// nodes padded and spanning times, `tree.rs`) and walks them in its own order: every hit is
-/// brute force's. Among the forty, every object has a twin of the same triangles and track,
-/// so that every hit on one is a tie between two objects, which the lower index must win
-/// whichever the walk reaches first.
+/// Three objects, as most scenes move (tried in turn), twelve (a tree, the path's placements
+/// made as it starts) and forty (a tree, placements made when first needed), where the tree
+/// over their boxes prunes (its nodes padded and spanning times, `tree.rs`) and walks them in
+/// its own order: every hit is brute force's. Beyond three, every object has a twin of the
+/// same triangles and track, so that every hit on one is a tie between two objects, which the
+/// lower index must win whichever the walk reaches first; and a still hit passed in, in front
+/// of, level with or behind the moving one, must win or lose as trying them in order did.
 #[test]
 fn moving_objects_are_hit_as_brute_force_over_their_triangles_in_object_space() {
     let mut s = Stream(11);
     let mut hits = 0;
-    for (count, worlds) in [(3, 20), (40, 4)] {
+    for (count, worlds) in [(3, 20), (12, 6), (40, 4)] {
         for turn in [false, true] {
             for _ in 0..worlds {
                 let mut objects: Vec<MovingObject> = (0..count)
@@ -170,6 +172,28 @@ fn moving_objects_are_hit_as_brute_force_over_their_triangles_in_object_space() 
                     );
                     let occluded = motion.occluded(&moment, &ray, Traversal::Robust, &mut stats);
                     assert_eq!(occluded, expected.is_some());
+                    if let Some(e) = expected {
+                        // Numbered below every moving triangle: level, the still hit stays.
+                        let t = [e.t, 0.5 * e.t, 2.0 * e.t][(s.unit() * 3.0) as usize % 3];
+                        let still = Hit {
+                            t,
+                            triangle: 4,
+                            b1: 0.25,
+                            b2: 0.25,
+                        };
+                        let found = motion.closest::<false>(
+                            &moment,
+                            &ray,
+                            Some(still),
+                            Traversal::Robust,
+                            &mut stats,
+                        );
+                        let wanted = if e.t < t { e } else { still };
+                        assert_eq!(found, Some(wanted), "{count} objects, still hit at {t}");
+                        // Nothing of the objects lies before their closest hit.
+                        let short = Ray { t_max: e.t, ..ray };
+                        assert!(!motion.occluded(&moment, &short, Traversal::Robust, &mut stats));
+                    }
                     hits += expected.is_some() as u32;
                 }
             }

@@ -17,9 +17,10 @@
 //! which makes the closest hit the one of least distance, then least triangle index, whatever
 //! the order, and gathers a shadow query's candidates to try them in object order.
 //!
-//! Built by splitting at the median of the boxes' centres along their widest spread: a scene
-//! moves tens or thousands of objects, not millions, and each node must carry the padding and
-//! the time span that a general-purpose builder (obvhs's) has no place for.
+//! Built by splitting at the median of the segments along x, y, z or time, whichever leaves
+//! halves least likely to be entered (surface area times time span times count): a scene moves
+//! tens or thousands of objects, not millions, and each node must carry the padding and the
+//! time span that a general-purpose builder (obvhs's) has no place for.
 
 use super::bounds::SweptBox;
 use crate::geometry::Ray;
@@ -29,9 +30,9 @@ use smallvec::SmallVec;
 /// Most segments in one leaf: a leaf's boxes are tested in turn, a node's two children too.
 const LEAF_SIZE: usize = 2;
 
-/// Up to this many objects a ray tests each one's box of its time in turn, which costs fewer
-/// box tests than a tree over their segments (one per object and keyframe segment), and is
-/// what the tracer did before the tree, instruction for instruction.
+/// Up to this many objects a ray tests each one's box of its time in turn, as the tracer did
+/// before the tree, which costs fewer box tests than a tree over their segments (one per
+/// object and keyframe segment).
 pub(super) const FLAT_OBJECTS: usize = 8;
 
 /// Objects (with their segment) a query gathers without allocating; more spill to the heap.
