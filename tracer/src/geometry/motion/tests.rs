@@ -96,6 +96,55 @@ fn swept_boxes_hold_the_object_at_every_time_of_their_segment() {
     }
 }
 
+/// `count` objects of 30 triangles each; beyond three, in twin pairs of the same triangles and
+/// track, far apart in index so that the tree may meet them in either order.
+fn objects(s: &mut Stream, count: usize, turn: bool) -> Vec<MovingObject> {
+    let mut objects: Vec<MovingObject> = (0..count)
+        .map(|_| MovingObject {
+            triangles: triangles(s, 30),
+            track: track(s, turn),
+        })
+        .collect();
+    if count > 3 {
+        let half = count / 2;
+        for k in 0..half {
+            objects[half + k] = objects[k].clone();
+        }
+    }
+    objects
+}
+
+/// A time of the tracks' range and a little beyond; a quarter of them on a key, where one
+/// segment ends and the next begins.
+fn time(s: &mut Stream) -> f64 {
+    if s.unit() < 0.25 {
+        f64::from(2 * (s.unit() * 3.0) as u32)
+    } else {
+        f64::from(s.range(-0.5, 4.5))
+    }
+}
+
+/// A ray from near the objects, most aimed at a vertex or an edge of some triangle where it is
+/// at `time`, where rounding decides; the rest anywhere near.
+fn aimed_ray(s: &mut Stream, objects: &[MovingObject], time: f64) -> Ray {
+    let origin = s.vec(-12.0, 12.0);
+    let count = objects.len();
+    let object = &objects[(s.unit() * count as f32) as usize % count];
+    let t = &object.triangles[(s.unit() * 30.0) as usize % 30];
+    let (a, b) = (s.unit(), s.unit());
+    let on = match (s.unit() * 3.0) as u32 {
+        0 => t.p[0],
+        1 => t.p[1] + a * (t.p[2] - t.p[1]),
+        _ => s.vec(-6.0, 6.0) + Vec3::splat(b),
+    };
+    let target = object.track.at(time).point(on.as_dvec3()).as_vec3();
+    Ray {
+        origin,
+        dir: target - origin,
+        t_max: f32::INFINITY,
+    }
+}
+
 /// Three objects, as most scenes move (tried in turn), twelve (a tree, the path's placements
 /// made as it starts) and forty (a tree, placements made when first needed), where the tree
 /// over their boxes prunes (its nodes padded and spanning times, `tree.rs`) and walks them in
@@ -110,45 +159,12 @@ fn moving_objects_are_hit_as_brute_force_over_their_triangles_in_object_space() 
     for (count, worlds) in [(3, 20), (12, 6), (40, 4)] {
         for turn in [false, true] {
             for _ in 0..worlds {
-                let mut objects: Vec<MovingObject> = (0..count)
-                    .map(|_| MovingObject {
-                        triangles: triangles(&mut s, 30),
-                        track: track(&mut s, turn),
-                    })
-                    .collect();
-                if count > 3 {
-                    // The twins far apart in index, so that the tree may order them either way.
-                    let half = count / 2;
-                    for k in 0..half {
-                        objects[half + k] = objects[k].clone();
-                    }
-                }
+                let objects = objects(&mut s, count, turn);
                 let motion = MotionAccel::build(&objects, 5, BuildQuality::Medium);
                 for _ in 0..300 {
-                    // A quarter of the times on a key, where one segment ends and the next begins.
-                    let time = if s.unit() < 0.25 {
-                        f64::from(2 * (s.unit() * 3.0) as u32)
-                    } else {
-                        f64::from(s.range(-0.5, 4.5))
-                    };
+                    let time = time(&mut s);
                     let moment = motion.moment(time);
-                    let origin = s.vec(-12.0, 12.0);
-                    // Most rays aim at a vertex or an edge of some triangle where it is then,
-                    // where rounding decides; the rest anywhere near.
-                    let object = &objects[(s.unit() * count as f32) as usize % count];
-                    let t = &object.triangles[(s.unit() * 30.0) as usize % 30];
-                    let (a, b) = (s.unit(), s.unit());
-                    let on = match (s.unit() * 3.0) as u32 {
-                        0 => t.p[0],
-                        1 => t.p[1] + a * (t.p[2] - t.p[1]),
-                        _ => s.vec(-6.0, 6.0) + Vec3::splat(b),
-                    };
-                    let target = object.track.at(time).point(on.as_dvec3()).as_vec3();
-                    let ray = Ray {
-                        origin,
-                        dir: target - origin,
-                        t_max: f32::INFINITY,
-                    };
+                    let ray = aimed_ray(&mut s, &objects, time);
                     let mut stats = TraversalStats::default();
                     let found =
                         motion.closest::<false>(&moment, &ray, None, Traversal::Robust, &mut stats);
@@ -203,4 +219,58 @@ fn moving_objects_are_hit_as_brute_force_over_their_triangles_in_object_space() 
         hits > 4000,
         "{hits} hits: the rays must find the objects often"
     );
+}
+
+/// What a shadow query finds depends on the order objects are tried in (its first hit must be
+/// certain, the later ones need not be), so the tree gathers a shadow query's candidates and
+/// tries them in object order. Here the same twelve objects (six twin pairs) with their tree
+/// and tried in turn without it, by both robust traversals, with and without a still hit
+/// passed in: every query, closest, certain-first and any-hit, answers the same.
+#[test]
+fn the_tree_answers_every_query_as_the_objects_tried_in_turn() {
+    let mut s = Stream(23);
+    for turn in [false, true] {
+        for _ in 0..8 {
+            let objects = objects(&mut s, 12, turn);
+            let with_tree = MotionAccel::build(&objects, 5, BuildQuality::Medium);
+            assert!(!with_tree.tree.is_flat(), "twelve objects get a tree");
+            let in_turn = MotionAccel {
+                tree: ObjectTree::default(),
+                ..with_tree.clone()
+            };
+            for _ in 0..200 {
+                let time = time(&mut s);
+                let mut ray = aimed_ray(&mut s, &objects, time);
+                // Half the rays end just past their closest hit, which a certain query may
+                // then not count: where the order of trying objects decides.
+                let mut stats = TraversalStats::default();
+                let moment = in_turn.moment(time);
+                let closest =
+                    in_turn.closest::<false>(&moment, &ray, None, Traversal::Robust, &mut stats);
+                if let Some(hit) = closest
+                    && s.unit() < 0.5
+                {
+                    ray.t_max = hit.t.next_up().next_up();
+                }
+                let still = (s.unit() < 0.5).then(|| Hit {
+                    t: s.range(0.2, 1.5),
+                    triangle: 4,
+                    b1: 0.25,
+                    b2: 0.25,
+                });
+                for traversal in [Traversal::Robust, Traversal::RobustBinary] {
+                    let mut stats = TraversalStats::default();
+                    let [a, b] = [&with_tree, &in_turn].map(|motion| {
+                        let moment = motion.moment(time);
+                        (
+                            motion.closest::<true>(&moment, &ray, still, traversal, &mut stats),
+                            motion.closest::<false>(&moment, &ray, still, traversal, &mut stats),
+                            motion.occluded(&moment, &ray, traversal, &mut stats),
+                        )
+                    });
+                    assert_eq!(a, b, "turn {turn}, time {time}, {traversal:?}, {ray:?}");
+                }
+            }
+        }
+    }
 }
