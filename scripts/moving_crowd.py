@@ -42,35 +42,23 @@ albedo = [0.14, 0.45, 0.091]
 type = "emissive"
 emission = [15, 12, 8]
 
-[[object]]
-shape = "quad"
-corners = [[0, 0, 0], [0, 0, 5.59], [5.56, 0, 5.59], [5.56, 0, 0]]
-material = "white"
+"""
 
-[[object]]
-shape = "quad"
-corners = [[0, 5.49, 0], [5.56, 5.49, 0], [5.56, 5.49, 5.59], [0, 5.49, 5.59]]
-material = "white"
+# The room's walls, floor and ceiling, every face towards the inside, and the lamp just below
+# the ceiling: (corners, material), as scenes/cornell-blur places them.
+QUADS = [
+    ("[[0, 0, 0], [0, 0, 5.59], [5.56, 0, 5.59], [5.56, 0, 0]]", "white"),
+    ("[[0, 5.49, 0], [5.56, 5.49, 0], [5.56, 5.49, 5.59], [0, 5.49, 5.59]]", "white"),
+    ("[[0, 0, 5.59], [0, 5.49, 5.59], [5.56, 5.49, 5.59], [5.56, 0, 5.59]]", "white"),
+    ("[[5.56, 0, 0], [5.56, 0, 5.59], [5.56, 5.49, 5.59], [5.56, 5.49, 0]]", "red"),
+    ("[[0, 0, 0], [0, 5.49, 0], [0, 5.49, 5.59], [0, 0, 5.59]]", "green"),
+    ("[[2.13, 5.48, 2.27], [3.43, 5.48, 2.27], [3.43, 5.48, 3.32], [2.13, 5.48, 3.32]]", "lamp"),
+]
 
-[[object]]
+QUAD = """[[object]]
 shape = "quad"
-corners = [[0, 0, 5.59], [0, 5.49, 5.59], [5.56, 5.49, 5.59], [5.56, 0, 5.59]]
-material = "white"
-
-[[object]]
-shape = "quad"
-corners = [[5.56, 0, 0], [5.56, 0, 5.59], [5.56, 5.49, 5.59], [5.56, 5.49, 0]]
-material = "red"
-
-[[object]]
-shape = "quad"
-corners = [[0, 0, 0], [0, 5.49, 0], [0, 5.49, 5.59], [0, 0, 5.59]]
-material = "green"
-
-[[object]]
-shape = "quad"
-corners = [[2.13, 5.48, 2.27], [3.43, 5.48, 2.27], [3.43, 5.48, 3.32], [2.13, 5.48, 3.32]]
-material = "lamp"
+corners = {corners}
+material = "{material}"
 """
 
 BALL = """
@@ -101,6 +89,7 @@ def main():
     spacing = 3.6 / side
     radius = 0.3 * spacing
     text = ROOM.format(count=count)
+    text += "\n".join(QUAD.format(corners=c, material=m) for c, m in QUADS)
     materials = ["white", "red", "green"]
     for k in range(count):
         i, j, layer = k % side, (k // side) % side, k // (side * side)
