@@ -345,6 +345,7 @@ fn brute_force<const ANY_HIT: bool>(triangles: &[Triangle], ray: &Ray) -> Option
 }
 
 /// The closest hit found so far, and the rule by which a new hit replaces it.
+#[derive(Clone, Copy)]
 pub(super) struct Closest {
     pub(super) best: Option<Hit>,
     /// The end of the search interval: `best`'s `t`, or the ray's own `t_max` while there is

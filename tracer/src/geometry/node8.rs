@@ -79,6 +79,7 @@ impl Node8 {
 
 /// A ray prepared for 8-wide slab tests: the binary test's origin and reciprocal direction,
 /// and for each axis which of a box's planes is near.
+#[derive(Clone, Copy)]
 pub(super) struct WideRay {
     pub(super) origin: [f32; 3],
     pub(super) inv_dir: [f32; 3],

@@ -152,18 +152,18 @@ impl Accel {
     ) -> bool {
         let last = rays.len() - 1;
         let ray = |r: usize| &rays[r.min(last)];
-        let wide: [WideRay; PACKET] = std::array::from_fn(|r| WideRay::new(ray(r)));
+        let wide: [WideRay; PACKET] = per_ray(|r| WideRay::new(ray(r)));
         if !PacketRays::share_planes(&wide) {
             return false;
         }
         let packet = PacketRays::new(&wide);
         let bound = packet_bound(&packet);
-        let sheared: [ShearedRay; PACKET] = std::array::from_fn(|r| ShearedRay::new(ray(r)));
-        let quad: [QuadRay; PACKET] = std::array::from_fn(|r| QuadRay::new(&sheared[r]));
-        let mut closest: [Closest; PACKET] = std::array::from_fn(|r| Closest::new(ray(r), false));
+        let sheared: [ShearedRay; PACKET] = per_ray(|r| ShearedRay::new(ray(r)));
+        let quad: [QuadRay; PACKET] = per_ray(|r| QuadRay::new(&sheared[r]));
+        let mut closest: [Closest; PACKET] = per_ray(|r| Closest::new(ray(r), false));
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         // Each ray's current end of search for the box tests.
-        let mut end: [f32; PACKET] = std::array::from_fn(|r| cull(&closest[r]));
+        let mut end: [f32; PACKET] = per_ray(|r| cull(&closest[r]));
         // The farthest of those ends, for the filter; kept, and taken again only when a leaf
         // has moved an end (ends only ever come nearer).
         let farthest_of =
@@ -297,4 +297,18 @@ pub(super) fn packet_bound(packet: &PacketRays) -> Option<PacketBound> {
         bound.inv_high[axis] = inv_high;
     }
     usable.then_some(bound)
+}
+
+/// `[f(0), .., f(PACKET - 1)]`, built in place. `std::array::from_fn` was compiled out of line
+/// (its drop guard kept it from being inlined into the AVX traversal), in SSE code, and its
+/// result copied into place by `memcpy`: 2 % of the Cornell box's time went to that copy and
+/// the call (`docs/bench.md`, issue 12, twenty-second round). Every slot is first `f(0)`, then
+/// its own: `f` only computes, so calling it once more changes nothing.
+#[inline(always)]
+fn per_ray<T: Copy>(f: impl Fn(usize) -> T) -> [T; PACKET] {
+    let mut out = [f(0); PACKET];
+    for (r, slot) in out.iter_mut().enumerate().skip(1) {
+        *slot = f(r);
+    }
+    out
 }

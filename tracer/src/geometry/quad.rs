@@ -87,6 +87,7 @@ impl Quad {
 /// scalars and splatted where a test uses them: a splat from memory is one instruction, as
 /// loading a splat kept here would be, and a ray that tests few triangles (most of them, on
 /// small scenes) does not pay for splats it never uses.
+#[derive(Clone, Copy)]
 pub(super) struct QuadRay {
     /// Which input axes become x, y and z.
     axes: [usize; 3],
