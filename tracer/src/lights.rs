@@ -179,12 +179,6 @@ impl Lights {
 
     /// Samples a light as seen from `p` at `moment` (where moving emitters are). `u_choice`
     /// picks the light, `u` the point on it.
-    // Inlined where the renderer calls it, so that its sample need not go through memory
-    // (a store-forwarding stall per shadow ray; docs/bench.md, issue 12, eighth round).
-    // Always, with the still triangle's case alone: under a plain `#[inline]` the whole match
-    // was left a call, and the sample came back through memory at every bounce (docs/bench.md,
-    // issue 12, nineteenth round). The other lights are sampled out of line.
-    #[inline(always)]
     pub fn sample(
         &self,
         scene: &Scene,
@@ -193,8 +187,32 @@ impl Lights {
         u_choice: f32,
         u: Vec2,
     ) -> Option<LightSample> {
+        let mut sample = None;
+        self.sample_into(scene, moment, p, (u_choice, u), &mut sample);
+        sample
+    }
+
+    /// [`Lights::sample`] into `out` (`None` before): how the renderer calls it.
+    // Inlined where the renderer calls it, so that its sample need not go through memory
+    // (a store-forwarding stall per shadow ray; docs/bench.md, issue 12, eighth round).
+    // Always, with the still triangle's case alone: under a plain `#[inline]` the whole match
+    // was left a call, and the sample came back through memory at every bounce (docs/bench.md,
+    // issue 12, nineteenth round). The other lights are sampled out of line. Into a place the
+    // caller names, both ways: where both returned a value, the out-of-line call's place was
+    // where the inline case built its sample too, which was then copied whole into the
+    // caller's variable and read back across the narrow stores of its last fields, which the
+    // processor cannot forward (issue 12, twenty-second round).
+    #[inline(always)]
+    pub fn sample_into(
+        &self,
+        scene: &Scene,
+        moment: &Moment,
+        p: Vec3,
+        (u_choice, u): (f32, Vec2),
+        out: &mut Option<LightSample>,
+    ) {
         if self.lights.is_empty() {
-            return None;
+            return;
         }
         let index = self
             .cdf
@@ -202,7 +220,7 @@ impl Lights {
             .min(self.lights.len() - 1);
         let choice = self.choice_pdf(index);
         if choice <= 0.0 {
-            return None;
+            return;
         }
         if let Light::Triangle(t) = self.lights[index] {
             let triangle = &scene.triangles[t as usize];
@@ -211,15 +229,29 @@ impl Lights {
             let (b1, b2) = (su * (1.0 - u.y), su * u.y);
             let at = SurfacePoint::on_triangle_with_normal(&triangle.p, b1, b2, shape.plane_normal);
             let radiance = scene.materials[triangle.material as usize].emission;
-            return area_sample(p, at, (shape.area, shape.normal), radiance, choice);
+            *out = area_sample(p, at, (shape.area, shape.normal), radiance, choice);
+            return;
         }
-        self.sample_other(scene, moment, p, (index, choice), u)
+        self.sample_other(scene, moment, p, (index, choice), u, out);
     }
 
     /// [`Lights::sample`] of light `index`, chosen with probability `choice`, where it is not a
     /// still triangle.
     #[inline(never)]
     fn sample_other(
+        &self,
+        scene: &Scene,
+        moment: &Moment,
+        p: Vec3,
+        (index, choice): (usize, f32),
+        u: Vec2,
+        out: &mut Option<LightSample>,
+    ) {
+        *out = self.sample_other_value(scene, moment, p, (index, choice), u);
+    }
+
+    /// What [`Lights::sample_other`] writes.
+    fn sample_other_value(
         &self,
         scene: &Scene,
         moment: &Moment,

@@ -204,32 +204,42 @@ pub struct PathSpectrum {
 }
 
 impl PathSpectrum {
+    /// The state every path starts in: RGB, nothing gathered aside.
+    pub const RGB: PathSpectrum = PathSpectrum {
+        wavelengths: None,
+        monochrome: false,
+        gathered_rgb: Vec3::ZERO,
+    };
+
     /// The state a path of `sampling` starts in, and its starting throughput.
-    // Inlined: returned through memory, written field by field and read back whole, the
-    // state stalled on store forwarding at every path's start (docs/bench.md, eighth round).
-    #[inline]
     pub fn start(sampling: SpectralSampling, sampler: &PixelSampler) -> (Self, Vec3) {
-        let mut spectrum = PathSpectrum {
-            wavelengths: None,
-            monochrome: false,
-            gathered_rgb: Vec3::ZERO,
-        };
-        let mut beta = Vec3::ONE;
+        let (mut spectrum, mut beta) = (Self::RGB, Vec3::ONE);
+        spectrum.begin(sampling, sampler, &mut beta);
+        (spectrum, beta)
+    }
+
+    /// Turns a path that starts in [`PathSpectrum::RGB`] with throughput `beta` into the state
+    /// a path of `sampling` starts in. In place, rather than [`PathSpectrum::start`]'s value:
+    /// an RGB start writes only a few of the state's bytes, and the value, copied whole into
+    /// the path's variable, was read back across those narrow stores, which the processor
+    /// cannot forward (a stall at every path's start: 7 % of `radiance_from`'s samples on the
+    /// Cornell box; docs/bench.md, issue 12, twenty-second round).
+    #[inline(always)]
+    pub fn begin(&mut self, sampling: SpectralSampling, sampler: &PixelSampler, beta: &mut Vec3) {
         match sampling {
             SpectralSampling::Auto => {}
             SpectralSampling::Hero => {
-                spectrum.wavelengths = Some(Wavelengths::sample(sampler.wavelength()));
+                self.wavelengths = Some(Wavelengths::sample(sampler.wavelength()));
             }
             SpectralSampling::Single => {
-                spectrum.wavelengths = Some(Wavelengths::sample(sampler.wavelength()));
-                spectrum.terminate_secondary(&mut beta);
+                self.wavelengths = Some(Wavelengths::sample(sampler.wavelength()));
+                self.terminate_secondary(beta);
             }
             SpectralSampling::Monochrome(nm) => {
-                spectrum.wavelengths = Some(Wavelengths::at([nm; 3], [1.0; 3]));
-                spectrum.monochrome = true;
+                self.wavelengths = Some(Wavelengths::at([nm; 3], [1.0; 3]));
+                self.monochrome = true;
             }
         }
-        (spectrum, beta)
     }
 
     /// Whether the path is spectral.

@@ -125,12 +125,16 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
                     };
                     // A pinhole never draws the lens's numbers, so it traces exactly the rays
                     // it traced before lenses existed.
-                    let lens = world.effects.depth_of_field && camera.has_lens();
-                    rays[k] = if lens {
-                        camera.ray_through_lens(px, py, sampler.lens())
+                    // Each branch writes its ray into the slot itself: as one value chosen
+                    // between the two, the ray was built aside field by field and copied
+                    // whole into the slot, read back across those narrow stores, which the
+                    // processor cannot forward (a stall per camera ray; docs/bench.md, issue
+                    // 12, twenty-second round).
+                    if world.effects.depth_of_field && camera.has_lens() {
+                        rays[k] = camera.ray_through_lens(px, py, sampler.lens());
                     } else {
-                        camera.ray(px, py)
-                    };
+                        rays[k] = camera.ray(px, py);
+                    }
                 }
                 let mut hits = [None; PACKET];
                 let found =

@@ -105,14 +105,20 @@ impl World {
         numbers: (f32, Vec2),
         stats: &mut PathStats,
     ) -> Vec3 {
-        let samples = self.sample_lights(at, moment, numbers, stats);
+        let mut samples = LightSamples::default();
+        self.sample_lights(at, moment, numbers, stats, &mut samples);
         self.direct_from(&samples, scatter, at, media, moment, numbers, stats)
     }
 
-    /// The first half of [`World::direct_light`]: where its light samples land, which does not
-    /// depend on the scatterer, so that a surface's texel can be on its way from memory
-    /// meanwhile (`World::radiance`). Inlined, as `direct_light` was: returned through a call
-    /// the samples were copied through memory, two percent of a Cornell box's instructions.
+    /// The first half of [`World::direct_light`]: where its light samples land, into
+    /// `samples` (none before), which does not depend on the scatterer, so that a surface's
+    /// texel can be on its way from memory meanwhile (`World::radiance`). Inlined, as
+    /// `direct_light` was: returned through a call the samples were copied through memory, two
+    /// percent of a Cornell box's instructions. Written in place: returned as a value, the
+    /// sample was taken out of its `Option` and copied whole into a new one, read back across
+    /// the narrow stores that had just written its last fields, which the processor cannot
+    /// forward (5 % of `radiance_from`'s samples on the Cornell box; docs/bench.md, issue 12,
+    /// twenty-second round).
     #[inline(always)]
     pub(super) fn sample_lights(
         &self,
@@ -120,24 +126,21 @@ impl World {
         moment: &Moment,
         (u_choice, u): (f32, Vec2),
         stats: &mut PathStats,
-    ) -> LightSamples {
+        samples: &mut LightSamples,
+    ) {
         stats.light_samples += 1;
-        let Some(own) = self.lights.sample(&self.scene, moment, at.p, u_choice, u) else {
-            return LightSamples::default();
-        };
+        self.lights
+            .sample_into(&self.scene, moment, at.p, (u_choice, u), &mut samples.own);
         // The environment with portals takes a second sample, through them (`Lights::
         // portal_sample`); both are weighed by the power heuristic over the three strategies.
-        let through = if own.distance.is_infinite() && self.lights.has_portals() {
-            self.lights.portal_sample(&self.scene, at.p, u_choice, u)
-        } else {
-            None
-        };
-        if through.is_some() {
-            stats.light_samples += 1;
-        }
-        LightSamples {
-            own: Some(own),
-            through,
+        if let Some(own) = &samples.own
+            && own.distance.is_infinite()
+            && self.lights.has_portals()
+        {
+            samples.through = self.lights.portal_sample(&self.scene, at.p, u_choice, u);
+            if samples.through.is_some() {
+                stats.light_samples += 1;
+            }
         }
     }
 

@@ -182,7 +182,8 @@ impl World {
         let effects = &self.effects;
         let mut ray = ray;
         let mut radiance = Vec3::ZERO;
-        let (mut spectrum, mut beta) = PathSpectrum::start(self.spectral, sampler);
+        let (mut spectrum, mut beta) = (PathSpectrum::RGB, Vec3::ONE);
+        spectrum.begin(self.spectral, sampler, &mut beta);
         // The density of the direction the last bounce sampled, and whether it was a delta lobe;
         // the camera ray counts as specular (nothing else could have found what it hits).
         let mut last_pdf = 0.0f32;
@@ -346,11 +347,11 @@ impl World {
             let frame = Frame::from_normal(surface.shading_normal);
             let wo = frame.to_local(-ray.dir);
             let shadows = effects.shadows && !material.bsdf.is_delta();
-            let lights = if shadows {
-                self.sample_lights(&surface.at, moment, (u.light_choice, u.light), stats)
-            } else {
-                LightSamples::default()
-            };
+            let mut lights = LightSamples::default();
+            if shadows {
+                let numbers = (u.light_choice, u.light);
+                self.sample_lights(&surface.at, moment, numbers, stats, &mut lights);
+            }
             let bsdf = spectrum.bsdf(resolve(&material.bsdf, texel));
             // The next direction is drawn before the shadow ray is traced, though used after:
             // it needs neither, and its chain of square roots and sines then overlaps the
