@@ -277,16 +277,18 @@ impl PathSpectrum {
         }
     }
 
-    /// A BSDF as the path sees it: colours read at its wavelengths, and a dispersive glass as
-    /// the plain glass of its index at the first wavelength (the only one that goes on through
-    /// it, [`PathSpectrum::disperse`]). Unchanged on an RGB path.
+    /// `bsdf` made what the path sees: colours read at its wavelengths, and a dispersive glass
+    /// as the plain glass of its index at the first wavelength (the only one that goes on
+    /// through it, [`PathSpectrum::disperse`]). Untouched on an RGB path.
     // Inlined, with the spectral reading kept out of line, so that an RGB path (every path of
-    // a scene without dispersive glass) pays no call and no copy of the BSDF at each hit.
+    // a scene without dispersive glass) pays no call and no copy of the BSDF at each hit. In
+    // place: returned as a value, a textured BSDF just written field by field was copied whole
+    // and read back across those narrow stores, which the processor cannot forward (a stall at
+    // every textured hit; docs/bench.md, issue 12, twenty-second round).
     #[inline(always)]
-    pub fn bsdf(&self, bsdf: Bsdf) -> Bsdf {
-        match &self.wavelengths {
-            None => bsdf,
-            Some(w) => Self::spectral_bsdf(w, bsdf),
+    pub fn see_bsdf(&self, bsdf: &mut Bsdf) {
+        if let Some(w) = &self.wavelengths {
+            *bsdf = Self::spectral_bsdf(w, *bsdf);
         }
     }
 

@@ -352,7 +352,8 @@ impl World {
                 let numbers = (u.light_choice, u.light);
                 self.sample_lights(&surface.at, moment, numbers, stats, &mut lights);
             }
-            let bsdf = spectrum.bsdf(resolve(&material.bsdf, texel));
+            let mut bsdf = resolve(&material.bsdf, texel);
+            spectrum.see_bsdf(&mut bsdf);
             // The next direction is drawn before the shadow ray is traced, though used after:
             // it needs neither, and its chain of square roots and sines then overlaps the
             // light sample's instead of waiting for the traversal between them (the box 5 %

@@ -155,7 +155,9 @@ fn an_rgb_path_is_left_alone() {
     assert_eq!(rgb.channels(v), v);
     assert_eq!(rgb.finish(v), v);
     let glass = Bsdf::Dielectric { ior: 1.5, tint: v };
-    assert_eq!(rgb.bsdf(glass), glass);
+    let mut seen = glass;
+    rgb.see_bsdf(&mut seen);
+    assert_eq!(seen, glass);
 }
 
 #[test]

@@ -180,7 +180,9 @@ fn dispersive_glass_refracts_by_its_index_at_the_wavelength_over_the_outside_ind
         for nm in [420.0f32, 550.0, 680.0] {
             let sampler = PixelSampler::new(1, 0, 2, 3, 4);
             let (spectrum, _) = PathSpectrum::start(SpectralSampling::Monochrome(nm), &sampler);
-            cases.push((spectrum.bsdf(bsdf), f64::from(nm)));
+            let mut seen = bsdf;
+            spectrum.see_bsdf(&mut seen);
+            cases.push((seen, f64::from(nm)));
         }
         for (resolved, nm) in cases {
             let n_in = cauchy(nm);
