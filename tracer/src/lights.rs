@@ -198,10 +198,10 @@ impl Lights {
     // Always, with the still triangle's case alone: under a plain `#[inline]` the whole match
     // was left a call, and the sample came back through memory at every bounce (docs/bench.md,
     // issue 12, nineteenth round). The other lights are sampled out of line. Into a place the
-    // caller names, both ways: where both returned a value, the out-of-line call's place was
-    // where the inline case built its sample too, which was then copied whole into the
-    // caller's variable and read back across the narrow stores of its last fields, which the
-    // processor cannot forward (issue 12, twenty-second round).
+    // caller names, by each case: where one value came out of both, the out-of-line call's
+    // place was where the inline case built its sample too, which was then copied whole into
+    // the caller's variable and read back across the narrow stores of its last fields, which
+    // the processor cannot forward (issue 12, twenty-second round).
     #[inline(always)]
     pub fn sample_into(
         &self,
@@ -232,26 +232,13 @@ impl Lights {
             *out = area_sample(p, at, (shape.area, shape.normal), radiance, choice);
             return;
         }
-        self.sample_other(scene, moment, p, (index, choice), u, out);
+        *out = self.sample_other(scene, moment, p, (index, choice), u);
     }
 
     /// [`Lights::sample`] of light `index`, chosen with probability `choice`, where it is not a
     /// still triangle.
     #[inline(never)]
     fn sample_other(
-        &self,
-        scene: &Scene,
-        moment: &Moment,
-        p: Vec3,
-        (index, choice): (usize, f32),
-        u: Vec2,
-        out: &mut Option<LightSample>,
-    ) {
-        *out = self.sample_other_value(scene, moment, p, (index, choice), u);
-    }
-
-    /// What [`Lights::sample_other`] writes.
-    fn sample_other_value(
         &self,
         scene: &Scene,
         moment: &Moment,
