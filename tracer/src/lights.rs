@@ -247,7 +247,9 @@ impl Lights {
         u: Vec2,
     ) -> Option<LightSample> {
         match self.lights[index] {
-            Light::Triangle(_) => unreachable!("still triangles are sampled inline by `sample`"),
+            Light::Triangle(_) => {
+                unreachable!("still triangles are sampled inline by `sample_into`")
+            }
             Light::Moving { object, triangle } => {
                 moving::sample(scene, moment, (object, triangle), p, u, choice)
             }

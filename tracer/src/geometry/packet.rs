@@ -302,8 +302,8 @@ pub(super) fn packet_bound(packet: &PacketRays) -> Option<PacketBound> {
 /// `[f(0), .., f(PACKET - 1)]`, built in place. `std::array::from_fn` was compiled out of line
 /// (its drop guard kept it from being inlined into the AVX traversal), in SSE code, and its
 /// result copied into place by `memcpy`: 2 % of the Cornell box's time went to that copy and
-/// the call (`docs/bench.md`, issue 12, twenty-second round). Every slot is first `f(0)`, then
-/// its own: `f` only computes, so calling it once more changes nothing.
+/// the call (`docs/bench.md`, issue 12, twenty-second round). Slots 1 on briefly hold a copy
+/// of `f(0)` and are overwritten: `f` is called once per index, in order, as `from_fn` did.
 #[inline(always)]
 fn per_ray<T: Copy>(f: impl Fn(usize) -> T) -> [T; PACKET] {
     let mut out = [f(0); PACKET];
