@@ -138,7 +138,12 @@ impl TransformTrack {
 
     /// The placement at `time` (frames).
     pub fn at(&self, time: f64) -> Placement {
-        let segment = self.segment(time);
+        self.at_in(self.segment(time), time)
+    }
+
+    /// [`TransformTrack::at`], where the caller has `segment` (which is `self.segment(time)`)
+    /// already: a path's start places every object of a few and keeps each one's segment too.
+    pub fn at_in(&self, segment: usize, time: f64) -> Placement {
         let (a, b) = self.segment_keys(segment);
         let first = segment.saturating_sub(1).min(self.keys.len() - 1);
         if a.frame == b.frame {

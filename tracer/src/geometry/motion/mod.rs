@@ -201,7 +201,10 @@ impl MotionAccel {
                 Placements::All(
                     self.objects
                         .iter()
-                        .map(|o| (o.track.segment(time), o.track.at(time)))
+                        .map(|o| {
+                            let segment = o.track.segment(time);
+                            (segment, o.track.at_in(segment, time))
+                        })
                         .collect(),
                 )
             } else {
