@@ -16,8 +16,8 @@
 //!
 //! Module map: `direct` (next-event estimation, and how it and BSDF sampling share the area
 //! lights: [`AreaLightSampling`]); `scatter` (a BSDF or a phase function as next-event
-//! estimation sees it, the bounce's random numbers, which medium a path is in, and shadow-ray
-//! transmittance); `hits` (where rays meet the static and the moving geometry at the path's
+//! estimation sees it, the bounce's random numbers, which medium a path is in, shadow-ray
+//! transmittance, and the texel a textured BSDF reads); `hits` (where rays meet the static and the moving geometry at the path's
 //! time, a pixel's camera rays walked together, and the local geometry at a hit); `stats`
 //! (the per-sample counters, [`PathStats`]).
 //!
@@ -51,12 +51,11 @@ use crate::lights::{EnvironmentSampling, Lights};
 use crate::material::{Bsdf, Frame};
 use crate::medium::{Flight, hero_channel, mean_ratio, sample_henyey_greenstein};
 use crate::sampler::PixelSampler;
-use crate::scene::{Scene, Texture};
+use crate::scene::Scene;
 use crate::spectrum::{PathSpectrum, SpectralSampling};
 use direct::{LightSamples, power_heuristic};
 use glam::Vec3;
-use hits::Surface;
-use scatter::{BounceNumbers, Phase, SurfaceScatter};
+use scatter::{BounceNumbers, Phase, SurfaceScatter, resolve};
 
 mod direct;
 mod hits;
@@ -472,34 +471,5 @@ impl World {
             *beta /= survive;
         }
         true
-    }
-
-    /// The texel a textured `bsdf` reads at `surface`, where textures are simulated: its
-    /// texture and index (none for a surface without coordinates, which reads white), found
-    /// once here and asked for from memory now, so that [`resolve`] reads it after other work
-    /// has overlapped the wait.
-    fn texel_ahead(&self, bsdf: &Bsdf, surface: &Surface) -> Option<(&Texture, Option<usize>)> {
-        let texture = match *bsdf {
-            Bsdf::Diffuse {
-                texture: Some(texture),
-                ..
-            } if self.effects.textures => &self.scene.textures[texture as usize],
-            _ => return None,
-        };
-        let index = surface.uv.map(|uv| texture.nearest(uv));
-        if let Some(index) = index {
-            texture.prefetch(index);
-        }
-        Some((texture, index))
-    }
-}
-
-/// `bsdf` with the texel [`World::texel_ahead`] found for it, if any.
-fn resolve(bsdf: &Bsdf, texel: Option<(&Texture, Option<usize>)>) -> Bsdf {
-    match texel {
-        Some((texture, index)) => {
-            bsdf.with_texture_value(index.map_or(Vec3::ONE, |index| texture.texel(index)))
-        }
-        None => *bsdf,
     }
 }

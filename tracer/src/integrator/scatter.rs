@@ -1,6 +1,7 @@
 //! What scatters light at a path's vertex and what a path travels through: a BSDF at a surface
 //! or the phase function in a medium, as next-event estimation sees them; the random numbers
-//! every bounce draws; which medium a path is in; and what a shadow ray lets through.
+//! every bounce draws; which medium a path is in; what a shadow ray lets through; and the
+//! texel a textured surface's BSDF reads.
 //!
 //! A path starts in the camera's medium (`Scene::camera_medium`, vacuum when there is none) and
 //! changes medium only where it crosses a surface: through glass (a refraction) or an
@@ -13,11 +14,13 @@
 //! segment's transmittance is taken in the medium that segment lies in.
 
 use super::World;
+use super::hits::Surface;
 use crate::geometry::{Moment, Ray};
 use crate::lights::LightSample;
 use crate::material::{Bsdf, Frame, Material};
 use crate::medium::{Medium, Stream, henyey_greenstein};
 use crate::sampler::PixelSampler;
+use crate::scene::Texture;
 use glam::{Vec2, Vec3};
 
 /// A scatterer seen from a fixed outgoing direction: the value and the sampling density of an
@@ -183,5 +186,38 @@ impl World {
             stats.shadow_rays += 1;
             shadow = self.shadow_ray(&placed.at, light);
         }
+    }
+
+    /// The texel a textured `bsdf` reads at `surface`, where textures are simulated: its
+    /// texture and index (none for a surface without coordinates, which reads white), found
+    /// once here and asked for from memory now, so that [`resolve`] reads it after other work
+    /// has overlapped the wait.
+    pub(super) fn texel_ahead(
+        &self,
+        bsdf: &Bsdf,
+        surface: &Surface,
+    ) -> Option<(&Texture, Option<usize>)> {
+        let texture = match *bsdf {
+            Bsdf::Diffuse {
+                texture: Some(texture),
+                ..
+            } if self.effects.textures => &self.scene.textures[texture as usize],
+            _ => return None,
+        };
+        let index = surface.uv.map(|uv| texture.nearest(uv));
+        if let Some(index) = index {
+            texture.prefetch(index);
+        }
+        Some((texture, index))
+    }
+}
+
+/// `bsdf` with the texel [`World::texel_ahead`] found for it, if any.
+pub(super) fn resolve(bsdf: &Bsdf, texel: Option<(&Texture, Option<usize>)>) -> Bsdf {
+    match texel {
+        Some((texture, index)) => {
+            bsdf.with_texture_value(index.map_or(Vec3::ONE, |index| texture.texel(index)))
+        }
+        None => *bsdf,
     }
 }
