@@ -17,9 +17,9 @@
 //! Module map: `direct` (next-event estimation, and how it and BSDF sampling share the area
 //! lights: [`AreaLightSampling`]); `scatter` (a BSDF or a phase function as next-event
 //! estimation sees it, the bounce's random numbers, which medium a path is in, shadow-ray
-//! transmittance, and the texel a textured BSDF reads); `hits` (where rays meet the static and the moving geometry at the path's
-//! time, a pixel's camera rays walked together, and the local geometry at a hit); `stats`
-//! (the per-sample counters, [`PathStats`]).
+//! transmittance, and the texel a textured BSDF reads); `hits` (where rays meet the static
+//! and the moving geometry at the path's time, a pixel's camera rays walked together, and the
+//! local geometry at a hit); `stats` (the per-sample counters, [`PathStats`]).
 //!
 //! Dispersion ([`crate::spectrum`]): a path is RGB until it meets dispersive glass, where it
 //! turns spectral; from then on every RGB value it meets goes through its [`PathSpectrum`],
