@@ -105,8 +105,9 @@ impl std::fmt::Debug for Placements {
 thread_local! {
     /// The buffer of the last path on this thread that placed every object, handed back when
     /// its [`Moment`] is dropped and filled again by the next: a path of a few moving objects
-    /// then allocates nothing (an allocation and a free per path were 1.5 % of `cornell-blur`'s
-    /// instructions). What a buffer held before is cleared, so no value crosses paths.
+    /// then allocates nothing (an allocation and a free per path; `cornell-blur` runs 0.9 %
+    /// fewer instructions without them). What a buffer held is cleared before it is filled, so
+    /// no value crosses paths.
     static SPARE_PLACEMENTS: Cell<Vec<(usize, Placement)>> = const { Cell::new(Vec::new()) };
 }
 
@@ -115,7 +116,10 @@ impl Drop for Moment<'_> {
         if let Placements::All(all) = &mut self.placements
             && all.capacity() > 0
         {
-            SPARE_PLACEMENTS.set(std::mem::take(all));
+            // `try_with`: while the thread's locals are being torn down the buffer is simply
+            // freed.
+            let all = std::mem::take(all);
+            let _ = SPARE_PLACEMENTS.try_with(|spare| spare.set(all));
         }
     }
 }
