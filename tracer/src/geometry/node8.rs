@@ -195,8 +195,9 @@ impl BoxTest for Avx {
 
     #[inline(always)]
     fn enter(ray: &WideRay, node: &Node8, t_max: f32) -> (u32, [f32; WIDTH]) {
-        // SAFETY: `Avx` is only used by `Accel::traverse_avx`, which runs only where
-        // `is_x86_feature_detected!("avx")` said yes.
+        // SAFETY: `Avx` is only used by `Accel::traverse_avx` and `Accel::packet_avx` (and by
+        // tests that ask the processor first), which run only where
+        // `is_x86_feature_detected!("avx")` said yes (`BoxSimd::Avx` is set nowhere else).
         unsafe { enter_avx(ray, node, t_max) }
     }
 

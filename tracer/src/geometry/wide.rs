@@ -162,7 +162,7 @@ impl Accel {
         let mut counted = *stats;
         let needed = (WIDTH - 1) * self.wide.depth + 1;
         let hit = if needed <= INLINE_STACK {
-            // Uninitialised: filling 210 entries per ray would cost more than a node test.
+            // Uninitialised: filling 211 entries per ray would cost more than a node test.
             let mut stack = [MaybeUninit::<StackEntry>::uninit(); INLINE_STACK];
             self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, &mut stack)
         } else {
@@ -217,7 +217,9 @@ impl Accel {
                 }
             } else {
                 // SAFETY: `current.child` of an entry with no triangles is an inner node's
-                // index, which `Bvh8::collapse` set to a slot of `nodes` it had pushed.
+                // index, which `Bvh8::collapse` set to a slot of `nodes` it had pushed (a leaf
+                // never has 0 triangles: obvhs's leaves hold at least one), or the root's 0,
+                // which exists since the empty tree returned above.
                 let node = unsafe { nodes.get_unchecked(current.child as usize) };
                 stats.nodes += u64::from(node.children);
                 let (mut entered, t_near) = B::enter(&wide, node, cull(&closest));
