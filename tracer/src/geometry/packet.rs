@@ -127,13 +127,16 @@ impl Accel {
         // box's rays, 769 to 910 instructions each, when tried).
         let mut counted = *stats;
         let needed = (WIDTH - 1) * self.wide.depth + 1;
-        let together = if needed <= INLINE_STACK {
-            let mut stack = [MaybeUninit::<PacketEntry>::uninit(); INLINE_STACK];
-            self.packet_with_stack::<B>(rays, hits, &mut counted, &mut stack)
+        let mut inline = [MaybeUninit::<PacketEntry>::uninit(); INLINE_STACK];
+        let mut heap = Vec::new();
+        // One walk over either stack, as in `Accel::traverse_with`.
+        let stack: &mut [MaybeUninit<PacketEntry>] = if needed <= INLINE_STACK {
+            &mut inline
         } else {
-            let mut stack = vec![MaybeUninit::uninit(); needed];
-            self.packet_with_stack::<B>(rays, hits, &mut counted, &mut stack)
+            heap.resize(needed, MaybeUninit::uninit());
+            &mut heap
         };
+        let together = self.packet_with_stack::<B>(rays, hits, &mut counted, stack);
         *stats = counted;
         together
     }

@@ -161,14 +161,18 @@ impl Accel {
         // count was a store to the caller's memory, which LLVM may not keep in a register.
         let mut counted = *stats;
         let needed = (WIDTH - 1) * self.wide.depth + 1;
-        let hit = if needed <= INLINE_STACK {
-            // Uninitialised: filling 211 entries per ray would cost more than a node test.
-            let mut stack = [MaybeUninit::<StackEntry>::uninit(); INLINE_STACK];
-            self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, &mut stack)
+        // Uninitialised: filling 211 entries per ray would cost more than a node test.
+        let mut inline = [MaybeUninit::<StackEntry>::uninit(); INLINE_STACK];
+        let mut heap = Vec::new();
+        // One walk over either stack, rather than the walk inlined once per stack: the code
+        // a ray runs is half as large.
+        let stack: &mut [MaybeUninit<StackEntry>] = if needed <= INLINE_STACK {
+            &mut inline
         } else {
-            let mut stack = vec![MaybeUninit::uninit(); needed];
-            self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, &mut stack)
+            heap.resize(needed, MaybeUninit::uninit());
+            &mut heap
         };
+        let hit = self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, stack);
         *stats = counted;
         hit
     }
@@ -378,5 +382,94 @@ impl Accel {
             }
             prefetch(at.wrapping_add(size.saturating_sub(1)) as *const u8);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{BuildQuality, PACKET, intersect_brute_force, occluded_brute_force};
+    use crate::scene::Triangle;
+
+    /// Triangles along the x axis at geometrically shrinking distances from the origin, each
+    /// half as large as the one before: a tree over them is many levels deep.
+    fn chain(n: usize) -> Vec<Triangle> {
+        (0..n)
+            .map(|k| {
+                let s = 0.5f32.powi(k as i32);
+                Triangle {
+                    p: [
+                        Vec3::new(s, -s, -s),
+                        Vec3::new(s, s, -s),
+                        Vec3::new(s, 0.0, s),
+                    ],
+                    n: None,
+                    uv: None,
+                    material: 0,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_tree_too_deep_for_the_inline_stack_is_walked_on_a_heap_stack_with_the_same_hits() {
+        let triangles = chain(120);
+        let mut accel = Accel::build(&triangles, BuildQuality::default());
+        // No tree of real scenes outgrows the inline stack (thirty levels of wide nodes), so
+        // the bound the walk sizes its stack by is raised past it: the walk then takes its
+        // stack from the heap, one larger than this tree needs, which is what a deeper tree
+        // would get.
+        accel.wide.depth = accel.wide.depth.max(INLINE_STACK / (WIDTH - 1) + 1);
+        assert!((WIDTH - 1) * accel.wide.depth + 1 > INLINE_STACK);
+        // Rays from beyond the largest triangle back toward the origin, through the
+        // triangles' planes at several slants, and segments ending between triangles.
+        let rays: Vec<Ray> = (0..200)
+            .map(|i| {
+                let a = i as f32 * 0.031;
+                Ray {
+                    origin: Vec3::new(2.0, 0.01 * a.cos(), 0.0),
+                    dir: Vec3::new(-1.0, 0.3 * a.sin(), 0.3 * a.cos() - 0.1),
+                    t_max: if i % 2 == 0 {
+                        f32::INFINITY
+                    } else {
+                        1.0 + 0.005 * i as f32
+                    },
+                }
+            })
+            .collect();
+        let mut hits = 0;
+        for simd in [BoxSimd::Sse, BoxSimd::Avx] {
+            if !accel.set_box_simd(simd) {
+                continue;
+            }
+            let mut stats = TraversalStats::default();
+            for ray in &rays {
+                let hit = accel.intersect(ray, &mut stats);
+                assert_eq!(
+                    hit,
+                    intersect_brute_force(&triangles, ray),
+                    "{simd:?} {ray:?}"
+                );
+                hits += usize::from(hit.is_some());
+                assert_eq!(
+                    accel.occluded(ray, &mut stats),
+                    occluded_brute_force(&triangles, ray),
+                    "{simd:?} {ray:?}"
+                );
+            }
+            // The packet walk sizes its stack the same way.
+            for packet in rays.chunks(PACKET) {
+                let mut found = [None; PACKET];
+                accel.intersect_packet(packet, &mut found[..packet.len()], &mut stats);
+                for (ray, hit) in packet.iter().zip(found) {
+                    assert_eq!(
+                        hit,
+                        intersect_brute_force(&triangles, ray),
+                        "{simd:?} packet"
+                    );
+                }
+            }
+        }
+        assert!(hits > 100, "the rays must find triangles: {hits} hits");
     }
 }
