@@ -186,7 +186,7 @@ impl World {
     /// spectral, and RGB sampling asked for). Such paths run [`World::radiance_with`] compiled
     /// for them (`PLAIN`), where the loop's steps for those effects are not there at all
     /// rather than skipped at run time: the loop is then small enough that the compiler keeps
-    /// more of its state in registers (1.5 % fewer instructions on the Cornell box). Both
+    /// more of its state in registers (1.7 % fewer instructions on the Cornell box). Both
     /// compile the same source, so they compute the same bits; [`Effects::ALL`] is never
     /// plain, so the tests that hold a scene's own effect set to it compare the two loops.
     /// Next-event estimation's own test of the media flag stays a run-time branch.
