@@ -29,7 +29,7 @@ use super::packet_box::{PacketBound, PacketRays};
 use super::quad::QuadRay;
 use super::traverse::FAR_SCALE;
 use super::triangle::ShearedRay;
-use super::wide::{BoxSimd, INLINE_STACK, push_sorted};
+use super::wide::{BoxSimd, WalkStack, push_sorted};
 use super::{Hit, Ray, TraversalStats};
 use std::mem::MaybeUninit;
 
@@ -121,21 +121,13 @@ impl Accel {
         hits: &mut [Option<Hit>],
         stats: &mut TraversalStats,
     ) -> bool {
-        // As `Accel::traverse_with` takes its stack, written out again rather than shared
-        // through a closure: a closure is compiled without the AVX target feature of the
-        // function it sits in, so the AVX box and triangle tests inside it became calls (the
-        // box's rays, 769 to 910 instructions each, when tried).
+        // The stack as `Accel::traverse_with` takes it, from a `WalkStack` rather than through
+        // a closure: a closure is compiled without the AVX target feature of the function it
+        // sits in, so the AVX box and triangle tests inside it became calls (the box's rays,
+        // 769 to 910 instructions each, when tried).
         let mut counted = *stats;
-        let needed = (WIDTH - 1) * self.wide.depth + 1;
-        let mut inline = [MaybeUninit::<PacketEntry>::uninit(); INLINE_STACK];
-        let mut heap = Vec::new();
-        // One walk over either stack, as in `Accel::traverse_with`.
-        let stack: &mut [MaybeUninit<PacketEntry>] = if needed <= INLINE_STACK {
-            &mut inline
-        } else {
-            heap.resize(needed, MaybeUninit::uninit());
-            &mut heap
-        };
+        let mut stack = WalkStack::<PacketEntry>::new();
+        let stack = stack.for_tree(&self.wide);
         let together = self.packet_with_stack::<B>(rays, hits, &mut counted, stack);
         *stats = counted;
         together

@@ -97,6 +97,38 @@ struct StackEntry {
 /// levels.
 pub(super) const INLINE_STACK: usize = (WIDTH - 1) * 30 + 1;
 
+/// The room a walk's stack is taken from, for the single-ray walk and the packet walk alike:
+/// [`INLINE_STACK`] entries in place, or, for a tree too deep for them, a heap allocation.
+/// Either way the walk proper is compiled once, over a slice.
+pub(super) struct WalkStack<E> {
+    /// Uninitialised: filling 211 entries per ray would cost more than a node test.
+    inline: [MaybeUninit<E>; INLINE_STACK],
+    heap: Vec<MaybeUninit<E>>,
+}
+
+impl<E: Copy> WalkStack<E> {
+    #[inline(always)]
+    pub(super) fn new() -> Self {
+        WalkStack {
+            inline: [MaybeUninit::uninit(); INLINE_STACK],
+            heap: Vec::new(),
+        }
+    }
+
+    /// A stack of at least `7 * depth + 1` entries for a walk of `tree`, which is what the
+    /// walks' pushes can reach (see [`INLINE_STACK`]).
+    #[inline(always)]
+    pub(super) fn for_tree(&mut self, tree: &Bvh8) -> &mut [MaybeUninit<E>] {
+        let needed = (WIDTH - 1) * tree.depth + 1;
+        if needed <= INLINE_STACK {
+            &mut self.inline
+        } else {
+            self.heap.resize(needed, MaybeUninit::uninit());
+            &mut self.heap
+        }
+    }
+}
+
 impl Accel {
     /// Closest hit (or, with `ANY_HIT`, the first certain hit found) by the wide traversal,
     /// with the box test [`Bvh8::simd`] names.
@@ -160,18 +192,8 @@ impl Accel {
         // Counted in a local copy, written back once: through `stats` itself, every node's
         // count was a store to the caller's memory, which LLVM may not keep in a register.
         let mut counted = *stats;
-        let needed = (WIDTH - 1) * self.wide.depth + 1;
-        // Uninitialised: filling 211 entries per ray would cost more than a node test.
-        let mut inline = [MaybeUninit::<StackEntry>::uninit(); INLINE_STACK];
-        let mut heap = Vec::new();
-        // One walk over either stack, rather than the walk inlined once per stack: the code
-        // a ray runs is half as large.
-        let stack: &mut [MaybeUninit<StackEntry>] = if needed <= INLINE_STACK {
-            &mut inline
-        } else {
-            heap.resize(needed, MaybeUninit::uninit());
-            &mut heap
-        };
+        let mut stack = WalkStack::<StackEntry>::new();
+        let stack = stack.for_tree(&self.wide);
         let hit = self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, stack);
         *stats = counted;
         hit
