@@ -47,6 +47,7 @@ mod offset;
 mod packed_hit;
 mod packet;
 mod packet_box;
+mod pair;
 mod quad;
 #[cfg(target_arch = "x86_64")]
 mod quad_avx;

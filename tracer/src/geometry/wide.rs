@@ -82,13 +82,13 @@ pub(super) fn best_simd() -> BoxSimd {
 /// A child waiting on the traversal's stack, or the one being visited: an inner node, or a
 /// leaf's run of triangle groups.
 #[derive(Clone, Copy)]
-struct StackEntry {
+pub(super) struct StackEntry {
     /// An inner node's index in `Bvh8::nodes`, or a leaf's first group in `Bvh8::quads`.
-    child: u32,
+    pub(super) child: u32,
     /// The leaf's triangles; 0 for an inner node.
-    count: u32,
+    pub(super) count: u32,
     /// Where the ray enters the child's box.
-    t_near: f32,
+    pub(super) t_near: f32,
 }
 
 /// Stack entries held in place: a node pushes its entered children (at most eight) and pops
