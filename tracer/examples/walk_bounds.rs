@@ -87,28 +87,6 @@ fn main() {
             *b = b.min(t);
         }
     }
-    // A closest-hit ray and another ray's shadow query, one after the other against walked
-    // together (`Accel::intersect_and_occluded`, a prototype): the same answers, checked.
-    let others: Vec<Ray> = shadows[count / 2..]
-        .iter()
-        .chain(&shadows[..count / 2])
-        .copied()
-        .collect();
-    let mut pair_best = [f64::INFINITY; 2];
-    let mut answers = [0.0; 2];
-    for _ in 0..rounds {
-        let (time, answer) = sequential(&accel, &rays, &others);
-        pair_best[0] = pair_best[0].min(time);
-        answers[0] = answer;
-        let (time, answer) = paired(&accel, &rays, &others);
-        pair_best[1] = pair_best[1].min(time);
-        answers[1] = answer;
-    }
-    assert_eq!(answers[0], answers[1], "the same hits either way");
-    println!(
-        "  closest+shadow  one after the other {:6.1}   together {:6.1}",
-        pair_best[0], pair_best[1]
-    );
     for (name, pair) in ["independent", "chained", "repeated", "shuffled"]
         .iter()
         .zip(best.chunks(2))
@@ -159,35 +137,6 @@ fn shadow<const CHAINED: bool>(accel: &Accel, rays: &[Ray]) -> f64 {
     }
     black_box(blocked);
     start.elapsed().as_secs_f64() * 1e9 / rays.len() as f64
-}
-
-/// Nanoseconds per pair of a closest-hit query and a shadow query, one after the other, and a
-/// sum of what they found.
-fn sequential(accel: &Accel, rays: &[Ray], shadows: &[Ray]) -> (f64, f64) {
-    let mut stats = TraversalStats::default();
-    let (start, mut sum) = (Instant::now(), 0.0f64);
-    for (ray, shadow) in rays.iter().zip(shadows) {
-        let hit = accel.intersect(ray, &mut stats);
-        let blocked = accel.occluded(shadow, &mut stats);
-        sum += found(hit, blocked);
-    }
-    (start.elapsed().as_secs_f64() * 1e9 / rays.len() as f64, sum)
-}
-
-/// [`sequential`] with the two queries walked together.
-fn paired(accel: &Accel, rays: &[Ray], shadows: &[Ray]) -> (f64, f64) {
-    let mut stats = TraversalStats::default();
-    let (start, mut sum) = (Instant::now(), 0.0f64);
-    for (ray, shadow) in rays.iter().zip(shadows) {
-        let (hit, blocked) = accel.intersect_and_occluded(ray, shadow, &mut stats);
-        sum += found(hit, blocked);
-    }
-    (start.elapsed().as_secs_f64() * 1e9 / rays.len() as f64, sum)
-}
-
-/// What a pair of queries found, as a number whose sum over all pairs compares two ways.
-fn found(hit: Option<tracer::geometry::Hit>, blocked: bool) -> f64 {
-    hit.map_or(-1.0, |h| f64::from(h.t) + f64::from(h.triangle)) + f64::from(u8::from(blocked))
 }
 
 /// `count` rays from points inside the middle 80 % of the box `lo`..`hi`, in uniformly random

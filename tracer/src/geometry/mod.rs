@@ -47,7 +47,6 @@ mod offset;
 mod packed_hit;
 mod packet;
 mod packet_box;
-mod pair;
 mod quad;
 #[cfg(target_arch = "x86_64")]
 mod quad_avx;

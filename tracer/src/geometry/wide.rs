@@ -82,13 +82,13 @@ pub(super) fn best_simd() -> BoxSimd {
 /// A child waiting on the traversal's stack, or the one being visited: an inner node, or a
 /// leaf's run of triangle groups.
 #[derive(Clone, Copy)]
-pub(super) struct StackEntry {
+struct StackEntry {
     /// An inner node's index in `Bvh8::nodes`, or a leaf's first group in `Bvh8::quads`.
-    pub(super) child: u32,
+    child: u32,
     /// The leaf's triangles; 0 for an inner node.
-    pub(super) count: u32,
+    count: u32,
     /// Where the ray enters the child's box.
-    pub(super) t_near: f32,
+    t_near: f32,
 }
 
 /// Stack entries held in place: a node pushes its entered children (at most eight) and pops
