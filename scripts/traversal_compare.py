@@ -18,7 +18,9 @@ by both can say. So this script
    process-CPU times, with the JIT's kernels compiled in a first untimed call;
 4. writes each set and Mitsuba's answers to OUT/SET.rays, and runs our
    `tracer/examples/trace_rays.rs` on them (one thread, thread-CPU time, the best of the same
-   rounds), which also counts the answers that differ;
+   rounds), which also counts the answers that differ; the camera rays twice, one by one and
+   a pixel's eight at a time as the renderer traces them (`packets`), since Mitsuba marks
+   them coherent and traces them as packets;
 5. prints a table and writes OUT/traversal.json.
 
 Mitsuba's times include what its JIT adds around Embree's call (reading the rays from its arrays,
@@ -69,20 +71,27 @@ def main():
         sets = draw_rays(mi, dr, scene, args.size, args.per_pixel)
         stem = args.out / toml.stem
         command = [args.example, str(toml), str(args.rounds)]
-        theirs = {}
+        # (set, Mitsuba's CPU-s) for each of our runs, in the order the example prints them.
+        runs = []
         for name, (ray, query) in sets.items():
-            seconds, answers = time_mitsuba(mi, dr, scene, ray, query, name == "camera", args.rounds)
-            theirs[name] = seconds
+            coherent = name == "camera"
+            seconds, answers = time_mitsuba(mi, dr, scene, ray, query, coherent, args.rounds)
             path = Path(f"{stem}-{name}.rays")
             write_rays(path, ray, answers)
             command += [str(path), query]
+            runs.append((name, seconds))
+            if coherent:
+                # Mitsuba traces them as packets; so does our renderer, a pixel's eight at a
+                # time: both ways of ours against its one.
+                command += [str(path), "packets"]
+                runs.append((name, seconds))
         ours = [json.loads(line) for line in subprocess.run(
             command, check=True, capture_output=True, text=True).stdout.splitlines()]
         rows = []
-        for name, line in zip(sets, ours[1:]):
+        for (name, seconds), line in zip(runs, ours[1:]):
             rows.append({"set": name, "query": line["query"], "rays": line["rays"],
-                         "tessera_cpu_seconds": line["cpu_seconds"], "mitsuba_cpu_seconds": theirs[name],
-                         "ratio": line["cpu_seconds"] / theirs[name], "differ": line["differ"],
+                         "tessera_cpu_seconds": line["cpu_seconds"], "mitsuba_cpu_seconds": seconds,
+                         "ratio": line["cpu_seconds"] / seconds, "differ": line["differ"],
                          "boxes_per_ray": line["boxes_per_ray"], "triangles_per_ray": line["triangles_per_ray"]})
         report["scenes"].append({"scene": str(toml), "triangles": triangles, "sets": rows,
                                  "tessera_build": ours[0]})

@@ -2,7 +2,12 @@
 //! alone, without shading, on exactly the rays Mitsuba 3 (Embree) traced, and whether both found
 //! the same hits. `scripts/traversal_compare.py` writes the ray files and runs this.
 //!
-//! `cargo run --release -p tracer --example trace_rays -- SCENE.toml ROUNDS [QUALITY] FILE.rays closest|any ...`
+//! `cargo run --release -p tracer --example trace_rays -- SCENE.toml ROUNDS [QUALITY] FILE.rays closest|any|packets ...`
+//!
+//! `packets` is `closest` with the file's rays taken [`PACKET`] at a time through
+//! `Accel::intersect_packet`, the walk the renderer gives a pixel's camera rays (which the file
+//! holds a pixel's in a row): the same answers, for comparison with the other renderer's
+//! coherent rays.
 //!
 //! `QUALITY` (`fastest` ... `very-slow`) builds the tree at that quality instead of the default.
 //!
@@ -16,7 +21,7 @@
 //! may differ, which the count shows rather than hides.
 
 use std::path::Path;
-use tracer::geometry::{Accel, BuildQuality, Ray, TraversalStats};
+use tracer::geometry::{Accel, BuildQuality, PACKET, Ray, TraversalStats};
 
 #[path = "support/thread_cpu.rs"]
 mod thread_cpu;
@@ -64,7 +69,7 @@ fn main() {
     let files = if quality.is_some() { 4 } else { 3 };
     if args.len() < files + 2 || !(args.len() - files).is_multiple_of(2) {
         eprintln!(
-            "usage: trace_rays SCENE.toml ROUNDS [QUALITY] FILE.rays closest|any [FILE.rays closest|any ...]"
+            "usage: trace_rays SCENE.toml ROUNDS [QUALITY] FILE.rays closest|any|packets [FILE.rays closest|any|packets ...]"
         );
         std::process::exit(2);
     }
@@ -83,11 +88,12 @@ fn main() {
     );
     for pair in args[files..].chunks_exact(2) {
         let (path, query) = (&pair[0], pair[1].as_str());
-        let any = match query {
-            "closest" => false,
-            "any" => true,
+        let (any, packets) = match query {
+            "closest" => (false, false),
+            "any" => (true, false),
+            "packets" => (false, true),
             other => {
-                eprintln!("{other}: the query is closest or any");
+                eprintln!("{other}: the query is closest, any or packets");
                 std::process::exit(2);
             }
         };
@@ -104,6 +110,13 @@ fn main() {
                     rays.iter()
                         .map(|ray| f32::from(u8::from(accel.occluded(ray, &mut stats)))),
                 );
+            } else if packets {
+                let mut hits = [None; PACKET];
+                for packet in rays.chunks(PACKET) {
+                    let found = &mut hits[..packet.len()];
+                    accel.intersect_packet(packet, found, &mut stats);
+                    answers.extend(found.iter().map(|h| h.map_or(f32::INFINITY, |h| h.t)));
+                }
             } else {
                 answers.extend(rays.iter().map(|ray| {
                     accel
