@@ -25,6 +25,8 @@ use super::packet_box::{PacketBound, PacketRays, enter_bound_portable, enter_chi
 #[cfg(target_arch = "x86_64")]
 use super::packet_box::{enter_bound_avx, enter_child_avx};
 use super::quad::{LaneHits, Quad, QuadRay};
+#[cfg(target_arch = "x86_64")]
+use super::quad_avx::RayLanes;
 use super::traverse::FAR_SCALE;
 use wide::{CmpGt, CmpLe, CmpLt, f32x4};
 
@@ -124,6 +126,24 @@ pub(super) trait BoxTest {
     /// The SIMD triangle test of two consecutive groups of a leaf, `a` in lanes 0 to 3 and `b`
     /// in lanes 4 to 7: [`QuadRay::intersect_pair`], lane for lane.
     fn intersect_pair(ray: &QuadRay, a: &Quad, b: &Quad) -> LaneHits<8>;
+
+    /// A packet's rays made into lanes for [`BoxTest::triangle_against_rays`].
+    type RayLanes: Copy;
+
+    /// The rays of a packet as lanes, one ray per lane, where this test has a step for one
+    /// triangle against eight rays and the rays share their permutation of the axes; `None`
+    /// where not, and the packet's leaves are then tested ray by ray.
+    fn ray_lanes(rays: &[QuadRay; 8]) -> Option<Self::RayLanes>;
+
+    /// Triangle `triangle` of `quad` against each ray of `rays` (lane `r` for ray `r`): for
+    /// each, the SIMD test's lane for that triangle and that ray, to the bit. `valid` names the
+    /// rays that need an answer.
+    fn triangle_against_rays(
+        rays: &Self::RayLanes,
+        quad: &Quad,
+        triangle: usize,
+        valid: u32,
+    ) -> LaneHits<8>;
 }
 
 /// Two SSE steps of four lanes (plain code off x86-64): every machine can run it.
@@ -135,6 +155,19 @@ impl BoxTest for Portable {
     #[inline(always)]
     fn intersect_pair(ray: &QuadRay, a: &Quad, b: &Quad) -> LaneHits<8> {
         ray.intersect_pair(a, b)
+    }
+
+    /// None: without AVX a packet's leaves are tested ray by ray (four triangles a step), as
+    /// every machine that lacks AVX is old enough that no speed is asked of it here.
+    type RayLanes = ();
+
+    #[inline(always)]
+    fn ray_lanes(_: &[QuadRay; 8]) -> Option<()> {
+        None
+    }
+
+    fn triangle_against_rays(_: &(), _: &Quad, _: usize, _: u32) -> LaneHits<8> {
+        unreachable!("the portable test hands out no ray lanes, so this step is never asked for")
     }
 
     #[inline(always)]
@@ -191,6 +224,24 @@ impl BoxTest for Avx {
     fn intersect_pair(ray: &QuadRay, a: &Quad, b: &Quad) -> LaneHits<8> {
         // SAFETY: as for `enter` below.
         unsafe { super::quad_avx::intersect_pair_avx(ray, a, b) }
+    }
+
+    type RayLanes = RayLanes;
+
+    #[inline(always)]
+    fn ray_lanes(rays: &[QuadRay; 8]) -> Option<RayLanes> {
+        RayLanes::new(rays)
+    }
+
+    #[inline(always)]
+    fn triangle_against_rays(
+        rays: &RayLanes,
+        quad: &Quad,
+        triangle: usize,
+        valid: u32,
+    ) -> LaneHits<8> {
+        // SAFETY: as for `enter` below.
+        unsafe { super::quad_avx::triangle_against_rays_avx(rays, quad, triangle, valid) }
     }
 
     #[inline(always)]

@@ -6,11 +6,17 @@
 //! Rays whose directions do not share their signs (whose boxes' near planes differ) are not
 //! made into a packet: each is traced alone.
 //!
+//! A leaf that most of the packet's rays reached is tested a triangle at a time against all of
+//! them, one ray per lane (`quad_avx.rs`, with AVX, where the rays permute the axes alike),
+//! rather than each ray against the leaf's triangles four or eight at a time: a pixel's rays
+//! mostly reach the same leaves, and there one step answers eight rays.
+//!
 //! **Exactness.** A packet changes only which nodes each ray is tested against and in which
 //! order, never how: lane `r` of a packet's box test computes exactly what the single-ray box
 //! test computes for ray `r` and that box, with the ray's own current end of search, and a
 //! leaf is tested for each ray by the very leaf test ([`Accel::test_leaf`], with its own
-//! sheared ray and its own [`Closest`]). A ray goes down to a child only if its own box test
+//! sheared ray and its own [`Closest`]), or by the lanes that compute, for each ray and
+//! triangle, what that leaf test's lanes compute (`Accel::leaf_against_rays`). A ray goes down to a child only if its own box test
 //! entered the child's box, and culling is conservative, so the leaf holding its closest hit
 //! is always tested for it. Since [`Closest`] breaks ties in `t` by triangle index, each ray's
 //! hit is the one the single-ray traversal (and brute force) finds, to the bit, whatever its
@@ -26,7 +32,7 @@ use super::bvh::{Accel, Closest};
 use super::node8::Avx;
 use super::node8::{BoxTest, Portable, WIDTH, WideRay};
 use super::packet_box::{PacketBound, PacketRays};
-use super::quad::QuadRay;
+use super::quad::{LANES, QuadRay};
 use super::traverse::FAR_SCALE;
 use super::triangle::ShearedRay;
 use super::wide::{BoxSimd, WalkStack, push_sorted};
@@ -155,6 +161,10 @@ impl Accel {
         let bound = packet_bound(&packet);
         let sheared: [ShearedRay; PACKET] = per_ray(|r| ShearedRay::new(ray(r)));
         let quad: [QuadRay; PACKET] = per_ray(|r| QuadRay::new(&sheared[r]));
+        // The rays in lanes, for leaves tested a triangle against all of them at once: where
+        // the box test has that step (AVX) and the rays permute the axes alike, as a pixel's
+        // camera rays nearly always do.
+        let lanes = B::ray_lanes(&quad);
         let mut closest: [Closest; PACKET] = per_ray(|r| Closest::new(ray(r), false));
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         // Each ray's current end of search for the box tests.
@@ -175,24 +185,41 @@ impl Accel {
         let mut len = 0usize;
         loop {
             if current.count > 0 {
-                let mut rays = current.rays;
-                let mut moved = false;
-                while rays != 0 {
-                    let r = rays.trailing_zeros() as usize;
-                    rays &= rays - 1;
-                    if self.test_leaf::<false, B>(
-                        current.child,
-                        current.count,
-                        &sheared[r],
-                        &quad[r],
-                        &mut closest[r],
-                        stats,
-                    ) {
-                        end[r] = cull(&closest[r]);
-                        moved = true;
+                // A triangle against all eight lanes costs about what one ray's test of a
+                // group of four costs, so the lanes pay where the rays that reached the leaf
+                // are not few against its triangles: at two thirds of them or more, cachegrind
+                // counted the fewest instructions on the box, the dragon and Sponza (whose
+                // packets part ways more often) among the thresholds tried (a half, two
+                // thirds, one, five quarters; docs/bench.md, issue 12, twenty-fourth round).
+                let mut moved = if let Some(lanes) = lanes
+                    .as_ref()
+                    .filter(|_| current.rays.count_ones() * 3 >= current.count * 2)
+                {
+                    self.leaf_against_rays::<B>(&current, lanes, &sheared, &mut closest, stats)
+                } else {
+                    let (mut rays, mut moved) = (current.rays, 0u32);
+                    while rays != 0 {
+                        let r = rays.trailing_zeros() as usize;
+                        rays &= rays - 1;
+                        if self.test_leaf::<false, B>(
+                            current.child,
+                            current.count,
+                            &sheared[r],
+                            &quad[r],
+                            &mut closest[r],
+                            stats,
+                        ) {
+                            moved |= 1 << r;
+                        }
                     }
-                }
-                if moved {
+                    moved
+                };
+                if moved != 0 {
+                    while moved != 0 {
+                        let r = moved.trailing_zeros() as usize;
+                        moved &= moved - 1;
+                        end[r] = cull(&closest[r]);
+                    }
                     farthest = farthest_of(&end);
                 }
             } else {
@@ -256,6 +283,53 @@ impl Accel {
     }
 }
 
+impl Accel {
+    /// The leaf `entry` names tested for each of its rays, a triangle against all of them at
+    /// once ([`BoxTest::triangle_against_rays`]); returns the rays whose closest hit it moved.
+    ///
+    /// For each ray this offers exactly what [`Accel::test_leaf`] offers it: every triangle of
+    /// the leaf, with the SIMD test's own hit where that lane is exact and through the scalar
+    /// test where not, so that the closest hit is the same (the order of offers never matters,
+    /// [`Closest::offer`]'s tie rule). It counts what `test_leaf` counts for a closest-hit
+    /// query, the leaf's triangles once per ray.
+    #[inline(always)]
+    fn leaf_against_rays<B: BoxTest>(
+        &self,
+        entry: &PacketEntry,
+        lanes: &B::RayLanes,
+        sheared: &[ShearedRay; PACKET],
+        closest: &mut [Closest; PACKET],
+        stats: &mut TraversalStats,
+    ) -> u32 {
+        let groups = (entry.count as usize).div_ceil(LANES);
+        let first = entry.child as usize;
+        let mut moved = 0u32;
+        for quad in &self.wide.quads[first..first + groups] {
+            for i in 0..quad.len as usize {
+                let hits = B::triangle_against_rays(lanes, quad, i, entry.rays);
+                let original = quad.original[i];
+                let mut candidates = hits.candidates & entry.rays;
+                while candidates != 0 {
+                    let r = candidates.trailing_zeros() as usize;
+                    candidates &= candidates - 1;
+                    let kept = if hits.exact & (1 << r) != 0 {
+                        closest[r].offer_hit(hits.hit(r), original)
+                    } else {
+                        let k = quad.entry as usize + i;
+                        closest[r].offer(&sheared[r], &self.vertices[k], original)
+                    };
+                    if kept {
+                        moved |= 1 << r;
+                        self.prefetch_hit(original);
+                    }
+                }
+            }
+        }
+        stats.triangles += u64::from(entry.count) * u64::from(entry.rays.count_ones());
+        moved
+    }
+}
+
 /// The interval the rays of `packet` span (all its lanes: slots past its rays repeat its last
 /// one), for the test that rejects at once the boxes none of them enters; `None` where a
 /// reciprocal direction is infinite or zero, for which that test's argument (no NaN) does not
@@ -299,6 +373,8 @@ pub(super) fn packet_bound(packet: &PacketRays) -> Option<PacketBound> {
 /// result copied into place by `memcpy`: 2 % of the Cornell box's time went to that copy and
 /// the call (`docs/bench.md`, issue 12, twenty-second round). Slots 1 on briefly hold a copy
 /// of `f(0)` and are overwritten: `f` is called once per index, in order, as `from_fn` did.
+/// (Slots left uninitialised and written once, then read out as the array, cost more: the
+/// read-out is a copy.)
 #[inline(always)]
 fn per_ray<T: Copy>(f: impl Fn(usize) -> T) -> [T; PACKET] {
     let mut out = [f(0); PACKET];

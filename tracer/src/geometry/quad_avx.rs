@@ -2,7 +2,9 @@
 //! two consecutive groups of a leaf, the first in lanes 0 to 3, the second in lanes 4 to 7.
 //! Used only where the processor has AVX (chosen at run time, with the 8-wide box test of
 //! `node8.rs`), so that a leaf of five to eight triangles, obvhs's largest, costs one step
-//! instead of two.
+//! instead of two. The same lanes also take one triangle against the eight rays of a packet
+//! (`packet.rs`), one ray per lane: the one body, [`watertight_lanes`], given its lanes either
+//! way.
 //!
 //! Why it keeps the four-triangle layout rather than a leaf of eight in one block: most leaves
 //! hold four triangles or fewer, and padding them all to eight would double the memory that the
@@ -33,11 +35,11 @@ use std::arch::x86_64::*;
 #[target_feature(enable = "avx")]
 #[inline]
 pub(super) unsafe fn intersect_pair_avx(ray: &QuadRay, a: &Quad, b: &Quad) -> LaneHits<8> {
-    let [kx, ky, kz] = ray.axes();
-    let [ox, oy, oz, sx, sy, sz] = ray.scalars.map(|s| _mm256_set1_ps(s));
-    // Vertex `v`'s coordinate `axis` of both groups: `a`'s lanes low, `b`'s high.
-    let load = |v: usize, axis: usize| {
-        let (low, high) = (&a.p[v][axis], &b.p[v][axis]);
+    let axes = ray.axes();
+    // Vertex `v`'s coordinate `j` (of the ray's permutation) of both groups: `a`'s lanes low,
+    // `b`'s high.
+    let load = |v: usize, j: usize| {
+        let (low, high) = (&a.p[v][axes[j]], &b.p[v][axes[j]]);
         // SAFETY: each is four f32 in bounds of its group (`wide::f32x4` holds exactly four).
         unsafe {
             _mm256_loadu2_m128(
@@ -46,6 +48,86 @@ pub(super) unsafe fn intersect_pair_avx(ray: &QuadRay, a: &Quad, b: &Quad) -> La
             )
         }
     };
+    let ray = ray.scalars.map(|s| _mm256_set1_ps(s));
+    // SAFETY: this function's own contract.
+    unsafe { watertight_lanes(load, &ray, a.valid | b.valid << 4) }
+}
+
+/// One triangle of `quad` (its lane `triangle`) against the eight rays of `rays`, lane `r`
+/// for ray `r`: what [`intersect_pair_avx`] computes for that triangle in its lane, with each
+/// ray's own origin and shear in place of the one ray's. The rays must share their
+/// permutation (`axes`), which the triangle's coordinates are taken in.
+///
+/// Why the results are the scalar test's: lane `r` takes the operations of the eight-lane
+/// test on the operands the four-lane test of ray `r` (`QuadRay::intersect`) would give that
+/// triangle's lane (its coordinates as `Quad` stores them, the ray's `QuadRay::scalars`), in
+/// the same order; `quad.rs` holds those to the scalar test, lane by lane. Only `valid`
+/// differs: it names the rays to be answered, and a ray outside it may be answered anyhow.
+///
+/// # Safety
+/// The processor must support AVX.
+#[target_feature(enable = "avx")]
+#[inline]
+pub(super) unsafe fn triangle_against_rays_avx(
+    rays: &RayLanes,
+    quad: &Quad,
+    triangle: usize,
+    valid: u32,
+) -> LaneHits<8> {
+    let axes = rays.axes;
+    let load =
+        |v: usize, j: usize| _mm256_broadcast_ss(&quad.p[v][axes[j]].as_array_ref()[triangle]);
+    // SAFETY: `RayLanes` holds eight f32 per row; the loads are unaligned.
+    let ray = rays
+        .lanes
+        .map(|row| unsafe { _mm256_loadu_ps(row.as_ptr()) });
+    // SAFETY: this function's own contract.
+    unsafe { watertight_lanes(load, &ray, valid) }
+}
+
+/// Eight rays of a packet that share their permutation, for [`triangle_against_rays_avx`]:
+/// row `k` holds, lane `r` for ray `r`, the `k`-th of ray `r`'s [`QuadRay::scalars`] (the
+/// permuted origin, then the shear).
+#[derive(Clone, Copy)]
+pub(super) struct RayLanes {
+    pub(super) axes: [usize; 3],
+    pub(super) lanes: [[f32; 8]; 6],
+}
+
+impl RayLanes {
+    /// The rays' lanes, or `None` where two of them permute the axes differently (a
+    /// triangle's coordinates are then not the same lanes for all).
+    #[inline(always)]
+    pub(super) fn new(rays: &[QuadRay; 8]) -> Option<RayLanes> {
+        // The permutation follows from the axis that becomes z (`triangle::AXES`).
+        let axes = rays[0].axes();
+        if rays.iter().any(|ray| ray.axes()[2] != axes[2]) {
+            return None;
+        }
+        let mut lanes = [[0.0; 8]; 6];
+        for (r, ray) in rays.iter().enumerate() {
+            for (row, &value) in lanes.iter_mut().zip(&ray.scalars) {
+                row[r] = value;
+            }
+        }
+        Some(RayLanes { axes, lanes })
+    }
+}
+
+/// The eight-lane watertight test, as far as it goes in f32, on the permuted coordinate
+/// lanes `coordinate(v, j)` of vertex `v` and the ray lanes `ray` (the permuted origin, then
+/// the shear): the one body of [`intersect_pair_avx`] and [`triangle_against_rays_avx`].
+///
+/// # Safety
+/// The processor must support AVX.
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn watertight_lanes(
+    coordinate: impl Fn(usize, usize) -> __m256,
+    ray: &[__m256; 6],
+    valid: u32,
+) -> LaneHits<8> {
+    let [ox, oy, oz, sx, sy, sz] = *ray;
     let zero = _mm256_setzero_ps();
     let lt = |x, y| _mm256_cmp_ps::<_CMP_LT_OQ>(x, y);
     let gt = |x, y| _mm256_cmp_ps::<_CMP_GT_OQ>(x, y);
@@ -62,9 +144,9 @@ pub(super) unsafe fn intersect_pair_avx(ray: &QuadRay, a: &Quad, b: &Quad) -> La
 
     // `sheared(v)`: `(x + sx * z, y + sy * z, z)` of `p - origin`, permuted.
     let sheared = |v: usize| {
-        let x = sub(load(v, kx), ox);
-        let y = sub(load(v, ky), oy);
-        let z = sub(load(v, kz), oz);
+        let x = sub(coordinate(v, 0), ox);
+        let y = sub(coordinate(v, 1), oy);
+        let z = sub(coordinate(v, 2), oz);
         (add(x, mul(sx, z)), add(y, mul(sy, z)), z)
     };
     let (p0, p1, p2) = (sheared(0), sheared(1), sheared(2));
@@ -76,7 +158,6 @@ pub(super) unsafe fn intersect_pair_avx(ray: &QuadRay, a: &Quad, b: &Quad) -> La
     let negative = or(or(lt(e0, zero), lt(e1, zero)), lt(e2, zero));
     let positive = or(or(gt(e0, zero), gt(e1, zero)), gt(e2, zero));
     let outside = and(negative, positive);
-    let valid = a.valid | b.valid << 4;
     // As in the four-lane test: where every lane is missed at the first step, nothing else
     // decides anything (both groups' tests stop there too, or find no candidate).
     if !(_mm256_movemask_ps(outside) as u32) & valid == 0 {
@@ -153,5 +234,131 @@ pub(super) unsafe fn intersect_pair_avx(ray: &QuadRay, a: &Quad, b: &Quad) -> La
             store(mul(e1, inv_det)),
             store(mul(e2, inv_det)),
         ],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Ray;
+    use crate::geometry::quad::LANES;
+    use crate::geometry::triangle::ShearedRay;
+    use glam::Vec3;
+
+    /// The build tests' splitmix64 step mapped to [-1, 1), as `quad.rs`'s tests draw.
+    fn next(state: &mut u64) -> f32 {
+        2.0 * crate::geometry::build::tests::next(state) - 1.0
+    }
+
+    /// Eight rays against four triangles, at scales from a millimetre to ten kilometres and
+    /// far from the origin, the rays from one point (a pixel's) or from a disc (a lens's),
+    /// aimed at a point that half the triangles have as a vertex (so that edge functions are
+    /// exactly zero and lanes go to the scalar test) or nearby: each ray's lane of
+    /// `triangle_against_rays_avx`, for each triangle, is that triangle's lane of the
+    /// four-lane test of that ray alone, in everything the packet walk reads.
+    #[test]
+    fn a_triangle_against_eight_rays_is_each_rays_own_four_lane_test_bit_for_bit() {
+        if !crate::geometry::node8::avx_available() {
+            eprintln!("skipped: this processor has no AVX, so there is no such step to run");
+            return;
+        }
+        let mut state = 23;
+        let point = |s: &mut u64| Vec3::new(next(s), next(s), next(s));
+        let (mut compared, mut exact, mut scalar, mut mixed) = (0, 0, 0, 0);
+        for round in 0..6_000 {
+            let scale = [1e-3, 1.0, 1e4][round % 3];
+            let centre = [Vec3::ZERO, Vec3::new(3e4, -1e4, 2e4)][round / 3 % 2] * scale;
+            let aim = centre + point(&mut state) * (0.5 * scale);
+            let triangles: Vec<[Vec3; 3]> = (0..LANES)
+                .map(|i| {
+                    let a = if i % 2 == 0 {
+                        aim
+                    } else {
+                        centre + point(&mut state) * scale
+                    };
+                    let mut other = || centre + point(&mut state) * scale;
+                    [a, other(), other()]
+                })
+                .collect();
+            let eye = centre + point(&mut state) * (4.0 * scale);
+            let spread = [0.0, 1e-3, 0.05][round % 3];
+            let rays: Vec<Ray> = (0..8)
+                .map(|r| {
+                    let origin = if round % 2 == 0 {
+                        eye
+                    } else {
+                        eye + point(&mut state) * (spread * scale)
+                    };
+                    let target = if r % 3 == 0 {
+                        aim
+                    } else {
+                        aim + point(&mut state) * (spread * scale)
+                    };
+                    Ray {
+                        origin,
+                        dir: target - origin,
+                        t_max: f32::INFINITY,
+                    }
+                })
+                .collect();
+            let quad_rays: [QuadRay; 8] =
+                std::array::from_fn(|r| QuadRay::new(&ShearedRay::new(&rays[r])));
+            let Some(lanes) = RayLanes::new(&quad_rays) else {
+                // Rays that permute the axes differently are not put in lanes.
+                let kz = quad_rays[0].axes()[2];
+                assert!(quad_rays.iter().any(|q| q.axes()[2] != kz));
+                mixed += 1;
+                continue;
+            };
+            let quad = Quad::pack(&triangles, &[0, 1, 2, 3], 0)
+                .next()
+                .expect("four triangles, one group");
+            let alone: Vec<LaneHits<LANES>> =
+                quad_rays.iter().map(|q| q.intersect(&quad)).collect();
+            for (i, triangle) in triangles.iter().enumerate() {
+                for valid in [0xff, 0b1010_0110] {
+                    // SAFETY: this processor has AVX (checked above).
+                    let together = unsafe { triangle_against_rays_avx(&lanes, &quad, i, valid) };
+                    for r in (0..8).filter(|r| valid & (1 << r) != 0) {
+                        let one = &alone[r];
+                        let candidate = one.candidates & (1 << i) != 0;
+                        assert_eq!(
+                            together.candidates & (1 << r) != 0,
+                            candidate,
+                            "ray {r}, triangle {i}: {triangle:?} by {:?}",
+                            rays[r]
+                        );
+                        let settled = one.exact & (1 << i) != 0;
+                        assert_eq!(
+                            together.exact & (1 << r) != 0,
+                            settled,
+                            "ray {r}, triangle {i}"
+                        );
+                        if settled {
+                            let bits = |h: crate::geometry::TriangleHit| {
+                                [h.t, h.t_error, h.b0, h.b1, h.b2].map(f32::to_bits)
+                            };
+                            assert_eq!(bits(together.hit(r)), bits(one.hit(i)));
+                            exact += 1;
+                        } else if candidate {
+                            scalar += 1;
+                        }
+                        compared += 1;
+                    }
+                }
+            }
+        }
+        // Sanity checks that the comparison is not vacuous: many lanes settled in SIMD, many
+        // left to the scalar test (the zero edge functions), and most packets in lanes.
+        assert!(compared > 200_000, "{compared} lanes compared");
+        assert!(exact > 10_000, "only {exact} lanes settled in SIMD");
+        assert!(
+            scalar > 5_000,
+            "only {scalar} candidates left to the scalar test"
+        );
+        assert!(
+            mixed < 600,
+            "{mixed} of 6000 packets permuted their axes differently"
+        );
     }
 }
