@@ -31,7 +31,7 @@ use super::bvh::{Accel, Closest};
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
 use super::node8::{BoxTest, Portable, WIDTH, WideRay};
-use super::packet_box::{PacketBound, PacketRays};
+use super::packet_box::{PacketBound, PacketRays, within};
 use super::quad::{LANES, QuadRay};
 use super::traverse::FAR_SCALE;
 use super::triangle::ShearedRay;
@@ -267,13 +267,7 @@ impl Accel {
                 len -= 1;
                 // SAFETY: entries below the old `len` were written by the pushes above.
                 let mut entry = unsafe { stack.get_unchecked(len).assume_init() };
-                // Every lane compared, in one step where the compiler makes it one: no
-                // arithmetic, so nothing a lane computes could differ.
-                let mut within = 0u32;
-                for (r, (t_near, end)) in entry.t_near.iter().zip(&end).enumerate() {
-                    within |= u32::from(t_near <= end) << r;
-                }
-                entry.rays &= within;
+                entry.rays &= within(&entry.t_near, &end);
                 if entry.rays != 0 {
                     current = entry;
                     break;

@@ -197,6 +197,25 @@ pub(super) unsafe fn enter_child_avx(
     unsafe { slab_result_avx(t0, t1) }
 }
 
+/// The rays (bit `r`) whose entry distance `t_near[r]` is within their end of search
+/// `end[r]`: the ordered comparison `t_near <= end` of every lane, false on NaN as the scalar
+/// one is, in two four-lane steps (compared one by one, with the shifts that gather the bits,
+/// it was 24 instructions per ray on Sponza's camera rays). A comparison computes nothing, so
+/// no lane's answer can differ.
+#[inline(always)]
+pub(super) fn within(t_near: &[f32; WIDTH], end: &[f32; WIDTH]) -> u32 {
+    let half = |h: usize| {
+        let lanes = |x: &[f32; WIDTH]| {
+            let four: &[f32; 4] = x[4 * h..4 * h + 4]
+                .try_into()
+                .expect("a half of eight lanes is four");
+            f32x4::new(*four)
+        };
+        lanes(t_near).cmp_le(lanes(end)).move_mask() as u32
+    };
+    half(0) | half(1) << 4
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -218,6 +237,31 @@ mod tests {
 
         fn range(&mut self, low: f32, high: f32) -> f32 {
             low + (high - low) * self.unit()
+        }
+    }
+
+    #[test]
+    fn within_is_the_scalar_comparison_of_every_lane_on_every_kind_of_float() {
+        let kinds = [
+            0.0,
+            -0.0,
+            f32::MIN_POSITIVE,
+            1e-40,
+            1.0,
+            1.0 + f32::EPSILON,
+            -3.0,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ];
+        let mut stream = Stream(41);
+        let mut pick = || kinds[(stream.unit() * kinds.len() as f32) as usize];
+        for _ in 0..20_000 {
+            let t_near: [f32; WIDTH] = std::array::from_fn(|_| pick());
+            let end: [f32; WIDTH] = std::array::from_fn(|_| pick());
+            let scalar = (0..WIDTH).fold(0, |bits, r| bits | u32::from(t_near[r] <= end[r]) << r);
+            assert_eq!(within(&t_near, &end), scalar, "{t_near:?} against {end:?}");
         }
     }
 
