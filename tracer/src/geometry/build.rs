@@ -106,13 +106,19 @@ pub(crate) mod tests {
     use super::*;
     use glam::DVec3;
 
-    /// A splitmix64 step mapped to [0, 1), for test scenes (and `quad.rs`'s tests).
+    /// A splitmix64 step mapped to [0, 1), for test scenes (and the SIMD triangle tests').
     pub(crate) fn next(state: &mut u64) -> f32 {
         *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = *state;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// [`next`] mapped to [-1, 1), for the SIMD triangle tests' points (doubling and the
+    /// subtraction are exact, so the draws are `next`'s own).
+    pub(crate) fn next_signed(state: &mut u64) -> f32 {
+        2.0 * next(state) - 1.0
     }
 
     /// Small triangles in a 20-wide cube plus long diagonal slivers, whose boxes are mostly empty

@@ -122,7 +122,7 @@ mod tests {
         // collapse keeps leaves of up to eight, which the AVX traversal tests two groups at a
         // time and the SSE one group by group.
         let mut state = 0x0005_ca1e;
-        let mut next = || 2.0 * crate::geometry::build::tests::next(&mut state) - 1.0;
+        let mut next = || crate::geometry::build::tests::next_signed(&mut state);
         let triangles: Vec<Triangle> = (0..600)
             .map(|_| {
                 let a = Vec3::new(next(), next(), next());

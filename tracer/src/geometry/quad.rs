@@ -246,12 +246,7 @@ impl<const N: usize> LaneHits<N> {
 mod tests {
     use super::*;
     use crate::geometry::Ray;
-
-    /// The build tests' splitmix64 step mapped to [-1, 1) (doubling and the subtraction are
-    /// exact, so the draws are the same as before it was shared).
-    fn next(state: &mut u64) -> f32 {
-        2.0 * crate::geometry::build::tests::next(state) - 1.0
-    }
+    use crate::geometry::build::tests::next_signed as next;
 
     #[test]
     fn simd_lanes_reject_only_misses_and_their_hits_are_the_scalar_ones() {

@@ -241,14 +241,10 @@ unsafe fn watertight_lanes(
 mod tests {
     use super::*;
     use crate::geometry::Ray;
+    use crate::geometry::build::tests::next_signed as next;
     use crate::geometry::quad::LANES;
     use crate::geometry::triangle::ShearedRay;
     use glam::Vec3;
-
-    /// The build tests' splitmix64 step mapped to [-1, 1), as `quad.rs`'s tests draw.
-    fn next(state: &mut u64) -> f32 {
-        2.0 * crate::geometry::build::tests::next(state) - 1.0
-    }
 
     /// Eight rays against four triangles, at scales from a millimetre to ten kilometres and
     /// far from the origin, the rays from one point (a pixel's) or from a disc (a lens's),
