@@ -15,7 +15,10 @@
 
 mod common;
 
-use common::{assert_close, assert_same_bits, mean_and_error, radiance_under_the_light, render};
+use common::{
+    assert_close, assert_same_bits, mean_and_error, radiance_under_the_light, render,
+    slab_under_a_point_light,
+};
 use glam::Vec3;
 use tracer::Effects;
 use tracer::scene::{Scene, load_str};
@@ -81,37 +84,10 @@ fn an_absorbing_medium_loses_energy_in_the_furnace() {
     assert!(mean.max_element() < 0.9, "mean {mean}");
 }
 
-/// A horizontal slab `[-0.5, 0.5] x [2, 2 + d] x [-0.5, 0.5]` bounded by an interface and filled
-/// with `medium`, a point light of intensity 16 at height 4 above the origin and a white diffuse
-/// floor; direct light only.
-fn slab_scene(thickness: f32, medium: &str) -> String {
-    let top = 2.0 + thickness;
-    format!(
-        r#"
-        render = {{ width = 8, height = 8, spp = 1, max_depth = 1, russian_roulette_depth = "off" }}
-        camera = {{ position = [3, 1, 0], look_at = [0, 0, 0] }}
-        object = [
-            {{ shape = "quad", corners = [[-4, 0, -4], [-4, 0, 4], [4, 0, 4], [4, 0, -4]], material = "floor" }},
-            {{ shape = "box", min = [-0.5, 2, -0.5], max = [0.5, {top}, 0.5], material = "slab" }},
-        ]
-        [[light]]
-        type = "point"
-        position = [0, 4, 0]
-        intensity = 16
-        [materials.floor]
-        type = "diffuse"
-        albedo = 1
-        [materials.slab]
-        type = "interface"
-        {medium}
-        "#
-    )
-}
-
 #[test]
 fn shadow_rays_through_a_slab_carry_exp_of_minus_sigma_t_d() {
     // albedo / pi * I / r^2 with r = 4, cos = 1, through a vacuum-filled interface.
-    let (clear, _) = radiance_under_the_light(load(&slab_scene(1.0, "")));
+    let (clear, _) = radiance_under_the_light(load(&slab_under_a_point_light(1.0, "")));
     let by_hand = 16.0 / (16.0 * std::f64::consts::PI);
     for c in 0..3 {
         assert!(
@@ -127,7 +103,10 @@ fn shadow_rays_through_a_slab_carry_exp_of_minus_sigma_t_d() {
     ];
     for thickness in [0.1f32, 0.5, 1.0, 1.75] {
         for (medium, sigma_t) in coefficients {
-            let toml = slab_scene(thickness, &format!("medium = \"m\"\n[media.m]\n{medium}"));
+            let toml = slab_under_a_point_light(
+                thickness,
+                &format!("medium = \"m\"\n[media.m]\n{medium}"),
+            );
             let (through, stats) = radiance_under_the_light(load(&toml));
             // One shadow ray and two more segments past the slab's two faces.
             assert_eq!(stats.shadow_rays, 3, "{medium}, d = {thickness}");

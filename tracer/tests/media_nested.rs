@@ -15,7 +15,10 @@
 
 mod common;
 
-use common::{assert_close, assert_same_bits, mean_and_error, radiance_under_the_light, render};
+use common::{
+    assert_close, assert_same_bits, mean_and_error, radiance_under_the_light, render,
+    under_a_point_light,
+};
 use glam::Vec3;
 use tracer::Effects;
 use tracer::scene::{Scene, load_str};
@@ -63,25 +66,12 @@ fn nested_boundaries(m1: &str, m2: &str, nested: bool) -> String {
 /// `nested`. Direct light only.
 fn boxes_under_a_light(d2: f32, m1: &str, m2: &str, nested: bool) -> String {
     let top = 1.4 + d2;
-    let boundaries = nested_boundaries(m1, m2, nested);
-    format!(
-        r#"
-        render = {{ width = 8, height = 8, spp = 1, max_depth = 1, russian_roulette_depth = "off" }}
-        camera = {{ position = [3, 1, 0], look_at = [0, 0, 0] }}
-        object = [
-            {{ shape = "quad", corners = [[-4, 0, -4], [-4, 0, 4], [4, 0, 4], [4, 0, -4]], material = "floor" }},
-            {{ shape = "box", min = [-1, 1, -1], max = [1, 3, 1], material = "a" }},
-            {{ shape = "box", min = [-0.5, 1.4, -0.5], max = [0.5, {top}, 0.5], material = "b" }},
-        ]
-        [[light]]
-        type = "point"
-        position = [0, 4, 0]
-        intensity = 16
-        [materials.floor]
-        type = "diffuse"
-        albedo = 1
-        {boundaries}
-        "#
+    under_a_point_light(
+        &format!(
+            r#"{{ shape = "box", min = [-1, 1, -1], max = [1, 3, 1], material = "a" }},
+            {{ shape = "box", min = [-0.5, 1.4, -0.5], max = [0.5, {top}, 0.5], material = "b" }},"#
+        ),
+        &nested_boundaries(m1, m2, nested),
     )
 }
 

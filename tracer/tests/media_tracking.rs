@@ -14,9 +14,11 @@
 
 mod common;
 
-use common::{assert_close, mean_and_error, render};
+use common::{
+    assert_close, mean_and_error, ray_to_the_floor_under_the_light, render,
+    slab_under_a_point_light,
+};
 use glam::Vec3;
-use tracer::geometry::Ray;
 use tracer::medium::MediaSampling;
 use tracer::sampler::PixelSampler;
 use tracer::scene::{Scene, load_str};
@@ -124,36 +126,12 @@ fn ratio_tracked_shadow_rays_through_a_slab_average_exp_of_minus_sigma_t_d() {
     for sampling in ratio {
         for thickness in [0.3f32, 1.2] {
             for (medium, sigma_t) in coefficients {
-                let top = 2.0 + thickness;
-                let toml = format!(
-                    r#"
-                    render = {{ width = 8, height = 8, spp = 1, max_depth = 1, russian_roulette_depth = "off" }}
-                    camera = {{ position = [3, 1, 0], look_at = [0, 0, 0] }}
-                    object = [
-                        {{ shape = "quad", corners = [[-4, 0, -4], [-4, 0, 4], [4, 0, 4], [4, 0, -4]], material = "floor" }},
-                        {{ shape = "box", min = [-0.5, 2, -0.5], max = [0.5, {top}, 0.5], material = "slab" }},
-                    ]
-                    [[light]]
-                    type = "point"
-                    position = [0, 4, 0]
-                    intensity = 16
-                    [materials.floor]
-                    type = "diffuse"
-                    albedo = 1
-                    [materials.slab]
-                    type = "interface"
-                    medium = "m"
-                    [media.m]
-                    {medium}
-                    "#
+                let toml = slab_under_a_point_light(
+                    thickness,
+                    &format!("medium = \"m\"\n[media.m]\n{medium}"),
                 );
                 let world = World::prepare(load(&toml, sampling), None);
-                let origin = Vec3::new(3.0, 1.0, 0.0);
-                let ray = Ray {
-                    origin,
-                    dir: (Vec3::ZERO - origin).normalize(),
-                    t_max: f32::INFINITY,
-                };
+                let ray = ray_to_the_floor_under_the_light();
                 let n = 20_000u32;
                 let mut sum = [0.0f64; 3];
                 for sample in 0..n {

@@ -146,20 +146,63 @@ pub fn load_with(toml: &str, files: &[(&str, Vec<u8>)]) -> Result<Scene, tracer:
     tracer::scene::load_from(&set, "scene.toml")
 }
 
-/// The radiance of one path from `(3, 1, 0)` to the floor point under the light (the origin):
-/// the media tests' scenes put a point light straight above that point, with slabs or boxes of
-/// media between, and keep the camera ray clear of them, so the path is deterministic and
-/// next-event estimation alone reaches the light, along a vertical shadow ray.
-pub fn radiance_under_the_light(scene: Scene) -> (Vec3, PathStats) {
-    let world = World::prepare(scene, None);
+/// The media tests' scene: a white diffuse floor at y = 0, the rays' eye at `(3, 1, 0)` (see
+/// [`ray_to_the_floor_under_the_light`]), a point light of intensity 16 at height 4 above the
+/// origin, and `objects` (TOML inline tables, each with its trailing comma) with their
+/// `materials` (TOML tables) between; direct light only.
+pub fn under_a_point_light(objects: &str, materials: &str) -> String {
+    format!(
+        r#"
+        render = {{ width = 8, height = 8, spp = 1, max_depth = 1, russian_roulette_depth = "off" }}
+        camera = {{ position = [3, 1, 0], look_at = [0, 0, 0] }}
+        object = [
+            {{ shape = "quad", corners = [[-4, 0, -4], [-4, 0, 4], [4, 0, 4], [4, 0, -4]], material = "floor" }},
+            {objects}
+        ]
+        [[light]]
+        type = "point"
+        position = [0, 4, 0]
+        intensity = 16
+        [materials.floor]
+        type = "diffuse"
+        albedo = 1
+        {materials}
+        "#
+    )
+}
+
+/// [`under_a_point_light`] with a horizontal slab `[-0.5, 0.5] x [2, 2 + d] x [-0.5, 0.5]`
+/// between the floor and the light, bounded by an interface whose table's further lines are
+/// `medium` (for instance `medium = "m"` and the medium's own table).
+pub fn slab_under_a_point_light(thickness: f32, medium: &str) -> String {
+    let top = 2.0 + thickness;
+    under_a_point_light(
+        &format!(
+            r#"{{ shape = "box", min = [-0.5, 2, -0.5], max = [0.5, {top}, 0.5], material = "slab" }},"#
+        ),
+        &format!("[materials.slab]\ntype = \"interface\"\n{medium}"),
+    )
+}
+
+/// The ray from the media tests' eye to the floor point under their light (the origin). The
+/// scenes keep it clear of their media, so next-event estimation alone reaches the light, along
+/// a vertical shadow ray.
+pub fn ray_to_the_floor_under_the_light() -> tracer::geometry::Ray {
     let origin = Vec3::new(3.0, 1.0, 0.0);
-    let ray = tracer::geometry::Ray {
+    tracer::geometry::Ray {
         origin,
         dir: (Vec3::ZERO - origin).normalize(),
         t_max: f32::INFINITY,
-    };
+    }
+}
+
+/// The radiance of the one path along [`ray_to_the_floor_under_the_light`] (with the first
+/// pixel sampler, deterministic here) and what it did.
+pub fn radiance_under_the_light(scene: Scene) -> (Vec3, PathStats) {
+    let world = World::prepare(scene, None);
     let mut stats = PathStats::default();
     let mut sampler = tracer::sampler::PixelSampler::new(0, 0, 0, 0, 0);
+    let ray = ray_to_the_floor_under_the_light();
     let radiance = world.radiance(ray, 0.0, &mut sampler, &mut stats);
     (radiance, stats)
 }
