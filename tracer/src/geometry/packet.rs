@@ -16,12 +16,12 @@
 //! test computes for ray `r` and that box, with the ray's own current end of search, and a
 //! leaf is tested for each ray by the very leaf test ([`Accel::test_leaf`], with its own
 //! sheared ray and its own [`Closest`]), or by the lanes that compute, for each ray and
-//! triangle, what that leaf test's lanes compute (`Accel::leaf_against_rays`). A ray goes down to a child only if its own box test
-//! entered the child's box, and culling is conservative, so the leaf holding its closest hit
-//! is always tested for it. Since [`Closest`] breaks ties in `t` by triangle index, each ray's
-//! hit is the one the single-ray traversal (and brute force) finds, to the bit, whatever its
-//! companions. `tracer/tests/packet_traversal.rs` holds the two to each other ray by ray and
-//! image by image.
+//! triangle, what that leaf test's lanes compute (`Accel::leaf_against_rays`). A ray goes down
+//! to a child only if its own box test entered the child's box, and culling is conservative,
+//! so the leaf holding its closest hit is always tested for it. Since [`Closest`] breaks ties
+//! in `t` by triangle index, each ray's hit is the one the single-ray traversal (and brute
+//! force) finds, to the bit, whatever its companions. `tracer/tests/packet_traversal.rs` holds
+//! the two to each other ray by ray and image by image.
 //!
 //! Work is counted per ray, as done: a node's boxes for every ray that reached it, a leaf's
 //! triangles for every ray tested against it. It depends on the companions (the order of the
@@ -185,12 +185,13 @@ impl Accel {
         let mut len = 0usize;
         loop {
             if current.count > 0 {
-                // A triangle against all eight lanes costs about what one ray's test of a
-                // group of four costs, so the lanes pay where the rays that reached the leaf
-                // are not few against its triangles: at two thirds of them or more, cachegrind
-                // counted the fewest instructions on the box, the dragon and Sponza (whose
-                // packets part ways more often) among the thresholds tried (a half, two
-                // thirds, one, five quarters; docs/bench.md, issue 12, twenty-fourth round).
+                // The lanes take a step per triangle whatever the rays, the leaf test a step
+                // per ray and group of four (or pair of groups), so the lanes pay where the
+                // rays that reached the leaf are not few against its triangles. Two thirds or
+                // more: of the thresholds tried (a half, two thirds, one, five quarters),
+                // cachegrind counted the fewest instructions there on the box and on Sponza,
+                // whose packets part ways more often (docs/bench.md, issue 12, twenty-fourth
+                // round).
                 let mut moved = if let Some(lanes) = lanes
                     .as_ref()
                     .filter(|_| current.rays.count_ones() * 3 >= current.count * 2)
