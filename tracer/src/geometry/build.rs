@@ -106,7 +106,7 @@ pub(crate) mod tests {
     use super::*;
     use glam::DVec3;
 
-    /// A splitmix64 step mapped to [0, 1), for test scenes (and the SIMD triangle tests').
+    /// A splitmix64 step mapped to [0, 1), for test scenes and the SIMD triangle tests.
     pub(crate) fn next(state: &mut u64) -> f32 {
         *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = *state;

@@ -157,17 +157,19 @@ impl BoxTest for Portable {
         ray.intersect_pair(a, b)
     }
 
-    /// None: without AVX a packet's leaves are tested ray by ray (four triangles a step), as
-    /// every machine that lacks AVX is old enough that no speed is asked of it here.
-    type RayLanes = ();
+    /// None (a type with no values): here a packet's leaves are tested ray by ray, four
+    /// triangles a step, where eight lanes against eight rays would be two SSE steps per
+    /// triangle; this test runs where the processor lacks AVX (or off x86-64), or where a test
+    /// asks for it.
+    type RayLanes = std::convert::Infallible;
 
     #[inline(always)]
-    fn ray_lanes(_: &[QuadRay; 8]) -> Option<()> {
+    fn ray_lanes(_: &[QuadRay; 8]) -> Option<Self::RayLanes> {
         None
     }
 
-    fn triangle_against_rays(_: &(), _: &Quad, _: usize, _: u32) -> LaneHits<8> {
-        unreachable!("the portable test hands out no ray lanes, so this step is never asked for")
+    fn triangle_against_rays(rays: &Self::RayLanes, _: &Quad, _: usize, _: u32) -> LaneHits<8> {
+        match *rays {}
     }
 
     #[inline(always)]

@@ -6,10 +6,11 @@
 //! Rays whose directions do not share their signs (whose boxes' near planes differ) are not
 //! made into a packet: each is traced alone.
 //!
-//! A leaf that most of the packet's rays reached is tested a triangle at a time against all of
-//! them, one ray per lane (`quad_avx.rs`, with AVX, where the rays permute the axes alike),
-//! rather than each ray against the leaf's triangles four or eight at a time: a pixel's rays
-//! mostly reach the same leaves, and there one step answers eight rays.
+//! A leaf reached by at least two thirds as many of the packet's rays as it has triangles is
+//! tested a triangle at a time against all of them, one ray per lane (`quad_avx.rs`, with AVX,
+//! where the rays permute the axes alike), rather than each ray against the leaf's triangles
+//! four or eight at a time: a pixel's rays mostly reach the same leaves, and there one step
+//! answers eight rays.
 //!
 //! **Exactness.** A packet changes only which nodes each ray is tested against and in which
 //! order, never how: lane `r` of a packet's box test computes exactly what the single-ray box
@@ -282,11 +283,11 @@ impl Accel {
     /// The leaf `entry` names tested for each of its rays, a triangle against all of them at
     /// once ([`BoxTest::triangle_against_rays`]); returns the rays whose closest hit it moved.
     ///
-    /// For each ray this offers exactly what [`Accel::test_leaf`] offers it: every triangle of
-    /// the leaf, with the SIMD test's own hit where that lane is exact and through the scalar
-    /// test where not, so that the closest hit is the same (the order of offers never matters,
-    /// [`Closest::offer`]'s tie rule). It counts what `test_leaf` counts for a closest-hit
-    /// query, the leaf's triangles once per ray.
+    /// For each ray this offers exactly what [`Accel::test_leaf`] offers it, in the same order:
+    /// every candidate triangle of the leaf, group by group and lane by lane, with the SIMD
+    /// test's own hit where that lane is exact and through the scalar test where not (the
+    /// order would not matter anyway: [`Closest::offer`]'s tie rule). It counts what
+    /// `test_leaf` counts for a closest-hit query, the leaf's triangles once per ray.
     #[inline(always)]
     fn leaf_against_rays<B: BoxTest>(
         &self,
@@ -303,7 +304,8 @@ impl Accel {
             for i in 0..quad.len as usize {
                 let hits = B::triangle_against_rays(lanes, quad, i, entry.rays);
                 let original = quad.original[i];
-                let mut candidates = hits.candidates & entry.rays;
+                // Only rays of `entry.rays` can be candidates: it is the test's `valid`.
+                let mut candidates = hits.candidates;
                 while candidates != 0 {
                     let r = candidates.trailing_zeros() as usize;
                     candidates &= candidates - 1;
