@@ -14,7 +14,6 @@
 //! `/proc/thread-self/schedstat`) is the render's. Depth is Mitsuba's comparison setting, 7
 //! bounces.
 
-use std::path::Path;
 use tracer::geometry::{Accel, BuildQuality, Traversal};
 use tracer::{FrameConfig, World, render_frame};
 
@@ -22,24 +21,15 @@ use tracer::{FrameConfig, World, render_frame};
 mod thread_cpu;
 use thread_cpu::thread_cpu_seconds;
 
+#[path = "support/args.rs"]
+mod args;
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let Some(path) = args.get(1) else {
-        eprintln!("usage: traversal_speed SCENE.toml [SIZE] [SPP] [ROUNDS] [wide]");
-        std::process::exit(2);
-    };
-    let number = |i: usize, default: u32| {
-        args.get(i)
-            .map_or(default, |s| s.parse().expect("a number"))
-    };
+    let (mut scene, args) =
+        args::scene_and_words("traversal_speed SCENE.toml [SIZE] [SPP] [ROUNDS] [wide]");
+    let path = &args[1];
+    let number = |i: usize, default: u32| args::number(&args, i, default);
     let (size, spp, rounds) = (number(2, 96), number(3, 8), number(4, 3));
-    let mut scene = match tracer::scene::load(Path::new(path)) {
-        Ok(scene) => scene,
-        Err(e) => {
-            eprintln!("{path}: {e}");
-            std::process::exit(1);
-        }
-    };
     scene.settings.samples_per_pixel = spp;
     scene.settings.max_depth = Some(7);
     scene.settings.width = size;

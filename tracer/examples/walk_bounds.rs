@@ -18,28 +18,19 @@
 
 use glam::Vec3;
 use std::hint::black_box;
-use std::path::Path;
 use std::time::Instant;
 use tracer::geometry::{Accel, BuildQuality, Ray, TraversalStats};
 
+#[path = "support/args.rs"]
+mod args;
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let Some(path) = args.get(1) else {
-        eprintln!("usage: walk_bounds SCENE.toml [RAYS] [ROUNDS]");
-        std::process::exit(2);
-    };
-    let number = |i: usize, default: usize| {
-        args.get(i)
-            .map_or(default, |s| s.parse().expect("a whole number"))
-    };
-    let (count, rounds) = (number(2, 1 << 20), number(3, 8));
-    let scene = match tracer::scene::load(Path::new(path)) {
-        Ok(scene) => scene,
-        Err(e) => {
-            eprintln!("{path}: {e}");
-            std::process::exit(1);
-        }
-    };
+    let (scene, words) = args::scene_and_words("walk_bounds SCENE.toml [RAYS] [ROUNDS]");
+    let path = &words[1];
+    let (count, rounds) = (
+        args::number(&words, 2, 1usize << 20),
+        args::number(&words, 3, 8),
+    );
     let accel = Accel::build(&scene.triangles, BuildQuality::default());
     let (lo, hi) = scene
         .triangles
