@@ -21,9 +21,10 @@
 //! `tracer/tests/wide_traversal.rs` renders through both and compares.
 
 use super::Ray;
-use super::packet_box::{PacketBound, PacketRays, enter_bound_portable, enter_child_portable};
+use super::packet_box::{PacketBound, PacketRays, RayRows};
 #[cfg(target_arch = "x86_64")]
 use super::packet_box::{enter_bound_avx, enter_child_avx};
+use super::packet_box::{enter_bound_portable, enter_child_portable};
 use super::quad::{LaneHits, Quad, QuadRay};
 #[cfg(target_arch = "x86_64")]
 use super::quad_avx::RayLanes;
@@ -133,7 +134,7 @@ pub(super) trait BoxTest {
     /// The rays of a packet as lanes, one ray per lane, where this test has a step for one
     /// triangle against eight rays and the rays share their permutation of the axes; `None`
     /// where not, and the packet's leaves are then tested ray by ray.
-    fn ray_lanes(rays: &[QuadRay; 8]) -> Option<Self::RayLanes>;
+    fn ray_lanes(rays: &RayRows) -> Option<Self::RayLanes>;
 
     /// Triangle `triangle` of `quad` against each ray of `rays` (lane `r` for ray `r`): for
     /// each, the SIMD test's lane for that triangle and that ray, to the bit. `valid` names the
@@ -164,7 +165,7 @@ impl BoxTest for Portable {
     type RayLanes = std::convert::Infallible;
 
     #[inline(always)]
-    fn ray_lanes(_: &[QuadRay; 8]) -> Option<Self::RayLanes> {
+    fn ray_lanes(_: &RayRows) -> Option<Self::RayLanes> {
         None
     }
 
@@ -231,7 +232,7 @@ impl BoxTest for Avx {
     type RayLanes = RayLanes;
 
     #[inline(always)]
-    fn ray_lanes(rays: &[QuadRay; 8]) -> Option<RayLanes> {
+    fn ray_lanes(rays: &RayRows) -> Option<RayLanes> {
         RayLanes::new(rays)
     }
 

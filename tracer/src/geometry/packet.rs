@@ -31,8 +31,8 @@
 use super::bvh::{Accel, Closest};
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
-use super::node8::{BoxTest, Portable, WIDTH, WideRay};
-use super::packet_box::{PacketBound, PacketRays, within};
+use super::node8::{BoxTest, Portable, WIDTH};
+use super::packet_box::{PacketBound, PacketRays, RayRows, within};
 use super::quad::{LANES, QuadRay};
 use super::traverse::FAR_SCALE;
 use super::triangle::ShearedRay;
@@ -154,18 +154,15 @@ impl Accel {
     ) -> bool {
         let last = rays.len() - 1;
         let ray = |r: usize| &rays[r.min(last)];
-        let wide: [WideRay; PACKET] = per_ray(|r| WideRay::new(ray(r)));
-        if !PacketRays::share_planes(&wide) {
+        let rows = RayRows::gather(rays);
+        let Some(packet) = PacketRays::from_rows(&rows) else {
             return false;
-        }
-        let packet = PacketRays::new(&wide);
+        };
         let bound = packet_bound(&packet);
-        let sheared: [ShearedRay; PACKET] = per_ray(|r| ShearedRay::new(ray(r)));
-        let quad: [QuadRay; PACKET] = per_ray(|r| QuadRay::new(&sheared[r]));
         // The rays in lanes, for leaves tested a triangle against all of them at once: where
         // the box test has that step (AVX) and the rays permute the axes alike, as a pixel's
         // camera rays nearly always do.
-        let lanes = B::ray_lanes(&quad);
+        let lanes = B::ray_lanes(&rows);
         let mut closest: [Closest; PACKET] = per_ray(|r| Closest::new(ray(r), false));
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         // Each ray's current end of search for the box tests.
@@ -197,17 +194,21 @@ impl Accel {
                     .as_ref()
                     .filter(|_| current.rays.count_ones() * 3 >= current.count * 2)
                 {
-                    self.leaf_against_rays::<B>(&current, lanes, &sheared, &mut closest, stats)
+                    self.leaf_against_rays::<B>(&current, lanes, rays, &mut closest, stats)
                 } else {
-                    let (mut rays, mut moved) = (current.rays, 0u32);
-                    while rays != 0 {
-                        let r = rays.trailing_zeros() as usize;
-                        rays &= rays - 1;
+                    let (mut waiting, mut moved) = (current.rays, 0u32);
+                    while waiting != 0 {
+                        let r = waiting.trailing_zeros() as usize;
+                        waiting &= waiting - 1;
+                        // Made again for each leaf tested ray by ray, rather than kept per
+                        // ray: the same values (a pure function of the ray), and the packets
+                        // that come here are the few whose rays part ways.
+                        let sheared = ShearedRay::new(&rays[r]);
                         if self.test_leaf::<false, B>(
                             current.child,
                             current.count,
-                            &sheared[r],
-                            &quad[r],
+                            &sheared,
+                            &QuadRay::new(&sheared),
                             &mut closest[r],
                             stats,
                         ) {
@@ -293,7 +294,7 @@ impl Accel {
         &self,
         entry: &PacketEntry,
         lanes: &B::RayLanes,
-        sheared: &[ShearedRay; PACKET],
+        rays: &[Ray],
         closest: &mut [Closest; PACKET],
         stats: &mut TraversalStats,
     ) -> u32 {
@@ -313,7 +314,7 @@ impl Accel {
                         closest[r].offer_hit(hits.hit(r), original)
                     } else {
                         let k = quad.entry as usize + i;
-                        closest[r].offer(&sheared[r], &self.vertices[k], original)
+                        closest[r].offer(&ShearedRay::new(&rays[r]), &self.vertices[k], original)
                     };
                     if kept {
                         moved |= 1 << r;

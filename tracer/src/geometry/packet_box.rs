@@ -4,7 +4,8 @@
 //! (`BoxTest::enter_bound`); each in two SSE steps of four lanes and in one AVX step of
 //! eight, which `node8.rs`'s `Portable` and `Avx` call.
 
-use super::node8::{Node8, WIDTH, WideRay, join_halves, slab_step_sse};
+use super::Ray;
+use super::node8::{Node8, WIDTH, join_halves, slab_step_sse};
 #[cfg(target_arch = "x86_64")]
 use super::node8::{slab_result_avx, slab_step_avx};
 use super::traverse::FAR_SCALE;
@@ -20,35 +21,66 @@ pub(super) struct PacketRays {
     pub(super) far: [usize; 3],
 }
 
-impl PacketRays {
-    /// Whether the prepared rays `wide` can make a packet: their near planes are the same
-    /// (their directions' signs are, as `WideRay::new` reads them). Rays that cannot are
-    /// traced one by one.
-    #[inline(always)]
-    pub(super) fn share_planes(wide: &[WideRay; WIDTH]) -> bool {
-        wide.iter().all(|w| w.near == wide[0].near)
-    }
+/// Up to eight rays' origins and directions, a row per axis and a lane per ray (the lanes
+/// past the last ray repeat it): what a packet's set-up is computed from, lane by lane.
+/// Made per ray and transposed, that set-up was mostly copies (docs/bench.md, issue 12,
+/// twenty-fifth round).
+pub(super) struct RayRows {
+    pub(super) origin: [[f32; WIDTH]; 3],
+    pub(super) dir: [[f32; WIDTH]; 3],
+}
 
-    /// The prepared rays `wide`, which [`PacketRays::share_planes`], in lanes.
-    // A plain loop: written as nested `array::map`s, the transpose was left as out-of-line
-    // `try_map` calls, 1.6 % of a Cornell box's render (docs/bench.md, issue 12, nineteenth
-    // round).
+impl RayRows {
+    /// `rays`, one to [`WIDTH`] of them, in rows.
     #[inline(always)]
-    pub(super) fn new(wide: &[WideRay; WIDTH]) -> Self {
-        let mut origin = [[0.0; WIDTH]; 3];
-        let mut inv_dir = [[0.0; WIDTH]; 3];
-        for (lane, ray) in wide.iter().enumerate() {
+    pub(super) fn gather(rays: &[Ray]) -> Self {
+        let last = rays.len() - 1;
+        let mut rows = RayRows {
+            origin: [[0.0; WIDTH]; 3],
+            dir: [[0.0; WIDTH]; 3],
+        };
+        for lane in 0..WIDTH {
+            let ray = &rays[lane.min(last)];
+            let (o, d) = (ray.origin.to_array(), ray.dir.to_array());
             for axis in 0..3 {
-                origin[axis][lane] = ray.origin[axis];
-                inv_dir[axis][lane] = ray.inv_dir[axis];
+                rows.origin[axis][lane] = o[axis];
+                rows.dir[axis][lane] = d[axis];
             }
         }
-        PacketRays {
+        rows
+    }
+}
+
+impl PacketRays {
+    /// The rays of `rows` prepared for the box tests: lane `r` holds what `WideRay::new`
+    /// makes of ray `r`, computed with the same operations. `None` where their reciprocal
+    /// directions do not all have the same signs (their boxes' near planes differ): such rays
+    /// are traced one by one.
+    #[inline(always)]
+    pub(super) fn from_rows(rows: &RayRows) -> Option<Self> {
+        let origin = rows.origin;
+        let mut inv_dir = [[0.0; WIDTH]; 3];
+        for (inv, dir) in inv_dir.iter_mut().zip(&rows.dir) {
+            for (inv, &d) in inv.iter_mut().zip(dir) {
+                *inv = 1.0 / d;
+            }
+        }
+        let (mut near, mut far) = ([0; 3], [0; 3]);
+        for axis in 0..3 {
+            let negative = inv_dir[axis].iter().filter(|&&inv| inv < 0.0).count();
+            if negative != 0 && negative != WIDTH {
+                return None;
+            }
+            let negative = negative == WIDTH;
+            near[axis] = if negative { 3 + axis } else { axis };
+            far[axis] = if negative { axis } else { 3 + axis };
+        }
+        Some(PacketRays {
             origin,
             inv_dir,
-            near: wide[0].near,
-            far: wide[0].far,
-        }
+            near,
+            far,
+        })
     }
 }
 
@@ -219,9 +251,9 @@ pub(super) fn within(t_near: &[f32; WIDTH], end: &[f32; WIDTH]) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Ray;
     #[cfg(target_arch = "x86_64")]
     use crate::geometry::node8::Avx;
+    use crate::geometry::node8::WideRay;
     use crate::geometry::node8::{BoxTest, Portable, avx_available};
     use glam::Vec3;
 
@@ -326,10 +358,24 @@ mod tests {
             let spread = scale * [1e-5, 1e-3, 0.1][round / 6 % 3];
             let rays = packet(&mut stream, origin, target, spread);
             let wide: [WideRay; WIDTH] = std::array::from_fn(|r| WideRay::new(&rays[r]));
-            if !PacketRays::share_planes(&wide) {
+            let Some(packet) = PacketRays::from_rows(&RayRows::gather(&rays)) else {
+                // Only rays whose near planes differ are refused.
+                assert!(wide.iter().any(|w| w.near != wide[0].near), "{what}");
                 continue;
+            };
+            for (r, alone) in wide.iter().enumerate() {
+                for axis in 0..3 {
+                    assert_eq!(
+                        packet.origin[axis][r].to_bits(),
+                        alone.origin[axis].to_bits()
+                    );
+                    assert_eq!(
+                        packet.inv_dir[axis][r].to_bits(),
+                        alone.inv_dir[axis].to_bits()
+                    );
+                }
+                assert_eq!((packet.near, packet.far), (alone.near, alone.far), "{what}");
             }
-            let packet = PacketRays::new(&wide);
             let Some(bound) = crate::geometry::packet::packet_bound(&packet) else {
                 continue;
             };

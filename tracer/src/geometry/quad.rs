@@ -98,11 +98,17 @@ pub(super) struct QuadRay {
 impl QuadRay {
     #[inline(always)]
     pub(super) fn new(sheared: &ShearedRay) -> Self {
-        let o = sheared.origin;
         QuadRay {
             axes: AXES[sheared.kz],
-            scalars: [o.x, o.y, o.z, sheared.sx, sheared.sy, sheared.sz],
+            scalars: Self::scalars_of(sheared),
         }
+    }
+
+    /// What [`QuadRay::scalars`] holds for `sheared`: the permuted origin, then the shear.
+    #[inline(always)]
+    pub(super) fn scalars_of(sheared: &ShearedRay) -> [f32; 6] {
+        let o = sheared.origin;
+        [o.x, o.y, o.z, sheared.sx, sheared.sy, sheared.sz]
     }
 
     /// Which input axes become x, y and z: the scalar test's permutation.

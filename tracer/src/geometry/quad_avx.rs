@@ -29,8 +29,9 @@
 //! shear, the operands ray `r`'s four-lane test gives that triangle's lane; where every ray is
 //! outside the triangle, each ray's own test finds it outside too.
 
+use super::packet_box::RayRows;
 use super::quad::{LaneHits, Quad, QuadRay};
-use super::triangle::gamma;
+use super::triangle::{AXES, gamma, major_axis};
 use std::arch::x86_64::*;
 
 /// [`QuadRay::intersect_pair`] in one step of eight lanes.
@@ -101,22 +102,37 @@ pub(super) struct RayLanes {
 }
 
 impl RayLanes {
-    /// The rays' lanes, or `None` where two of them permute the axes differently (a
-    /// triangle's coordinates are then not the same lanes for all).
+    /// The lanes of the rays in `rows`, or `None` where two of them permute the axes
+    /// differently (a triangle's coordinates are then not the same lanes for all). Lane `r`
+    /// of each row is what `ShearedRay::new` computes for ray `r`, with the same operations
+    /// (a test holds them to it, bit for bit): its axis choice, its permuted origin, and its
+    /// shear, `-d[kx] / d[kz]`, `-d[ky] / d[kz]` and `1 / d[kz]`.
     #[inline(always)]
-    pub(super) fn new(rays: &[QuadRay; 8]) -> Option<RayLanes> {
-        // The permutation follows from the axis that becomes z (`triangle::AXES`).
-        let axes = rays[0].axes();
-        if rays.iter().any(|ray| ray.axes()[2] != axes[2]) {
+    pub(super) fn new(rows: &RayRows) -> Option<RayLanes> {
+        let axis_of = |r: usize| major_axis([0, 1, 2].map(|axis| rows.dir[axis][r]));
+        let kz = axis_of(0);
+        if (1..8).any(|r| axis_of(r) != kz) {
             return None;
         }
-        let mut lanes = [[0.0; 8]; 6];
-        for (r, ray) in rays.iter().enumerate() {
-            for (row, &value) in lanes.iter_mut().zip(&ray.scalars) {
-                row[r] = value;
-            }
+        let [kx, ky, _] = AXES[kz];
+        let mut lanes = [
+            rows.origin[kx],
+            rows.origin[ky],
+            rows.origin[kz],
+            [0.0; 8],
+            [0.0; 8],
+            [0.0; 8],
+        ];
+        let (dx, dy, dz) = (&rows.dir[kx], &rows.dir[ky], &rows.dir[kz]);
+        for r in 0..8 {
+            lanes[3][r] = -dx[r] / dz[r];
+            lanes[4][r] = -dy[r] / dz[r];
+            lanes[5][r] = 1.0 / dz[r];
         }
-        Some(RayLanes { axes, lanes })
+        Some(RayLanes {
+            axes: AXES[kz],
+            lanes,
+        })
     }
 }
 
@@ -307,7 +323,7 @@ mod tests {
                 .collect();
             let quad_rays: [QuadRay; 8] =
                 std::array::from_fn(|r| QuadRay::new(&ShearedRay::new(&rays[r])));
-            let Some(lanes) = RayLanes::new(&quad_rays) else {
+            let Some(lanes) = RayLanes::new(&RayRows::gather(&rays)) else {
                 // Rays that permute the axes differently are not put in lanes.
                 let kz = quad_rays[0].axes()[2];
                 assert!(quad_rays.iter().any(|q| q.axes()[2] != kz));
@@ -363,6 +379,69 @@ mod tests {
         assert!(
             mixed < 600,
             "{mixed} of 6000 packets permuted their axes differently"
+        );
+    }
+
+    /// The rays' lanes made in rows are, lane for lane and bit for bit, what each ray's own
+    /// `ShearedRay` holds, over directions that make the set-up hard: zeros of both signs,
+    /// subnormals, the extremes of the normal range, and components of equal magnitude, where
+    /// the axis choice breaks ties; and they are refused exactly where the rays' axes differ.
+    #[test]
+    fn ray_lanes_made_in_rows_are_each_rays_own_set_up_bit_for_bit() {
+        const HARD: [f32; 12] = [
+            0.0,
+            -0.0,
+            1e-40,
+            -1e-40,
+            f32::MIN_POSITIVE,
+            1.0,
+            -1.0,
+            0.75,
+            -3.0,
+            1e20,
+            -1e20,
+            f32::MAX,
+        ];
+        let mut state = 0x07a9_e5e7_u64;
+        let pick = |state: &mut u64| {
+            let i = (next(state).to_bits() as usize) % HARD.len();
+            HARD[i]
+        };
+        let (mut together, mut refused) = (0, 0);
+        for round in 0..4000 {
+            // A shared direction most of the time, so that the lanes are made at all.
+            let shared = Vec3::new(pick(&mut state), pick(&mut state), pick(&mut state));
+            let rays: Vec<Ray> = (0..1 + round % 8)
+                .map(|r| Ray {
+                    origin: Vec3::new(next(&mut state), next(&mut state), 1e3 * next(&mut state)),
+                    dir: if round % 3 == 0 && r > 0 {
+                        Vec3::new(pick(&mut state), pick(&mut state), pick(&mut state))
+                    } else {
+                        shared
+                    },
+                    t_max: f32::INFINITY,
+                })
+                .collect();
+            let alone: Vec<ShearedRay> = rays.iter().map(ShearedRay::new).collect();
+            let lane_of = |r: usize| &alone[r.min(rays.len() - 1)];
+            let Some(lanes) = RayLanes::new(&RayRows::gather(&rays)) else {
+                assert!(alone.iter().any(|s| s.kz != alone[0].kz), "{rays:?}");
+                refused += 1;
+                continue;
+            };
+            assert!(alone.iter().all(|s| s.kz == alone[0].kz), "{rays:?}");
+            assert_eq!(lanes.axes, AXES[alone[0].kz]);
+            for r in 0..8 {
+                let own = QuadRay::scalars_of(lane_of(r));
+                for (row, value) in lanes.lanes.iter().zip(own) {
+                    assert_eq!(row[r].to_bits(), value.to_bits(), "lane {r} of {rays:?}");
+                }
+            }
+            together += 1;
+        }
+        assert!(
+            together > 2000 && refused > 300,
+            "{together} made, {refused} refused"
         );
     }
 }

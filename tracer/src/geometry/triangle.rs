@@ -85,15 +85,7 @@ pub(crate) struct ShearedRay {
 
 impl ShearedRay {
     pub(crate) fn new(ray: &Ray) -> Self {
-        let a = ray.dir.abs();
-        // pbrt's MaxComponentIndex, ties included, so that our choice of axis matches pbrt's.
-        let kz = if a.x > a.y {
-            if a.x > a.z { 0 } else { 2 }
-        } else if a.y > a.z {
-            1
-        } else {
-            2
-        };
+        let kz = major_axis(ray.dir.to_array());
         // Indexing arrays by a table, rather than `permute`'s match and glam's checked
         // indexing, keeps this per-ray set-up free of branches; the values are the same.
         let [kx, ky, _] = AXES[kz];
@@ -210,6 +202,20 @@ impl ShearedRay {
         }
         let t = (num / den) as f32;
         (t > 0.0 && t.is_finite()).then_some(t)
+    }
+}
+
+/// The axis a ray along `dir` moves to z: pbrt's MaxComponentIndex of `|dir|`, ties
+/// included, so that our choice of axis matches pbrt's.
+#[inline(always)]
+pub(super) fn major_axis(dir: [f32; 3]) -> usize {
+    let a = dir.map(f32::abs);
+    if a[0] > a[1] {
+        if a[0] > a[2] { 0 } else { 2 }
+    } else if a[1] > a[2] {
+        1
+    } else {
+        2
     }
 }
 
