@@ -90,14 +90,18 @@ enum Family {
     AlongAxes,
     /// As `Pixel`, each ray ending at its own distance.
     Ends,
+    /// As `Pixel`, one ray of the packet with a NaN in its origin or its direction: it hits
+    /// nothing, and must not keep its companions from their hits.
+    Broken,
 }
 
-const FAMILIES: [Family; 5] = [
+const FAMILIES: [Family; 6] = [
     Family::Pixel,
     Family::Lens,
     Family::Grazing,
     Family::AlongAxes,
     Family::Ends,
+    Family::Broken,
 ];
 
 fn packet(rng: &mut Rng, family: Family, centre: Vec3, half: f32, n: usize) -> Vec<Ray> {
@@ -109,11 +113,26 @@ fn packet(rng: &mut Rng, family: Family, centre: Vec3, half: f32, n: usize) -> V
         ) * half;
     let axis = rng.direction();
     let spread = [1e-4, 1e-3, 2e-2][rng.index(3)];
+    let broken = rng.index(n);
     (0..n)
-        .map(|_| {
+        .map(|r| {
             let jitter = rng.direction() * spread;
             match family {
-                Family::Pixel => Ray {
+                Family::Broken if r == broken => {
+                    let mut ray = Ray {
+                        origin,
+                        dir: axis + jitter,
+                        t_max: f32::INFINITY,
+                    };
+                    match rng.index(4) {
+                        0 => ray.origin.x = f32::NAN,
+                        1 => ray.origin.z = f32::NAN,
+                        2 => ray.dir.y = f32::NAN,
+                        _ => ray.dir = Vec3::NAN,
+                    }
+                    ray
+                }
+                Family::Pixel | Family::Broken => Ray {
                     origin,
                     dir: axis + jitter,
                     t_max: f32::INFINITY,

@@ -233,7 +233,8 @@ impl BoxTest for Avx {
 
     #[inline(always)]
     fn ray_lanes(rays: &RayRows) -> Option<RayLanes> {
-        RayLanes::new(rays)
+        // SAFETY: as for `enter` below.
+        unsafe { RayLanes::new(rays) }
     }
 
     #[inline(always)]

@@ -39,6 +39,7 @@ use super::triangle::ShearedRay;
 use super::wide::{BoxSimd, WalkStack, push_sorted};
 use super::{Hit, Ray, TraversalStats};
 use std::mem::MaybeUninit;
+use wide::f32x4;
 
 /// The most rays in one packet: one bit each in a byte of ray masks.
 pub const PACKET: usize = 8;
@@ -344,16 +345,10 @@ pub(super) fn packet_bound(packet: &PacketRays) -> Option<PacketBound> {
     };
     let mut usable = true;
     for axis in 0..3 {
-        let (origin, inv) = (&packet.origin[axis], &packet.inv_dir[axis]);
-        let (mut origin_low, mut origin_high) = (origin[0], origin[0]);
-        let (mut inv_low, mut inv_high) = (inv[0], inv[0]);
-        for r in 1..PACKET {
-            origin_low = origin_low.min(origin[r]);
-            origin_high = origin_high.max(origin[r]);
-            inv_low = inv_low.min(inv[r]);
-            inv_high = inv_high.max(inv[r]);
-        }
+        let (origin_low, origin_high) = least_and_greatest(&packet.origin[axis]);
+        let (inv_low, inv_high) = least_and_greatest(&packet.inv_dir[axis]);
         usable &= inv_low.is_finite() && inv_high.is_finite() && inv_low != 0.0 && inv_high != 0.0;
+        usable &= !origin_low.is_nan() && !origin_high.is_nan();
         // With positive reciprocals (the near plane the min, row `axis`) the entry distance is
         // least from the greatest origin and the exit distance greatest from the least; with
         // negative ones the other way round.
@@ -364,6 +359,25 @@ pub(super) fn packet_bound(packet: &PacketRays) -> Option<PacketBound> {
         bound.inv_high[axis] = inv_high;
     }
     usable.then_some(bound)
+}
+
+/// The least and the greatest of `row`'s lanes, four lanes at a time and then in pairs: the
+/// reduction one lane after another was 150 instructions a packet. With a NaN among the
+/// lanes either comes out NaN, or else as the least (greatest) of the other lanes: each step
+/// takes the other operand where one is NaN, or gives NaN. Both are safe for the bound: a NaN
+/// is refused (`packet_bound` makes none), and a ray with a NaN in its origin or reciprocal
+/// direction enters no box (its comparisons are false), so the other rays' bound serves.
+#[inline(always)]
+fn least_and_greatest(row: &[f32; PACKET]) -> (f32, f32) {
+    let half = |start: usize| f32x4::new([0, 1, 2, 3].map(|i| row[start + i]));
+    let (a, b) = (half(0), half(4));
+    let (low, high) = (a.fast_min(b).to_array(), a.fast_max(b).to_array());
+    let min = |x: f32, y: f32| if x < y { x } else { y };
+    let max = |x: f32, y: f32| if x > y { x } else { y };
+    (
+        min(min(low[0], low[1]), min(low[2], low[3])),
+        max(max(high[0], high[1]), max(high[2], high[3])),
+    )
 }
 
 /// `[f(0), .., f(PACKET - 1)]`, built in place. `std::array::from_fn` was compiled out of line

@@ -31,7 +31,9 @@
 
 use super::packet_box::RayRows;
 use super::quad::{LaneHits, Quad, QuadRay};
-use super::triangle::{AXES, gamma, major_axis};
+#[cfg(doc)]
+use super::triangle::major_axis;
+use super::triangle::{AXES, gamma};
 use std::arch::x86_64::*;
 
 /// [`QuadRay::intersect_pair`] in one step of eight lanes.
@@ -84,12 +86,8 @@ pub(super) unsafe fn triangle_against_rays_avx(
     let axes = rays.axes;
     let load =
         |v: usize, j: usize| _mm256_broadcast_ss(&quad.p[v][axes[j]].as_array_ref()[triangle]);
-    // SAFETY: `RayLanes` holds eight f32 per row; the loads are unaligned.
-    let ray = rays
-        .lanes
-        .map(|row| unsafe { _mm256_loadu_ps(row.as_ptr()) });
     // SAFETY: this function's own contract.
-    unsafe { watertight_lanes(load, &ray, valid) }
+    unsafe { watertight_lanes(load, &rays.lanes, valid) }
 }
 
 /// Eight rays of a packet that share their permutation, for [`triangle_against_rays_avx`]:
@@ -98,40 +96,56 @@ pub(super) unsafe fn triangle_against_rays_avx(
 #[derive(Clone, Copy)]
 pub(super) struct RayLanes {
     pub(super) axes: [usize; 3],
-    pub(super) lanes: [[f32; 8]; 6],
+    pub(super) lanes: [__m256; 6],
 }
 
 impl RayLanes {
     /// The lanes of the rays in `rows`, or `None` where two of them permute the axes
     /// differently (a triangle's coordinates are then not the same lanes for all). Lane `r`
     /// of each row is what `ShearedRay::new` computes for ray `r`, with the same operations
-    /// (a test holds them to it, bit for bit): its axis choice, its permuted origin, and its
-    /// shear, `-d[kx] / d[kz]`, `-d[ky] / d[kz]` and `1 / d[kz]`.
-    #[inline(always)]
-    pub(super) fn new(rows: &RayRows) -> Option<RayLanes> {
-        let axis_of = |r: usize| major_axis([0, 1, 2].map(|axis| rows.dir[axis][r]));
-        let kz = axis_of(0);
-        if (1..8).any(|r| axis_of(r) != kz) {
-            return None;
-        }
+    /// (a test holds them to it, bit for bit): its axis choice ([`major_axis`]: `z` is `x`
+    /// where `|x| > |y|` and `|x| > |z|`, else `y` where `|y| > |z|`, else `z`), its permuted
+    /// origin, and its shear, `-d[kx] / d[kz]`, `-d[ky] / d[kz]` and `1 / d[kz]`.
+    ///
+    /// Written in AVX instructions: in plain loops the compiler took the rows apart into
+    /// scalars and put them together again.
+    ///
+    /// # Safety
+    /// The processor must support AVX.
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(super) unsafe fn new(rows: &RayRows) -> Option<RayLanes> {
+        // SAFETY: each row holds eight f32; the loads are unaligned.
+        let load = |row: &[f32; 8]| unsafe { _mm256_loadu_ps(row.as_ptr()) };
+        let magnitude = _mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX));
+        let [ax, ay, az] = [0, 1, 2].map(|axis| _mm256_and_ps(load(&rows.dir[axis]), magnitude));
+        let greater = |a, b| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(a, b)) as u32;
+        let x_over_y = greater(ax, ay);
+        let x_major = x_over_y & greater(ax, az);
+        let y_major = !x_over_y & greater(ay, az) & 0xff;
+        let kz = match (x_major, y_major) {
+            (0xff, _) => 0,
+            (_, 0xff) => 1,
+            (0, 0) => 2,
+            _ => return None,
+        };
         let [kx, ky, _] = AXES[kz];
-        let mut lanes = [
-            rows.origin[kx],
-            rows.origin[ky],
-            rows.origin[kz],
-            [0.0; 8],
-            [0.0; 8],
-            [0.0; 8],
-        ];
-        let (dx, dy, dz) = (&rows.dir[kx], &rows.dir[ky], &rows.dir[kz]);
-        for r in 0..8 {
-            lanes[3][r] = -dx[r] / dz[r];
-            lanes[4][r] = -dy[r] / dz[r];
-            lanes[5][r] = 1.0 / dz[r];
-        }
+        let (dx, dy, dz) = (
+            load(&rows.dir[kx]),
+            load(&rows.dir[ky]),
+            load(&rows.dir[kz]),
+        );
+        let negate = |x| _mm256_xor_ps(x, _mm256_set1_ps(-0.0));
         Some(RayLanes {
             axes: AXES[kz],
-            lanes,
+            lanes: [
+                load(&rows.origin[kx]),
+                load(&rows.origin[ky]),
+                load(&rows.origin[kz]),
+                _mm256_div_ps(negate(dx), dz),
+                _mm256_div_ps(negate(dy), dz),
+                _mm256_div_ps(_mm256_set1_ps(1.0), dz),
+            ],
         })
     }
 }
@@ -323,7 +337,8 @@ mod tests {
                 .collect();
             let quad_rays: [QuadRay; 8] =
                 std::array::from_fn(|r| QuadRay::new(&ShearedRay::new(&rays[r])));
-            let Some(lanes) = RayLanes::new(&RayRows::gather(&rays)) else {
+            // SAFETY: this processor has AVX (checked above).
+            let Some(lanes) = (unsafe { RayLanes::new(&RayRows::gather(&rays)) }) else {
                 // Rays that permute the axes differently are not put in lanes.
                 let kz = quad_rays[0].axes()[2];
                 assert!(quad_rays.iter().any(|q| q.axes()[2] != kz));
@@ -388,6 +403,10 @@ mod tests {
     /// the axis choice breaks ties; and they are refused exactly where the rays' axes differ.
     #[test]
     fn ray_lanes_made_in_rows_are_each_rays_own_set_up_bit_for_bit() {
+        if !crate::geometry::node8::avx_available() {
+            eprintln!("skipped: this processor has no AVX, so the lanes are never made");
+            return;
+        }
         const HARD: [f32; 12] = [
             0.0,
             -0.0,
@@ -424,7 +443,8 @@ mod tests {
                 .collect();
             let alone: Vec<ShearedRay> = rays.iter().map(ShearedRay::new).collect();
             let lane_of = |r: usize| &alone[r.min(rays.len() - 1)];
-            let Some(lanes) = RayLanes::new(&RayRows::gather(&rays)) else {
+            // SAFETY: this processor has AVX (checked above).
+            let Some(lanes) = (unsafe { RayLanes::new(&RayRows::gather(&rays)) }) else {
                 assert!(alone.iter().any(|s| s.kz != alone[0].kz), "{rays:?}");
                 refused += 1;
                 continue;
@@ -434,7 +454,11 @@ mod tests {
             for r in 0..8 {
                 let own = QuadRay::scalars_of(lane_of(r));
                 for (row, value) in lanes.lanes.iter().zip(own) {
-                    assert_eq!(row[r].to_bits(), value.to_bits(), "lane {r} of {rays:?}");
+                    let mut row_values = [0.0f32; 8];
+                    // SAFETY: eight f32 of room; the store is unaligned.
+                    unsafe { _mm256_storeu_ps(row_values.as_mut_ptr(), *row) };
+                    let lane = row_values[r];
+                    assert_eq!(lane.to_bits(), value.to_bits(), "lane {r} of {rays:?}");
                 }
             }
             together += 1;
