@@ -131,9 +131,8 @@ pub(super) trait BoxTest {
     /// A packet's rays made into lanes for [`BoxTest::triangle_against_rays`].
     type RayLanes: Copy;
 
-    /// The rays of a packet as lanes, one ray per lane, where this test has a step for one
-    /// triangle against eight rays and the rays share their permutation of the axes; `None`
-    /// where not, and the packet's leaves are then tested ray by ray.
+    /// A packet's rays as lanes, one a lane, where this test has a step for one triangle
+    /// against eight rays and the rays permute the axes alike; else `None` (ray by ray).
     fn ray_lanes(rays: &RayRows) -> Option<Self::RayLanes>;
 
     /// Triangle `triangle` of `quad` against each ray of `rays` (lane `r` for ray `r`): for
