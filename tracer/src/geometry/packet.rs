@@ -204,12 +204,12 @@ impl Accel {
                         // Made again for each leaf tested ray by ray, rather than kept per
                         // ray: the same values (a pure function of the ray), and the packets
                         // that come here are the few whose rays part ways.
-                        let sheared = ShearedRay::new(&rays[r]);
+                        let quad_ray = QuadRay::new(&ShearedRay::new(&rays[r]));
                         if self.test_leaf::<false, B>(
                             current.child,
                             current.count,
-                            &sheared,
-                            &QuadRay::new(&sheared),
+                            &rays[r],
+                            &quad_ray,
                             &mut closest[r],
                             stats,
                         ) {

@@ -218,8 +218,7 @@ impl Accel {
     ) -> Option<Hit> {
         let nodes = &self.wide.nodes;
         let wide = WideRay::new(ray);
-        let sheared = ShearedRay::new(ray);
-        let quad_ray = QuadRay::new(&sheared);
+        let quad_ray = QuadRay::new(&ShearedRay::new(ray));
         let mut closest = Closest::new(ray, CERTAIN);
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         let mut current = StackEntry {
@@ -233,7 +232,7 @@ impl Accel {
                 if self.test_leaf::<ANY_HIT, B>(
                     current.child,
                     current.count,
-                    &sheared,
+                    ray,
                     &quad_ray,
                     &mut closest,
                     stats,
@@ -263,7 +262,7 @@ impl Accel {
                         if self.test_leaf::<ANY_HIT, B>(
                             entry.child,
                             entry.count,
-                            &sheared,
+                            ray,
                             &quad_ray,
                             &mut closest,
                             stats,
