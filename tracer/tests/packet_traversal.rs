@@ -90,8 +90,9 @@ enum Family {
     AlongAxes,
     /// As `Pixel`, each ray ending at its own distance.
     Ends,
-    /// As `Pixel`, one ray of the packet with a NaN in its origin or its direction: it hits
-    /// nothing, and must not keep its companions from their hits.
+    /// Rays from a small region in directions that part ways (so that the packet's bound
+    /// matters), one of them with a NaN in its origin or its direction: it hits nothing, and
+    /// must not keep its companions from their hits.
     Broken,
 }
 
@@ -113,7 +114,9 @@ fn packet(rng: &mut Rng, family: Family, centre: Vec3, half: f32, n: usize) -> V
         ) * half;
     let axis = rng.direction();
     let spread = [1e-4, 1e-3, 2e-2][rng.index(3)];
-    let broken = rng.index(n);
+    // In the upper half of the packet's lanes, whose NaN a careless reduction would let take
+    // a lower lane's place.
+    let broken = n / 2 + rng.index(n - n / 2);
     (0..n)
         .map(|r| {
             let jitter = rng.direction() * spread;
@@ -132,7 +135,7 @@ fn packet(rng: &mut Rng, family: Family, centre: Vec3, half: f32, n: usize) -> V
                     }
                     ray
                 }
-                Family::Pixel | Family::Broken => Ray {
+                Family::Pixel => Ray {
                     origin,
                     dir: axis + jitter,
                     t_max: f32::INFINITY,
@@ -141,6 +144,11 @@ fn packet(rng: &mut Rng, family: Family, centre: Vec3, half: f32, n: usize) -> V
                     origin,
                     dir: axis + jitter,
                     t_max: rng.range(0.1, 2.0) * half,
+                },
+                Family::Broken => Ray {
+                    origin: origin + rng.direction() * (0.2 * half),
+                    dir: axis + rng.direction() * 0.3,
+                    t_max: f32::INFINITY,
                 },
                 Family::Lens => {
                     let lens = rng.direction() * (0.05 * half);
@@ -223,6 +231,61 @@ fn packets_find_each_rays_own_hit_at_every_scale_distance_and_spread() {
     // Inside a closed box nearly every ray hits something; far fewer would mean the rays
     // missed the scene and the comparison said little.
     assert!(hits > 9000, "only {hits} hits");
+}
+
+/// A packet whose rays part ways on one axis, the ray that bounds them there in a lower lane
+/// and a ray with a NaN in that axis's origin or direction four lanes above it: the NaN must
+/// not take the bounding ray's place in the packet's bound (a reduction that let it did, and
+/// the filter then dropped boxes the bounding ray enters), so every ray finds its own hit.
+#[test]
+fn a_nan_four_lanes_above_the_ray_that_bounds_a_packet_leaves_it_its_hit() {
+    let mut rng = Rng(0x9ac4_e702);
+    let half = 1.0;
+    let triangles = scene(&mut rng, Vec3::ZERO, half);
+    let accel = Accel::build(&triangles, BuildQuality::Medium);
+    let mut hits = 0;
+    for round in 0..800 {
+        let origin = Vec3::new(
+            rng.range(-0.5, 0.5),
+            rng.range(-0.5, 0.5),
+            rng.range(-0.5, 0.5),
+        );
+        let signs = Vec3::new(
+            if round % 2 == 0 { 1.0 } else { -1.0 },
+            if round % 4 < 2 { 1.0 } else { -1.0 },
+            if round % 8 < 4 { 1.0 } else { -1.0 },
+        );
+        let lane = round % 4;
+        let rays: Vec<Ray> = (0..PACKET)
+            .map(|r| {
+                let mut ray = Ray {
+                    origin,
+                    dir: Vec3::new(rng.range(0.01, 0.02), rng.range(0.01, 0.02), 1.0) * signs,
+                    t_max: f32::INFINITY,
+                };
+                if r == lane {
+                    // The bounding ray: the least origin and reciprocal along x.
+                    ray.origin.x -= 0.3 * half;
+                    ray.dir.x = rng.range(0.5, 1.5) * signs.x;
+                } else if r == lane + 4 {
+                    match round % 8 / 4 {
+                        0 => ray.origin.x = f32::NAN,
+                        _ => ray.dir.x = f32::NAN,
+                    }
+                }
+                ray
+            })
+            .collect();
+        let mut found = vec![None; PACKET];
+        accel.intersect_packet(&rays, &mut found, &mut TraversalStats::default());
+        for (ray, hit) in rays.iter().zip(&found) {
+            let alone = accel.intersect(ray, &mut TraversalStats::default());
+            assert_eq!(bits(hit), bits(&alone), "round {round}: {ray:?}");
+            hits += hit.is_some() as u32;
+        }
+    }
+    // Seven good rays a packet inside a closed box: nearly all hit.
+    assert!(hits > 5000, "only {hits} hits");
 }
 
 #[test]

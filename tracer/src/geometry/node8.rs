@@ -120,8 +120,8 @@ pub(super) trait BoxTest {
     /// box. Why it is conservative: rounding is monotonic, so each ray's entry distance on
     /// each axis, `(plane - origin) * inv_dir` rounded twice, is at least the same expression
     /// at the corner of the packet's interval that makes it least (and its exit distance at
-    /// most the one at the corner that makes it greatest); with finite reciprocals no NaN
-    /// arises. A filter only: what it lets through is tested exactly, ray by ray.
+    /// most the one at the corner that makes it greatest); with finite reciprocals, origins
+    /// not NaN and finite planes (the valid children's) no NaN arises. A filter only.
     fn enter_bound(bound: &PacketBound, node: &Node8, end: f32) -> u32;
 
     /// The SIMD triangle test of two consecutive groups of a leaf, `a` in lanes 0 to 3 and `b`

@@ -15,8 +15,8 @@
 //! **Exactness.** A packet changes only which nodes each ray is tested against and in which
 //! order, never how: lane `r` of a packet's box test computes exactly what the single-ray box
 //! test computes for ray `r` and that box, with the ray's own current end of search, and a
-//! leaf is tested for each ray by the very leaf test ([`Accel::test_leaf`], with its own
-//! sheared ray and its own [`Closest`]), or by the lanes that compute, for each ray and
+//! leaf is tested for each ray by the very leaf test ([`Accel::test_leaf`], with the ray's own
+//! set-up and its own [`Closest`]), or by the lanes that compute, for each ray and
 //! triangle, what that leaf test's lanes compute (`Accel::leaf_against_rays`). A ray goes down
 //! to a child only if its own box test entered the child's box, and culling is conservative,
 //! so the leaf holding its closest hit is always tested for it. Since [`Closest`] breaks ties
@@ -164,6 +164,14 @@ impl Accel {
         // the box test has that step (AVX) and the rays permute the axes alike, as a pixel's
         // camera rays nearly always do.
         let lanes = B::ray_lanes(&rows);
+        // Each ray's own triangle set-up, for the leaves tested ray by ray: made once per ray
+        // where the packet has no lanes (no AVX, or rays permuting the axes differently) and
+        // every leaf comes here; where it has lanes, made again at each of the few leaves
+        // that reach here (few of its rays reach them). The same bits either way: a function
+        // of the ray alone.
+        let quad_rays: Option<[QuadRay; PACKET]> = lanes
+            .is_none()
+            .then(|| per_ray(|r| QuadRay::new(&ShearedRay::new(ray(r)))));
         let mut closest: [Closest; PACKET] = per_ray(|r| Closest::new(ray(r), false));
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         // Each ray's current end of search for the box tests.
@@ -201,10 +209,10 @@ impl Accel {
                     while waiting != 0 {
                         let r = waiting.trailing_zeros() as usize;
                         waiting &= waiting - 1;
-                        // Made again for each leaf tested ray by ray, rather than kept per
-                        // ray: the same values (a pure function of the ray), and the packets
-                        // that come here are the few whose rays part ways.
-                        let quad_ray = QuadRay::new(&ShearedRay::new(&rays[r]));
+                        let quad_ray = match &quad_rays {
+                            Some(quad_rays) => quad_rays[r],
+                            None => QuadRay::new(&ShearedRay::new(&rays[r])),
+                        };
                         if self.test_leaf::<false, B>(
                             current.child,
                             current.count,
@@ -331,8 +339,8 @@ impl Accel {
 
 /// The interval the rays of `packet` span (all its lanes: slots past its rays repeat its last
 /// one), for the test that rejects at once the boxes none of them enters; `None` where a
-/// reciprocal direction is infinite or zero, for which that test's argument (no NaN) does not
-/// hold. Plain loops over the lanes, which the compiler turns into a few vector steps.
+/// reciprocal direction is infinite, zero or NaN, or an origin NaN, for which that test's
+/// argument (no NaN arises) does not hold.
 #[inline(always)]
 pub(super) fn packet_bound(packet: &PacketRays) -> Option<PacketBound> {
     let mut bound = PacketBound {
@@ -361,16 +369,19 @@ pub(super) fn packet_bound(packet: &PacketRays) -> Option<PacketBound> {
     usable.then_some(bound)
 }
 
-/// The least and the greatest of `row`'s lanes, four lanes at a time and then in pairs: the
-/// reduction one lane after another was 150 instructions a packet. With a NaN among the
-/// lanes either comes out NaN, or else as the least (greatest) of the other lanes: each step
-/// takes the other operand where one is NaN, or gives NaN. Both are safe for the bound: a NaN
-/// is refused (`packet_bound` makes none), and a ray with a NaN in its origin or reciprocal
-/// direction enters no box (its comparisons are false), so the other rays' bound serves.
+/// The least and the greatest of `row`'s lanes, four lanes at a time and then in pairs (the
+/// reduction one lane after another was 150 instructions a packet); both NaN where any lane
+/// is NaN, which `packet_bound` refuses. The vector steps alone would not say so: where one
+/// operand is NaN they take the other, or give NaN, depending on which lane it is in, and
+/// could leave out a ray that is not NaN (a review found the case; a test now covers every
+/// pattern of NaN lanes).
 #[inline(always)]
 fn least_and_greatest(row: &[f32; PACKET]) -> (f32, f32) {
     let half = |start: usize| f32x4::new([0, 1, 2, 3].map(|i| row[start + i]));
     let (a, b) = (half(0), half(4));
+    if (a.is_nan() | b.is_nan()).any() {
+        return (f32::NAN, f32::NAN);
+    }
     let (low, high) = (a.fast_min(b).to_array(), a.fast_max(b).to_array());
     let min = |x: f32, y: f32| if x < y { x } else { y };
     let max = |x: f32, y: f32| if x > y { x } else { y };
@@ -394,4 +405,37 @@ fn per_ray<T: Copy>(f: impl Fn(usize) -> T) -> [T; PACKET] {
         *slot = f(r);
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every pattern of NaN lanes, with the least and the greatest of the others in every
+    /// lane: the pair is exactly the least and greatest of a row without NaN, and NaN for a
+    /// row with any, which `packet_bound` then refuses. (A reduction that let a NaN lane take
+    /// its partner's place left a ray out of the bound, and its boxes were filtered away.)
+    #[test]
+    fn a_rows_least_and_greatest_are_exact_or_refused_for_every_pattern_of_nans() {
+        for nans in 0u32..256 {
+            for least in 0..PACKET {
+                for greatest in (0..PACKET).filter(|&g| g != least) {
+                    let mut row: [f32; PACKET] = std::array::from_fn(|i| 1.0 + i as f32 * 0.25);
+                    row[least] = -3.0;
+                    row[greatest] = 7.0;
+                    for (i, value) in row.iter_mut().enumerate() {
+                        if nans & (1 << i) != 0 {
+                            *value = f32::NAN;
+                        }
+                    }
+                    let (low, high) = least_and_greatest(&row);
+                    if nans == 0 {
+                        assert_eq!((low, high), (-3.0, 7.0));
+                    } else {
+                        assert!(low.is_nan() && high.is_nan(), "{row:?}: {low}, {high}");
+                    }
+                }
+            }
+        }
+    }
 }

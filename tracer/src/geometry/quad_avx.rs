@@ -399,15 +399,16 @@ mod tests {
 
     /// The rays' lanes made in rows are, lane for lane and bit for bit, what each ray's own
     /// `ShearedRay` holds, over directions that make the set-up hard: zeros of both signs,
-    /// subnormals, the extremes of the normal range, and components of equal magnitude, where
-    /// the axis choice breaks ties; and they are refused exactly where the rays' axes differ.
+    /// subnormals, the extremes of the normal range, infinities, NaN, and components of equal
+    /// magnitude, where the axis choice breaks ties; and they are refused exactly where the
+    /// rays' axes differ.
     #[test]
     fn ray_lanes_made_in_rows_are_each_rays_own_set_up_bit_for_bit() {
         if !crate::geometry::node8::avx_available() {
             eprintln!("skipped: this processor has no AVX, so the lanes are never made");
             return;
         }
-        const HARD: [f32; 12] = [
+        const HARD: [f32; 15] = [
             0.0,
             -0.0,
             1e-40,
@@ -420,6 +421,9 @@ mod tests {
             1e20,
             -1e20,
             f32::MAX,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
         ];
         let mut state = 0x07a9_e5e7_u64;
         let pick = |state: &mut u64| {

@@ -15,8 +15,9 @@
 //! large distances, and pbrt then drops the hit, leaving a hole) the distance is recomputed from
 //! the plane equation in f64 and accepted if it is certainly positive.
 //!
-//! The per-ray part of the transform lives in [`ShearedRay`], computed once per ray: every
-//! triangle then sees bit-identical shear factors, which the watertightness argument needs.
+//! The per-ray part of the transform lives in [`ShearedRay`], a function of the ray alone
+//! (made once per walk, or again where needed, always the same bits): every triangle sees
+//! bit-identical shear factors, which the watertightness argument needs.
 
 use super::Ray;
 use glam::{Vec3, Vec3Swizzles};
@@ -69,7 +70,7 @@ pub(crate) const fn gamma(n: u32) -> f32 {
 }
 
 /// A ray prepared for [`ShearedRay::intersect`]: the axis permutation and shear that make it the
-/// +z axis, computed once so that every triangle sees bit-identical factors.
+/// +z axis, a function of the ray alone, so that every triangle sees bit-identical factors.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ShearedRay {
     /// The axis that becomes z; x and y follow cyclically (`kx = kz + 1`, `ky = kz + 2`).
