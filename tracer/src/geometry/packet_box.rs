@@ -356,7 +356,13 @@ mod tests {
                     stream.range(0.2, 1.0),
                 ) * (4.0 * scale);
             let spread = scale * [1e-5, 1e-3, 0.1][round / 6 % 3];
-            let rays = packet(&mut stream, origin, target, spread);
+            let mut rays = packet(&mut stream, origin, target, spread);
+            if round % 5 == 4 {
+                // Along a plane: a zero of either sign, an infinite reciprocal of that sign,
+                // whose near plane the packet's must be.
+                let zero = if round % 10 == 4 { 0.0 } else { -0.0 };
+                rays.iter_mut().for_each(|ray| ray.dir.y = zero);
+            }
             let wide: [WideRay; WIDTH] = std::array::from_fn(|r| WideRay::new(&rays[r]));
             let Some(packet) = PacketRays::from_rows(&RayRows::gather(&rays)) else {
                 // Only rays whose near planes differ are refused.
