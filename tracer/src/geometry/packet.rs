@@ -171,7 +171,7 @@ impl Accel {
         // of the ray alone.
         let quad_rays: Option<[QuadRay; PACKET]> = lanes
             .is_none()
-            .then(|| per_ray(|r| QuadRay::new(&ShearedRay::new(ray(r)))));
+            .then(|| per_ray(|r| QuadRay::for_ray(ray(r))));
         let mut closest: [Closest; PACKET] = per_ray(|r| Closest::new(ray(r), false));
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         // Each ray's current end of search for the box tests.
@@ -211,7 +211,7 @@ impl Accel {
                         waiting &= waiting - 1;
                         let quad_ray = match &quad_rays {
                             Some(quad_rays) => quad_rays[r],
-                            None => QuadRay::new(&ShearedRay::new(&rays[r])),
+                            None => QuadRay::for_ray(&rays[r]),
                         };
                         if self.test_leaf::<false, B>(
                             current.child,

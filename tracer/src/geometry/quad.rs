@@ -26,6 +26,7 @@
 //! NaN); a NaN in any of their inputs makes the lane's `t` NaN, which goes to the scalar test.
 //! So no hit changes: tests compare every lane with the scalar test.
 
+use super::Ray;
 use super::triangle::{AXES, ShearedRay, TriangleHit, gamma};
 use glam::Vec3;
 use wide::{CmpEq, CmpGe, CmpGt, CmpLe, CmpLt, f32x4};
@@ -102,6 +103,13 @@ impl QuadRay {
             axes: AXES[sheared.kz],
             scalars: Self::scalars_of(sheared),
         }
+    }
+
+    /// The set-up of `ray` itself: what `new` makes of its `ShearedRay`, which the SIMD
+    /// tests do not otherwise need.
+    #[inline(always)]
+    pub(super) fn for_ray(ray: &Ray) -> Self {
+        Self::new(&ShearedRay::new(ray))
     }
 
     /// What [`QuadRay::scalars`] holds for `sheared`: the permuted origin, then the shear.
@@ -354,7 +362,7 @@ mod tests {
                 dir,
                 t_max: f32::INFINITY,
             };
-            let quad_ray = QuadRay::new(&ShearedRay::new(&ray));
+            let quad_ray = QuadRay::for_ray(&ray);
             let ids: Vec<u32> = (0..count as u32).collect();
             let quads: Vec<Quad> = Quad::pack(&triangles, &ids, 0).collect();
             let four = quad_ray.intersect_pair(&quads[0], &quads[1]);
@@ -385,7 +393,7 @@ mod tests {
             dir: -Vec3::Z,
             t_max: f32::INFINITY,
         };
-        let quad_ray = QuadRay::new(&ShearedRay::new(&ray));
+        let quad_ray = QuadRay::for_ray(&ray);
         let found = quad_ray.intersect(&quads[1]);
         assert_eq!(found.candidates, 0b0011, "the padding is never a candidate");
         assert_eq!(found.exact, 0b0011);

@@ -335,8 +335,7 @@ mod tests {
                     }
                 })
                 .collect();
-            let quad_rays: [QuadRay; 8] =
-                std::array::from_fn(|r| QuadRay::new(&ShearedRay::new(&rays[r])));
+            let quad_rays: [QuadRay; 8] = std::array::from_fn(|r| QuadRay::for_ray(&rays[r]));
             // SAFETY: this processor has AVX (checked above).
             let Some(lanes) = (unsafe { RayLanes::new(&RayRows::gather(&rays)) }) else {
                 // Rays that permute the axes differently are not put in lanes.

@@ -31,7 +31,6 @@ use super::node8::{BoxTest, Node8, Portable, WIDTH, WideRay, avx_available};
 use super::packed_hit::PackedHit;
 use super::quad::{LANES, Quad, QuadRay};
 use super::traverse::FAR_SCALE;
-use super::triangle::ShearedRay;
 use super::{Hit, Ray, TraversalStats};
 use glam::Vec3;
 use std::mem::MaybeUninit;
@@ -218,7 +217,7 @@ impl Accel {
     ) -> Option<Hit> {
         let nodes = &self.wide.nodes;
         let wide = WideRay::new(ray);
-        let quad_ray = QuadRay::new(&ShearedRay::new(ray));
+        let quad_ray = QuadRay::for_ray(ray);
         let mut closest = Closest::new(ray, CERTAIN);
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         let mut current = StackEntry {
