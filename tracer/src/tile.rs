@@ -142,7 +142,7 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
                 for k in 0..n {
                     let first_hit = found.then_some(hits[k]);
                     let radiance = world.radiance_from(
-                        rays[k],
+                        &rays[k],
                         first_hit,
                         times[k],
                         &mut samplers[k],

@@ -171,6 +171,10 @@ pub fn offset_ray_origin(point: &SurfacePoint, toward: Vec3, method: OffsetMetho
 }
 
 /// A ray leaving `from` in direction `dir`, from the side of the surface `dir` points to.
+// Always inlined: as a call, the path loop read the returned ray back from memory in two
+// overlapping 16-byte loads across the narrower stores that wrote it, which the processor
+// cannot forward (a stall per bounce; docs/bench.md, issue 12, twenty-sixth round).
+#[inline(always)]
 pub fn spawn_ray(from: &SurfacePoint, dir: Vec3, method: OffsetMethod) -> Ray {
     Ray {
         origin: offset_ray_origin(from, dir, method),

@@ -161,14 +161,19 @@ impl World {
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
-        self.radiance_from(ray, None, time, sampler, stats)
+        self.radiance_from(&ray, None, time, sampler, stats)
     }
 
     /// [`World::radiance`], with the closest hit of `ray` already found where `first` is
     /// `Some` (by [`World::camera_hits`], which counted its work).
+    ///
+    /// The ray is taken by reference: passed by value, the caller copied it into a temporary
+    /// just before the call, in two overlapping 16-byte stores, and the path's first read of
+    /// its direction spanned both, which the processor cannot forward from the store buffer (a
+    /// stall per camera ray; docs/bench.md, issue 12, twenty-sixth round).
     pub fn radiance_from(
         &self,
-        ray: Ray,
+        ray: &Ray,
         first: Option<Option<Hit>>,
         time: f64,
         sampler: &mut PixelSampler,
@@ -204,7 +209,7 @@ impl World {
     /// dispersion, both absent), so every reading of it folds to the identity too.
     fn radiance_with<const PLAIN: bool>(
         &self,
-        ray: Ray,
+        ray: &Ray,
         mut first: Option<Option<Hit>>,
         time: f64,
         sampler: &mut PixelSampler,
@@ -221,7 +226,7 @@ impl World {
         // Where `PLAIN`, the flags of the effects it leaves out, as constants.
         let media = !PLAIN && effects.media;
         let dispersion = !PLAIN && effects.dispersion;
-        let mut ray = ray;
+        let mut ray = *ray;
         let mut radiance = Vec3::ZERO;
         let (mut spectrum, mut beta) = (PathSpectrum::RGB, Vec3::ONE);
         if !PLAIN {
