@@ -197,7 +197,7 @@ impl World {
         // through, and passes index-matched interfaces (`scatter.rs`). A vacuum lets exactly 1
         // through, and `x * 1` is `x`, so the product below keeps its bits either way.
         let transmittance = if self.effects.media {
-            let transmittance = self.transmittance(shadow, light, medium, moment, numbers, stats);
+            let transmittance = self.transmittance(&shadow, light, medium, moment, numbers, stats);
             if transmittance == Vec3::ZERO {
                 return Vec3::ZERO;
             }

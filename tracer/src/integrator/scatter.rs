@@ -133,9 +133,13 @@ impl World {
     /// way the answer is blocked exactly when [`crate::geometry::Accel::occluded_with`] would
     /// say so (that is what keeps `--effects all` bit-identical), and it pays what a renderer
     /// that always tracks media pays: a closest-hit query instead of an any-hit one.
+    ///
+    /// `shadow` is taken by reference: passed by value, it was copied just after
+    /// [`World::shadow_ray`] wrote it, in wide loads across that function's narrower stores,
+    /// which the processor cannot forward (docs/bench.md, issue 12, twenty-sixth round).
     pub(super) fn transmittance(
         &self,
-        shadow: Ray,
+        shadow: &Ray,
         light: &LightSample,
         medium: Option<u32>,
         moment: &Moment,
@@ -150,7 +154,7 @@ impl World {
             // for less than the closest certain blocker costs, and the same bits come out (the
             // loop's product starts at exactly 1). What `--effects all` saves in a scene without
             // media, and a scene of fog or tinted glass alone.
-            if self.occluded(&shadow, moment, &mut stats.traversal) {
+            if self.occluded(shadow, moment, &mut stats.traversal) {
                 return Vec3::ZERO;
             }
             let escapes = shadow.t_max == f32::INFINITY;
@@ -161,7 +165,7 @@ impl World {
                 &mut stream,
             );
         }
-        let mut shadow = shadow;
+        let mut shadow = *shadow;
         let mut medium = medium;
         let mut transmittance = Vec3::ONE;
         loop {
