@@ -167,6 +167,12 @@ impl QuadRay {
         let behind =
             (det.cmp_lt(zero) & t_scaled.cmp_ge(zero)) | (det.cmp_gt(zero) & t_scaled.cmp_le(zero));
         let missed = outside | ((det.cmp_eq(zero) | behind) & !zero_edge);
+        // And where every lane is missed at the second (a triangle behind the ray, or seen
+        // edge on), the division and the error bound decide nothing either.
+        let candidates = !(missed.move_mask() as u32) & quad.valid;
+        if candidates == 0 {
+            return LaneHits::NONE;
+        }
         let inv_det = f32x4::ONE / det;
         let t = t_scaled * inv_det;
 
@@ -186,7 +192,6 @@ impl QuadRay {
             * (f32x4::splat(gamma(3)) * max_e * max_zt + delta_e * max_zt + delta_z * max_e)
             * inv_det.abs();
         let bounded = t.cmp_gt(delta_t) & t.abs().cmp_lt(f32x4::splat(f32::INFINITY));
-        let candidates = !(missed.move_mask() as u32) & quad.valid;
         let exact = (bounded & !zero_edge).move_mask() as u32 & candidates;
         QuadHits {
             candidates,

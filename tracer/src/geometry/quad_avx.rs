@@ -216,6 +216,12 @@ unsafe fn watertight_lanes(
         outside,
         _mm256_andnot_ps(zero_edge, or(eq(det, zero), behind)),
     );
+    // And where every lane is missed at the second (a triangle behind the ray, or seen edge
+    // on), the division and the error bound decide nothing either.
+    let candidates = !(_mm256_movemask_ps(missed) as u32) & valid;
+    if candidates == 0 {
+        return LaneHits::NONE;
+    }
     let inv_det = _mm256_div_ps(splat(1.0), det);
     let t = mul(t_scaled, inv_det);
 
@@ -253,7 +259,6 @@ unsafe fn watertight_lanes(
         abs(inv_det),
     );
     let bounded = and(gt(t, delta_t), lt(abs(t), splat(f32::INFINITY)));
-    let candidates = !(_mm256_movemask_ps(missed) as u32) & valid;
     let exact = _mm256_movemask_ps(_mm256_andnot_ps(zero_edge, bounded)) as u32 & candidates;
     let store = |x: __m256| {
         let mut out = [0.0f32; 8];
