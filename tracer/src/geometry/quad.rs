@@ -167,8 +167,8 @@ impl QuadRay {
         let behind =
             (det.cmp_lt(zero) & t_scaled.cmp_ge(zero)) | (det.cmp_gt(zero) & t_scaled.cmp_le(zero));
         let missed = outside | ((det.cmp_eq(zero) | behind) & !zero_edge);
-        // And where every lane is missed at the second (a triangle behind the ray, or seen
-        // edge on), the division and the error bound decide nothing either.
+        // And where every lane is missed by the second step (outside, or a triangle behind
+        // the ray or seen edge on), the division and the error bound decide nothing either.
         let candidates = !(missed.move_mask() as u32) & quad.valid;
         if candidates == 0 {
             return LaneHits::NONE;

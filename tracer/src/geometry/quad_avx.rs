@@ -18,16 +18,19 @@
 //! ordered ones (false on NaN), and AVX's `_CMP_*_OQ` predicates are the same; its `abs` clears
 //! the sign bit, as here; its `max` is `maxps` with the running value first, whose rule for NaN
 //! and equal zeros (the second operand) `vmaxps` shares; its masks combine by bitwise and, or
-//! and not, as here (`a & !b` is `andnot(b, a)`). So every lane's candidate bit, exact bit,
-//! distance, error bound and barycentrics are the four-lane test's bits, which `quad.rs` holds
-//! to the scalar test; `QuadRay::intersect_pair` is the reference the tests compare with. Where
-//! it stops early (every lane outside its triangle) the two four-lane tests stop there too or
-//! find every lane outside, so neither has a candidate.
+//! and not, as here (`a & !b` is `andnot(b, a)`). So every lane's candidate bit and exact bit
+//! are the four-lane test's bits, and so are the distance, error bound and barycentrics of
+//! each lane with an exact bit (all that the traversal reads), which `quad.rs` holds to the
+//! scalar test; `QuadRay::intersect_pair` is the reference the tests compare with. Where it
+//! stops early (every lane outside its triangle, or missed by the next step: behind the ray or
+//! edge on) each four-lane test stops at the same step or an earlier one, or goes on to find
+//! every lane missed, so neither has a candidate.
 //!
 //! With a triangle against eight rays the same holds lane by lane with the roles swapped: lane
 //! `r` gets the triangle's coordinates, as `Quad` stores them, and ray `r`'s own origin and
-//! shear, the operands ray `r`'s four-lane test gives that triangle's lane; where every ray is
-//! outside the triangle, each ray's own test finds it outside too.
+//! shear, the operands ray `r`'s four-lane test gives that triangle's lane; where every ray
+//! misses the triangle by the second step, each ray's own test finds no candidate there
+//! either.
 
 use super::packet_box::RayRows;
 use super::quad::{LaneHits, Quad, QuadRay};
@@ -216,8 +219,8 @@ unsafe fn watertight_lanes(
         outside,
         _mm256_andnot_ps(zero_edge, or(eq(det, zero), behind)),
     );
-    // And where every lane is missed at the second (a triangle behind the ray, or seen edge
-    // on), the division and the error bound decide nothing either.
+    // And where every lane is missed by the second step (outside, or a triangle behind the
+    // ray or seen edge on), the division and the error bound decide nothing either.
     let candidates = !(_mm256_movemask_ps(missed) as u32) & valid;
     if candidates == 0 {
         return LaneHits::NONE;
