@@ -50,6 +50,7 @@ mod packet_box;
 mod quad;
 #[cfg(target_arch = "x86_64")]
 mod quad_avx;
+mod ray_setup;
 mod traverse;
 mod triangle;
 mod wide;
@@ -66,8 +67,10 @@ pub use wide::BoxSimd;
 
 use glam::Vec3;
 
-/// A ray segment `origin + t * dir` for `t` in `(0, t_max)`.
+/// A ray segment `origin + t * dir` for `t` in `(0, t_max)`. Laid out as C would, seven f32
+/// in this order, which the packets' AVX gather reads four at a time (`ray_setup.rs`).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct Ray {
     /// Where the segment starts, in world space (already offset off any surface it leaves).
     pub origin: Vec3,

@@ -21,13 +21,15 @@
 //! `tracer/tests/wide_traversal.rs` renders through both and compares.
 
 use super::Ray;
-use super::packet_box::{PacketBound, PacketRays, RayRows};
+use super::packet_box::{PacketBound, PacketRays};
 #[cfg(target_arch = "x86_64")]
 use super::packet_box::{enter_bound_avx, enter_child_avx};
 use super::packet_box::{enter_bound_portable, enter_child_portable};
 use super::quad::{LaneHits, Quad, QuadRay};
 #[cfg(target_arch = "x86_64")]
 use super::quad_avx::RayLanes;
+use super::ray_setup::RayRows;
+pub(super) use super::ray_setup::WideRay;
 use super::traverse::FAR_SCALE;
 use wide::{CmpGt, CmpLe, CmpLt, f32x4};
 
@@ -80,18 +82,6 @@ impl Node8 {
     }
 }
 
-/// A ray prepared for 8-wide slab tests: the binary test's origin and reciprocal direction,
-/// and for each axis which of a box's planes is near.
-#[derive(Clone, Copy)]
-pub(super) struct WideRay {
-    pub(super) origin: [f32; 3],
-    pub(super) inv_dir: [f32; 3],
-    /// Per axis, the index in [`Node8::bounds`] of the near plane and of the far plane: the max
-    /// when the reciprocal direction is negative (including -0.0's -inf), else the min.
-    pub(super) near: [usize; 3],
-    pub(super) far: [usize; 3],
-}
-
 /// Which instructions test a node's boxes, and a leaf's triangles eight at a time. The
 /// traversal is written once, generic over this, and compiled once per implementation.
 pub(super) trait BoxTest {
@@ -128,6 +118,9 @@ pub(super) trait BoxTest {
     /// in lanes 4 to 7: [`QuadRay::intersect_pair`], lane for lane.
     fn intersect_pair(ray: &QuadRay, a: &Quad, b: &Quad) -> LaneHits<8>;
 
+    /// A packet's rays in rows: [`RayRows::gather`], bit for bit.
+    fn gather(rays: &[Ray]) -> RayRows;
+
     /// A packet's rays made into lanes for [`BoxTest::triangle_against_rays`].
     type RayLanes: Copy;
 
@@ -162,6 +155,11 @@ impl BoxTest for Portable {
     /// triangle; this test runs where the processor lacks AVX (or off x86-64), or where a test
     /// asks for it.
     type RayLanes = std::convert::Infallible;
+
+    #[inline(always)]
+    fn gather(rays: &[Ray]) -> RayRows {
+        RayRows::gather(rays)
+    }
 
     #[inline(always)]
     fn ray_lanes(_: &RayRows) -> Option<Self::RayLanes> {
@@ -226,6 +224,12 @@ impl BoxTest for Avx {
     fn intersect_pair(ray: &QuadRay, a: &Quad, b: &Quad) -> LaneHits<8> {
         // SAFETY: as for `enter` below.
         unsafe { super::quad_avx::intersect_pair_avx(ray, a, b) }
+    }
+
+    #[inline(always)]
+    fn gather(rays: &[Ray]) -> RayRows {
+        // SAFETY: as for `enter` below.
+        unsafe { RayRows::gather_avx(rays) }
     }
 
     type RayLanes = RayLanes;
@@ -391,23 +395,6 @@ pub(super) unsafe fn slab_result_avx(
     // SAFETY: `t_near` holds eight f32; the store is unaligned.
     unsafe { _mm256_storeu_ps(t_near.as_mut_ptr(), t0) };
     (entered, t_near)
-}
-
-impl WideRay {
-    // Always inlined: once per ray, and a call would return the prepared ray through memory.
-    // Left to the heuristics, it was inlined or not depending on unrelated code elsewhere in
-    // the renderer (docs/bench.md, issue 12, twelfth round).
-    #[inline(always)]
-    pub(super) fn new(ray: &Ray) -> Self {
-        let inv = [1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z];
-        let negative = |axis: usize| inv[axis] < 0.0;
-        WideRay {
-            origin: ray.origin.to_array(),
-            inv_dir: inv,
-            near: [0, 1, 2].map(|a| if negative(a) { 3 + a } else { a }),
-            far: [0, 1, 2].map(|a| if negative(a) { a } else { 3 + a }),
-        }
-    }
 }
 
 /// Whether this processor runs the AVX box test. Asked once per tree (`Bvh8::collapse`); the

@@ -32,7 +32,7 @@ use super::bvh::{Accel, Closest};
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
 use super::node8::{BoxTest, Portable, WIDTH};
-use super::packet_box::{PacketBound, PacketRays, RayRows, within};
+use super::packet_box::{PacketBound, PacketRays, within};
 use super::quad::{LANES, QuadRay};
 use super::traverse::FAR_SCALE;
 use super::triangle::ShearedRay;
@@ -155,7 +155,7 @@ impl Accel {
     ) -> bool {
         let last = rays.len() - 1;
         let ray = |r: usize| &rays[r.min(last)];
-        let rows = RayRows::gather(rays);
+        let rows = B::gather(rays);
         let Some(packet) = PacketRays::from_rows(&rows) else {
             return false;
         };

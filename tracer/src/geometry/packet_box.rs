@@ -4,10 +4,10 @@
 //! (`BoxTest::enter_bound`); each in two SSE steps of four lanes and in one AVX step of
 //! eight, which `node8.rs`'s `Portable` and `Avx` call.
 
-use super::Ray;
 use super::node8::{Node8, WIDTH, join_halves, slab_step_sse};
 #[cfg(target_arch = "x86_64")]
 use super::node8::{slab_result_avx, slab_step_avx};
+use super::ray_setup::RayRows;
 use super::traverse::FAR_SCALE;
 use wide::{CmpLe, f32x4};
 
@@ -19,36 +19,6 @@ pub(super) struct PacketRays {
     pub(super) inv_dir: [[f32; WIDTH]; 3],
     pub(super) near: [usize; 3],
     pub(super) far: [usize; 3],
-}
-
-/// Up to eight rays' origins and directions, a row per axis and a lane per ray (the lanes
-/// past the last ray repeat it): what a packet's set-up is computed from, lane by lane.
-/// Made per ray and transposed, that set-up was mostly copies (docs/bench.md, issue 12,
-/// twenty-fifth round).
-pub(super) struct RayRows {
-    pub(super) origin: [[f32; WIDTH]; 3],
-    pub(super) dir: [[f32; WIDTH]; 3],
-}
-
-impl RayRows {
-    /// `rays`, one to [`WIDTH`] of them, in rows.
-    #[inline(always)]
-    pub(super) fn gather(rays: &[Ray]) -> Self {
-        let last = rays.len() - 1;
-        let mut rows = RayRows {
-            origin: [[0.0; WIDTH]; 3],
-            dir: [[0.0; WIDTH]; 3],
-        };
-        for lane in 0..WIDTH {
-            let ray = &rays[lane.min(last)];
-            let (o, d) = (ray.origin.to_array(), ray.dir.to_array());
-            for axis in 0..3 {
-                rows.origin[axis][lane] = o[axis];
-                rows.dir[axis][lane] = d[axis];
-            }
-        }
-        rows
-    }
 }
 
 impl PacketRays {
@@ -251,10 +221,11 @@ pub(super) fn within(t_near: &[f32; WIDTH], end: &[f32; WIDTH]) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::Ray;
     #[cfg(target_arch = "x86_64")]
     use crate::geometry::node8::Avx;
-    use crate::geometry::node8::WideRay;
     use crate::geometry::node8::{BoxTest, Portable, avx_available};
+    use crate::geometry::ray_setup::WideRay;
     use glam::Vec3;
 
     /// A small fixed stream (splitmix64), so every run checks the same cases.

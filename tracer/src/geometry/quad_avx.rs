@@ -32,8 +32,8 @@
 //! misses the triangle by the second step, each ray's own test finds no candidate there
 //! either.
 
-use super::packet_box::RayRows;
 use super::quad::{LaneHits, Quad, QuadRay};
+use super::ray_setup::RayRows;
 #[cfg(doc)]
 use super::triangle::major_axis;
 use super::triangle::{AXES, gamma};

@@ -1,0 +1,184 @@
+//! What the wide traversals make of their rays before the first box: one ray's box set-up
+//! ([`WideRay`]), and a packet's rays gathered into rows ([`RayRows`]), from which its box and
+//! triangle set-ups are computed lane by lane.
+//!
+//! The rows are gathered twice over: in plain code, a float at a time, which every machine
+//! runs; and with AVX, where the box test has it, by loading each ray in two four-float pieces
+//! and transposing them in registers. Both only move bits, so both give the same rows; a test
+//! holds them to each other. The AVX gather is there for speed: the plain one's 48 narrow stores
+//! were read back at once as whole rows, which the processor cannot forward from its store
+//! buffer (a stall per packet; docs/bench.md, issue 12, twenty-sixth round).
+
+use super::Ray;
+use super::node8::WIDTH;
+
+/// A ray prepared for 8-wide slab tests: the binary test's origin and reciprocal direction,
+/// and for each axis which of a box's planes is near.
+#[derive(Clone, Copy)]
+pub(super) struct WideRay {
+    pub(super) origin: [f32; 3],
+    pub(super) inv_dir: [f32; 3],
+    /// Per axis, the index in `Node8::bounds` of the near plane and of the far plane: the max
+    /// when the reciprocal direction is negative (including -0.0's -inf), else the min.
+    pub(super) near: [usize; 3],
+    pub(super) far: [usize; 3],
+}
+
+impl WideRay {
+    // Always inlined: once per ray, and a call would return the prepared ray through memory.
+    // Left to the heuristics, it was inlined or not depending on unrelated code elsewhere in
+    // the renderer (docs/bench.md, issue 12, twelfth round).
+    #[inline(always)]
+    pub(super) fn new(ray: &Ray) -> Self {
+        let inv = [1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z];
+        let negative = |axis: usize| inv[axis] < 0.0;
+        WideRay {
+            origin: ray.origin.to_array(),
+            inv_dir: inv,
+            near: [0, 1, 2].map(|a| if negative(a) { 3 + a } else { a }),
+            far: [0, 1, 2].map(|a| if negative(a) { a } else { 3 + a }),
+        }
+    }
+}
+
+/// Up to eight rays' origins and directions, a row per axis and a lane per ray (the lanes
+/// past the last ray repeat it): what a packet's set-up is computed from, lane by lane.
+/// Made per ray and transposed, that set-up was mostly copies (docs/bench.md, issue 12,
+/// twenty-fifth round). Aligned so that each row is one whole cache-line-half store and load.
+#[repr(align(32))]
+pub(super) struct RayRows {
+    pub(super) origin: [[f32; WIDTH]; 3],
+    pub(super) dir: [[f32; WIDTH]; 3],
+}
+
+impl RayRows {
+    /// `rays`, one to [`WIDTH`] of them, in rows.
+    #[inline(always)]
+    pub(super) fn gather(rays: &[Ray]) -> Self {
+        let last = rays.len() - 1;
+        let mut rows = RayRows {
+            origin: [[0.0; WIDTH]; 3],
+            dir: [[0.0; WIDTH]; 3],
+        };
+        for lane in 0..WIDTH {
+            let ray = &rays[lane.min(last)];
+            let (o, d) = (ray.origin.to_array(), ray.dir.to_array());
+            for axis in 0..3 {
+                rows.origin[axis][lane] = o[axis];
+                rows.dir[axis][lane] = d[axis];
+            }
+        }
+        rows
+    }
+
+    /// [`RayRows::gather`] with AVX: each ray loaded as `(ox, oy, oz, dx)` and `(dx, dy, dz,
+    /// t_max)`, rays `r` and `r + 4` side by side in one register, and the eight registers
+    /// transposed by unpacks and shuffles within their halves; each row is then one whole
+    /// store. The same bits as the plain gather: nothing but moves.
+    ///
+    /// # Safety
+    /// The processor must support AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(super) unsafe fn gather_avx(rays: &[Ray]) -> Self {
+        use std::arch::x86_64::*;
+        let last = rays.len() - 1;
+        // Ray `lane`'s first float (the last ray's past the end).
+        let at = |lane: usize| -> *const f32 { (&rays[lane.min(last)] as *const Ray).cast() };
+        // SAFETY: `Ray` is `repr(C)`, seven f32 (origin, dir, t_max), so floats 0 to 3 and 3 to
+        // 6 of a ray lie within the one ray each pointer was made from; the loads are
+        // unaligned. Written out rather than mapped over lanes: through closures LLVM left
+        // some loads as calls.
+        let (a0, a1, a2, a3, b0, b1, b2, b3) = unsafe {
+            let low = |lane: usize| _mm_loadu_ps(at(lane));
+            let high = |lane: usize| _mm_loadu_ps(at(lane).add(3));
+            (
+                _mm256_set_m128(low(4), low(0)),
+                _mm256_set_m128(low(5), low(1)),
+                _mm256_set_m128(low(6), low(2)),
+                _mm256_set_m128(low(7), low(3)),
+                _mm256_set_m128(high(4), high(0)),
+                _mm256_set_m128(high(5), high(1)),
+                _mm256_set_m128(high(6), high(2)),
+                _mm256_set_m128(high(7), high(3)),
+            )
+        };
+        // Within each half: lanes `(x0, x1, y0, y1)` and `(z0, z1, w0, w1)`, then the first
+        // or second pair of two such registers side by side.
+        let (low01, high01) = (_mm256_unpacklo_ps(a0, a1), _mm256_unpackhi_ps(a0, a1));
+        let (low23, high23) = (_mm256_unpacklo_ps(a2, a3), _mm256_unpackhi_ps(a2, a3));
+        let origin = [
+            _mm256_shuffle_ps::<0x44>(low01, low23),
+            _mm256_shuffle_ps::<0xee>(low01, low23),
+            _mm256_shuffle_ps::<0x44>(high01, high23),
+        ];
+        let (low01, high01) = (_mm256_unpacklo_ps(b0, b1), _mm256_unpackhi_ps(b0, b1));
+        let (low23, high23) = (_mm256_unpacklo_ps(b2, b3), _mm256_unpackhi_ps(b2, b3));
+        let dir = [
+            _mm256_shuffle_ps::<0x44>(low01, low23),
+            _mm256_shuffle_ps::<0xee>(low01, low23),
+            _mm256_shuffle_ps::<0x44>(high01, high23),
+        ];
+        let row = |v: __m256| {
+            let mut out = [0.0f32; WIDTH];
+            // SAFETY: `out` holds eight f32; the store is unaligned.
+            unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
+            out
+        };
+        RayRows {
+            origin: [row(origin[0]), row(origin[1]), row(origin[2])],
+            dir: [row(dir[0]), row(dir[1]), row(dir[2])],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::build::tests::next_signed as next;
+    use glam::Vec3;
+
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn the_avx_gather_gives_the_plain_rows_bit_for_bit() {
+        if !std::arch::is_x86_feature_detected!("avx") {
+            eprintln!("skipped: this processor has no AVX, where the AVX gather never runs");
+            return;
+        }
+        // Values whose bits a conversion or an arithmetic step would change: zeros of both
+        // signs, a subnormal, infinities, a NaN with a payload, the extremes.
+        let hard = [
+            0.0,
+            -0.0,
+            1.0e-40,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::from_bits(0x7fc0_1234),
+            f32::MAX,
+            -f32::MIN_POSITIVE,
+        ];
+        let mut state = 11;
+        let value = |s: &mut u64| {
+            let pick = (next(s).abs() * 24.0) as usize;
+            hard.get(pick).copied().unwrap_or_else(|| next(s) * 100.0)
+        };
+        for round in 0..4_000 {
+            let count = 1 + round % WIDTH;
+            let rays: Vec<Ray> = (0..count)
+                .map(|_| Ray {
+                    origin: Vec3::new(value(&mut state), value(&mut state), value(&mut state)),
+                    dir: Vec3::new(value(&mut state), value(&mut state), value(&mut state)),
+                    t_max: value(&mut state),
+                })
+                .collect();
+            let plain = RayRows::gather(&rays);
+            // SAFETY: the processor has AVX, asked above.
+            let avx = unsafe { RayRows::gather_avx(&rays) };
+            let bits = |rows: &RayRows| {
+                [rows.origin, rows.dir].map(|rows| rows.map(|row| row.map(f32::to_bits)))
+            };
+            assert_eq!(bits(&avx), bits(&plain), "{rays:?}");
+        }
+    }
+}
