@@ -33,6 +33,8 @@
 //!   ([`MotionAccel`], [`placed_point`]).
 //! - `quad_avx`: the same filter on two groups at once in AVX's eight lanes, where the
 //!   processor has them, with the same results bit for bit.
+//! - `ray_setup`: what the wide traversals make of their rays first: one ray's box set-up, and
+//!   a packet's rays gathered into rows (with AVX, transposed in registers).
 //! - `traverse`: the same robust traversal over the binary tree, and obvhs's own, for
 //!   comparison ([`Traversal`]).
 
