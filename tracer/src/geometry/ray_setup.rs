@@ -104,22 +104,20 @@ impl RayRows {
                 _mm256_set_m128(high(7), high(3)),
             )
         };
-        // Within each half: lanes `(x0, x1, y0, y1)` and `(z0, z1, w0, w1)`, then the first
-        // or second pair of two such registers side by side.
-        let (low01, high01) = (_mm256_unpacklo_ps(a0, a1), _mm256_unpackhi_ps(a0, a1));
-        let (low23, high23) = (_mm256_unpacklo_ps(a2, a3), _mm256_unpackhi_ps(a2, a3));
-        let origin = [
-            _mm256_shuffle_ps::<0x44>(low01, low23),
-            _mm256_shuffle_ps::<0xee>(low01, low23),
-            _mm256_shuffle_ps::<0x44>(high01, high23),
-        ];
-        let (low01, high01) = (_mm256_unpacklo_ps(b0, b1), _mm256_unpackhi_ps(b0, b1));
-        let (low23, high23) = (_mm256_unpacklo_ps(b2, b3), _mm256_unpackhi_ps(b2, b3));
-        let dir = [
-            _mm256_shuffle_ps::<0x44>(low01, low23),
-            _mm256_shuffle_ps::<0xee>(low01, low23),
-            _mm256_shuffle_ps::<0x44>(high01, high23),
-        ];
+        // The first three columns of four registers `(x, y, z, w)` (ray `k` in the low half of
+        // register `k`, ray `k + 4` in the high): within each half, lanes `(x0, x1, y0, y1)`
+        // and `(z0, z1, w0, w1)`, then the first or second pair of two such side by side.
+        let columns = |r0, r1, r2, r3| {
+            let (low01, high01) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
+            let (low23, high23) = (_mm256_unpacklo_ps(r2, r3), _mm256_unpackhi_ps(r2, r3));
+            [
+                _mm256_shuffle_ps::<0x44>(low01, low23),
+                _mm256_shuffle_ps::<0xee>(low01, low23),
+                _mm256_shuffle_ps::<0x44>(high01, high23),
+            ]
+        };
+        let origin = columns(a0, a1, a2, a3);
+        let dir = columns(b0, b1, b2, b3);
         let row = |v: __m256| {
             let mut out = [0.0f32; WIDTH];
             // SAFETY: `out` holds eight f32; the store is unaligned.
