@@ -12,6 +12,9 @@
 use super::Ray;
 use super::node8::WIDTH;
 
+// What `RayRows::gather_avx`'s loads rely on: a ray is seven f32 with nothing between them.
+const _: () = assert!(std::mem::size_of::<Ray>() == 7 * 4 && std::mem::align_of::<Ray>() == 4);
+
 /// A ray prepared for 8-wide slab tests: the binary test's origin and reciprocal direction,
 /// and for each axis which of a box's planes is near.
 #[derive(Clone, Copy)]
