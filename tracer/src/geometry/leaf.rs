@@ -33,7 +33,14 @@ impl Accel {
     ) -> bool {
         let groups = (count as usize).div_ceil(LANES);
         let first = first as usize;
-        let quads = &self.wide.quads[first..first + groups];
+        debug_assert!(
+            first + groups <= self.wide.quads.len(),
+            "a leaf's groups were packed"
+        );
+        // SAFETY: a leaf's entry names the groups `Bvh8::collapse` packed for it: `first` is
+        // where they start in `quads` and `count` the triangles they hold, four to a group, so
+        // the `count.div_ceil(4)` groups from `first` were all pushed.
+        let quads = unsafe { self.wide.quads.get_unchecked(first..first + groups) };
         let mut found = false;
         let mut g = 0;
         while g < groups {
