@@ -21,8 +21,13 @@ impl Accel {
     /// scalar test on the lanes it leaves. Returns whether any became the closest hit (with
     /// `ANY_HIT`, stops at the first). Every triangle up to where it stops counts as tested,
     /// filtered out or not, so pairs count what groups one by one count.
+    ///
+    /// # Safety
+    /// `first` and `count` must be a leaf entry of this tree: the `index` and `count` of a lane
+    /// of one of its `Node8`s whose count is not 0 (the groups `Bvh8::collapse` packed for it),
+    /// which are read without a bounds check.
     #[inline(always)]
-    pub(super) fn test_leaf<const ANY_HIT: bool, B: BoxTest>(
+    pub(super) unsafe fn test_leaf<const ANY_HIT: bool, B: BoxTest>(
         &self,
         first: u32,
         count: u32,

@@ -213,14 +213,17 @@ impl Accel {
                             Some(quad_rays) => quad_rays[r],
                             None => QuadRay::for_ray(&rays[r]),
                         };
-                        if self.test_leaf::<false, B>(
-                            current.child,
-                            current.count,
-                            &rays[r],
-                            &quad_ray,
-                            &mut closest[r],
-                            stats,
-                        ) {
+                        // SAFETY: as for the single-ray walk: a leaf entry of this tree.
+                        if unsafe {
+                            self.test_leaf::<false, B>(
+                                current.child,
+                                current.count,
+                                &rays[r],
+                                &quad_ray,
+                                &mut closest[r],
+                                stats,
+                            )
+                        } {
                             moved |= 1 << r;
                         }
                     }

@@ -227,15 +227,19 @@ impl Accel {
         };
         let mut len = 0usize;
         loop {
+            // SAFETY: every entry with triangles is a lane of a node of this tree (pushed
+            // below from `node.index` and `node.count`), and this one has some.
             if current.count > 0 {
-                if self.test_leaf::<ANY_HIT, B>(
-                    current.child,
-                    current.count,
-                    ray,
-                    &quad_ray,
-                    &mut closest,
-                    stats,
-                ) && ANY_HIT
+                if unsafe {
+                    self.test_leaf::<ANY_HIT, B>(
+                        current.child,
+                        current.count,
+                        ray,
+                        &quad_ray,
+                        &mut closest,
+                        stats,
+                    )
+                } && ANY_HIT
                 {
                     return closest.best;
                 }
@@ -258,14 +262,17 @@ impl Accel {
                     };
                     self.prefetch_child(entry.child, entry.count);
                     if ANY_HIT && entry.count > 0 {
-                        if self.test_leaf::<ANY_HIT, B>(
-                            entry.child,
-                            entry.count,
-                            ray,
-                            &quad_ray,
-                            &mut closest,
-                            stats,
-                        ) {
+                        // SAFETY: a lane of this node, with triangles.
+                        if unsafe {
+                            self.test_leaf::<ANY_HIT, B>(
+                                entry.child,
+                                entry.count,
+                                ray,
+                                &quad_ray,
+                                &mut closest,
+                                stats,
+                            )
+                        } {
                             return closest.best;
                         }
                         continue;
