@@ -28,8 +28,7 @@ use super::packet_box::{enter_bound_portable, enter_child_portable};
 use super::quad::{LaneHits, Quad, QuadRay};
 #[cfg(target_arch = "x86_64")]
 use super::quad_avx::RayLanes;
-use super::ray_setup::RayRows;
-pub(super) use super::ray_setup::WideRay;
+use super::ray_setup::{RayRows, WideRay};
 use super::traverse::FAR_SCALE;
 use wide::{CmpGt, CmpLe, CmpLt, f32x4};
 

@@ -27,9 +27,10 @@ use super::bvh::{Accel, Closest};
 use super::memory::prefetch;
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
-use super::node8::{BoxTest, Node8, Portable, WIDTH, WideRay, avx_available};
+use super::node8::{BoxTest, Node8, Portable, WIDTH, avx_available};
 use super::packed_hit::PackedHit;
 use super::quad::{LANES, Quad, QuadRay};
+use super::ray_setup::WideRay;
 use super::traverse::FAR_SCALE;
 use super::{Hit, Ray, TraversalStats};
 use glam::Vec3;
@@ -227,9 +228,9 @@ impl Accel {
         };
         let mut len = 0usize;
         loop {
-            // SAFETY: every entry with triangles is a lane of a node of this tree (pushed
-            // below from `node.index` and `node.count`), and this one has some.
             if current.count > 0 {
+                // SAFETY: every entry with triangles is a lane of a node of this tree (pushed
+                // below from `node.index` and `node.count`), and this one has some.
                 if unsafe {
                     self.test_leaf::<ANY_HIT, B>(
                         current.child,

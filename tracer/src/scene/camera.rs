@@ -168,9 +168,10 @@ impl CameraRays {
 
     /// The ray through image position (`x`, `y`) from the point `lens` (in [0, 1)^2, mapped
     /// onto the disk) of the lens; the pinhole ray when there is no lens.
-    // Always inlined, as `ray` is: as a call, its ray came back through memory, written field
-    // by field and read at once in 16-byte loads across those stores, which the processor
-    // cannot forward (a stall per camera ray; docs/bench.md, issue 12, twenty-sixth round).
+    // Always inlined (`ray`, smaller, the compiler inlines of itself): as a call, its ray came
+    // back through memory, written field by field and read at once in 16-byte loads across
+    // those stores, which the processor cannot forward (a stall per camera ray; docs/bench.md,
+    // issue 12, twenty-sixth round).
     #[inline(always)]
     pub fn ray_through_lens(&self, x: f32, y: f32, lens: Vec2) -> Ray {
         if !self.has_lens() {
