@@ -23,11 +23,11 @@ import re
 import subprocess
 import sys
 
-WIDE_LOADS = ('movups', 'movaps', 'vmovups', 'vmovaps', 'movsd', 'vmovsd', 'movq', 'vmovq',
-              'movdqu', 'vmovdqu', 'movhps', 'movlps', 'vinsertf128')
-FOUR = ('movss', 'vmovss', 'movd', 'vmovd')
+FOUR = ('movss', 'vmovss', 'movd', 'vmovd', 'movl')
 EIGHT = ('movsd', 'vmovsd', 'movq', 'vmovq', 'movlps', 'vmovlps', 'movhps', 'vmovhps')
 SIXTEEN = ('movups', 'movaps', 'vmovups', 'vmovaps', 'movdqu', 'movdqa', 'vmovdqu', 'vmovdqa')
+# The loads of eight bytes or more that the scan after calls looks for.
+WIDE_LOADS = EIGHT + SIXTEEN + ('vinsertf128',)
 STACK = re.compile(r'(-?0x[0-9a-f]+|)\(%rsp\)')
 
 
@@ -60,10 +60,6 @@ def width(op, args):
     for names, size in ((FOUR, 4), (EIGHT, 8), (SIXTEEN, 16)):
         if op in names:
             return size
-    if op in ('movl',):
-        return 4
-    if op in ('movq',):
-        return 8
     if op == 'mov':
         registers = [r for r in re.findall(r'%(\w+)', args) if r not in ('rsp', 'rip')]
         if not registers:
