@@ -5,17 +5,20 @@ Why this script exists: the tracer issue sets a target of being faster than the 
 would otherwise pick, at equal settings and with the same mean image (within 1% per channel). A
 speed figure means nothing unless both renderers drew the same picture, so this script
 
-1. reads each scene's tessera TOML (camera, OBJ file, a constant environment) and the OBJ/MTL
-   it names, and builds the same scene for Mitsuba from them: one mesh per MTL material, Kd (or
-   its `map_Kd` texture) as a two-sided diffuse reflectance, Ke as a one-sided area light (see
-   MTL_MAPPING below), `[environment] radiance` as a `constant` emitter;
+1. reads each scene's tessera TOML (camera, OBJ file, environment) and the OBJ/MTL it names, and
+   builds the same scene for Mitsuba from them (`scripts/mitsuba_scene.py`, with its mappings):
+   one mesh per MTL material, Kd (or its `map_Kd` texture) as a two-sided diffuse reflectance, Ke
+   as a one-sided area light, `[environment] radiance` as a `constant` emitter and a lat-long
+   `map` as an `envmap`, a camera with an open aperture as a `thinlens`;
 2. renders it with Mitsuba (each variant in a fresh process, so that its CPU-seconds are its
    own) and writes an EXR;
 3. runs `tessera bench` on the same TOML at the same size, samples and depth, which writes our EXR
    and our timings (CPU-seconds of the whole process, BVH build and render); scene by scene, after
    Mitsuba's run of it, and `--repeats N` times over, each renderer's fastest run reported (a
    machine shared with others disturbs single runs by up to a third);
-4. runs `tessera compare OURS.exr MITSUBA.exr --json` and checks the per-channel means;
+4. runs `tessera compare OURS.exr MITSUBA.exr --json` and checks the per-channel means, and
+   compares the images' means over 8x8-pixel blocks (`block_difference`), which see a picture
+   mirrored, shifted or blurred that the means cannot;
 5. prints one table and writes OUT/compare.json and OUT/compare.md.
 
 Participating media: a scene may also hold procedural spheres (`shape = "sphere"`) whose
@@ -23,6 +26,11 @@ material is an `interface` or `glass` with a `medium` (MEDIA_MAPPING below); suc
 rendered by Mitsuba's `volpath` instead of `path`. `scenes/shared/cornell-box-smoke.toml` is one.
 Global fog (`[camera] medium`) becomes the medium of Mitsuba's sensor, where its camera rays start
 (`scenes/shared/cornell-box-fog.toml`).
+
+Depth of field and environment maps (issue 16): `scenes/shared/cornell-box-focus.toml` and
+`scenes/shared/stanford-bunny-sky.toml`. Mitsuba's time on a map scene is not a speed comparison:
+it reads the map with each texel repeated 32 times each way (EFFECTS_MAPPING in
+`scripts/mitsuba_scene.py` says why), which costs its render more than the map would.
 
 Depth: Mitsuba's `max_depth` counts path segments (1 shows emitters only), ours counts bounces as
 pbrt does (0 shows emitters only), so Mitsuba `max_depth = 8` is our `--max-depth 7`.
@@ -42,49 +50,7 @@ import time
 import tomllib
 from pathlib import Path
 
-# How the script maps MTL onto Mitsuba. Mitsuba's own OBJ loader ignores MTL files entirely, so
-# the mapping is ours; it is the one tessera applies to these files (scenes/README.md, "MTL"):
-# every material of the shared Cornell scenes is `illum 2` with `Ks 0`, which tessera reads as
-# diffuse with reflectance Kd. Mitsuba's `diffuse` is black from behind, tessera's reflection-only
-# BSDFs are two-sided, so the diffuse goes in a `twosided` wrapper. `Ke` > 0 adds an `area`
-# emitter, which, like tessera's, emits on the winding normal's side only. Ns, Ni, Ka and illum
-# play no part for these materials in either renderer.
-#
-# Textures (Sponza): tessera's diffuse with `map_Kd` is the texture alone (albedo 1, Kd ignored),
-# decoded from sRGB to linear, looked up nearest with repeat wrapping, v = 0 the bottom row
-# (tracer/src/scene/texture.rs). Mitsuba's `bitmap` with `filter_type = nearest`,
-# `wrap_mode = repeat` and `raw = false` (sRGB decoded) does the same, with v = 0 the *top* row,
-# so the script hands Mitsuba (u, 1 - v). What cannot be matched exactly: the JPEG decoders
-# (Mitsuba's libjpeg against the `image` crate's) may round chroma upsampling differently, and a
-# texel boundary may fall one texel apart where `1 - v` rounds; both move means by far less than
-# the noise of a 64-spp Sponza.
-MTL_MAPPING = (
-    "Kd -> twosided(diffuse(reflectance = Kd)); map_Kd -> twosided(diffuse(reflectance = bitmap(nearest, "
-    "repeat, sRGB-decoded, uv = (u, 1 - v)))), Kd ignored, as tessera does; Ke > 0 -> one-sided area "
-    "emitter (radiance = Ke) on the same mesh; Ns/Ni/Ka/illum/bump unused (Ks below Kd everywhere); no "
-    "vertex normals in these OBJs, so both renderers shade with face normals; [environment] radiance -> "
-    "constant emitter"
-)
-
-# How the script maps tessera's media onto Mitsuba (scenes/README.md, "Participating media"): a
-# `[media.NAME]` table becomes a `homogeneous` medium with `sigma_t = sigma_a + sigma_s`,
-# `albedo = sigma_s / sigma_t` (RGB) and an `hg` phase function of the same `g` (both renderers
-# take g > 0 as forward scattering); a sphere whose material is `interface` becomes Mitsuba's
-# analytic `sphere` with a `null` BSDF and that medium as `interior`, `glass` a `dielectric`
-# (int_ior = ior, ext_ior = outside_ior, 1 when left out: both renderers refract by their ratio);
-# its `outside_medium` (the camera's medium when left out, as in tessera) becomes the sphere's
-# `exterior`, so media nest alike in both renderers (`scenes/shared/cornell-box-nested.toml`).
-# Our sphere is an icosphere (20,480 faces at subdivisions 5, 0.03 % less area than the sphere),
-# Mitsuba's the exact sphere. `[camera] medium` (global fog)
-# becomes the sensor's `medium`: both renderers start camera rays in it, and since the meshes
-# name no media, a ray that reflects stays in it (Mitsuba changes a ray's medium only at shapes
-# with an interior or exterior medium, tessera only at glass and interfaces).
-MEDIA_MAPPING = (
-    "[media] -> homogeneous(sigma_t = sigma_a + sigma_s, albedo = sigma_s / sigma_t, phase hg(g)); "
-    "sphere with interface -> sphere(null BSDF, interior = medium, exterior = outside_medium or the camera's); "
-    "with glass -> sphere(dielectric(int_ior = ior, ext_ior = outside_ior), interior, exterior); "
-    "[camera] medium -> the sensor's medium"
-)
+from mitsuba_scene import EFFECTS_MAPPING, MEDIA_MAPPING, MTL_MAPPING, mitsuba_description
 
 DEFAULT_SCENES = [
     "scenes/shared/cornell-box-original.toml",
@@ -130,12 +96,19 @@ def main():
         "where the processor has AVX-512 and 8 where it has AVX2): 8 on an AVX-512 machine shows how much "
         "of Mitsuba's time there is its wider vectors; the processor and its features stay the host's",
     )
+    parser.add_argument(
+        "--floor",
+        action="store_true",
+        help="render each scene with Mitsuba once more at another sampler seed and report how its two images "
+        "differ over blocks: the noise floor that tessera's difference from Mitsuba is to be read against",
+    )
+    parser.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     parser.add_argument("--worker", nargs=3, metavar=("VARIANT", "TOML", "EXR"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         variant, toml, exr = args.worker
         print(json.dumps(render_mitsuba(variant, Path(toml), Path(exr), args.size, args.spp, args.segments,
-                                        args.integrator, args.mitsuba_lanes)))
+                                        args.integrator, args.mitsuba_lanes, args.seed)))
         return
 
     present = [Path(s) for s in args.scenes if scene_files_present(Path(s))]
@@ -180,12 +153,17 @@ def main():
             }
             if "error" not in theirs:
                 row["comparison"] = compare(args.tessera, our["image"], theirs["exr"], args.tolerance)
+                if args.floor:
+                    again = Path(theirs["exr"]).with_suffix(".seed1.exr")
+                    if "error" not in run_worker(variant, toml, again, args, seed=1):
+                        row["floor"] = block_difference(again, theirs["exr"])
             rows.append(row)
     report = {
         "settings": {"size": args.size, "spp": args.spp, "segments": args.segments, "tessera_max_depth": args.segments - 1,
                      "tolerance": args.tolerance, "mitsuba_integrator": args.integrator, "repeats": args.repeats},
         "mtl_mapping": MTL_MAPPING,
         "media_mapping": MEDIA_MAPPING,
+        "effects_mapping": EFFECTS_MAPPING,
         "cores": os.cpu_count(),
         "processor": processor(),
         "load_before": load_before,
@@ -209,10 +187,10 @@ def scene_files_present(toml):
     return all((toml.parent / o["obj"]).exists() for o in scene.get("object", []) if "obj" in o)
 
 
-def run_worker(variant, toml, exr, args):
+def run_worker(variant, toml, exr, args, seed=0):
     command = [sys.executable, __file__, "--worker", variant, str(toml), str(exr)]
     command += ["--size", str(args.size), "--spp", str(args.spp), "--segments", str(args.segments)]
-    command += ["--integrator", args.integrator]
+    command += ["--integrator", args.integrator, "--seed", str(seed)]
     if args.mitsuba_lanes:
         command += ["--mitsuba-lanes", str(args.mitsuba_lanes)]
     done = subprocess.run(command, capture_output=True, text=True)
@@ -261,7 +239,37 @@ def compare(tessera, ours, theirs, tolerance):
         "rmse": metrics["rmse"],
         "rel_mse": metrics["rel_mse"],
         "flip": metrics.get("flip", {}).get("mean") if isinstance(metrics.get("flip"), dict) else metrics.get("flip"),
+        "blocks": block_difference(ours, theirs),
     }
+
+
+# The side of the square blocks whose means `block_difference` compares, in pixels.
+BLOCK = 8
+
+
+def block_difference(ours, theirs):
+    """Where in the image the two renderers differ, not only by how much on the whole: the
+    luminance of each BLOCK x BLOCK block of pixels, ours relative to Mitsuba's, as the root mean
+    square and the largest magnitude over the blocks. The image means cannot see a picture
+    mirrored, or sharp where the other is blurred; block means can, while the blocks' thousands
+    of samples average most of the noise away (what remains of it sets the floor, which `--floor`
+    measures: two renders of Mitsuba's at different seeds). Blocks darker than a thousandth of the
+    image's mean are left out, as a relative difference there is noise over nothing."""
+    import mitsuba as mi
+    import numpy as np
+
+    mi.set_variant("scalar_rgb")
+    luminance = np.array([0.2126, 0.7152, 0.0722])
+    blocks = []
+    for path in (ours, theirs):
+        pixels = np.array(mi.Bitmap(str(path)).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, False))
+        height, width = (pixels.shape[0] // BLOCK) * BLOCK, (pixels.shape[1] // BLOCK) * BLOCK
+        y = pixels[:height, :width] @ luminance
+        blocks.append(y.reshape(height // BLOCK, BLOCK, width // BLOCK, BLOCK).mean(axis=(1, 3)))
+    test, reference = blocks
+    lit = reference > 1e-3 * reference.mean()
+    relative = (test[lit] - reference[lit]) / reference[lit]
+    return {"size": BLOCK, "rms": float(np.sqrt(np.mean(relative**2))), "max": float(np.abs(relative).max())}
 
 
 def processor():
@@ -319,7 +327,9 @@ def markdown(report):
         lines.append(
             f"| {row['scene']} | | Mitsuba {name} | {m['cpu_seconds']:.2f} "
             f"({m['load_cpu_seconds']:.2f} + {m['render_cpu_seconds']:.2f}) | {m['wall_seconds']:.2f} | "
-            f"{fmt_means(c['mean_mitsuba'])} | {diff} ({verdict} {tolerance}; RMSE {c['rmse']:.4f}) |"
+            f"{fmt_means(c['mean_mitsuba'])} | {diff} ({verdict} {tolerance}; RMSE {c['rmse']:.4f}; "
+            f"{c['blocks']['size']}-pixel blocks {c['blocks']['rms'] * 100:.1f}% RMS, {c['blocks']['max'] * 100:.1f}% at most"
+            f"{fmt_floor(row.get('floor'))}) |"
         )
     if s.get("repeats", 1) > 1:
         lines += ["", f"Each renderer's fastest of {s['repeats']} runs, alternated scene by scene; every run's CPU-s:", ""]
@@ -330,8 +340,16 @@ def markdown(report):
             ours = ", ".join(f"{v:.2f}" for v in row["runs"]["tessera"])
             theirs = ", ".join(f"{v:.2f}" for v in row["runs"]["mitsuba"])
             lines.append(f"- {row['scene']}: tessera {ours}; Mitsuba {row['variant']} {theirs}; fastest against fastest {ratio:.2f}x")
-    lines += ["", "MTL mapping: " + report["mtl_mapping"] + ".", "", "Media mapping: " + report["media_mapping"] + ".", ""]
+    for title, key in (("MTL", "mtl_mapping"), ("Media", "media_mapping"), ("Effects", "effects_mapping")):
+        lines += ["", f"{title} mapping: {report[key]}."]
+    lines.append("")
     return "\n".join(lines)
+
+
+def fmt_floor(floor):
+    if floor is None:
+        return ""
+    return f"; Mitsuba against itself at another seed {floor['rms'] * 100:.1f}% RMS, {floor['max'] * 100:.1f}% at most"
 
 
 def fmt_means(means):
@@ -343,78 +361,6 @@ def fmt_load(load):
 
 
 # --- The Mitsuba side, run in a process of its own per (variant, scene). ---
-
-
-def mitsuba_description(toml, size, spp, segments, integrator="auto"):
-    """The Mitsuba scene dictionary of a tessera TOML (MTL_MAPPING, MEDIA_MAPPING) and its
-    triangle count; the variant must be set. Shared with scripts/traversal_compare.py."""
-    import mitsuba as mi
-
-    scene_toml = tomllib.loads(toml.read_text())
-    camera = scene_toml["camera"]
-    unsupported = set(camera) - {"position", "look_at", "up", "vfov", "medium"}
-    environment = scene_toml.get("environment", {})
-    if unsupported or scene_toml.get("lights") or set(environment) - {"radiance"}:
-        raise SystemExit(
-            f"{toml}: only a fixed camera, plain OBJ objects and a constant environment are translated for Mitsuba"
-        )
-    media = {name: mitsuba_medium(spec) for name, spec in scene_toml.get("media", {}).items()}
-    shapes = {}
-    triangles = 0
-    for index, obj in enumerate(scene_toml.get("object", [])):
-        if obj.get("shape") == "sphere":
-            shapes[f"shape-{index}-sphere"] = mitsuba_sphere(
-                toml, obj, scene_toml.get("materials", {}), media, camera.get("medium")
-            )
-            continue
-        if set(obj) != {"obj"}:
-            raise SystemExit(f"{toml}: object {index} has keys other than obj, which this script does not translate")
-        for name, (positions, texcoords, faces, kd, ke, texture) in read_obj(toml.parent / obj["obj"]).items():
-            triangles += len(faces) // 3
-            props = mi.Properties()
-            if texture is not None:
-                reflectance = {"type": "bitmap", "filename": str(texture), "filter_type": "nearest",
-                               "wrap_mode": "repeat", "raw": False}
-            else:
-                reflectance = {"type": "rgb", "value": kd}
-            props["bsdf"] = mi.load_dict({"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": reflectance}})
-            if any(v > 0 for v in ke):
-                props["emitter"] = mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": ke}})
-            textured = texcoords is not None
-            mesh = mi.Mesh(f"{index}-{name}", len(positions) // 3, len(faces) // 3, props=props,
-                           has_vertex_normals=False, has_vertex_texcoords=textured)
-            params = mi.traverse(mesh)
-            # The buffers' own types: drjit arrays in the llvm variants, scalar arrays in scalar_rgb.
-            params["vertex_positions"] = type(params["vertex_positions"])(positions)
-            params["faces"] = type(params["faces"])(faces)
-            if textured:
-                params["vertex_texcoords"] = type(params["vertex_texcoords"])(texcoords)
-            params.update()
-            shapes[f"shape-{index}-{name}"] = mesh
-    description = {
-        "type": "scene",
-        "integrator": {"type": integrator if integrator != "auto" else "volpath" if media else "path",
-                       "max_depth": segments},
-        "sensor": {
-            "type": "perspective",
-            "fov": camera.get("vfov", 40.0),
-            "fov_axis": "y",
-            "to_world": mi.ScalarTransform4f().look_at(
-                origin=camera["position"], target=camera["look_at"], up=camera.get("up", [0, 1, 0])
-            ),
-            "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
-                     "pixel_format": "rgb", "component_format": "float32"},
-            "sampler": {"type": "independent", "sample_count": spp},
-        },
-        **shapes,
-    }
-    if "medium" in camera:
-        description["sensor"]["medium"] = media[camera["medium"]]
-    if "radiance" in environment:
-        radiance = environment["radiance"]
-        radiance = [float(radiance)] * 3 if isinstance(radiance, (int, float)) else [float(c) for c in radiance]
-        description["environment"] = {"type": "constant", "radiance": {"type": "rgb", "value": radiance}}
-    return description, triangles
 
 
 def llvm_lanes(lanes=None):
@@ -436,13 +382,13 @@ def llvm_lanes(lanes=None):
     return width()
 
 
-def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto", lanes=None):
+def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto", lanes=None, seed=0):
     import drjit as dr
     import mitsuba as mi
 
     mi.set_variant(variant)
     lanes = llvm_lanes(lanes) if variant.startswith("llvm") else None
-    description, triangles = mitsuba_description(toml, size, spp, segments, integrator)
+    description, triangles = mitsuba_description(toml, size, spp, segments, integrator, seed)
     # Resident memory (KiB) before Mitsuba builds its scene, which holds this script's own
     # Python lists of the OBJ's vertices and faces, and after the scene and the render: the
     # growth is about what Mitsuba's scene (meshes and BVH) and render took.
@@ -478,59 +424,6 @@ def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto", l
     }
 
 
-def mitsuba_medium(spec):
-    """A `[media.NAME]` table as a Mitsuba `homogeneous` medium (MEDIA_MAPPING)."""
-    rgb = lambda v: [float(v)] * 3 if isinstance(v, (int, float)) else [float(c) for c in v]
-    if "albedo" in spec:
-        albedo, sigma_t = rgb(spec["albedo"]), rgb(spec["density"])
-    else:
-        sigma_a, sigma_s = rgb(spec.get("sigma_a", 0)), rgb(spec.get("sigma_s", 0))
-        sigma_t = [a + s for a, s in zip(sigma_a, sigma_s)]
-        albedo = [s / t if t > 0 else 0.0 for s, t in zip(sigma_s, sigma_t)]
-    # Mitsuba reads an RGB `sigma_t` as a reflectance, in [0, 1]: it takes the largest channel
-    # as its `scale` and the rest relative to it.
-    scale = max(sigma_t) or 1.0
-    return {
-        "type": "homogeneous",
-        "scale": scale,
-        "sigma_t": {"type": "rgb", "value": [t / scale for t in sigma_t]},
-        "albedo": {"type": "rgb", "value": albedo},
-        "phase": {"type": "hg", "g": float(spec.get("g", 0.0))},
-    }
-
-
-def mitsuba_sphere(toml, obj, materials, media, camera_medium):
-    """A procedural sphere bounded by an `interface` or `glass` material with a medium, and with
-    the medium outside it: its `outside_medium`, or the camera's medium when left out (tessera's
-    rule; Mitsuba's own default, no exterior, would be vacuum)."""
-    import mitsuba as mi
-
-    if set(obj) - {"shape", "center", "radius", "subdivisions", "material"}:
-        raise SystemExit(f"{toml}: a sphere with keys this script does not translate: {sorted(obj)}")
-    material = materials[obj["material"]]
-    if material.get("type") == "interface" and set(material) <= {"type", "medium", "outside_medium"}:
-        bsdf = {"type": "null"}
-    elif material.get("type") == "glass" and set(material) <= {"type", "ior", "outside_ior", "medium", "outside_medium"}:
-        bsdf = {
-            "type": "dielectric",
-            "int_ior": float(material.get("ior", 1.5)),
-            "ext_ior": float(material.get("outside_ior", 1.0)),
-        }
-    else:
-        raise SystemExit(f"{toml}: sphere material {obj['material']} is neither a plain interface nor a plain glass")
-    sphere = {
-        "type": "sphere",
-        "to_world": mi.ScalarTransform4f().translate(obj.get("center", [0, 0, 0])).scale(float(obj.get("radius", 1.0))),
-        "bsdf": bsdf,
-    }
-    if "medium" in material:
-        sphere["interior"] = mi.load_dict(media[material["medium"]])
-    outside = material.get("outside_medium", camera_medium)
-    if outside is not None:
-        sphere["exterior"] = mi.load_dict(media[outside])
-    return mi.load_dict(sphere)
-
-
 def resident_kib():
     """This process's resident memory now, in KiB (Linux's /proc; None elsewhere)."""
     try:
@@ -542,104 +435,6 @@ def resident_kib():
         return None
     return None
 
-
-def read_obj(path):
-    """Triangles per `usemtl` material: {name: (flat positions, flat uvs or None, flat indices, Kd, Ke,
-    texture path or None)}.
-
-    Handles what the shared scenes use: CRLF endings, negative (relative) indices, `v/vt/vn`
-    references, and polygons, which are cut into fans as tessera's loader cuts them. A vertex is
-    a (position, texture coordinate) pair, as in tessera's loader (tobj's single index), so that
-    faces meeting at a position with different `vt` keep their own; texture coordinates are kept
-    for a material only when it has a texture and every corner of its faces has one.
-    """
-    vertices = []
-    uvs = []
-    groups = {}
-    material = None
-    materials = {}
-    with open(path, encoding="utf-8", errors="replace") as f:
-        for line in f:
-            words = line.split()
-            if not words:
-                continue
-            if words[0] == "v":
-                vertices.append((float(words[1]), float(words[2]), float(words[3])))
-            elif words[0] == "vt":
-                # `vt u [v [w]]`: a missing v is 0, as tessera reads it.
-                uvs.append((float(words[1]), float(words[2]) if len(words) > 2 else 0.0))
-            elif words[0] == "f":
-                corners = [w.split("/") for w in words[1:]]
-                resolve = lambda i, count: i - 1 if i > 0 else count + i
-                ids = [
-                    (resolve(int(c[0]), len(vertices)), resolve(int(c[1]), len(uvs)) if len(c) > 1 and c[1] else None)
-                    for c in corners
-                ]
-                tris = groups.setdefault(material, [])
-                for k in range(1, len(ids) - 1):
-                    tris.extend((ids[0], ids[k], ids[k + 1]))
-            elif words[0] == "usemtl":
-                material = " ".join(words[1:])
-            elif words[0] == "mtllib":
-                materials.update(read_mtl(path.parent / " ".join(words[1:])))
-    meshes = {}
-    for name, tris in groups.items():
-        if name not in materials:
-            raise SystemExit(f"{path}: material {name!r} is not in its MTL files")
-        kd, ke, texture = materials[name]
-        textured = texture is not None and all(t is not None for _, t in tris)
-        # Each material's mesh keeps only the vertices it uses.
-        remap = {}
-        positions = []
-        texcoords = [] if textured else None
-        faces = []
-        for i, t in tris:
-            key = (i, t) if textured else i
-            j = remap.get(key)
-            if j is None:
-                j = remap[key] = len(remap)
-                positions.extend(vertices[i])
-                if textured:
-                    u, v = uvs[t]
-                    # Mitsuba's bitmap has v = 0 at the top row, tessera's at the bottom.
-                    texcoords.extend((u, 1.0 - v))
-            faces.append(j)
-        meshes[name] = (positions, texcoords, faces, kd, ke, texture if textured else None)
-    return meshes
-
-
-def read_mtl(path):
-    """{name: (Kd, Ke, map_Kd path or None)}; the texture's file name is matched ignoring ASCII case
-    when it does not exist as written, as tessera's loader matches it (Sponza's MTL says
-    `00_SKAP.JPG` for `00_skap.JPG`)."""
-    materials = {}
-    name = None
-    with open(path, encoding="utf-8", errors="replace") as f:
-        for line in f:
-            words = line.split("#")[0].split()
-            if not words:
-                continue
-            if words[0] == "newmtl":
-                name = " ".join(words[1:])
-                materials[name] = [[0.8, 0.8, 0.8], [0.0, 0.0, 0.0], None]
-            elif words[0] in ("Kd", "Ke") and name is not None:
-                values = [float(w) for w in words[1:4]]
-                values = values * 3 if len(values) == 1 else values
-                materials[name][0 if words[0] == "Kd" else 1] = values
-            elif words[0] == "map_Kd" and name is not None:
-                # With leading `-options` tessera takes the last word; `\` is read as `/`.
-                file = (words[-1] if words[1].startswith("-") else " ".join(words[1:])).replace("\\", "/")
-                materials[name][2] = find_ignoring_case(path.parent / file)
-    return {k: tuple(v) for k, v in materials.items()}
-
-
-def find_ignoring_case(path):
-    if path.exists():
-        return path
-    matches = [p for p in path.parent.iterdir() if p.name.lower() == path.name.lower()]
-    if not matches:
-        raise SystemExit(f"{path}: texture not found")
-    return sorted(matches)[0]
 
 
 if __name__ == "__main__":

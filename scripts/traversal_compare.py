@@ -43,7 +43,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from mitsuba_compare import DEFAULT_SCENES, fmt_load, mitsuba_description, processor  # noqa: E402
+from mitsuba_compare import DEFAULT_SCENES, fmt_load, processor  # noqa: E402
+from mitsuba_scene import mitsuba_description  # noqa: E402
 
 
 def main():
