@@ -36,7 +36,7 @@ use super::packet_box::{PacketBound, PacketRays, within};
 use super::quad::{LANES, QuadRay};
 use super::traverse::FAR_SCALE;
 use super::triangle::ShearedRay;
-use super::wide::{BoxSimd, WalkStack, push_sorted};
+use super::wide::{BoxSimd, INLINE_STACK, WalkStack, push_sorted};
 use super::{Hit, Ray, TraversalStats};
 use std::mem::MaybeUninit;
 use wide::f32x4;
@@ -78,21 +78,31 @@ impl Accel {
             hits.fill(None);
             return;
         }
-        #[cfg(target_arch = "x86_64")]
-        let together = if self.wide.simd == BoxSimd::Avx {
-            // SAFETY: `simd` is `Avx` only where `is_x86_feature_detected!("avx")` said yes
-            // (`best_simd`, `Accel::set_box_simd`).
-            unsafe { self.packet_avx(rays, hits, stats) }
-        } else {
-            self.packet_portable(rays, hits, stats)
-        };
-        #[cfg(not(target_arch = "x86_64"))]
-        let together = self.packet_portable(rays, hits, stats);
+        // A tree too deep for the walks' stack is walked ray by ray, through the binary tree.
+        let together = self.wide.fits_inline_stack() && self.packet_walk(rays, hits, stats);
         if !together {
             for (ray, hit) in rays.iter().zip(hits) {
                 *hit = self.intersect(ray, stats);
             }
         }
+    }
+
+    /// The packet walk with the box test [`Bvh8::simd`](super::wide::Bvh8) names; `false`
+    /// where the rays cannot be walked together.
+    #[inline(always)]
+    fn packet_walk(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        stats: &mut TraversalStats,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.wide.simd == BoxSimd::Avx {
+            // SAFETY: `simd` is `Avx` only where `is_x86_feature_detected!("avx")` said yes
+            // (`best_simd`, `Accel::set_box_simd`).
+            return unsafe { self.packet_avx(rays, hits, stats) };
+        }
+        self.packet_portable(rays, hits, stats)
     }
 
     /// The packet walk with the portable box test (SSE on x86-64).
@@ -134,9 +144,8 @@ impl Accel {
         // sits in, so the AVX box and triangle tests inside it became calls (the box's rays,
         // 769 to 910 instructions each, when tried).
         let mut counted = *stats;
-        let mut stack = WalkStack::<PacketEntry>::new();
-        let stack = stack.for_tree(&self.wide);
-        let together = self.packet_with_stack::<B>(rays, hits, &mut counted, stack);
+        let mut stack: WalkStack<PacketEntry> = [MaybeUninit::uninit(); INLINE_STACK];
+        let together = self.packet_with_stack::<B>(rays, hits, &mut counted, &mut stack);
         *stats = counted;
         together
     }

@@ -97,35 +97,20 @@ struct StackEntry {
 /// levels.
 pub(super) const INLINE_STACK: usize = (WIDTH - 1) * 30 + 1;
 
-/// The room a walk's stack is taken from, for the single-ray walk and the packet walk alike:
-/// [`INLINE_STACK`] entries in place, or, for a tree too deep for them, a heap allocation.
-/// Either way the walk proper is compiled once, over a slice.
-pub(super) struct WalkStack<E> {
-    /// Uninitialised: filling 211 entries per ray would cost more than a node test.
-    inline: [MaybeUninit<E>; INLINE_STACK],
-    heap: Vec<MaybeUninit<E>>,
-}
+/// The stack a walk of the wide tree takes, for the single-ray walk and the packet walk alike:
+/// [`INLINE_STACK`] entries in place, uninitialised (filling 211 entries per ray would cost
+/// more than a node test). A tree too deep for it is never walked wide
+/// ([`Bvh8::fits_inline_stack`]), so the walks carry no heap fallback: no allocator's state
+/// to set up per ray, and no release of it at every return.
+pub(super) type WalkStack<E> = [MaybeUninit<E>; INLINE_STACK];
 
-impl<E: Copy> WalkStack<E> {
+impl Bvh8 {
+    /// Whether every walk's pushes fit in a [`WalkStack`]: at most `7 * depth + 1` entries
+    /// (see [`INLINE_STACK`]). Where not (a tree no real scene has come near), the rays are
+    /// walked through the binary tree instead, which finds the same hits, bit for bit.
     #[inline(always)]
-    pub(super) fn new() -> Self {
-        WalkStack {
-            inline: [MaybeUninit::uninit(); INLINE_STACK],
-            heap: Vec::new(),
-        }
-    }
-
-    /// A stack of at least `7 * depth + 1` entries for a walk of `tree`, which is what the
-    /// walks' pushes can reach (see [`INLINE_STACK`]).
-    #[inline(always)]
-    pub(super) fn for_tree(&mut self, tree: &Bvh8) -> &mut [MaybeUninit<E>] {
-        let needed = (WIDTH - 1) * tree.depth + 1;
-        if needed <= INLINE_STACK {
-            &mut self.inline
-        } else {
-            self.heap.resize(needed, MaybeUninit::uninit());
-            &mut self.heap
-        }
+    pub(super) fn fits_inline_stack(&self) -> bool {
+        (WIDTH - 1) * self.depth < INLINE_STACK
     }
 }
 
@@ -144,6 +129,9 @@ impl Accel {
     ) -> Option<Hit> {
         if self.wide.nodes.is_empty() {
             return None;
+        }
+        if !self.wide.fits_inline_stack() {
+            return self.traverse_robust::<ANY_HIT, CERTAIN>(ray, stats);
         }
         #[cfg(target_arch = "x86_64")]
         if self.wide.simd == BoxSimd::Avx {
@@ -192,9 +180,8 @@ impl Accel {
         // Counted in a local copy, written back once: through `stats` itself, every node's
         // count was a store to the caller's memory, which LLVM may not keep in a register.
         let mut counted = *stats;
-        let mut stack = WalkStack::<StackEntry>::new();
-        let stack = stack.for_tree(&self.wide);
-        let hit = self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, stack);
+        let mut stack: WalkStack<StackEntry> = [MaybeUninit::uninit(); INLINE_STACK];
+        let hit = self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, &mut stack);
         *stats = counted;
         hit
     }
@@ -207,8 +194,9 @@ impl Accel {
     /// An any-hit query stops at any hit, so it tests a node's leaves at once and leaves the
     /// rest unsorted.
     ///
-    /// `stack` holds at least `7 * depth + 1` entries (see [`INLINE_STACK`]). Entries below
-    /// `len` are always initialised: every push writes one before `len` grows past it.
+    /// `stack` holds at least `7 * depth + 1` entries (see [`Bvh8::fits_inline_stack`]).
+    /// Entries below `len` are always initialised: every push writes one before `len` grows
+    /// past it.
     #[inline(always)]
     fn wide_with_stack<const ANY_HIT: bool, const CERTAIN: bool, B: BoxTest>(
         &self,
@@ -440,15 +428,15 @@ mod tests {
     }
 
     #[test]
-    fn a_tree_too_deep_for_the_inline_stack_is_walked_on_a_heap_stack_with_the_same_hits() {
+    fn a_tree_too_deep_for_the_inline_stack_is_walked_through_the_binary_tree_with_the_same_hits() {
         let triangles = chain(120);
         let mut accel = Accel::build(&triangles, BuildQuality::default());
+        assert!(accel.wide.fits_inline_stack());
         // No tree of real scenes outgrows the inline stack (thirty levels of wide nodes), so
-        // the bound the walk sizes its stack by is raised past it: the walk then takes its
-        // stack from the heap, one larger than this tree needs, which is what a deeper tree
-        // would get.
+        // the depth the walks check is raised past it: single rays and packets alike are then
+        // walked through the binary tree, as a deeper tree's would be.
         accel.wide.depth = accel.wide.depth.max(INLINE_STACK / (WIDTH - 1) + 1);
-        assert!((WIDTH - 1) * accel.wide.depth + 1 > INLINE_STACK);
+        assert!(!accel.wide.fits_inline_stack());
         // Rays from beyond the largest triangle back toward the origin, through the
         // triangles' planes at several slants, and segments ending between triangles.
         let rays: Vec<Ray> = (0..200)
@@ -485,7 +473,7 @@ mod tests {
                     "{simd:?} {ray:?}"
                 );
             }
-            // The packet walk sizes its stack the same way.
+            // The packet walk checks the same depth.
             for packet in rays.chunks(PACKET) {
                 let mut found = [None; PACKET];
                 accel.intersect_packet(packet, &mut found[..packet.len()], &mut stats);
