@@ -59,6 +59,7 @@ use crate::spectrum::{PathSpectrum, SpectralSampling};
 use direct::{LightSamples, power_heuristic};
 use glam::Vec3;
 use scatter::{BounceNumbers, Phase, SurfaceScatter, resolve};
+use std::mem::ManuallyDrop;
 
 mod direct;
 mod hits;
@@ -215,12 +216,16 @@ impl World {
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
-        let moment = if PLAIN || self.motion.is_empty() {
+        // Held undropped, and dropped below only where it placed moving objects: a still
+        // world's moment holds nothing to release, and its drop was a call per path (the drop
+        // glue, which the compiler leaves out of line for the moving case's sake).
+        let still = PLAIN || self.motion.is_empty();
+        let owned_moment = ManuallyDrop::new(if still {
             Moment::default()
         } else {
             self.motion.moment(time)
-        };
-        let moment = &moment;
+        });
+        let moment: &Moment = &owned_moment;
         let settings = &self.scene.settings;
         let effects = &self.effects;
         // Where `PLAIN`, the flags of the effects it leaves out, as constants.
@@ -451,6 +456,10 @@ impl World {
         }
         if spectrum.is_spectral() {
             stats.spectral_paths += 1;
+        }
+        if !still {
+            // Hands the placements' buffer back to the thread (`Moment`'s `Drop`).
+            drop(ManuallyDrop::into_inner(owned_moment));
         }
         spectrum.finish(radiance)
     }
