@@ -73,7 +73,7 @@ impl World {
     }
 
     /// The closest hit of `ray` at `moment`.
-    #[inline]
+    #[inline(always)]
     pub(super) fn closest(
         &self,
         ray: &Ray,
@@ -108,6 +108,7 @@ impl World {
     }
 
     /// Whether anything certainly blocks `ray` at `moment`.
+    #[inline(always)]
     pub(super) fn occluded(&self, ray: &Ray, moment: &Moment, stats: &mut TraversalStats) -> bool {
         self.accel.occluded_with(ray, self.traversal, stats)
             || (!self.motion.is_empty() && self.motion.occluded(moment, ray, self.traversal, stats))
