@@ -99,8 +99,8 @@ def main():
     parser.add_argument(
         "--floor",
         action="store_true",
-        help="render each scene with Mitsuba once more at another sampler seed and report how its two images "
-        "differ over blocks: the noise floor that tessera's difference from Mitsuba is to be read against",
+        help="render each scene once more with each renderer at another sampler seed and report how each one's "
+        "two images differ over blocks: the noise floors that tessera's difference from Mitsuba is read against",
     )
     parser.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     parser.add_argument("--worker", nargs=3, metavar=("VARIANT", "TOML", "EXR"), help=argparse.SUPPRESS)
@@ -157,6 +157,8 @@ def main():
                     again = Path(theirs["exr"]).with_suffix(".seed1.exr")
                     if "error" not in run_worker(variant, toml, again, args, seed=1):
                         row["floor"] = block_difference(again, theirs["exr"])
+                    ours_again = run_tessera([toml], args, seed=1)[str(toml)]["image"]
+                    row["our_floor"] = block_difference(ours_again, our["image"])
             rows.append(row)
     report = {
         "settings": {"size": args.size, "spp": args.spp, "segments": args.segments, "tessera_max_depth": args.segments - 1,
@@ -199,11 +201,12 @@ def run_worker(variant, toml, exr, args, seed=0):
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def run_tessera(tomls, args):
+def run_tessera(tomls, args, seed=0):
     """One `tessera bench` over every scene: its JSON has our timings and the EXR paths."""
-    out = args.out / "tessera"
+    out = args.out / ("tessera" if seed == 0 else f"tessera-seed{seed}")
     command = [args.tessera, "bench", *map(str, tomls), "--spp", str(args.spp), "--width", str(args.size)]
     command += ["--height", str(args.size), "--max-depth", str(args.segments - 1), "--out", str(out), "--json"]
+    command += ["--seed", str(seed)]
     print("running: " + " ".join(command), file=sys.stderr)
     done = subprocess.run(command, capture_output=True, text=True, check=True)
     report = json.loads(done.stdout)
@@ -253,7 +256,7 @@ def block_difference(ours, theirs):
     square and the largest magnitude over the blocks. The image means cannot see a picture
     mirrored, or sharp where the other is blurred; block means can, while the blocks' thousands
     of samples average most of the noise away (what remains of it sets the floor, which `--floor`
-    measures: two renders of Mitsuba's at different seeds). Blocks darker than a thousandth of the
+    measures: two renders of each renderer at different seeds). Blocks darker than a thousandth of the
     image's mean are left out, as a relative difference there is noise over nothing."""
     import mitsuba as mi
     import numpy as np
@@ -329,7 +332,7 @@ def markdown(report):
             f"({m['load_cpu_seconds']:.2f} + {m['render_cpu_seconds']:.2f}) | {m['wall_seconds']:.2f} | "
             f"{fmt_means(c['mean_mitsuba'])} | {diff} ({verdict} {tolerance}; RMSE {c['rmse']:.4f}; "
             f"{c['blocks']['size']}-pixel blocks {c['blocks']['rms'] * 100:.1f}% RMS, {c['blocks']['max'] * 100:.1f}% at most"
-            f"{fmt_floor(row.get('floor'))}) |"
+            f"{fmt_floor(row)}) |"
         )
     if s.get("repeats", 1) > 1:
         lines += ["", f"Each renderer's fastest of {s['repeats']} runs, alternated scene by scene; every run's CPU-s:", ""]
@@ -346,10 +349,14 @@ def markdown(report):
     return "\n".join(lines)
 
 
-def fmt_floor(floor):
-    if floor is None:
-        return ""
-    return f"; Mitsuba against itself at another seed {floor['rms'] * 100:.1f}% RMS, {floor['max'] * 100:.1f}% at most"
+def fmt_floor(row):
+    """The noise floors `--floor` measured: each renderer against itself at another seed."""
+    text = ""
+    for key, who in (("floor", "Mitsuba"), ("our_floor", "tessera")):
+        if row.get(key):
+            floor = row[key]
+            text += f"; {who} against itself at another seed {floor['rms'] * 100:.1f}% RMS, {floor['max'] * 100:.1f}% at most"
+    return text
 
 
 def fmt_means(means):

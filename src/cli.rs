@@ -124,8 +124,8 @@ pub struct KeygenArgs {
     pub peers: u32,
 }
 
-/// Overrides of a scene's image settings, shared by every command that renders a scene as it
-/// is (`render`, `serve`, `bench`); applied by [`ImageArgs::apply`].
+/// Overrides of a scene's image and sampling settings, shared by every command that renders a
+/// scene as it is (`render`, `serve`, `bench`); applied by [`ImageArgs::apply`].
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct ImageArgs {
     /// Samples per pixel (default: the scene's).
@@ -137,6 +137,10 @@ pub struct ImageArgs {
     /// Image height in pixels (default: the scene's).
     #[arg(long)]
     pub height: Option<u32>,
+    /// Seed of the pixel sampler (default: the scene's); a render's peers also seed their
+    /// choice of whom to steal from with it.
+    #[arg(long)]
+    pub seed: Option<u64>,
 }
 
 impl ImageArgs {
@@ -145,6 +149,7 @@ impl ImageArgs {
         settings.samples_per_pixel = self.spp.unwrap_or(settings.samples_per_pixel);
         settings.width = self.width.unwrap_or(settings.width);
         settings.height = self.height.unwrap_or(settings.height);
+        settings.seed = self.seed.unwrap_or(settings.seed);
         anyhow::ensure!(
             settings.width > 0 && settings.height > 0,
             "the image must be at least 1x1 pixels"
@@ -187,9 +192,6 @@ pub struct FrameArgs {
     /// whether it was the peer's own, taken over, a piece of a cut tile, or a duplicate.
     #[arg(long)]
     pub gantt: Option<PathBuf>,
-    /// Seed of the pixel sampler (default: the scene's).
-    #[arg(long)]
-    pub seed: Option<u64>,
     /// How frames are cut into tiles.
     #[arg(long, value_enum, default_value_t = BalancerKind::Pbt)]
     pub balancer: BalancerKind,

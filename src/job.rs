@@ -253,7 +253,7 @@ fn check_writable(flag: &str, path: &std::path::Path) -> anyhow::Result<()> {
 pub fn options(args: &FrameArgs, threads: usize) -> node::Options {
     let mut options = node::Options {
         threads,
-        seed: args.seed.unwrap_or(0),
+        seed: args.image.seed.unwrap_or(0),
         ..node::Options::default()
     };
     options.core.steal = !args.no_steal;
@@ -317,7 +317,6 @@ pub fn load_scene(args: &FrameArgs) -> anyhow::Result<Scene> {
     let mut scene = tracer::scene::load(&args.scene)?;
     let s = &mut scene.settings;
     s.frames = args.frames.unwrap_or(s.frames);
-    s.seed = args.seed.unwrap_or(s.seed);
     args.image.apply(s)?;
     Ok(scene)
 }

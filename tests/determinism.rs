@@ -101,6 +101,33 @@ fn a_different_seed_gives_a_different_image() {
     assert_ne!(a[0].1, b[0].1);
 }
 
+/// `tessera bench` renders the very pixels `tessera render` does, seed for seed, so that the
+/// images a benchmark compares with another renderer's (`scripts/mitsuba_compare.py`, which
+/// takes a second seed for the noise floor) are the renderer's own: the same `--seed` gives the
+/// same bits, and another seed another image.
+#[test]
+fn bench_draws_what_render_draws_seed_for_seed() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = repo("scenes/glass-cluster-pan/glass-cluster-pan.toml");
+    let bench = |seed: &str| {
+        let out = dir.path().join(format!("bench-{seed}"));
+        let mut command = tessera();
+        command.arg("bench").arg(&scene).args([
+            "--width", "48", "--height", "40", "--spp", "2", "--seed", seed, "--out",
+        ]);
+        run_ok(command.arg(&out));
+        pixels(&out.join("glass-cluster-pan.exr"))
+    };
+    render(&dir.path().join("render"), &["--peers", "1", "--seed", "7"]);
+    let rendered = pixels(&dir.path().join("render/frame-0000.exr"));
+    let (seven, eight) = (bench("7"), bench("8"));
+    assert!(
+        seven == rendered,
+        "bench --seed 7 differs from render --seed 7"
+    );
+    assert!(seven != eight, "bench ignores --seed");
+}
+
 #[test]
 fn the_render_leaves_stats_tile_maps_and_a_gantt_chart() {
     let dir = tempfile::tempdir().unwrap();
