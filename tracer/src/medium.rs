@@ -327,6 +327,7 @@ mod tests {
         check::<5>();
         check::<6>();
         check::<7>();
+        check::<8>();
         check::<9>();
         check::<10>();
         check::<11>();
