@@ -320,19 +320,10 @@ mod tests {
             let horner = c.iter().rev().fold(0.0, |p, &c| c + 3.0 * p);
             assert_eq!(estrin(&c, 3.0), horner, "{N} terms");
         }
-        check::<1>();
-        check::<2>();
-        check::<3>();
-        check::<4>();
-        check::<5>();
-        check::<6>();
-        check::<7>();
-        check::<8>();
-        check::<9>();
-        check::<10>();
-        check::<11>();
-        check::<12>();
-        check::<13>();
+        macro_rules! check_lengths {
+            ($($n:literal)*) => { $(check::<$n>();)* };
+        }
+        check_lengths!(1 2 3 4 5 6 7 8 9 10 11 12 13);
     }
 
     #[test]
