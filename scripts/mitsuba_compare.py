@@ -10,12 +10,13 @@ speed figure means nothing unless both renderers drew the same picture, so this 
    one mesh per MTL material, Kd (or its `map_Kd` texture) as a two-sided diffuse reflectance, Ke
    as a one-sided area light, `[environment] radiance` as a `constant` emitter and a lat-long
    `map` as an `envmap`, a camera with an open aperture as a `thinlens`;
-2. renders it with Mitsuba (each variant in a fresh process, so that its CPU-seconds are its
-   own) and writes an EXR;
-3. runs `tessera bench` on the same TOML at the same size, samples and depth, which writes our EXR
-   and our timings (CPU-seconds of the whole process, BVH build and render); scene by scene, after
-   Mitsuba's run of it, and `--repeats N` times over, each renderer's fastest run reported (a
-   machine shared with others disturbs single runs by up to a third);
+2. runs `tessera bench` on the same TOML at the size, samples and depth given, which writes our
+   EXR and our timings (CPU-seconds of the whole process, BVH build and render) and reports the
+   depth from which the scene's Russian roulette may end paths;
+3. renders it with Mitsuba at the same settings, that roulette depth included (each variant in a
+   fresh process, so that its CPU-seconds are its own), and writes an EXR; scene by scene, our run
+   then Mitsuba's, `--repeats N` times over, each renderer's fastest run reported (a machine
+   shared with others disturbs single runs by up to a third);
 4. runs `tessera compare OURS.exr MITSUBA.exr --json` and checks the per-channel means, and
    compares the images' means over 8x8-pixel blocks (`block_difference`), which see a picture
    mirrored, shifted or blurred that the means cannot;
@@ -33,7 +34,12 @@ it reads the map with each texel repeated 32 times each way (EFFECTS_MAPPING in
 `scripts/mitsuba_scene.py` says why), which costs its render more than the map would.
 
 Depth: Mitsuba's `max_depth` counts path segments (1 shows emitters only), ours counts bounces as
-pbrt does (0 shows emitters only), so Mitsuba `max_depth = 8` is our `--max-depth 7`.
+pbrt does (0 shows emitters only), so Mitsuba `max_depth = 8` is our `--max-depth 7`. Russian
+roulette: both count the scattering events before it alike, so Mitsuba's `rr_depth` is the
+scene's `russian_roulette_depth` (3 unless the scene says otherwise) as `tessera bench` reports
+it. Until 2026-12-06 this script left Mitsuba at its own default of 5, so that Mitsuba traced
+about a quarter more segments per path than tessera on the Cornell box for the same mean image
+(docs/bench.md, issue 12, twenty-eighth round): every speed ratio before then favours tessera.
 
 Usage (from the repository root, after `cargo build --release`):
     pip install mitsuba            # llvm_ad_rgb also needs Debian's libllvm19
@@ -83,7 +89,7 @@ def main():
         "--repeats",
         type=int,
         default=1,
-        help="runs of each renderer on each scene, alternated scene by scene (Mitsuba, then tessera); the "
+        help="runs of each renderer on each scene, alternated scene by scene (tessera, then Mitsuba); the "
         "table shows each renderer's fastest run and lists every run's CPU-seconds below it: on a shared "
         "machine the fastest is the one others disturbed least, and alternating exposes both renderers "
         "to the same disturbances",
@@ -103,12 +109,15 @@ def main():
         "two images differ over blocks: the noise floors that tessera's difference from Mitsuba is read against",
     )
     parser.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
+    # The worker's roulette depth, as tessera reported it for the scene ("off" where none).
+    parser.add_argument("--roulette-depth", default="off", help=argparse.SUPPRESS)
     parser.add_argument("--worker", nargs=3, metavar=("VARIANT", "TOML", "EXR"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         variant, toml, exr = args.worker
+        roulette = None if args.roulette_depth == "off" else int(args.roulette_depth)
         print(json.dumps(render_mitsuba(variant, Path(toml), Path(exr), args.size, args.spp, args.segments,
-                                        args.integrator, args.mitsuba_lanes, args.seed)))
+                                        args.integrator, args.mitsuba_lanes, args.seed, roulette)))
         return
 
     present = [Path(s) for s in args.scenes if scene_files_present(Path(s))]
@@ -122,20 +131,21 @@ def main():
     args.out.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()
     variants = [v for v in args.variants.split(",") if v]
-    # Every run, scene by scene, Mitsuba's variants then ours, so that a disturbance of the
-    # machine falls on both renderers alike; both are deterministic, so each repeat writes the
-    # same images over the last.
+    # Every run, scene by scene, ours then Mitsuba's variants at the roulette depth ours
+    # reported, so that a disturbance of the machine falls on both renderers alike; both are
+    # deterministic, so each repeat writes the same images over the last.
     mitsuba_runs = {}
     our_runs = {}
     for _ in range(args.repeats):
         for toml in present:
+            ours = run_tessera([toml], args)[str(toml)]
+            our_runs.setdefault(str(toml), []).append(ours)
             for variant in variants:
                 exr = args.out / f"mitsuba-{variant}" / f"{toml.stem}.exr"
                 exr.parent.mkdir(parents=True, exist_ok=True)
-                result = run_worker(variant, toml, exr, args)
+                result = run_worker(variant, toml, exr, args, ours["roulette_depth"])
                 mitsuba_runs.setdefault((variant, toml.stem), []).append(result)
                 print(f"mitsuba {variant} {toml.stem}: {describe(result)}", file=sys.stderr)
-            our_runs.setdefault(str(toml), []).append(run_tessera([toml], args)[str(toml)])
     rows = []
     for toml in present:
         our = fastest(our_runs[str(toml)])
@@ -160,7 +170,7 @@ def main():
                 row["comparison"] = compare(args.tessera, our["image"], theirs["exr"], args.tolerance)
                 if args.floor:
                     again = Path(theirs["exr"]).with_suffix(".seed1.exr")
-                    if "error" not in run_worker(variant, toml, again, args, seed=1):
+                    if "error" not in run_worker(variant, toml, again, args, our["roulette_depth"], seed=1):
                         row["floor"] = block_difference(again, theirs["exr"])
                     row["our_floor"] = our_floor
             rows.append(row)
@@ -193,10 +203,13 @@ def scene_files_present(toml):
     return all((toml.parent / o["obj"]).exists() for o in scene.get("object", []) if "obj" in o)
 
 
-def run_worker(variant, toml, exr, args, seed=0):
+def run_worker(variant, toml, exr, args, roulette_depth, seed=0):
+    """Mitsuba's render of `toml` in a process of its own, with Russian roulette from
+    `roulette_depth` (tessera's, as `tessera bench` reported it; `None`: off)."""
     command = [sys.executable, __file__, "--worker", variant, str(toml), str(exr)]
     command += ["--size", str(args.size), "--spp", str(args.spp), "--segments", str(args.segments)]
     command += ["--integrator", args.integrator, "--seed", str(seed)]
+    command += ["--roulette-depth", "off" if roulette_depth is None else str(roulette_depth)]
     if args.mitsuba_lanes:
         command += ["--mitsuba-lanes", str(args.mitsuba_lanes)]
     done = subprocess.run(command, capture_output=True, text=True)
@@ -226,6 +239,7 @@ def run_tessera(tomls, args, seed=0):
             "cpu_seconds": (s["build_cpu_seconds"] or 0) + (paths["cpu_seconds"] or 0),
             "wall_seconds": s["build_seconds"] + paths["seconds"],
             "rays": paths["rays"],
+            "roulette_depth": paths["russian_roulette_depth"],
             "mrays_per_second": paths["rays_per_second"] / 1e6,
             "image": s["image"],
         }
@@ -306,7 +320,9 @@ def markdown(report):
         f"(Mitsuba max_depth {s['segments']}, tessera --max-depth {s['tessera_max_depth']}); "
         f"{report['cores']} cores ({report.get('processor', 'processor not recorded')}), "
         f"load average {fmt_load(report['load_before'])} before, "
-        f"{fmt_load(report['load_after'])} after.",
+        f"{fmt_load(report['load_after'])} after. Russian roulette from the scene's depth in both renderers: "
+        + ", ".join(sorted({f"{r['scene']} {fmt_roulette(r['tessera'].get('roulette_depth'))}" for r in report["rows"]}))
+        + ".",
         "",
         "| scene | triangles | renderer | build + render CPU-s | wall s | mean R / G / B | tessera vs Mitsuba, per channel |",
         "|---|---|---|---|---|---|---|",
@@ -363,6 +379,10 @@ def fmt_floor(row):
     return text
 
 
+def fmt_roulette(depth):
+    return "off" if depth is None else f"from {depth}"
+
+
 def fmt_means(means):
     return " / ".join(f"{v:.4f}" for v in means) if means else ""
 
@@ -393,13 +413,13 @@ def llvm_lanes(lanes=None):
     return width()
 
 
-def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto", lanes=None, seed=0):
+def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto", lanes=None, seed=0, roulette_depth=None):
     import drjit as dr
     import mitsuba as mi
 
     mi.set_variant(variant)
     lanes = llvm_lanes(lanes) if variant.startswith("llvm") else None
-    description, triangles = mitsuba_description(toml, size, spp, segments, integrator, seed)
+    description, triangles = mitsuba_description(toml, size, spp, segments, integrator, seed, roulette_depth)
     # Resident memory (KiB) before Mitsuba builds its scene, which holds this script's own
     # Python lists of the OBJ's vertices and faces, and after the scene and the render: the
     # growth is about what Mitsuba's scene (meshes and BVH) and render took.

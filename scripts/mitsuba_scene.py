@@ -85,9 +85,12 @@ EFFECTS_MAPPING = (
 )
 
 
-def mitsuba_description(toml, size, spp, segments, integrator="auto", seed=0):
+def mitsuba_description(toml, size, spp, segments, integrator="auto", seed=0, roulette_depth=None):
     """The Mitsuba scene dictionary of a tessera TOML (MTL_MAPPING, MEDIA_MAPPING,
-    EFFECTS_MAPPING) and its triangle count; the variant must be set. `seed` is the sampler's."""
+    EFFECTS_MAPPING) and its triangle count; the variant must be set. `seed` is the sampler's;
+    `roulette_depth` the depth from which Russian roulette may end paths, as tessera counts it
+    (scattering events; `None`: off), which is Mitsuba's `rr_depth` too (both count the events
+    before the roulette, both survive with the throughput's largest channel, at most 0.95)."""
     import mitsuba as mi
 
     scene_toml = tomllib.loads(toml.read_text())
@@ -134,7 +137,9 @@ def mitsuba_description(toml, size, spp, segments, integrator="auto", seed=0):
     description = {
         "type": "scene",
         "integrator": {"type": integrator if integrator != "auto" else "volpath" if media else "path",
-                       "max_depth": segments},
+                       "max_depth": segments,
+                       # Off: a depth no path reaches (a path has fewer than `segments` events).
+                       "rr_depth": segments if roulette_depth is None else roulette_depth},
         "sensor": mitsuba_sensor(camera, size, spp, seed),
         **shapes,
     }

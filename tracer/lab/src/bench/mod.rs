@@ -105,6 +105,11 @@ pub struct SceneBench {
 pub struct Pass {
     /// `None`: unlimited, ended by Russian roulette.
     pub max_depth: Option<u32>,
+    /// The depth from which Russian roulette may end paths (the scene's); `None`: off. Reported
+    /// so that a comparison with another renderer can set that renderer's to the same
+    /// (`scripts/mitsuba_compare.py`): where paths are rouletted from changes how many segments
+    /// a render traces, not its mean.
+    pub russian_roulette_depth: Option<u32>,
     /// Closest-hit plus shadow rays.
     pub rays: u64,
     /// Wall seconds of the render.
@@ -273,6 +278,7 @@ fn pass(world: &tracer::World, pool: &rayon::ThreadPool) -> (Pass, tracer::outpu
     let rendered = measured.value;
     let pass = Pass {
         max_depth: world.scene.settings.max_depth,
+        russian_roulette_depth: world.scene.settings.russian_roulette_depth,
         rays: rendered.rays,
         seconds: rendered.seconds,
         cpu_seconds: measured.cpu_seconds,
@@ -355,8 +361,11 @@ fn print_scene(s: &SceneBench) {
         let depth = pass
             .max_depth
             .map_or("unlimited".to_owned(), |d| d.to_string());
+        let roulette = pass
+            .russian_roulette_depth
+            .map_or("off".to_owned(), |d| d.to_string());
         println!(
-            "  {name:<7} depth {depth:<9} {:>12} rays in {:>7.3} s wall, {:>7} CPU-s: {:>7.2} Mrays/s{}",
+            "  {name:<7} depth {depth:<9} roulette from {roulette:<3} {:>12} rays in {:>7.3} s wall, {:>7} CPU-s: {:>7.2} Mrays/s{}",
             pass.rays,
             pass.seconds,
             cpu(pass.cpu_seconds),

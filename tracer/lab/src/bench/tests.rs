@@ -48,6 +48,28 @@ fn primary_pass_traces_one_camera_ray_per_sample_and_paths_trace_more() {
         measured.paths.rays
     );
     assert_eq!(measured.paths.max_depth, Some(8));
+    // The furnace turns roulette off, and the report says so.
+    assert_eq!(measured.paths.russian_roulette_depth, None);
+}
+
+#[test]
+fn the_paths_pass_reports_the_roulette_depth_the_scene_declares() {
+    let furnace = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/furnace/furnace.toml");
+    let text = std::fs::read_to_string(&furnace).expect("the shipped furnace");
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    for depth in [1, 5] {
+        let scene = dir.path().join(format!("furnace-{depth}.toml"));
+        let declared = text.replace(
+            "russian_roulette_depth = \"off\"",
+            &format!("russian_roulette_depth = {depth}"),
+        );
+        assert_ne!(declared, text, "the furnace declares its roulette depth");
+        std::fs::write(&scene, declared).expect("a scene in the temporary folder");
+        let measured = bench_scene(&scene, &args(), &pool())
+            .expect("the furnace loads")
+            .expect("nothing absent");
+        assert_eq!(measured.paths.russian_roulette_depth, Some(depth));
+    }
 }
 
 #[test]
