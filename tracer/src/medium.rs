@@ -34,18 +34,21 @@
 //! by channel: for a homogeneous medium ratio tracking with the majorant `sigma_t` would
 //! estimate exactly this value, with no variance, so evaluating it needs no random numbers.
 //!
-//! **Arithmetic.** The exponential and logarithm here are our own ([`exp_neg`], [`ln`]): basic
-//! IEEE operations in f64 in a fixed order, so that images do not depend on which variant of
-//! glibc's `expf`/`logf` a processor gets at run time (glibc picks FMA variants where the
-//! processor has FMA). The phase function's azimuth uses [`crate::math::sin_cos`], as the BSDFs
-//! do, for the same reason.
+//! **Arithmetic.** The exponential and logarithm here are our own (`arith.rs`: [`exp_neg`],
+//! [`exp_neg_each`] for three channels at once in SIMD lanes, [`ln`]): basic IEEE operations in
+//! f64 in a fixed order, so that images do not depend on which variant of glibc's
+//! `expf`/`logf` a processor gets at run time (glibc picks FMA variants where the processor has
+//! FMA). The phase function's azimuth uses [`crate::math::sin_cos`], as the BSDFs do, for the
+//! same reason.
 //!
 //! The methods above are the default; `tracking.rs` holds the others a render can ask for
 //! ([`MediaSampling`]: a per-flight channel mixture, delta tracking with null collisions, ratio
 //! tracking for shadow rays), for `tessera accuracy` to measure, and says why the default is this.
 
+mod arith;
 mod tracking;
 
+pub use arith::{exp_neg, exp_neg_each, ln};
 pub use tracking::{FlightSampling, MediaSampling, ShadowTransmittance, Stream};
 
 use crate::material::Frame;
@@ -123,10 +126,20 @@ impl Medium {
     /// exactly 1 in a channel without extinction.
     pub fn transmittance(&self, distance: f32) -> Vec3 {
         let sigma_t = self.sigma_t();
-        let channel = |s: f32| {
-            if s == 0.0 { 1.0 } else { exp_neg(s * distance) }
-        };
-        Vec3::new(channel(sigma_t.x), channel(sigma_t.y), channel(sigma_t.z))
+        // A vacuum (the space around a closed object's medium) passes everything, with none
+        // of the exponentials' work.
+        if sigma_t == Vec3::ZERO {
+            return Vec3::ONE;
+        }
+        // The three exponentials at once (`exp_neg_each`: the same bits as one by one); a
+        // channel without extinction is exactly 1 whatever the distance (`0 * inf` is NaN).
+        let each = exp_neg_each(sigma_t * distance);
+        let channel = |s: f32, value: f32| if s == 0.0 { 1.0 } else { value };
+        Vec3::new(
+            channel(sigma_t.x, each.x),
+            channel(sigma_t.y, each.y),
+            channel(sigma_t.z, each.z),
+        )
     }
 
     /// Samples where a path starting into the medium scatters before `t_end` (the distance to
@@ -204,159 +217,9 @@ pub fn sample_henyey_greenstein(wo: Vec3, g: f32, u: Vec2) -> (Vec3, f32) {
     (wi, henyey_greenstein(cos_theta, g))
 }
 
-/// `exp(-x)` for `x >= 0` (and `+inf`, giving 0), by range reduction to `x = k ln 2 + r` with
-/// `|r| <= ln 2 / 2` and a degree-11 Taylor polynomial of `exp(-r)` in f64 (a tail below
-/// 2^-47): within one f32 rounding of the exact value, and the same bits on every machine.
-///
-/// The polynomial multiplies by constant coefficients rather than dividing by `n` at each step,
-/// as this function once did: a division cannot be turned into a multiplication without
-/// changing its rounding, so the compiler kept thirteen dependent f64 divisions, about 200
-/// cycles per call, and three calls per transmittance made it a third of a fog render's time.
-pub fn exp_neg(x: f32) -> f32 {
-    // exp(-104) is below half the smallest f32 subnormal.
-    if x.is_nan() || x > 104.0 {
-        return if x.is_nan() { f32::NAN } else { 0.0 };
-    }
-    let x = f64::from(x);
-    // The nearest integer to x / ln 2. Truncation is the floor here (the argument is at least
-    // 0.5), and unlike `floor` it needs no call into libm on the baseline x86-64 target.
-    let k = (x * std::f64::consts::LOG2_E + 0.5) as i64;
-    let r = x - k as f64 * std::f64::consts::LN_2;
-    // sum (-r)^n / n!, n = 0..11, by Estrin's scheme: pairs of terms, then pairs of pairs,
-    // combined by r^2, r^4 and r^8. Horner's rule takes eleven dependent steps of a product and
-    // a sum, about 90 cycles per call (most of a fog render's transmittance); this, four.
-    let p = estrin(&EXP_NEG_TAYLOR, -r);
-    // 2^-k for k in [-1, 150]: exact in f64.
-    let scale = f64::from_bits(((1023 - k) as u64) << 52);
-    (p * scale) as f32
-}
-
-/// `1 / n!` for n = 0..11, the Taylor coefficients [`exp_neg`] alternates the signs of;
-/// evaluated by the compiler, the same constants on every machine.
-const EXP_NEG_TAYLOR: [f64; 12] = {
-    let mut c = [1.0f64; 12];
-    let mut n = 1;
-    while n < 12 {
-        c[n] = c[n - 1] / n as f64;
-        n += 1;
-    }
-    c
-};
-
-/// `1 / (2n + 1)` for n = 0..9, the series [`ln`] sums.
-const ATANH_SERIES: [f64; 10] = {
-    let mut c = [1.0f64; 10];
-    let mut n = 0;
-    while n < 10 {
-        c[n] = 1.0 / (2 * n + 1) as f64;
-        n += 1;
-    }
-    c
-};
-
-/// The natural logarithm of `y` in `(0, 1]`, in f64 by `ln(m 2^e) = e ln 2 + 2 atanh((m - 1) /
-/// (m + 1))` with `m` in `[sqrt(1/2), sqrt(2))`: the same bits on every machine.
-pub fn ln(y: f32) -> f32 {
-    let y = f64::from(y);
-    if y.is_nan() || y <= 0.0 {
-        return if y == 0.0 {
-            f32::NEG_INFINITY
-        } else {
-            f32::NAN
-        };
-    }
-    // f32 inputs are normal in f64, so the exponent field is the binary exponent.
-    let bits = y.to_bits();
-    let mut e = ((bits >> 52) & 0x7ff) as i64 - 1023;
-    let mut m = f64::from_bits((bits & ((1u64 << 52) - 1)) | (1023u64 << 52));
-    if m >= std::f64::consts::SQRT_2 {
-        m *= 0.5;
-        e += 1;
-    }
-    let s = (m - 1.0) / (m + 1.0);
-    let s2 = s * s;
-    // sum s^(2n+1) / (2n+1), n = 0..9; |s| <= 0.172 leaves a tail below 2^-55. By Estrin's
-    // scheme, as in `exp_neg`: a free flight's distance waits on this.
-    let p = estrin(&ATANH_SERIES, s2);
-    (e as f64 * std::f64::consts::LN_2 + 2.0 * s * p) as f32
-}
-
-/// `sum c[n] x^n` by Estrin's scheme: the terms in pairs `c[2i] + c[2i+1] x`, then pairs of
-/// those by `x^2`, of those by `x^4`, and so on (an odd one out carried up as it is), so that
-/// the dependent chain is as long as the number of halvings rather than the number of terms.
-/// Its f64 roundings differ from Horner's rule's by a few units of 2^-53 of the sum, far below
-/// the f32 the callers round to.
-#[inline(always)]
-fn estrin<const N: usize>(c: &[f64; N], x: f64) -> f64 {
-    let mut terms = *c;
-    let mut len = N;
-    let mut power = x;
-    while len > 1 {
-        // Pair `i` reads terms `2i` and `2i + 1` before anything writes them: writes stay
-        // below `i + 1`.
-        for i in 0..len / 2 {
-            terms[i] = terms[2 * i] + power * terms[2 * i + 1];
-        }
-        if len % 2 == 1 {
-            terms[len / 2] = terms[len - 1];
-        }
-        len = len.div_ceil(2);
-        power *= power;
-    }
-    terms[0]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn estrin_sums_every_term_of_polynomials_of_every_length() {
-        // Integer coefficients at x = 3: every product and sum is exact in f64, so any other
-        // order of the same terms gives the same value, and a term left out or taken twice
-        // (an odd one out dropped, a pair misaligned) shows.
-        fn check<const N: usize>() {
-            let c: [f64; N] = std::array::from_fn(|n| (n + 1) as f64);
-            let horner = c.iter().rev().fold(0.0, |p, &c| c + 3.0 * p);
-            assert_eq!(estrin(&c, 3.0), horner, "{N} terms");
-        }
-        macro_rules! check_lengths {
-            ($($n:literal)*) => { $(check::<$n>();)* };
-        }
-        check_lengths!(1 2 3 4 5 6 7 8 9 10 11 12 13);
-    }
-
-    #[test]
-    fn exp_and_ln_match_the_f64_library_across_their_ranges() {
-        // A grid over [0, 100], and a geometric sweep from 1e-30 to 104 that reaches the
-        // smallest arguments and the subnormal results.
-        let grid = (0..=20_000).map(|i| i as f32 * 0.005);
-        let sweep = (0..=3_000).map(|i| 1e-30f32 * 104e30f32.powf(i as f32 / 3_000.0));
-        for x in grid.chain(sweep) {
-            let ours = f64::from(exp_neg(x));
-            let exact = (-f64::from(x)).exp();
-            let tolerance = exact * 2.0f64.powi(-23) + f64::from(f32::from_bits(1));
-            assert!(
-                (ours - exact).abs() <= tolerance,
-                "exp(-{x}): {ours} vs {exact}"
-            );
-        }
-        assert_eq!(exp_neg(0.0), 1.0);
-        assert_eq!(exp_neg(f32::INFINITY), 0.0);
-        for i in 1..=(1 << 12) {
-            let y = i as f32 / (1 << 12) as f32;
-            for y in [y, y * 1e-6] {
-                let ours = f64::from(ln(y));
-                let exact = f64::from(y).ln();
-                let tolerance = exact.abs() * 2.0f64.powi(-23) + 1e-9;
-                assert!(
-                    (ours - exact).abs() <= tolerance,
-                    "ln({y}): {ours} vs {exact}"
-                );
-            }
-        }
-        assert_eq!(ln(1.0), 0.0);
-    }
 
     #[test]
     fn henyey_greenstein_is_normalised_sampled_by_its_own_density_with_mean_cosine_minus_g() {
