@@ -213,32 +213,21 @@ mod sse2 {
     #[derive(Clone, Copy)]
     struct F64x2(__m128d);
 
-    impl Add for F64x2 {
-        type Output = Self;
-        #[inline(always)]
-        fn add(self, other: Self) -> Self {
-            // SAFETY: SSE2, on x86-64.
-            F64x2(unsafe { _mm_add_pd(self.0, other.0) })
-        }
+    /// `impl $Trait for F64x2` by the packed instruction `$packed`, lane by lane.
+    macro_rules! lanewise {
+        ($($Trait:ident $method:ident $packed:ident),*) => {$(
+            impl $Trait for F64x2 {
+                type Output = Self;
+                #[inline(always)]
+                fn $method(self, other: Self) -> Self {
+                    // SAFETY: SSE2, on x86-64.
+                    F64x2(unsafe { $packed(self.0, other.0) })
+                }
+            }
+        )*};
     }
 
-    impl Sub for F64x2 {
-        type Output = Self;
-        #[inline(always)]
-        fn sub(self, other: Self) -> Self {
-            // SAFETY: SSE2, on x86-64.
-            F64x2(unsafe { _mm_sub_pd(self.0, other.0) })
-        }
-    }
-
-    impl Mul for F64x2 {
-        type Output = Self;
-        #[inline(always)]
-        fn mul(self, other: Self) -> Self {
-            // SAFETY: SSE2, on x86-64.
-            F64x2(unsafe { _mm_mul_pd(self.0, other.0) })
-        }
-    }
+    lanewise!(Add add _mm_add_pd, Sub sub _mm_sub_pd, Mul mul _mm_mul_pd);
 
     impl Neg for F64x2 {
         type Output = Self;
