@@ -61,8 +61,9 @@ MTL_MAPPING = (
 # with an interior or exterior medium, tessera only at glass and interfaces).
 MEDIA_MAPPING = (
     "[media] -> homogeneous(sigma_t = sigma_a + sigma_s, albedo = sigma_s / sigma_t, phase hg(g)); "
-    "sphere with interface -> sphere(null BSDF, interior = medium, exterior = outside_medium or the camera's); "
-    "with glass -> sphere(dielectric(int_ior = ior, ext_ior = outside_ior), interior, exterior); "
+    "sphere -> a mesh of tessera's own icosphere (20 * 4^subdivisions triangles, radial normals), with interface -> "
+    "null BSDF, interior = medium, exterior = outside_medium or the camera's; "
+    "with glass -> dielectric(int_ior = ior, ext_ior = outside_ior), interior, exterior; "
     "[camera] medium -> the sensor's medium"
 )
 
@@ -244,7 +245,8 @@ def mitsuba_medium(spec):
 def mitsuba_sphere(toml, obj, materials, media, camera_medium):
     """A procedural sphere bounded by an `interface` or `glass` material with a medium, and with
     the medium outside it: its `outside_medium`, or the camera's medium when left out (tessera's
-    rule; Mitsuba's own default, no exterior, would be vacuum)."""
+    rule; Mitsuba's own default, no exterior, would be vacuum); as a mesh of tessera's own
+    triangles (`icosphere`)."""
     import mitsuba as mi
 
     if set(obj) - {"shape", "center", "radius", "subdivisions", "material"}:
@@ -260,17 +262,63 @@ def mitsuba_sphere(toml, obj, materials, media, camera_medium):
         }
     else:
         raise SystemExit(f"{toml}: sphere material {obj['material']} is neither a plain interface nor a plain glass")
-    sphere = {
-        "type": "sphere",
-        "to_world": mi.ScalarTransform4f().translate(obj.get("center", [0, 0, 0])).scale(float(obj.get("radius", 1.0))),
-        "bsdf": bsdf,
-    }
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(bsdf)
     if "medium" in material:
-        sphere["interior"] = mi.load_dict(media[material["medium"]])
+        props["interior"] = mi.load_dict(media[material["medium"]])
     outside = material.get("outside_medium", camera_medium)
     if outside is not None:
-        sphere["exterior"] = mi.load_dict(media[outside])
-    return mi.load_dict(sphere)
+        props["exterior"] = mi.load_dict(media[outside])
+    # The triangles tessera traces (scenes/README.md, `shape = "sphere"`), not Mitsuba's
+    # analytic sphere: a speed comparison must give both renderers the same geometry to trace.
+    positions, normals, faces = icosphere(
+        obj.get("center", [0, 0, 0]), float(obj.get("radius", 1.0)), int(obj.get("subdivisions", 3))
+    )
+    mesh = mi.Mesh(f"sphere-{obj['material']}", len(positions) // 3, len(faces) // 3, props=props,
+                   has_vertex_normals=True, has_vertex_texcoords=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = type(params["vertex_positions"])(positions)
+    params["vertex_normals"] = type(params["vertex_normals"])(normals)
+    params["faces"] = type(params["faces"])(faces)
+    params.update()
+    return mesh
+
+
+def icosphere(center, radius, subdivisions):
+    """The sphere tessera tessellates (`tracer/src/scene/shapes.rs`): the icosahedron with every
+    triangle split in four `subdivisions` times and its vertices put on the sphere, wound with
+    the outside in front, with smooth normals (tessera's default, `smooth = true`; here the
+    radial direction, which tessera's area-weighted average approaches). Flat lists of
+    positions, normals and vertex indices."""
+    import numpy as np
+
+    t = (1.0 + 5.0**0.5) / 2.0
+    vertices = [np.array(v) / np.linalg.norm(v) for v in (
+        (-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t),
+        (0, -1, -t), (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1))]
+    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
+             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
+             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    for _ in range(subdivisions):
+        midpoints = {}
+
+        def midpoint(a, b):
+            key = (min(a, b), max(a, b))
+            if key not in midpoints:
+                m = vertices[a] + vertices[b]
+                vertices.append(m / np.linalg.norm(m))
+                midpoints[key] = len(vertices) - 1
+            return midpoints[key]
+
+        next_faces = []
+        for a, b, c in faces:
+            ab, bc, ca = midpoint(a, b), midpoint(b, c), midpoint(c, a)
+            next_faces += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+        faces = next_faces
+    unit = np.array(vertices)
+    positions = np.asarray(center, dtype=float) + radius * unit
+    return (positions.astype(np.float32).ravel().tolist(), unit.astype(np.float32).ravel().tolist(),
+            np.array(faces, dtype=np.uint32).ravel().tolist())
 
 
 def read_obj(path, default=None):
