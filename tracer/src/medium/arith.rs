@@ -160,11 +160,7 @@ const ATANH_SERIES: [f64; 10] = {
 /// the f32 the callers round to.
 #[inline(always)]
 fn estrin<T: Lanes, const N: usize>(c: &[f64; N], x: T) -> T {
-    // Filled by a loop: `c.map(T::splat)` was left a call for lanes wider than an f64.
-    let mut terms = [T::splat(0.0); N];
-    for (term, &c) in terms.iter_mut().zip(c) {
-        *term = T::splat(c);
-    }
+    let mut terms = c.map(T::splat);
     let mut len = N;
     let mut power = x;
     while len > 1 {
