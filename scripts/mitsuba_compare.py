@@ -36,7 +36,7 @@ it reads the map with each texel repeated 32 times each way (EFFECTS_MAPPING in
 Depth: Mitsuba's `max_depth` counts path segments (1 shows emitters only), ours counts bounces as
 pbrt does (0 shows emitters only), so Mitsuba `max_depth = 8` is our `--max-depth 7`. Russian
 roulette: both count the scattering events before it alike, so Mitsuba's `rr_depth` is the
-scene's `russian_roulette_depth` (3 unless the scene says otherwise) as `tessera bench` reports
+scene's `russian_roulette_depth` (scenes/README.md has its default) as `tessera bench` reports
 it. Until 2026-12-06 this script left Mitsuba at its own default of 5, so that Mitsuba traced
 about a quarter more segments per path than tessera on the Cornell box for the same mean image
 (docs/bench.md, issue 12, twenty-eighth round): every speed ratio before then favours tessera.
