@@ -5,9 +5,10 @@ Why this script exists: the tracer issue sets a target of being faster than the 
 would otherwise pick, at equal settings and with the same mean image (within 1% per channel). A
 speed figure means nothing unless both renderers drew the same picture, so this script
 
-1. reads each scene's tessera TOML (camera, OBJ file, environment) and the OBJ/MTL it names, and
-   builds the same scene for Mitsuba from them (`scripts/mitsuba_scene.py`, with its mappings):
-   one mesh per MTL material, Kd (or its `map_Kd` texture) as a two-sided diffuse reflectance, Ke
+1. reads each scene's tessera TOML (camera, environment), takes its triangles and materials as
+   tessera's loader made them (`tessera meshes`), and builds the same scene for Mitsuba from them
+   (`scripts/mitsuba_scene.py`, with its mappings): one mesh per object and material, the
+   albedo (or its texture) as a two-sided diffuse reflectance, the emission
    as a one-sided area light, `[environment] radiance` as a `constant` emitter and a lat-long
    `map` as an `envmap`, a camera with an open aperture as a `thinlens`;
 2. runs `tessera bench` on the same TOML at the size, samples and depth given, which writes our
@@ -117,7 +118,7 @@ def main():
         variant, toml, exr = args.worker
         roulette = None if args.roulette_depth == "off" else int(args.roulette_depth)
         print(json.dumps(render_mitsuba(variant, Path(toml), Path(exr), args.size, args.spp, args.segments,
-                                        args.integrator, args.mitsuba_lanes, args.seed, roulette)))
+                                        args.integrator, args.mitsuba_lanes, args.seed, roulette, args.tessera)))
         return
 
     present = [Path(s) for s in args.scenes if scene_files_present(Path(s))]
@@ -208,7 +209,7 @@ def run_worker(variant, toml, exr, args, roulette_depth, seed=0):
     `roulette_depth` (tessera's, as `tessera bench` reported it; `None`: off)."""
     command = [sys.executable, __file__, "--worker", variant, str(toml), str(exr)]
     command += ["--size", str(args.size), "--spp", str(args.spp), "--segments", str(args.segments)]
-    command += ["--integrator", args.integrator, "--seed", str(seed)]
+    command += ["--integrator", args.integrator, "--seed", str(seed), "--tessera", args.tessera]
     command += ["--roulette-depth", "off" if roulette_depth is None else str(roulette_depth)]
     if args.mitsuba_lanes:
         command += ["--mitsuba-lanes", str(args.mitsuba_lanes)]
@@ -413,15 +414,16 @@ def llvm_lanes(lanes=None):
     return width()
 
 
-def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto", lanes=None, seed=0, roulette_depth=None):
+def render_mitsuba(variant, toml, exr, size, spp, segments, integrator="auto", lanes=None, seed=0, roulette_depth=None,
+                   tessera="target/release/tessera"):
     import drjit as dr
     import mitsuba as mi
 
     mi.set_variant(variant)
     lanes = llvm_lanes(lanes) if variant.startswith("llvm") else None
-    description, triangles = mitsuba_description(toml, size, spp, segments, integrator, seed, roulette_depth)
-    # Resident memory (KiB) before Mitsuba builds its scene, which holds this script's own
-    # Python lists of the OBJ's vertices and faces, and after the scene and the render: the
+    description, triangles = mitsuba_description(toml, size, spp, segments, integrator, seed, roulette_depth, tessera)
+    # Resident memory (KiB) before Mitsuba builds its scene (the meshes already handed over from
+    # `tessera meshes`' files), and after the scene and the render: the
     # growth is about what Mitsuba's scene (meshes and BVH) and render took.
     rss_before_scene = resident_kib()
     cpu, wall = time.process_time(), time.perf_counter()

@@ -6,12 +6,18 @@ Why a module of its own: the translation is the comparisons' one account of how 
 format maps onto Mitsuba's plugins (MTL_MAPPING, MEDIA_MAPPING, EFFECTS_MAPPING below); both
 scripts build their Mitsuba scenes through `mitsuba_description` here, and neither repeats it.
 
-What is translated: a fixed camera (a pinhole, or a thin lens), OBJ objects with their MTL
-materials or one diffuse `material` of the TOML's, procedural spheres bounding media, global
-fog, and the environment (a constant radiance, or a lat-long map with its `scale` and `rotate`).
-Anything else is refused with a message naming it, rather than rendered differently.
+What is translated: a fixed camera (a pinhole, or a thin lens), still objects with diffuse
+materials (textured or not, emitting or not), procedural spheres bounding media, global fog, and
+the environment (a constant radiance, or a lat-long map with its `scale` and `rotate`). Anything
+else is refused with a message naming it, rather than rendered differently.
+
+The geometry is never read here: `tessera meshes` writes the triangles tessera's loader made
+(its OBJ reading, its spheres' tessellation and normals, its transforms) and the materials it
+resolved, and `mitsuba_shapes` hands exactly those to Mitsuba, so a second loader in this script
+cannot drift from the first.
 """
 
+import json
 import math
 import tempfile
 import tomllib
@@ -22,10 +28,10 @@ from pathlib import Path
 # to 1 / ENVMAP_REPEAT of a texel.
 ENVMAP_REPEAT = 32
 
-# How the script maps MTL onto Mitsuba. Mitsuba's own OBJ loader ignores MTL files entirely, so
-# the mapping is ours; it is the one tessera applies to these files (scenes/README.md, "MTL"):
-# every material of the shared Cornell scenes is `illum 2` with `Ks 0`, which tessera reads as
-# diffuse with reflectance Kd. Mitsuba's `diffuse` is black from behind, tessera's reflection-only
+# How the script maps materials onto Mitsuba. Mitsuba's own OBJ loader ignores MTL files
+# entirely, so the mapping is ours, from what tessera resolved (`tessera meshes`' index, after
+# its MTL rules, scenes/README.md, "MTL"): every material of the shared Cornell scenes is
+# `illum 2` with `Ks 0`, which tessera reads as diffuse with reflectance Kd. Mitsuba's `diffuse` is black from behind, tessera's reflection-only
 # BSDFs are two-sided, so the diffuse goes in a `twosided` wrapper. `Ke` > 0 adds an `area`
 # emitter, which, like tessera's, emits on the winding normal's side only. Ns, Ni, Ka and illum
 # play no part for these materials in either renderer.
@@ -49,19 +55,19 @@ MTL_MAPPING = (
 # How the script maps tessera's media onto Mitsuba (scenes/README.md, "Participating media"): a
 # `[media.NAME]` table becomes a `homogeneous` medium with `sigma_t = sigma_a + sigma_s`,
 # `albedo = sigma_s / sigma_t` (RGB) and an `hg` phase function of the same `g` (both renderers
-# take g > 0 as forward scattering); a sphere whose material is `interface` becomes Mitsuba's
-# analytic `sphere` with a `null` BSDF and that medium as `interior`, `glass` a `dielectric`
+# take g > 0 as forward scattering); a sphere whose material is `interface` becomes a mesh of
+# tessera's own triangles with a `null` BSDF and that medium as `interior`, `glass` a `dielectric`
 # (int_ior = ior, ext_ior = outside_ior, 1 when left out: both renderers refract by their ratio);
 # its `outside_medium` (the camera's medium when left out, as in tessera) becomes the sphere's
 # `exterior`, so media nest alike in both renderers (`scenes/shared/cornell-box-nested.toml`).
-# Our sphere is an icosphere (20,480 faces at subdivisions 5, 0.03 % less area than the sphere),
-# Mitsuba's the exact sphere. `[camera] medium` (global fog)
+# The sphere is tessera's icosphere in both (20,480 faces at subdivisions 5), with its smooth
+# normals. `[camera] medium` (global fog)
 # becomes the sensor's `medium`: both renderers start camera rays in it, and since the meshes
 # name no media, a ray that reflects stays in it (Mitsuba changes a ray's medium only at shapes
 # with an interior or exterior medium, tessera only at glass and interfaces).
 MEDIA_MAPPING = (
     "[media] -> homogeneous(sigma_t = sigma_a + sigma_s, albedo = sigma_s / sigma_t, phase hg(g)); "
-    "sphere -> a mesh of tessera's own icosphere (20 * 4^subdivisions triangles, radial normals), with interface -> "
+    "sphere -> a mesh of tessera's own triangles and normals (`tessera meshes`), with interface -> "
     "null BSDF, interior = medium, exterior = outside_medium or the camera's; "
     "with glass -> dielectric(int_ior = ior, ext_ior = outside_ior), interior, exterior; "
     "[camera] medium -> the sensor's medium"
@@ -86,12 +92,14 @@ EFFECTS_MAPPING = (
 )
 
 
-def mitsuba_description(toml, size, spp, segments, integrator="auto", seed=0, roulette_depth=None):
+def mitsuba_description(toml, size, spp, segments, integrator="auto", seed=0, roulette_depth=None,
+                        tessera="target/release/tessera"):
     """The Mitsuba scene dictionary of a tessera TOML (MTL_MAPPING, MEDIA_MAPPING,
     EFFECTS_MAPPING) and its triangle count; the variant must be set. `seed` is the sampler's;
     `roulette_depth` the depth from which Russian roulette may end paths, as tessera counts it
     (scattering events; `None`: off), which is Mitsuba's `rr_depth` too (both count the events
-    before the roulette, both survive with the throughput's largest channel, at most 0.95)."""
+    before the roulette, both survive with the throughput's largest channel, at most 0.95).
+    `tessera` is the binary whose loader gives the triangles (`mitsuba_shapes`)."""
     import mitsuba as mi
 
     scene_toml = tomllib.loads(toml.read_text())
@@ -104,37 +112,7 @@ def mitsuba_description(toml, size, spp, segments, integrator="auto", seed=0, ro
         )
     materials = scene_toml.get("materials", {})
     media = {name: mitsuba_medium(spec) for name, spec in scene_toml.get("media", {}).items()}
-    shapes = {}
-    triangles = 0
-    for index, obj in enumerate(scene_toml.get("object", [])):
-        if obj.get("shape") == "sphere":
-            shapes[f"shape-{index}-sphere"] = mitsuba_sphere(toml, obj, materials, media, camera.get("medium"))
-            continue
-        if set(obj) - {"obj", "material"}:
-            raise SystemExit(f"{toml}: object {index} has keys other than obj and material, which this script does not translate")
-        default = diffuse_material(toml, materials, obj["material"]) if "material" in obj else None
-        for name, (positions, texcoords, faces, kd, ke, texture) in read_obj(toml.parent / obj["obj"], default).items():
-            triangles += len(faces) // 3
-            props = mi.Properties()
-            if texture is not None:
-                reflectance = {"type": "bitmap", "filename": str(texture), "filter_type": "nearest",
-                               "wrap_mode": "repeat", "raw": False}
-            else:
-                reflectance = {"type": "rgb", "value": kd}
-            props["bsdf"] = mi.load_dict({"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": reflectance}})
-            if any(v > 0 for v in ke):
-                props["emitter"] = mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": ke}})
-            textured = texcoords is not None
-            mesh = mi.Mesh(f"{index}-{name}", len(positions) // 3, len(faces) // 3, props=props,
-                           has_vertex_normals=False, has_vertex_texcoords=textured)
-            params = mi.traverse(mesh)
-            # The buffers' own types: drjit arrays in the llvm variants, scalar arrays in scalar_rgb.
-            params["vertex_positions"] = type(params["vertex_positions"])(positions)
-            params["faces"] = type(params["faces"])(faces)
-            if textured:
-                params["vertex_texcoords"] = type(params["vertex_texcoords"])(texcoords)
-            params.update()
-            shapes[f"shape-{index}-{name}"] = mesh
+    shapes, triangles = mitsuba_shapes(toml, tessera, scene_toml, media, camera.get("medium"))
     description = {
         "type": "scene",
         "integrator": {"type": integrator if integrator != "auto" else "volpath" if media else "path",
@@ -208,15 +186,6 @@ def mitsuba_environment(toml, environment):
         })
 
 
-def diffuse_material(toml, materials, name):
-    """An object's `material` (what tessera gives an OBJ's faces before any `usemtl`) as the
-    (Kd, Ke, texture) of `read_obj`: only a plain `diffuse` with an `albedo` is translated."""
-    material = materials.get(name, {})
-    if material.get("type") != "diffuse" or set(material) - {"type", "albedo"}:
-        raise SystemExit(f"{toml}: material {name} is not a plain diffuse (type and albedo), which this script translates")
-    return (rgb(material.get("albedo", 0.5)), [0.0, 0.0, 0.0], None)
-
-
 def rgb(value):
     """A number or `[r, g, b]` of a TOML as three floats."""
     return [float(value)] * 3 if isinstance(value, (int, float)) else [float(c) for c in value]
@@ -242,15 +211,100 @@ def mitsuba_medium(spec):
     }
 
 
-def mitsuba_sphere(toml, obj, materials, media, camera_medium):
-    """A procedural sphere bounded by an `interface` or `glass` material with a medium, and with
-    the medium outside it: its `outside_medium`, or the camera's medium when left out (tessera's
-    rule; Mitsuba's own default, no exterior, would be vacuum); as a mesh of tessera's own
-    triangles (`icosphere`)."""
+def mitsuba_shapes(toml, tessera, scene_toml, media, camera_medium):
+    """Every object of the scene as Mitsuba meshes, and their triangle count. The triangles are
+    the ones tessera's loader made (`tessera meshes`: its OBJ reading, its spheres' tessellation
+    and normals, its transforms, to the bit), so that the two renderers trace the same geometry
+    and this script holds no second loader; the materials as MTL_MAPPING and MEDIA_MAPPING say."""
+    import subprocess
+
+    objects = scene_toml.get("object", [])
+    with tempfile.TemporaryDirectory() as folder:
+        done = subprocess.run([str(tessera), "meshes", str(toml), "--out", folder], capture_output=True, text=True)
+        if done.returncode != 0:
+            raise SystemExit(f"{toml}: `tessera meshes` failed: {done.stderr.strip()}")
+        index = json.loads((Path(folder) / "meshes.json").read_text())
+        # Only moving objects have no file: their triangles are placed per time.
+        moving = sorted(set(range(len(objects))) - {entry["object"] for entry in index})
+        if moving:
+            raise SystemExit(f"{toml}: object {moving[0]} moves, which this script does not translate")
+        shapes = {}
+        for entry in index:
+            obj = objects[entry["object"]]
+            if obj.get("shape") == "sphere":
+                props = sphere_properties(toml, obj, scene_toml.get("materials", {}), media, camera_medium)
+            else:
+                props = surface_properties(toml, entry)
+            shapes[f"shape-{Path(entry['file']).stem}"] = mitsuba_mesh(Path(folder) / entry["file"], entry, props)
+    return shapes, sum(entry["triangles"] for entry in index)
+
+
+def surface_properties(toml, entry):
+    """The Mitsuba BSDF and emitter of a mesh of `tessera meshes` (MTL_MAPPING): only diffuse
+    materials are translated, a texture only as the whole reflectance (tessera's albedo 1)."""
     import mitsuba as mi
 
-    if set(obj) - {"shape", "center", "radius", "subdivisions", "material"}:
-        raise SystemExit(f"{toml}: a sphere with keys this script does not translate: {sorted(obj)}")
+    material, bsdf = entry["material"], entry["material"]["bsdf"]
+    if bsdf["type"] != "diffuse":
+        raise SystemExit(f"{toml}: material {material['name']} is {bsdf['type']}, which this script does not translate")
+    if bsdf["texture"] is not None:
+        if bsdf["albedo"] != [1.0, 1.0, 1.0]:
+            raise SystemExit(f"{toml}: material {material['name']} scales its texture, which this script does not translate")
+        if not entry["texcoords"]:
+            raise SystemExit(f"{toml}: material {material['name']} has a texture but faces without texture coordinates")
+        reflectance = {"type": "bitmap", "filename": str(toml.parent / bsdf["texture"]), "filter_type": "nearest",
+                       "wrap_mode": "repeat", "raw": False}
+    else:
+        reflectance = {"type": "rgb", "value": bsdf["albedo"]}
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict({"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": reflectance}})
+    if any(v > 0 for v in material["emission"]):
+        props["emitter"] = mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": material["emission"]}})
+    return props
+
+
+def mitsuba_mesh(path, entry, props):
+    """The PLY file `path` of `tessera meshes` (described by its index `entry`) as a Mitsuba mesh
+    with `props`; texture coordinates as Mitsuba's bitmap reads them, v = 0 at the top (ours at the
+    bottom, so (u, 1 - v)), and kept only where the BSDF has a texture."""
+    import mitsuba as mi
+    import numpy as np
+
+    data = path.read_bytes()
+    body = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:body].decode().splitlines()
+    vertices = int(next(line.split()[2] for line in header if line.startswith("element vertex")))
+    faces = int(next(line.split()[2] for line in header if line.startswith("element face")))
+    names = [line.split()[2] for line in header if line.startswith("property float")]
+    table = np.frombuffer(data, dtype="<f4", count=vertices * len(names), offset=body).reshape(vertices, len(names))
+    records = np.frombuffer(data, dtype=[("count", "u1"), ("corners", "<u4", 3)], count=faces,
+                            offset=body + table.nbytes)
+    if np.any(records["count"] != 3):
+        raise SystemExit(f"{path}: a face that is not a triangle")
+    column = {name: table[:, k] for k, name in enumerate(names)}
+    textured = entry["texcoords"] and entry["material"]["bsdf"].get("texture") is not None
+    mesh = mi.Mesh(f"{path.stem}-{entry['material']['name']}", vertices, faces, props=props,
+                   has_vertex_normals=entry["normals"], has_vertex_texcoords=textured)
+    params = mi.traverse(mesh)
+    # The buffers' own types: drjit arrays in the llvm variants, scalar arrays in scalar_rgb.
+    flat = lambda *columns: np.stack([column[c] for c in columns], axis=1).ravel()
+    params["vertex_positions"] = type(params["vertex_positions"])(flat("x", "y", "z"))
+    params["faces"] = type(params["faces"])(records["corners"].ravel())
+    if entry["normals"]:
+        params["vertex_normals"] = type(params["vertex_normals"])(flat("nx", "ny", "nz"))
+    if textured:
+        column["v"] = 1.0 - column["v"]
+        params["vertex_texcoords"] = type(params["vertex_texcoords"])(flat("u", "v"))
+    params.update()
+    return mesh
+
+
+def sphere_properties(toml, obj, materials, media, camera_medium):
+    """The BSDF and media of a procedural sphere bounded by an `interface` or `glass` material
+    with a medium, and with the medium outside it: its `outside_medium`, or the camera's medium
+    when left out (tessera's rule; Mitsuba's own default, no exterior, would be vacuum)."""
+    import mitsuba as mi
+
     material = materials[obj["material"]]
     if material.get("type") == "interface" and set(material) <= {"type", "medium", "outside_medium"}:
         bsdf = {"type": "null"}
@@ -269,155 +323,4 @@ def mitsuba_sphere(toml, obj, materials, media, camera_medium):
     outside = material.get("outside_medium", camera_medium)
     if outside is not None:
         props["exterior"] = mi.load_dict(media[outside])
-    # The triangles tessera traces (scenes/README.md, `shape = "sphere"`), not Mitsuba's
-    # analytic sphere: a speed comparison must give both renderers the same geometry to trace.
-    positions, normals, faces = icosphere(
-        obj.get("center", [0, 0, 0]), float(obj.get("radius", 1.0)), int(obj.get("subdivisions", 3))
-    )
-    mesh = mi.Mesh(f"sphere-{obj['material']}", len(positions) // 3, len(faces) // 3, props=props,
-                   has_vertex_normals=True, has_vertex_texcoords=False)
-    params = mi.traverse(mesh)
-    params["vertex_positions"] = type(params["vertex_positions"])(positions)
-    params["vertex_normals"] = type(params["vertex_normals"])(normals)
-    params["faces"] = type(params["faces"])(faces)
-    params.update()
-    return mesh
-
-
-def icosphere(center, radius, subdivisions):
-    """The sphere tessera tessellates (`tracer/src/scene/shapes.rs`): the icosahedron with every
-    triangle split in four `subdivisions` times and its vertices put on the sphere, wound with
-    the outside in front, with smooth normals (tessera's default, `smooth = true`; here the
-    radial direction, which tessera's area-weighted average approaches). Flat lists of
-    positions, normals and vertex indices."""
-    import numpy as np
-
-    t = (1.0 + 5.0**0.5) / 2.0
-    vertices = [np.array(v) / np.linalg.norm(v) for v in (
-        (-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t),
-        (0, -1, -t), (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1))]
-    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
-             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
-             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
-    for _ in range(subdivisions):
-        midpoints = {}
-
-        def midpoint(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in midpoints:
-                m = vertices[a] + vertices[b]
-                vertices.append(m / np.linalg.norm(m))
-                midpoints[key] = len(vertices) - 1
-            return midpoints[key]
-
-        next_faces = []
-        for a, b, c in faces:
-            ab, bc, ca = midpoint(a, b), midpoint(b, c), midpoint(c, a)
-            next_faces += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
-        faces = next_faces
-    unit = np.array(vertices)
-    positions = np.asarray(center, dtype=float) + radius * unit
-    return (positions.astype(np.float32).ravel().tolist(), unit.astype(np.float32).ravel().tolist(),
-            np.array(faces, dtype=np.uint32).ravel().tolist())
-
-
-def read_obj(path, default=None):
-    """Triangles per `usemtl` material: {name: (flat positions, flat uvs or None, flat indices, Kd, Ke,
-    texture path or None)}; faces before any `usemtl` under the name None, with `default`'s (Kd,
-    Ke, texture), the object's own `material` (without one such faces are refused, as tessera
-    refuses them).
-
-    Handles what the shared scenes use: CRLF endings, negative (relative) indices, `v/vt/vn`
-    references, and polygons, which are cut into fans as tessera's loader cuts them. A vertex is
-    a (position, texture coordinate) pair, as in tessera's loader (tobj's single index), so that
-    faces meeting at a position with different `vt` keep their own; texture coordinates are kept
-    for a material only when it has a texture and every corner of its faces has one.
-    """
-    vertices = []
-    uvs = []
-    groups = {}
-    material = None
-    materials = {} if default is None else {None: default}
-    with open(path, encoding="utf-8", errors="replace") as f:
-        for line in f:
-            words = line.split()
-            if not words:
-                continue
-            if words[0] == "v":
-                vertices.append((float(words[1]), float(words[2]), float(words[3])))
-            elif words[0] == "vt":
-                # `vt u [v [w]]`: a missing v is 0, as tessera reads it.
-                uvs.append((float(words[1]), float(words[2]) if len(words) > 2 else 0.0))
-            elif words[0] == "f":
-                corners = [w.split("/") for w in words[1:]]
-                resolve = lambda i, count: i - 1 if i > 0 else count + i
-                ids = [
-                    (resolve(int(c[0]), len(vertices)), resolve(int(c[1]), len(uvs)) if len(c) > 1 and c[1] else None)
-                    for c in corners
-                ]
-                tris = groups.setdefault(material, [])
-                for k in range(1, len(ids) - 1):
-                    tris.extend((ids[0], ids[k], ids[k + 1]))
-            elif words[0] == "usemtl":
-                material = " ".join(words[1:])
-            elif words[0] == "mtllib":
-                materials.update(read_mtl(path.parent / " ".join(words[1:])))
-    meshes = {}
-    for name, tris in groups.items():
-        if name not in materials:
-            raise SystemExit(f"{path}: material {name!r} is not in its MTL files")
-        kd, ke, texture = materials[name]
-        textured = texture is not None and all(t is not None for _, t in tris)
-        # Each material's mesh keeps only the vertices it uses.
-        remap = {}
-        positions = []
-        texcoords = [] if textured else None
-        faces = []
-        for i, t in tris:
-            key = (i, t) if textured else i
-            j = remap.get(key)
-            if j is None:
-                j = remap[key] = len(remap)
-                positions.extend(vertices[i])
-                if textured:
-                    u, v = uvs[t]
-                    # Mitsuba's bitmap has v = 0 at the top row, tessera's at the bottom.
-                    texcoords.extend((u, 1.0 - v))
-            faces.append(j)
-        meshes[name] = (positions, texcoords, faces, kd, ke, texture if textured else None)
-    return meshes
-
-
-def read_mtl(path):
-    """{name: (Kd, Ke, map_Kd path or None)}; the texture's file name is matched ignoring ASCII case
-    when it does not exist as written, as tessera's loader matches it (Sponza's MTL says
-    `00_SKAP.JPG` for `00_skap.JPG`)."""
-    materials = {}
-    name = None
-    with open(path, encoding="utf-8", errors="replace") as f:
-        for line in f:
-            words = line.split("#")[0].split()
-            if not words:
-                continue
-            if words[0] == "newmtl":
-                name = " ".join(words[1:])
-                materials[name] = [[0.8, 0.8, 0.8], [0.0, 0.0, 0.0], None]
-            elif words[0] in ("Kd", "Ke") and name is not None:
-                values = [float(w) for w in words[1:4]]
-                values = values * 3 if len(values) == 1 else values
-                materials[name][0 if words[0] == "Kd" else 1] = values
-            elif words[0] == "map_Kd" and name is not None:
-                # With leading `-options` tessera takes the last word; `\` is read as `/`.
-                file = (words[-1] if words[1].startswith("-") else " ".join(words[1:])).replace("\\", "/")
-                materials[name][2] = find_ignoring_case(path.parent / file)
-    return {k: tuple(v) for k, v in materials.items()}
-
-
-def find_ignoring_case(path):
-    if path.exists():
-        return path
-    matches = [p for p in path.parent.iterdir() if p.name.lower() == path.name.lower()]
-    if not matches:
-        raise SystemExit(f"{path}: texture not found")
-    return sorted(matches)[0]
-
+    return props

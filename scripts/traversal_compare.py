@@ -52,6 +52,7 @@ def main():
     parser.add_argument("scenes", nargs="*", default=DEFAULT_SCENES, help="tessera scene TOMLs")
     parser.add_argument("--out", default="out/bench/traversal", type=Path)
     parser.add_argument("--example", default="target/release/examples/trace_rays")
+    parser.add_argument("--tessera", default="target/release/tessera", help="the binary whose loader gives Mitsuba the triangles")
     parser.add_argument("--size", type=int, default=512, help="the film's width and height")
     parser.add_argument("--per-pixel", type=int, default=8, help="camera rays per pixel")
     parser.add_argument("--rounds", type=int, default=5)
@@ -67,7 +68,7 @@ def main():
     report = {"processor": processor(), "load_before": os.getloadavg(), "variant": args.variant,
               "mitsuba": mi.__version__, "scenes": []}
     for toml in map(Path, args.scenes):
-        description, triangles = mitsuba_description(toml, args.size, 1, 8)
+        description, triangles = mitsuba_description(toml, args.size, 1, 8, tessera=args.tessera)
         scene = mi.load_dict(description)
         sets = draw_rays(mi, dr, scene, args.size, args.per_pixel)
         stem = args.out / toml.stem

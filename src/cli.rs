@@ -32,6 +32,9 @@ pub enum Command {
     Accuracy(crate::accuracy::AccuracyArgs),
     /// Measure the tracer: rays per second (camera rays, full paths), BVH build, CPU-seconds.
     Bench(crate::bench::BenchArgs),
+    /// Write a scene's still triangles as PLY files, with an index of their materials, for
+    /// another renderer to trace the same geometry (the Mitsuba 3 comparison scripts).
+    Meshes(crate::meshes::MeshesArgs),
     /// Simulate a cluster in virtual time on a cost trace: efficiency against peers, policies
     /// and tile counts, as CSV, JSON and SVG charts.
     Simulate(crate::simulate::SimulateArgs),

@@ -14,6 +14,8 @@
 //!   ([`lab::accuracy`]).
 //! - `bench`: `tessera bench`, rays per second of the tracer alone, and the steal round trip
 //!   ([`lab::bench`]).
+//! - `meshes`: `tessera meshes`, a scene's still triangles as PLY files for another renderer
+//!   ([`lab::meshes`]).
 //! - `simulate`: `tessera simulate`, scaling experiments in virtual time on a cost trace.
 
 mod accuracy;
@@ -22,6 +24,7 @@ mod cli;
 mod cluster;
 mod compare;
 mod job;
+mod meshes;
 mod progress;
 mod render;
 mod simulate;
@@ -64,6 +67,7 @@ fn run() -> anyhow::Result<()> {
         cli::Command::Compare(args) => compare::run(&args),
         cli::Command::Accuracy(args) => accuracy::run(&args),
         cli::Command::Bench(args) => bench::run(&args),
+        cli::Command::Meshes(args) => meshes::run(&args),
         cli::Command::Simulate(args) => simulate::run(&args),
     }
 }

@@ -9,6 +9,9 @@
 //!   knob, each rung measured against a reference, written as a table, a report and a plot.
 //! - [`bench`](mod@bench): rays per second of the tracer alone on real scenes, and the steal
 //!   round trip between two peers on loopback.
+//! - [`meshes`]: a scene's still triangles as the loader made them, as PLY files with an index
+//!   of their materials, so that another renderer (Mitsuba 3, in the comparison scripts) traces
+//!   exactly what tessera traces.
 //!
 //! Every whole-frame render here goes through [`tracer::render_frame`]; errors are [`LabError`],
 //! whose message and causes are what a user reads.
@@ -16,6 +19,7 @@
 pub mod accuracy;
 pub mod bench;
 pub mod compare;
+pub mod meshes;
 
 use std::path::PathBuf;
 

@@ -23,8 +23,13 @@ use toml::Spanned;
 /// What the loader noticed without rejecting the scene.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct LoadReport {
-    /// One entry per `[[object]]`, in file order.
+    /// One entry per `[[object]]`, in file order. The still objects' triangles follow one
+    /// another in [`Scene::triangles`] in this order, each object's [`ObjectReport::triangles`]
+    /// of them; the moving ones are [`Scene::moving`], in this order too.
     pub objects: Vec<ObjectReport>,
+    /// Each texture's file, relative to the scene file's folder, in the order of
+    /// [`Scene::textures`].
+    pub textures: Vec<String>,
 }
 
 /// What the loader made of one `[[object]]`: the counts a user needs to see that it loaded
@@ -37,6 +42,9 @@ pub struct ObjectReport {
     pub triangles: usize,
     /// Zero-area triangles dropped.
     pub degenerate: usize,
+    /// Whether the object moves (keyframes that differ): its triangles are then a
+    /// [`super::MovingObject`] of their own, in object space, rather than in [`Scene::triangles`].
+    pub moving: bool,
     /// The object's farthest coordinate from the origin over its median edge, rounded, when
     /// that is past [`MAX_DISTANCE_PER_FEATURE`] (and the loader warned).
     pub too_far: Option<u64>,
@@ -52,13 +60,19 @@ impl LoadReport {
 /// Loads the scene file at `path` and everything it references from the disk. Error messages
 /// name files by their full path.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    load_file_with_report(path).map(|(scene, _)| scene)
+}
+
+/// [`load`], also returning what the loader noticed ([`LoadReport`]).
+pub fn load_file_with_report(path: &Path) -> Result<(Scene, LoadReport), SceneError> {
     let root = path.parent().unwrap_or(Path::new("")).to_path_buf();
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let files = DiskFiles { root: root.clone() };
-    load_from(&files, &name).map_err(|e| e.rename_files(|f| root.join(f).display().to_string()))
+    load_with_report(&files, &name)
+        .map_err(|e| e.rename_files(|f| root.join(f).display().to_string()))
 }
 
 /// Loads the scene file `toml_name` (a path within `files`) and everything it references.
@@ -132,9 +146,10 @@ pub fn load_with_report(
         table,
         triangles,
         moving,
-        report,
+        mut report,
         ..
     } = builder;
+    report.textures = table.texture_files();
     let scene = Scene {
         settings: render_settings(&spec, &camera, &moving),
         camera,
@@ -307,6 +322,7 @@ impl Builder<'_> {
             source,
             triangles: kept.len(),
             degenerate,
+            moving: track.is_some(),
             too_far,
         });
         match track {

@@ -344,6 +344,15 @@ impl<'a> MaterialTable<'a> {
         Ok((material, indices))
     }
 
+    /// Each texture's file (as the loader resolved it), in the order of `textures`.
+    pub(super) fn texture_files(&self) -> Vec<String> {
+        let mut files = vec![String::new(); self.textures.len()];
+        for (path, &id) in &self.texture_ids {
+            files[id as usize] = path.clone();
+        }
+        files
+    }
+
     /// The index of the texture `reference`, named at `from` (file, line); decoded once.
     fn texture(
         &mut self,
