@@ -138,12 +138,18 @@ fn main() {
             })
             .count();
         let n = rays.len() as f64;
+        // A set traced faster than the clock ticks has no rate: `null`, where a division by
+        // zero would print `inf`, which is not JSON.
+        let rate = if best > 0.0 {
+            format!("{:.3}", n / best / 1e6)
+        } else {
+            "null".to_owned()
+        };
         println!(
             "{{\"file\": \"{path}\", \"query\": \"{query}\", \"rays\": {}, \"cpu_seconds\": {best:.4}, \
-             \"mrays_per_cpu_second\": {:.3}, \"boxes_per_ray\": {:.2}, \"triangles_per_ray\": {:.2}, \
+             \"mrays_per_cpu_second\": {rate}, \"boxes_per_ray\": {:.2}, \"triangles_per_ray\": {:.2}, \
              \"differ\": {differ}}}",
             rays.len(),
-            n / best / 1e6,
             stats.nodes as f64 / n,
             stats.triangles as f64 / n,
         );
