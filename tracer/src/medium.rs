@@ -131,6 +131,11 @@ impl Medium {
         if sigma_t == Vec3::ZERO {
             return Vec3::ONE;
         }
+        // A grey medium (smoke, mist: the same extinction in every channel) has one
+        // exponential for all three: the same argument in each, so the same bits.
+        if sigma_t.x == sigma_t.y && sigma_t.y == sigma_t.z {
+            return Vec3::splat(exp_neg(sigma_t.x * distance));
+        }
         // The three exponentials at once (`exp_neg_each`: the same bits as one by one); a
         // channel without extinction is exactly 1 whatever the distance (`0 * inf` is NaN).
         let each = exp_neg_each(sigma_t * distance);
