@@ -48,7 +48,7 @@ pub use microfacet::MIN_ALPHA;
 use dielectric::{reflect_local, sample_dielectric};
 use glam::{Vec2, Vec3};
 use microfacet::Ggx;
-use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4};
+use std::f32::consts::FRAC_1_PI;
 
 /// A surface material: how it scatters and what it emits.
 #[derive(Clone, Debug, PartialEq)]
@@ -310,24 +310,8 @@ fn flip_z(v: Vec3, flip: bool) -> Vec3 {
 /// A cosine-weighted direction in the upper hemisphere (density `cos theta / pi`), by Malley's
 /// method: a uniform point on the unit disk lifted onto the hemisphere.
 fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
-    let d = concentric_disk(u);
+    let d = crate::math::concentric_disk(u);
     Vec3::new(d.x, d.y, (1.0 - d.length_squared()).max(0.0).sqrt())
-}
-
-/// Shirley and Chiu's concentric map from the unit square to the unit disk. It preserves
-/// fractional area and adjacency, so stratified `u` stay stratified on the hemisphere.
-fn concentric_disk(u: Vec2) -> Vec2 {
-    let o = 2.0 * u - Vec2::ONE;
-    if o.x == 0.0 && o.y == 0.0 {
-        return Vec2::ZERO;
-    }
-    let (r, theta) = if o.x.abs() > o.y.abs() {
-        (o.x, FRAC_PI_4 * (o.y / o.x))
-    } else {
-        (o.y, FRAC_PI_2 - FRAC_PI_4 * (o.x / o.y))
-    };
-    let (sin, cos) = crate::math::sin_cos(theta);
-    r * Vec2::new(cos, sin)
 }
 
 #[cfg(test)]
@@ -445,12 +429,12 @@ mod tests {
         for i in 0..=64 {
             for j in 0..=64 {
                 let u = Vec2::new(i as f32 / 64.0, j as f32 / 64.0);
-                let r = concentric_disk(u).length();
+                let r = crate::math::concentric_disk(u).length();
                 assert!(r <= 1.0 + 1e-6, "u = {u} maps outside the disk (r = {r})");
                 max_r = max_r.max(r);
             }
         }
         assert!(max_r > 0.999, "the rim is never reached: max r = {max_r}");
-        assert_eq!(concentric_disk(Vec2::splat(0.5)), Vec2::ZERO);
+        assert_eq!(crate::math::concentric_disk(Vec2::splat(0.5)), Vec2::ZERO);
     }
 }

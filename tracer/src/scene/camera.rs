@@ -10,7 +10,6 @@
 
 use crate::geometry::Ray;
 use glam::{Vec2, Vec3};
-use std::f32::consts::FRAC_PI_4;
 
 /// A pinhole (`aperture_radius` zero) or thin-lens camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -177,7 +176,7 @@ impl CameraRays {
         if !self.has_lens() {
             return self.ray(x, y);
         }
-        let disk = concentric_disk(lens);
+        let disk = crate::math::concentric_disk(lens);
         let offset = disk.x * self.lens_right + disk.y * self.lens_up;
         // `towards` has a forward component of one, so this is the focus plane's point.
         let focus = self.towards(x, y) * self.focus_distance;
@@ -194,22 +193,6 @@ impl CameraRays {
         let sy = 2.0 * y / self.height - 1.0;
         self.forward + sx * self.right + sy * self.down
     }
-}
-
-/// Shirley and Chiu's concentric map of the unit square onto the unit disk: uniform in area, and
-/// it keeps neighbouring points neighbours (stratification survives).
-fn concentric_disk(u: Vec2) -> Vec2 {
-    let o = 2.0 * u - Vec2::ONE;
-    if o == Vec2::ZERO {
-        return Vec2::ZERO;
-    }
-    let (r, theta) = if o.x.abs() > o.y.abs() {
-        (o.x, FRAC_PI_4 * (o.y / o.x))
-    } else {
-        (o.y, 2.0 * FRAC_PI_4 - FRAC_PI_4 * (o.x / o.y))
-    };
-    let (sin, cos) = crate::math::sin_cos(theta);
-    Vec2::new(r * cos, r * sin)
 }
 
 #[cfg(test)]
@@ -284,7 +267,7 @@ mod tests {
         let inner = (0..n * n)
             .filter(|i| {
                 let u = Vec2::new((i % n) as f32 + 0.5, (i / n) as f32 + 0.5) / n as f32;
-                concentric_disk(u).length() < 0.5
+                crate::math::concentric_disk(u).length() < 0.5
             })
             .count();
         assert!(
