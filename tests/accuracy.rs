@@ -1,4 +1,4 @@
-//! `tessera compare` and `tessera accuracy`, run as a user runs them: the binary, real EXR files,
+//! `tessera compare`, `tessera accuracy` and `tessera meshes`, run as a user runs them: the binary, real EXR files,
 //! real scene files in a temporary folder. What is tested here is the command line (flags,
 //! output, error messages); the metrics and the ladders themselves are tested through the
 //! library in `tracer/lab/tests/`.
@@ -148,4 +148,64 @@ fn accuracy_runs_the_ladders_the_flags_name() {
     for file in ["accuracy.md", "accuracy.svg"] {
         assert!(out.join(file).is_file(), "{file} missing");
     }
+}
+
+#[test]
+fn meshes_writes_every_still_triangle_the_bench_counts_and_refuses_a_missing_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::repo("scenes/cornell-box/cornell-box.toml");
+    let out = dir.path().join("meshes");
+    let printed = tessera_ok(&[
+        "meshes",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let index: Value =
+        serde_json::from_slice(&std::fs::read(out.join("meshes.json")).unwrap()).unwrap();
+    let meshes = index.as_array().unwrap();
+    let triangles: u64 = meshes
+        .iter()
+        .map(|m| m["triangles"].as_u64().unwrap())
+        .sum();
+    assert!(
+        printed.starts_with(&format!("{} meshes, {triangles} triangles", meshes.len())),
+        "{printed}"
+    );
+    for mesh in meshes {
+        let file = out.join(mesh["file"].as_str().unwrap());
+        assert!(
+            std::fs::read(&file).unwrap().starts_with(b"ply\n"),
+            "{}",
+            file.display()
+        );
+    }
+    // The benchmark counts the triangles the tracer traces: every one is in a file.
+    let bench: Value = serde_json::from_str(&tessera_ok(&[
+        "bench",
+        scene.to_str().unwrap(),
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--spp",
+        "1",
+        "--json",
+    ]))
+    .unwrap();
+    assert_eq!(Some(triangles), bench["scenes"][0]["triangles"].as_u64());
+
+    let missing = dir.path().join("absent.toml");
+    let failed = tessera(&[
+        "meshes",
+        missing.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&failed.stderr);
+    assert_eq!(failed.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&missing.display().to_string()) && !stderr.contains("backtrace"),
+        "{stderr}"
+    );
 }
