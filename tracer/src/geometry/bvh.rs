@@ -163,7 +163,7 @@ impl Accel {
                 obvhs::triangle::Triangle { v0, v1, v2 }
             })
             .collect();
-        let mut bvh = build_bvh2(&shapes, quality.params());
+        let mut bvh = build_bvh2(shapes, quality.params());
         let depth = tree_depth(&bvh);
         // obvhs sizes its own traversal stack from max_depth, which reinsertion may outgrow.
         bvh.max_depth = bvh.max_depth.max(depth);

@@ -58,7 +58,7 @@ mod triangle;
 mod wide;
 
 pub use bvh::{Accel, BuildQuality, Traversal, intersect_brute_force, occluded_brute_force};
-pub(crate) use memory::{on_huge_pages, prefetch};
+pub(crate) use memory::{on_huge_pages, prefetch, release_freed_memory};
 pub use motion::{Moment, MotionAccel, MovingTriangle, placed_point};
 pub use offset::{
     OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, plane_normal, spawn_ray, spawn_ray_to,

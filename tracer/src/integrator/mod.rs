@@ -123,6 +123,7 @@ impl World {
             first,
             crate::geometry::BuildQuality::default(),
         );
+        crate::geometry::release_freed_memory();
         Self {
             scene,
             accel,

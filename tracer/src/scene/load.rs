@@ -286,34 +286,41 @@ impl Builder<'_> {
             None => key_pose(o, o.keys.first().map(|k| k.get_ref())),
         };
         let transform = Transform::new(pose.scale, pose.rotate_degrees, pose.translate);
-        let mut kept = Vec::with_capacity(local.len());
-        let mut placed = Vec::with_capacity(local.len());
-        for t in &local {
+        let moving = track.is_some();
+        let total = local.len();
+        // The triangles kept, where they lie in `local`: a still object's moved into the world
+        // in place, a moving one's left in object space, with its world copies (where the
+        // first key places them) in `placed` for the distance check alone. A still mesh is then
+        // never held twice: the dragon's 94 MB of triangles set the process's peak while
+        // loading when each still object was copied into `kept` and again into `placed`.
+        let mut kept = local;
+        let mut placed = Vec::new();
+        let mut overflows = false;
+        kept.retain_mut(|t| {
             let world = if transform.is_identity() {
                 *t
             } else {
                 transform.apply(t)
             };
             let area = world.area_vector().length_squared();
-            if !area.is_finite() {
-                return Err(
-                    "a triangle's area overflows 32-bit floats (coordinates too large)".into(),
-                );
-            }
+            overflows |= !area.is_finite();
             // A moving triangle must have area where it is modelled too: that is where rays
             // meet it.
-            if area > 0.0 && (track.is_none() || t.area_vector().length_squared() > 0.0) {
-                kept.push(if track.is_some() { *t } else { world });
+            let keep = area > 0.0 && (!moving || t.area_vector().length_squared() > 0.0);
+            if keep && moving {
                 placed.push(world);
+            } else if keep {
+                *t = world;
             }
+            keep
+        });
+        if overflows {
+            return Err("a triangle's area overflows 32-bit floats (coordinates too large)".into());
         }
-        let degenerate = local.len() - kept.len();
-        let too_far = warn_if_too_far(&source, &placed);
+        let degenerate = total - kept.len();
+        let too_far = warn_if_too_far(&source, if moving { &placed } else { &kept });
         if degenerate > 0 {
-            tracing::warn!(
-                "{source}: dropped {degenerate} zero-area triangles of {}",
-                local.len()
-            );
+            tracing::warn!("{source}: dropped {degenerate} zero-area triangles of {total}");
         }
         if kept.is_empty() {
             return Err(format!("{source}: every triangle has zero area"));
@@ -322,7 +329,7 @@ impl Builder<'_> {
             source,
             triangles: kept.len(),
             degenerate,
-            moving: track.is_some(),
+            moving,
             too_far,
         });
         match track {
@@ -334,6 +341,9 @@ impl Builder<'_> {
                     track,
                 });
             }
+            // The first still object's triangles become the scene's array as they are, not a
+            // copy of them (a scene of one large mesh would hold it twice while copying).
+            None if self.triangles.is_empty() => self.triangles = kept,
             None => self.triangles.extend(kept),
         }
         Ok(())
