@@ -291,7 +291,7 @@ fn accuracy_refuses_images_past_memory_and_knobs_named_twice() {
 #[test]
 fn simulator_bench_and_keygen_values_that_cannot_work_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let simulate = |flags: &[&str]| small_simulation(dir.path(), flags);
+    let simulate = |flags: &[&str]| common::small_simulation(dir.path(), flags);
     let started = std::time::Instant::now();
     for flag in [
         "--latency",
@@ -436,7 +436,7 @@ fn an_unwritable_out_and_a_missing_bench_scene_are_refused_before_any_work() {
     let scene = common::repo("scenes/point-in-sphere/point-in-sphere.toml");
     let stats = dir.path().join("no-stats.json");
     let commands: [Vec<std::ffi::OsString>; 3] = [
-        SMALL_SIMULATION.map(Into::into).to_vec(),
+        common::SMALL_SIMULATION.map(Into::into).to_vec(),
         vec![
             "simulate".into(),
             "synthetic:16x12:2".into(),
@@ -466,43 +466,4 @@ fn an_unwritable_out_and_a_missing_bench_scene_are_refused_before_any_work() {
     let missing = dir.path().join("missing.toml");
     let stderr = user_error(tessera().arg("bench").arg(&missing).args(["--spp", "1"]));
     assert!(stderr.contains("missing.toml"), "{stderr}");
-}
-
-/// Links whose round trip reaches or outlasts the peers' silence timeout (10 s) were refused
-/// while the simulated cores were not told their links' round trips (the owner would have
-/// declared every peer failed before it could answer, and a run of 16 peers did not end);
-/// told them, as the QUIC driver tells real ones, the owner waits out three round trips, and
-/// such links simply work.
-#[test]
-fn simulated_links_slower_than_the_silence_timeout_work() {
-    let dir = tempfile::tempdir().unwrap();
-    for flags in [
-        &["--latency", "5000"][..],
-        &["--latency", "4000", "--jitter", "1000"],
-        &["--latency", "8000", "--link-spread", "0.25"],
-    ] {
-        let output = small_simulation(dir.path(), flags).output().unwrap();
-        assert!(output.status.success(), "{flags:?}: {output:?}");
-    }
-}
-
-/// A small simulation's command line: a synthetic trace on 2 peers and 4 tiles.
-const SMALL_SIMULATION: [&str; 6] = [
-    "simulate",
-    "synthetic:16x12:2",
-    "--peers",
-    "2",
-    "--tiles",
-    "4",
-];
-
-/// `tessera simulate` of [`SMALL_SIMULATION`] with `flags`, writing into `out`.
-fn small_simulation(out: &std::path::Path, flags: &[&str]) -> std::process::Command {
-    let mut command = tessera();
-    command
-        .args(SMALL_SIMULATION)
-        .args(flags)
-        .arg("--out")
-        .arg(out);
-    command
 }

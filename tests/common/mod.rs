@@ -172,3 +172,24 @@ pub fn tiles_of(out: &Path, peer: u64) -> Vec<usize> {
         })
         .collect()
 }
+
+/// A small simulation's command line: a synthetic trace on 2 peers and 4 tiles.
+pub const SMALL_SIMULATION: [&str; 6] = [
+    "simulate",
+    "synthetic:16x12:2",
+    "--peers",
+    "2",
+    "--tiles",
+    "4",
+];
+
+/// `tessera simulate` of [`SMALL_SIMULATION`] with `flags`, writing into `out`.
+pub fn small_simulation(out: &std::path::Path, flags: &[&str]) -> std::process::Command {
+    let mut command = tessera();
+    command
+        .args(SMALL_SIMULATION)
+        .args(flags)
+        .arg("--out")
+        .arg(out);
+    command
+}
