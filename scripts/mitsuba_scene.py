@@ -47,8 +47,9 @@ ENVMAP_REPEAT = 32
 MTL_MAPPING = (
     "Kd -> twosided(diffuse(reflectance = Kd)); map_Kd -> twosided(diffuse(reflectance = bitmap(nearest, "
     "repeat, sRGB-decoded, uv = (u, 1 - v)))), Kd ignored, as tessera does; Ke > 0 -> one-sided area "
-    "emitter (radiance = Ke) on the same mesh; Ns/Ni/Ka/illum/bump unused (Ks below Kd everywhere); no "
-    "vertex normals in these OBJs, so both renderers shade with face normals; [environment] radiance -> "
+    "emitter (radiance = Ke) on the same mesh; Ns/Ni/Ka/illum/bump unused (Ks below Kd everywhere); "
+    "an OBJ's vertex normals, where tessera keeps them, are the mesh's in both (the shared OBJs have none but the "
+    "water and sphere variants'); [environment] radiance -> "
     "constant emitter"
 )
 
@@ -241,17 +242,17 @@ def mitsuba_shapes(toml, tessera, scene_toml, media, camera_medium):
 
 def surface_properties(toml, entry):
     """The Mitsuba BSDF and emitter of a mesh of `tessera meshes` (MTL_MAPPING): only diffuse
-    materials are translated, a texture only as the whole reflectance (tessera's albedo 1)."""
+    materials are translated, a texture only as the whole reflectance (tessera's albedo 1). Faces
+    without texture coordinates read a texture as white in tessera (`scatter.rs`), so theirs is
+    the albedo alone."""
     import mitsuba as mi
 
     material, bsdf = entry["material"], entry["material"]["bsdf"]
     if bsdf["type"] != "diffuse":
         raise SystemExit(f"{toml}: material {material['name']} is {bsdf['type']}, which this script does not translate")
-    if bsdf["texture"] is not None:
+    if bsdf["texture"] is not None and entry["texcoords"]:
         if bsdf["albedo"] != [1.0, 1.0, 1.0]:
             raise SystemExit(f"{toml}: material {material['name']} scales its texture, which this script does not translate")
-        if not entry["texcoords"]:
-            raise SystemExit(f"{toml}: material {material['name']} has a texture but faces without texture coordinates")
         reflectance = {"type": "bitmap", "filename": str(toml.parent / bsdf["texture"]), "filter_type": "nearest",
                        "wrap_mode": "repeat", "raw": False}
     else:
