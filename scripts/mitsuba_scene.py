@@ -31,8 +31,9 @@ ENVMAP_REPEAT = 32
 # How the script maps materials onto Mitsuba. Mitsuba's own OBJ loader ignores MTL files
 # entirely, so the mapping is ours, from what tessera resolved (`tessera meshes`' index, after
 # its MTL rules, scenes/README.md, "MTL"): every material of the shared Cornell scenes is
-# `illum 2` with `Ks 0`, which tessera reads as diffuse with reflectance Kd. Mitsuba's `diffuse` is black from behind, tessera's reflection-only
-# BSDFs are two-sided, so the diffuse goes in a `twosided` wrapper. `Ke` > 0 adds an `area`
+# `illum 2` with `Ks 0`, which tessera reads as diffuse with reflectance Kd. Mitsuba's `diffuse`
+# is black from behind, tessera's reflection-only BSDFs are two-sided, so the diffuse goes in a
+# `twosided` wrapper. `Ke` > 0 adds an `area`
 # emitter, which, like tessera's, emits on the winding normal's side only. Ns, Ni, Ka and illum
 # play no part for these materials in either renderer.
 #
@@ -48,9 +49,8 @@ MTL_MAPPING = (
     "Kd -> twosided(diffuse(reflectance = Kd)); map_Kd -> twosided(diffuse(reflectance = bitmap(nearest, "
     "repeat, sRGB-decoded, uv = (u, 1 - v)))), Kd ignored, as tessera does; Ke > 0 -> one-sided area "
     "emitter (radiance = Ke) on the same mesh; Ns/Ni/Ka/illum/bump unused (Ks below Kd everywhere); "
-    "an OBJ's vertex normals, where tessera keeps them, are the mesh's in both (the shared OBJs have none but the "
-    "water and sphere variants'); [environment] radiance -> "
-    "constant emitter"
+    "an OBJ's vertex normals, where tessera keeps them, are the mesh's in both (the shared OBJs have "
+    "none but the water and sphere variants'); [environment] radiance -> constant emitter"
 )
 
 # How the script maps tessera's media onto Mitsuba (scenes/README.md, "Participating media"): a
@@ -111,7 +111,6 @@ def mitsuba_description(toml, size, spp, segments, integrator="auto", seed=0, ro
         raise SystemExit(
             f"{toml}: only a fixed camera, OBJ objects and an environment (constant or a map) are translated for Mitsuba"
         )
-    materials = scene_toml.get("materials", {})
     media = {name: mitsuba_medium(spec) for name, spec in scene_toml.get("media", {}).items()}
     shapes, triangles = mitsuba_shapes(toml, tessera, scene_toml, media, camera.get("medium"))
     description = {
