@@ -105,13 +105,9 @@ pub fn write_meshes(scene: &Path, out: &Path) -> Result<Vec<MeshFile>, LabError>
     let (loaded, report) = tracer::scene::load_file_with_report(scene)?;
     std::fs::create_dir_all(out).map_err(LabError::io("create", out))?;
     let mut index = Vec::new();
-    let mut start = 0;
-    for (object, entry) in report.objects.iter().enumerate() {
-        if entry.moving {
-            continue;
-        }
-        let triangles = &loaded.triangles[start..start + entry.triangles];
-        start += entry.triangles;
+    for (object, range) in report.still_objects() {
+        let source = &report.objects[object].source;
+        let triangles = &loaded.triangles[range];
         // The object's triangles by material, then by the attributes they carry, each group
         // in the loader's order.
         let mut groups: BTreeMap<(u32, bool, bool), Vec<&Triangle>> = BTreeMap::new();
@@ -127,7 +123,7 @@ pub fn write_meshes(scene: &Path, out: &Path) -> Result<Vec<MeshFile>, LabError>
             let material = &loaded.materials[material as usize];
             index.push(MeshFile {
                 object,
-                source: entry.source.clone(),
+                source: source.clone(),
                 file,
                 triangles: group.len(),
                 normals,

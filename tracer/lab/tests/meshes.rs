@@ -78,12 +78,13 @@ fn every_still_triangle_is_written_with_the_loaders_bits_by_object_and_material(
     // Each still object's triangles, from the loader, grouped as the files should group them.
     let mut expected: Vec<(usize, Vec<Triangle>)> = Vec::new();
     let mut start = 0;
-    for (object, entry) in report.objects.iter().enumerate() {
-        if entry.moving {
-            continue;
-        }
-        let triangles = &scene.triangles[start..start + entry.triangles];
-        start += entry.triangles;
+    for (object, range) in report.still_objects() {
+        assert_eq!(
+            range.start, start,
+            "the still objects' ranges follow one another"
+        );
+        start = range.end;
+        let triangles = &scene.triangles[range];
         let mut keys: Vec<_> = triangles
             .iter()
             .map(|t| (t.material, t.n.is_some(), t.uv.is_some()))

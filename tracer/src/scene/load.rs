@@ -55,6 +55,21 @@ impl LoadReport {
     pub fn degenerate(&self) -> usize {
         self.objects.iter().map(|o| o.degenerate).sum()
     }
+
+    /// Each still object's place among the `[[object]]` tables and the range of its triangles
+    /// in [`Scene::triangles`], in file order: the ranges follow one another from 0 and cover
+    /// the array, which the loader fills object by object; moving objects have none.
+    pub fn still_objects(&self) -> impl Iterator<Item = (usize, std::ops::Range<usize>)> + '_ {
+        let mut start = 0;
+        self.objects
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| !o.moving)
+            .map(move |(object, o)| {
+                start += o.triangles;
+                (object, start - o.triangles..start)
+            })
+    }
 }
 
 /// Loads the scene file at `path` and everything it references from the disk. Error messages
