@@ -18,6 +18,7 @@ mod motion;
 mod mtl;
 mod nesting;
 mod obj;
+mod report;
 mod shapes;
 mod texture;
 mod values;
@@ -38,10 +39,9 @@ pub const MAX_FRAMES: u32 = 1 << 24;
 pub const MAX_RADIANCE: f32 = 1e30;
 pub use error::{Location, SceneError};
 pub use files::{DiskFiles, MemoryFiles, SceneFiles, normalize};
-pub use load::{
-    LoadReport, ObjectReport, load, load_file_with_report, load_from, load_str, load_with_report,
-};
+pub use load::{load, load_file_with_report, load_from, load_str, load_with_report};
 pub use motion::{MovingObject, Placement, Shutter, TransformKey, TransformTrack};
+pub use report::{LoadReport, ObjectReport};
 pub use texture::Texture;
 
 use crate::environment::{Environment, Portal};
