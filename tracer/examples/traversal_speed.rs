@@ -66,7 +66,7 @@ fn main() {
     let mut hashes = Vec::new();
     for _ in 0..rounds {
         for (i, &traversal) in traversals.iter().enumerate() {
-            world.traversal = traversal;
+            world.set_traversal(traversal);
             // One tile of the whole image on a pool of one thread, measured on that thread:
             // `install` from inside the pool runs the frame right there.
             let (film, seconds) = pool.install(|| {

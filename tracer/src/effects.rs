@@ -179,7 +179,7 @@ impl Effects {
             textures: used(
                 |b| matches!(b, Bsdf::Diffuse { albedo, texture: Some(_) } if *albedo != Vec3::ZERO),
             ),
-            shading_normals: scene.all_triangles().any(|t| t.n.is_some()),
+            shading_normals: scene.has_shading_normals(),
             media,
             motion_blur: scene.shutter.is_open() && scene.moves(),
             dispersion: used(Bsdf::is_dispersive),

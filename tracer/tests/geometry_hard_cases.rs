@@ -42,12 +42,7 @@ struct Mesh {
 impl Mesh {
     fn triangles(&self) -> Vec<Triangle> {
         let p = |f: &[u32; 3]| f.map(|i| self.vertices[i as usize]);
-        let tri = |p| Triangle {
-            p,
-            n: None,
-            uv: None,
-            material: 0,
-        };
+        let tri = |p| Triangle { p, material: 0 };
         self.faces.iter().map(|f| tri(p(f))).collect()
     }
 

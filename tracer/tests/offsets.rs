@@ -184,12 +184,7 @@ fn sphere(center: Vec3, radius: f32, subdivisions: u32) -> Vec<[Vec3; 3]> {
 fn tree(v: &[[Vec3; 3]]) -> Accel {
     let triangles: Vec<_> = v
         .iter()
-        .map(|&p| tracer::scene::Triangle {
-            p,
-            n: None,
-            uv: None,
-            material: 0,
-        })
+        .map(|&p| tracer::scene::Triangle::new(p, 0))
         .collect();
     Accel::build(&triangles, BuildQuality::Medium)
 }

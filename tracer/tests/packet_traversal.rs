@@ -20,12 +20,7 @@ use tracer::scene::{CameraTrack, Triangle};
 use tracer::{CameraRays, World};
 
 fn triangle(p: [Vec3; 3]) -> Triangle {
-    Triangle {
-        p,
-        n: None,
-        uv: None,
-        material: 0,
-    }
+    Triangle { p, material: 0 }
 }
 
 /// A closed box of `2 * half` around `centre` made of many small triangles (shared edges

@@ -181,8 +181,9 @@ fn crlf_comments_relative_indices_and_polygons_are_understood() {
     ])
     .unwrap();
     assert_eq!((fans.triangles.len(), fans.triangles.capacity()), (3, 3));
-    assert_eq!(scene.triangles[0].uv.unwrap()[1], Vec2::new(1.0, 0.0));
-    assert_eq!(scene.triangles[0].n.unwrap()[0], Vec3::Z);
+    let first = scene.attributes[0];
+    assert_eq!(first.uv.unwrap()[1], Vec2::new(1.0, 0.0));
+    assert_eq!(first.n.unwrap()[0], Vec3::Z);
     assert_eq!(scene.materials[1].emission, Vec3::splat(4.0));
     // An error in a CRLF file is still reported at the right line.
     let bad = crlf.replace("v 1 1 0", "v 1 nan 0");

@@ -18,12 +18,7 @@ use tracer::geometry::{
 use tracer::scene::Triangle;
 
 fn triangle(p: [Vec3; 3]) -> Triangle {
-    Triangle {
-        p,
-        n: None,
-        uv: None,
-        material: 0,
-    }
+    Triangle { p, material: 0 }
 }
 
 /// Triangles of many sizes in a 10-wide cube, with an exact copy of some (a tie in `t` that
@@ -135,7 +130,18 @@ fn render_with(
     scene.settings.height = size;
     scene.settings.samples_per_pixel = spp;
     let mut world = World::prepare(scene, None);
-    world.traversal = traversal;
+    // A world frees the binary tree, and the wide walk answers alone (with the leaves'
+    // triangles read from their groups); a comparison traversal builds the tree again.
+    assert!(
+        !world.accel.has_binary_tree(),
+        "a world keeps the wide tree alone"
+    );
+    world.set_traversal(traversal);
+    assert_eq!(
+        world.accel.has_binary_tree(),
+        traversal != Traversal::Robust,
+        "{traversal:?}"
+    );
     if let Some(simd) = simd
         && !world.accel.set_box_simd(simd)
     {

@@ -17,7 +17,7 @@ use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 use tracer::material::Bsdf;
-use tracer::scene::Triangle;
+use tracer::scene::{Triangle, VertexAttributes};
 
 /// The index file [`write_meshes`] writes beside the meshes.
 pub const INDEX_FILE: &str = "meshes.json";
@@ -97,6 +97,10 @@ pub enum BsdfDescription {
     Interface,
 }
 
+/// A group of an object's triangles: their material, and whether they have normals and
+/// texture coordinates.
+type GroupKey = (u32, bool, bool);
+
 /// Loads `scene` and writes its still objects' triangles into the folder `out` (made if
 /// missing), one PLY file per object and material, with the index [`INDEX_FILE`]; returns the
 /// index. Moving objects are left out (their triangles are in object space, placed per time):
@@ -107,13 +111,14 @@ pub fn write_meshes(scene: &Path, out: &Path) -> Result<Vec<MeshFile>, LabError>
     let mut index = Vec::new();
     for (object, range) in report.still_objects() {
         let source = &report.objects[object].source;
-        let triangles = &loaded.triangles[range];
         // The object's triangles by material, then by the attributes they carry, each group
         // in the loader's order.
-        let mut groups: BTreeMap<(u32, bool, bool), Vec<&Triangle>> = BTreeMap::new();
-        for t in triangles {
-            let key = (t.material, t.n.is_some(), t.uv.is_some());
-            groups.entry(key).or_default().push(t);
+        let mut groups: BTreeMap<GroupKey, Vec<(&Triangle, VertexAttributes)>> = BTreeMap::new();
+        for i in range {
+            let t = &loaded.triangles[i];
+            let a = loaded.attributes.get(i).copied().unwrap_or_default();
+            let key = (t.material, a.n.is_some(), a.uv.is_some());
+            groups.entry(key).or_default().push((t, a));
         }
         for ((material, normals, texcoords), group) in groups {
             let file = format!("object-{object}-{}.ply", index.len());
@@ -177,14 +182,14 @@ fn describe(material: &tracer::material::Material, textures: &[String]) -> Mater
 /// The binary little-endian PLY file of `triangles`: vertices `x y z` (then `nx ny nz` where
 /// `normals`, `u v` where `texcoords`) as 32-bit floats, corners with the same bits shared, and
 /// faces as lists of three 32-bit indices, in order.
-fn ply(triangles: &[&Triangle], normals: bool, texcoords: bool) -> Vec<u8> {
+fn ply(triangles: &[(&Triangle, VertexAttributes)], normals: bool, texcoords: bool) -> Vec<u8> {
     let mut vertices: Vec<[f32; 8]> = Vec::new();
     let mut ids: HashMap<[u32; 8], u32> = HashMap::new();
     let mut faces = Vec::with_capacity(triangles.len());
-    for t in triangles {
+    for (t, a) in triangles {
         let face: [u32; 3] = std::array::from_fn(|corner| {
-            let n = t.n.map_or([0.0; 3], |n| n[corner].into());
-            let uv = t.uv.map_or([0.0; 2], |uv| uv[corner].into());
+            let n = a.n.map_or([0.0; 3], |n| n[corner].into());
+            let uv = a.uv.map_or([0.0; 2], |uv| uv[corner].into());
             let p = t.p[corner];
             let vertex = [p.x, p.y, p.z, n[0], n[1], n[2], uv[0], uv[1]];
             *ids.entry(vertex.map(f32::to_bits)).or_insert_with(|| {

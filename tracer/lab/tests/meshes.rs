@@ -7,7 +7,7 @@
 
 use lab::meshes::{BsdfDescription, INDEX_FILE, write_meshes};
 use std::path::Path;
-use tracer::scene::{Triangle, load_file_with_report};
+use tracer::scene::{Triangle, VertexAttributes, load_file_with_report};
 
 /// A perturbed smooth sphere (shared vertices, normals), an emitting quad, a box that moves (left
 /// out of the files), an OBJ with two materials, one textured with texture coordinates, and a
@@ -76,7 +76,7 @@ fn every_still_triangle_is_written_with_the_loaders_bits_by_object_and_material(
     let (scene, report) = load_file_with_report(&dir.path().join("scene.toml")).unwrap();
 
     // Each still object's triangles, from the loader, grouped as the files should group them.
-    let mut expected: Vec<(usize, Vec<Triangle>)> = Vec::new();
+    let mut expected: Vec<(usize, Vec<(Triangle, VertexAttributes)>)> = Vec::new();
     let mut start = 0;
     for (object, range) in report.still_objects() {
         assert_eq!(
@@ -84,17 +84,24 @@ fn every_still_triangle_is_written_with_the_loaders_bits_by_object_and_material(
             "the still objects' ranges follow one another"
         );
         start = range.end;
-        let triangles = &scene.triangles[range];
-        let mut keys: Vec<_> = triangles
-            .iter()
-            .map(|t| (t.material, t.n.is_some(), t.uv.is_some()))
+        // Each triangle with its attributes, as the loader holds them.
+        let triangles: Vec<_> = range
+            .map(|i| {
+                (
+                    scene.triangles[i],
+                    scene.attributes.get(i).copied().unwrap_or_default(),
+                )
+            })
             .collect();
+        let key =
+            |(t, a): &(Triangle, VertexAttributes)| (t.material, a.n.is_some(), a.uv.is_some());
+        let mut keys: Vec<_> = triangles.iter().map(key).collect();
         keys.sort();
         keys.dedup();
-        for key in keys {
+        for group_key in keys {
             let group = triangles
                 .iter()
-                .filter(|t| (t.material, t.n.is_some(), t.uv.is_some()) == key)
+                .filter(|t| key(t) == group_key)
                 .copied()
                 .collect();
             expected.push((object, group));
@@ -111,12 +118,12 @@ fn every_still_triangle_is_written_with_the_loaders_bits_by_object_and_material(
         assert_eq!(mesh.triangles, triangles.len());
         let read = read_ply(&std::fs::read(out.join(&mesh.file)).unwrap());
         assert_eq!(read.faces.len(), triangles.len(), "{}", mesh.file);
-        for (face, t) in read.faces.iter().zip(triangles) {
+        for (face, (t, a)) in read.faces.iter().zip(triangles) {
             for (corner, &vertex) in face.iter().enumerate() {
                 let v = &read.vertices[vertex as usize];
                 let bits = |x: &[f32]| x.iter().map(|c| c.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&v.p), bits(&t.p[corner].to_array()), "{}", mesh.file);
-                match (&v.n, t.n) {
+                match (&v.n, a.n) {
                     (Some(n), Some(tn)) => assert_eq!(bits(n), bits(&tn[corner].to_array())),
                     (None, None) => {}
                     _ => panic!(
@@ -124,7 +131,7 @@ fn every_still_triangle_is_written_with_the_loaders_bits_by_object_and_material(
                         mesh.file
                     ),
                 }
-                match (&v.uv, t.uv) {
+                match (&v.uv, a.uv) {
                     (Some(uv), Some(tuv)) => assert_eq!(bits(uv), bits(&tuv[corner].to_array())),
                     (None, None) => {}
                     _ => panic!("{}: texture coordinates that differ in presence", mesh.file),
@@ -135,7 +142,7 @@ fn every_still_triangle_is_written_with_the_loaders_bits_by_object_and_material(
             (mesh.normals, mesh.texcoords),
             (read.normals, read.texcoords)
         );
-        let material = &scene.materials[triangles[0].material as usize];
+        let material = &scene.materials[triangles[0].0.material as usize];
         assert_eq!(mesh.material.name, material.name);
         assert_eq!(mesh.material.emission, material.emission.to_array());
     }

@@ -108,17 +108,20 @@ impl Traversal {
     pub const ALL: [Traversal; 3] = [Traversal::Robust, Traversal::RobustBinary, Traversal::Obvhs];
 }
 
-/// A BVH over a scene's triangles, with the triangles' vertices copied in leaf order.
+/// A BVH over a scene's triangles: the wide tree the renderer walks, with the triangles'
+/// vertices copied into its leaves, and (until [`Accel::release_binary_tree`]) the binary tree
+/// it was collapsed from.
 #[derive(Clone)]
 pub struct Accel {
-    /// The tree. Leaf `first_index .. first_index + prim_count` indexes `vertices`/`original`.
-    pub(super) bvh: Bvh2,
-    /// Vertices of each leaf entry, in leaf order, so that a leaf's triangles are contiguous in
-    /// memory. With spatial pre-splits a triangle can appear in several leaves.
-    pub(super) vertices: Vec<[Vec3; 3]>,
-    /// The index in the input slice of each leaf entry: what hits report.
-    pub(super) original: Vec<u32>,
-    /// Number of levels of the tree (a lone leaf is 1); bounds the traversal stack.
+    /// The binary tree and its leaves' vertices: what the comparison traversals
+    /// ([`Traversal::RobustBinary`], [`Traversal::Obvhs`]) and a tree too deep for the wide
+    /// walk's stack walk. `None` once released.
+    pub(super) binary: Option<BinaryTree>,
+    /// Number of the binary tree's nodes (inner nodes and leaves), kept past its release.
+    node_count: usize,
+    /// Number of leaf entries, kept past the binary tree's release.
+    leaf_entries: usize,
+    /// Number of levels of the binary tree (a lone leaf is 1); bounds its traversal stack.
     pub(super) depth: usize,
     /// The same tree collapsed into 8-wide nodes, over the same leaves: what `Robust` walks.
     pub(super) wide: Bvh8,
@@ -126,11 +129,24 @@ pub struct Accel {
     /// (f64) and its `area_vector().normalize()` (f32, NaN without area), computed once here
     /// rather than at every hit, side by side so that a hit reads one cache line for both.
     pub(super) normals: Vec<[Vec3; 2]>,
-    /// The caller's record of each input triangle that it reads at every closest hit (the
-    /// integrator's `Triangle`: texture coordinates, normals, material), as the address of the
-    /// first and the size of one, set by [`Accel::prefetch_at_hits`]. Only ever prefetched,
-    /// never read: a stale address costs a wasted hint, never a wrong value.
-    pub(super) hit_records: Option<(usize, usize)>,
+    /// The caller's arrays, indexed by input triangle, that it reads at every closest hit (the
+    /// integrator's `Triangle`, with its material, and the triangle's texture coordinates and
+    /// normals), each as the address of the first and the size of one, set by
+    /// [`Accel::prefetch_at_hits`]. Only ever prefetched, never read: a stale address costs a
+    /// wasted hint, never a wrong value.
+    pub(super) hit_records: [Option<(usize, usize)>; 2],
+    /// The quality the tree was built with, for a rebuild that must give the same tree.
+    quality: BuildQuality,
+}
+
+/// obvhs's binary tree, with the vertices and input triangle of each leaf entry in its leaf
+/// order (leaf `first_index .. first_index + prim_count` indexes both). With spatial
+/// pre-splits a triangle can appear in several leaves.
+#[derive(Clone, Default)]
+pub(super) struct BinaryTree {
+    pub(super) bvh: Bvh2,
+    pub(super) vertices: Vec<[Vec3; 3]>,
+    pub(super) original: Vec<u32>,
 }
 
 impl Accel {
@@ -147,13 +163,14 @@ impl Accel {
             .collect();
         if kept.is_empty() {
             return Accel {
-                bvh: Bvh2::default(),
-                vertices: Vec::new(),
-                original: Vec::new(),
+                binary: Some(BinaryTree::default()),
+                node_count: 0,
+                leaf_entries: 0,
                 depth: 0,
                 wide: Bvh8::default(),
                 normals,
-                hit_records: None,
+                hit_records: [None; 2],
+                quality,
             };
         }
         let shapes: Vec<obvhs::triangle::Triangle> = kept
@@ -178,14 +195,55 @@ impl Accel {
         wide.nodes = on_huge_pages(wide.nodes);
         wide.quads = on_huge_pages(wide.quads);
         Accel {
-            bvh,
-            vertices: on_huge_pages(vertices),
-            original: on_huge_pages(original),
+            node_count: bvh.nodes.len(),
+            leaf_entries: original.len(),
+            binary: Some(BinaryTree {
+                bvh,
+                vertices,
+                original,
+            }),
             depth,
             wide,
             normals: on_huge_pages(normals),
-            hit_records: None,
+            hit_records: [None; 2],
+            quality,
         }
+    }
+
+    /// Frees the binary tree and its copy of the leaves' vertices (on the Cornell dragon 45 MB
+    /// of the 255 MB the scene keeps), where the wide walk alone answers every query: the
+    /// renderer's traversal ([`Traversal::Robust`]) walks the wide tree, which holds its own
+    /// copy of the vertices. Kept where the tree is too deep for the wide walk's stack (which
+    /// then walks the binary tree). Returns whether it was freed; after that the comparison
+    /// traversals are unavailable (asking for one panics) until a rebuild, which
+    /// [`crate::integrator::World::set_traversal`] makes.
+    pub fn release_binary_tree(&mut self) -> bool {
+        if !self.wide.fits_inline_stack() {
+            return false;
+        }
+        self.binary = None;
+        true
+    }
+
+    /// Whether the binary tree is here, so that every [`Traversal`] can walk it.
+    pub fn has_binary_tree(&self) -> bool {
+        self.binary.is_some()
+    }
+
+    /// The quality the tree was built with: a build of the same triangles at this quality
+    /// gives the same tree.
+    pub fn quality(&self) -> BuildQuality {
+        self.quality
+    }
+
+    /// The binary tree, for the traversals that walk it.
+    #[inline(always)]
+    pub(super) fn binary_tree(&self) -> &BinaryTree {
+        self.binary.as_ref().expect(
+            "the binary tree is walked only while kept: it is released only where the wide walk \
+             answers every query, and World::set_traversal rebuilds it for the comparison \
+             traversals",
+        )
     }
 
     /// The unit plane normal of input triangle `triangle`, as [`plane_normal`] computes it, for
@@ -296,7 +354,7 @@ impl Accel {
 
     /// Number of tree nodes (inner nodes and leaves).
     pub fn node_count(&self) -> usize {
-        self.bvh.nodes.len()
+        self.node_count
     }
 
     /// Number of levels of the tree; 0 when it is empty.
@@ -307,7 +365,7 @@ impl Accel {
     /// Number of leaf entries: the non-degenerate triangles, plus duplicates made by spatial
     /// pre-splits.
     pub fn leaf_entries(&self) -> usize {
-        self.original.len()
+        self.leaf_entries
     }
 }
 

@@ -19,8 +19,8 @@ impl Bvh8 {
     /// binary nodes become wide nodes so that the summed surface area of the wide nodes, the
     /// surface area heuristic's measure of how often rays open them, is least ([`Plan`]).
     /// Deterministic: ties go to the first choice considered.
-    /// Leaves are packed into groups of four triangles from `vertices` (`Accel::vertices`),
-    /// with their input triangles from `original` (`Accel::original`).
+    /// Leaves are packed into groups of four triangles from `vertices`, with their input
+    /// triangles from `original` (the binary tree's leaf entries, `BinaryTree`).
     pub(super) fn collapse(bvh: &Bvh2, vertices: &[[Vec3; 3]], original: &[u32]) -> Bvh8 {
         if bvh.nodes.is_empty() {
             return Bvh8::default();
@@ -200,12 +200,7 @@ mod tests {
                     [v(i, j), v(i + 1, j), v(i + 1, j + 1)],
                     [v(i, j), v(i + 1, j + 1), v(i, j + 1)],
                 ] {
-                    out.push(Triangle {
-                        p,
-                        n: None,
-                        uv: None,
-                        material: 0,
-                    });
+                    out.push(Triangle { p, material: 0 });
                 }
             }
         }
@@ -326,8 +321,6 @@ mod tests {
                     let e = Vec3::new(next(), next(), next()) * 0.6;
                     Triangle {
                         p: [a, a + d, a + e],
-                        n: None,
-                        uv: None,
                         material: 0,
                     }
                 })
@@ -336,7 +329,7 @@ mod tests {
                 &triangles,
                 BuildQuality::ALL[case % BuildQuality::ALL.len()],
             );
-            let bvh = &accel.bvh;
+            let bvh = &accel.binary_tree().bvh;
             let inner = bvh.nodes.iter().skip(1).filter(|n| !n.is_leaf()).count();
             if bvh.nodes[0].is_leaf() || inner > 14 {
                 continue;

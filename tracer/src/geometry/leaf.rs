@@ -100,12 +100,11 @@ impl Accel {
             let kept = if hits.exact & (1 << lane) != 0 {
                 closest.offer_hit(hits.hit(lane as usize), original)
             } else {
-                let k = (group.entry as usize) + i;
                 // The scalar test's set-up made here, for the few lanes the SIMD test leaves
                 // it, rather than once per ray: the walk's set-up then stored it for every ray
                 // (4.9 % of a Cornell box shadow ray's instructions). The same values: it is a
                 // function of the ray alone.
-                closest.offer(&ShearedRay::new(ray), &self.vertices[k], original)
+                closest.offer(&ShearedRay::new(ray), &group.triangle(i), original)
             };
             if kept {
                 *found = true;
@@ -140,8 +139,6 @@ mod tests {
                 let e = Vec3::new(next(), next(), next()) * 0.05;
                 Triangle {
                     p: [a - d, a + d, a + e],
-                    n: None,
-                    uv: None,
                     material: 0,
                 }
             })
@@ -201,17 +198,12 @@ mod tests {
                     [v(i, j), v(i + 1, j + 1), v(i, j + 1)],
                 ]
             })
-            .map(|p| Triangle {
-                p,
-                n: None,
-                uv: None,
-                material: 0,
-            })
+            .map(|p| Triangle { p, material: 0 })
             .collect();
         let plain = Accel::build(&triangles, BuildQuality::Medium);
         let mut hinted = plain.clone();
         let records = [0u64; 3];
-        hinted.prefetch_at_hits(&records);
+        hinted.prefetch_at_hits(&records, &records);
         let (mut a, mut b) = (TraversalStats::default(), TraversalStats::default());
         let mut hits = 0;
         for i in 0..400 {

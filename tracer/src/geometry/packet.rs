@@ -334,8 +334,7 @@ impl Accel {
                     let kept = if hits.exact & (1 << r) != 0 {
                         closest[r].offer_hit(hits.hit(r), original)
                     } else {
-                        let k = quad.entry as usize + i;
-                        closest[r].offer(&ShearedRay::new(&rays[r]), &self.vertices[k], original)
+                        closest[r].offer(&ShearedRay::new(&rays[r]), &quad.triangle(i), original)
                     };
                     if kept {
                         moved |= 1 << r;

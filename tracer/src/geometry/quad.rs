@@ -42,7 +42,7 @@ pub(super) struct Quad {
     /// `p[vertex][axis]`: lane `i` holds triangle `entry + i`'s vertex. Unused lanes repeat
     /// the group's first triangle and are masked out by `valid`.
     pub(super) p: [[f32x4; 3]; 3],
-    /// The leaf entry (index into `Accel::vertices` and `Accel::original`) of lane 0.
+    /// The leaf entry of lane 0 (its place in the binary tree's leaf order, `BinaryTree`).
     pub(super) entry: u32,
     /// Each lane's input triangle (its `Accel::original`), which hits report: kept here, in
     /// the cache lines the test has just read, rather than read from a separate array at
@@ -81,6 +81,20 @@ impl Quad {
                     len: chunk.len() as u32,
                 }
             })
+    }
+
+    /// Lane `i`'s triangle, its vertices as [`Quad::pack`] was given them (the same bits):
+    /// what the scalar test reads for a lane the SIMD test leaves undecided, from the lines
+    /// the SIMD test has just read.
+    #[inline(always)]
+    pub(super) fn triangle(&self, i: usize) -> [Vec3; 3] {
+        self.p.map(|[x, y, z]| {
+            Vec3::new(
+                x.as_array_ref()[i],
+                y.as_array_ref()[i],
+                z.as_array_ref()[i],
+            )
+        })
     }
 }
 

@@ -18,7 +18,7 @@
 //! Costs are counted in [`TraversalStats`]: `nodes` is the number of boxes tested (the root and
 //! both children of every inner node opened), `triangles` the number of triangle tests.
 
-use super::bvh::{Accel, Closest};
+use super::bvh::{Accel, BinaryTree, Closest};
 use super::triangle::{ShearedRay, gamma};
 use super::{Hit, Ray, TraversalStats};
 use glam::{BVec3A, Vec3A};
@@ -85,7 +85,7 @@ impl Accel {
         ray: &Ray,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
-        if self.bvh.nodes.is_empty() {
+        if self.binary_tree().bvh.nodes.is_empty() {
             return None;
         }
         if self.depth <= INLINE_STACK {
@@ -110,7 +110,8 @@ impl Accel {
         stats: &mut TraversalStats,
         stack: &mut [StackEntry],
     ) -> Option<Hit> {
-        let nodes = &self.bvh.nodes;
+        let tree = self.binary_tree();
+        let nodes = &tree.bvh.nodes;
         let slab = SlabRay::new(ray);
         let sheared = ShearedRay::new(ray);
         let mut closest = Closest::new(ray, CERTAIN);
@@ -119,7 +120,7 @@ impl Accel {
         stats.nodes += 1;
         slab.enter(nodes[0].aabb(), cull(&closest))?;
         if nodes[0].is_leaf() {
-            self.intersect_leaf::<ANY_HIT>(&nodes[0], &sheared, &mut closest, stats);
+            tree.intersect_leaf::<ANY_HIT>(&nodes[0], &sheared, &mut closest, stats);
             return closest.best;
         }
         // From here on `node` is always an inner node.
@@ -144,7 +145,7 @@ impl Accel {
                 if child.is_leaf() {
                     // The near leaf may have moved the closest hit in front of this one.
                     if t_near <= cull(&closest)
-                        && self.intersect_leaf::<ANY_HIT>(child, &sheared, &mut closest, stats)
+                        && tree.intersect_leaf::<ANY_HIT>(child, &sheared, &mut closest, stats)
                         && ANY_HIT
                     {
                         return closest.best;
@@ -178,6 +179,55 @@ impl Accel {
         }
     }
 
+    /// Closest hit (or, with `ANY_HIT`, the first hit found) by obvhs's traversal, ray and
+    /// Moller-Trumbore test. Barycentrics are computed for the winner with the same formulas.
+    #[inline(never)]
+    pub(super) fn traverse_obvhs<const ANY_HIT: bool>(
+        &self,
+        ray: &Ray,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
+        let tree = self.binary_tree();
+        if tree.bvh.nodes.is_empty() {
+            return None;
+        }
+        let obvhs_ray = obvhs::ray::Ray::new(ray.origin.into(), ray.dir.into(), 0.0, ray.t_max);
+        let mut hit = RayHit::none();
+        let mut leaf = |node: &Bvh2Node, r: &mut obvhs::ray::Ray, hit: &mut RayHit| {
+            stats.nodes += 1;
+            for k in node.first_index..node.first_index + node.prim_count {
+                stats.triangles += 1;
+                let t = tree.obvhs_triangle(k as usize).intersect(r);
+                if t < r.tmax {
+                    hit.primitive_id = k;
+                    hit.t = t;
+                    r.tmax = t;
+                    if ANY_HIT {
+                        return false;
+                    }
+                }
+            }
+            true
+        };
+        obvhs::fast_stack!(u32, (96, 192), tree.bvh.max_depth, stack, {
+            tree.bvh
+                .ray_traverse_dynamic(&mut stack, obvhs_ray, &mut hit, &mut leaf)
+        });
+        if hit.primitive_id == obvhs::ray::INVALID_ID {
+            return None;
+        }
+        let k = hit.primitive_id as usize;
+        let (b1, b2) = moller_trumbore_barycentrics(&tree.obvhs_triangle(k), &obvhs_ray);
+        Some(Hit {
+            t: hit.t,
+            triangle: tree.original[k],
+            b1,
+            b2,
+        })
+    }
+}
+
+impl BinaryTree {
     /// Tests the triangles of a leaf; returns whether any became the closest hit (with
     /// `ANY_HIT`, stops at the first).
     #[inline(always)]
@@ -200,52 +250,6 @@ impl Accel {
             }
         }
         found
-    }
-
-    /// Closest hit (or, with `ANY_HIT`, the first hit found) by obvhs's traversal, ray and
-    /// Moller-Trumbore test. Barycentrics are computed for the winner with the same formulas.
-    #[inline(never)]
-    pub(super) fn traverse_obvhs<const ANY_HIT: bool>(
-        &self,
-        ray: &Ray,
-        stats: &mut TraversalStats,
-    ) -> Option<Hit> {
-        if self.bvh.nodes.is_empty() {
-            return None;
-        }
-        let obvhs_ray = obvhs::ray::Ray::new(ray.origin.into(), ray.dir.into(), 0.0, ray.t_max);
-        let mut hit = RayHit::none();
-        let mut leaf = |node: &Bvh2Node, r: &mut obvhs::ray::Ray, hit: &mut RayHit| {
-            stats.nodes += 1;
-            for k in node.first_index..node.first_index + node.prim_count {
-                stats.triangles += 1;
-                let t = self.obvhs_triangle(k as usize).intersect(r);
-                if t < r.tmax {
-                    hit.primitive_id = k;
-                    hit.t = t;
-                    r.tmax = t;
-                    if ANY_HIT {
-                        return false;
-                    }
-                }
-            }
-            true
-        };
-        obvhs::fast_stack!(u32, (96, 192), self.bvh.max_depth, stack, {
-            self.bvh
-                .ray_traverse_dynamic(&mut stack, obvhs_ray, &mut hit, &mut leaf)
-        });
-        if hit.primitive_id == obvhs::ray::INVALID_ID {
-            return None;
-        }
-        let k = hit.primitive_id as usize;
-        let (b1, b2) = moller_trumbore_barycentrics(&self.obvhs_triangle(k), &obvhs_ray);
-        Some(Hit {
-            t: hit.t,
-            triangle: self.original[k],
-            b1,
-            b2,
-        })
     }
 
     fn obvhs_triangle(&self, k: usize) -> obvhs::triangle::Triangle {

@@ -18,10 +18,12 @@
 //! order. Tests render the same images through both trees, and through both box tests, bit for
 //! bit.
 //!
-//! Leaves are the binary tree's leaves, the same runs of `Accel::vertices`, packed four triangles
+//! Leaves are the binary tree's leaves, the same runs of its leaf entries, packed four triangles
 //! to a group for the SIMD triangle test of `quad.rs` (with AVX, a leaf's first two groups in one
-//! step of eight lanes, `quad_avx.rs`); `Accel::vertices` stays for the scalar test, which
-//! settles what the SIMD one leaves.
+//! step of eight lanes, `quad_avx.rs`); the scalar test, which settles what the SIMD one leaves,
+//! reads its triangle from the group's lanes ([`Quad::triangle`]), so the wide walk needs no
+//! other copy of the vertices, and the binary tree's can be freed
+//! ([`Accel::release_binary_tree`]).
 
 use super::bvh::{Accel, Closest};
 use super::memory::prefetch;
@@ -370,13 +372,20 @@ fn address_of<T>(items: &[T], index: u32) -> *const u8 {
 }
 
 impl Accel {
-    /// Prefetch `records[triangle]`, with this tree's own normals of the triangle, whenever a
-    /// closest-hit query keeps a hit on it, while the traversal goes on. What the caller reads
-    /// first at a hit is that record (on Sponza, the texture coordinates whose texel is the
-    /// next miss); without the hint it is a cache miss that starts only once the query has
-    /// returned. A prefetch reads nothing into the computation, so results are unchanged.
-    pub fn prefetch_at_hits<T>(&mut self, records: &[T]) {
-        self.hit_records = Some((records.as_ptr() as usize, std::mem::size_of::<T>()));
+    /// Prefetch `records[triangle]` and `attributes[triangle]` (an array that may be empty),
+    /// with this tree's own normals of the triangle, whenever a closest-hit query keeps a hit
+    /// on it, while the traversal goes on. What the caller reads first at a hit is that record
+    /// and those attributes (on Sponza, the texture coordinates whose texel is the next miss);
+    /// without the hint each is a cache miss that starts only once the query has returned. A
+    /// prefetch reads nothing into the computation, so results are unchanged.
+    pub fn prefetch_at_hits<T, U>(&mut self, records: &[T], attributes: &[U]) {
+        let array = |base: usize, size: usize| (base != 0 && size != 0).then_some((base, size));
+        self.hit_records = [
+            array(records.as_ptr() as usize, std::mem::size_of::<T>()),
+            (!attributes.is_empty())
+                .then(|| array(attributes.as_ptr() as usize, std::mem::size_of::<U>()))
+                .flatten(),
+        ];
     }
 
     /// Asks for what the caller will read first if `triangle` stays the closest hit: its
@@ -389,7 +398,7 @@ impl Accel {
         let at = normals.wrapping_add(triangle as usize * size);
         prefetch(at);
         prefetch(at.wrapping_add(size - 1));
-        if let Some((base, size)) = self.hit_records {
+        for &(base, size) in self.hit_records.iter().flatten() {
             let at = base.wrapping_add(triangle as usize * size);
             let mut offset = 0;
             while offset < size {
@@ -419,8 +428,6 @@ mod tests {
                         Vec3::new(s, s, -s),
                         Vec3::new(s, 0.0, s),
                     ],
-                    n: None,
-                    uv: None,
                     material: 0,
                 }
             })

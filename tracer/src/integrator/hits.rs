@@ -17,7 +17,7 @@
 
 use super::World;
 use crate::geometry::{Hit, Moment, Ray, SurfacePoint, Traversal, TraversalStats};
-use crate::scene::{Placement, Triangle};
+use crate::scene::{Placement, Triangle, VertexAttributes};
 use glam::{Vec2, Vec3};
 
 /// The geometry of a hit; both normals on the winding's side.
@@ -34,6 +34,8 @@ pub(super) struct Surface {
 /// a moving triangle (in object space) its placement.
 pub(super) struct Placed<'a> {
     pub triangle: &'a Triangle,
+    /// The triangle's normals and texture coordinates, if it has any.
+    pub attributes: Option<&'a VertexAttributes>,
     pub at: SurfacePoint,
     pub unit_normal: Vec3,
     pub placement: Option<&'a Placement>,
@@ -52,6 +54,27 @@ pub enum CameraRays {
 }
 
 impl World {
+    /// The traversal rays take through the BVH ([`World::set_traversal`]).
+    pub fn traversal(&self) -> Traversal {
+        self.traversal
+    }
+
+    /// Makes rays take `traversal`: the renderer's own ([`Traversal::Robust`], the default)
+    /// or a comparison one, which walks the binary tree. A world frees that tree when it is
+    /// made ([`crate::geometry::Accel::release_binary_tree`]), so the first comparison
+    /// traversal builds the still geometry's trees again, at the quality they were built
+    /// with: the same trees, as the build is deterministic.
+    pub fn set_traversal(&mut self, traversal: Traversal) {
+        if traversal != Traversal::Robust && !self.accel.has_binary_tree() {
+            let mut accel =
+                crate::geometry::Accel::build(&self.scene.triangles, self.accel.quality());
+            accel.set_box_simd(self.accel.box_simd());
+            accel.prefetch_at_hits(&self.scene.triangles, &self.scene.attributes);
+            self.accel = accel;
+        }
+        self.traversal = traversal;
+    }
+
     /// The closest hits of a pixel's camera rays `rays` (at most [`crate::geometry::PACKET`]),
     /// found together into `hits`, their work counted in `stats`; `false`, with nothing done,
     /// where this world traces them one by one instead (then [`World::radiance`] finds each).
@@ -124,6 +147,7 @@ impl World {
                 let triangle = &self.scene.triangles[hit.triangle as usize];
                 Placed {
                     triangle,
+                    attributes: self.scene.attributes.get(hit.triangle as usize),
                     at: SurfacePoint::on_triangle_with_normal(
                         &triangle.p,
                         hit.b1,
@@ -136,8 +160,10 @@ impl World {
             }
             Some(moving) => {
                 let at = self.motion.surface(moment, moving, hit);
+                let object = &self.scene.moving[moving.object];
                 Placed {
-                    triangle: &self.scene.moving[moving.object].triangles[moving.triangle],
+                    triangle: &object.triangles[moving.triangle],
+                    attributes: object.attributes.get(moving.triangle),
                     at,
                     unit_normal: at.normal,
                     placement: Some(self.motion.placement(moment, moving.object)),
@@ -150,6 +176,7 @@ impl World {
     pub(super) fn surface(&self, ray: &Ray, hit: &Hit, moment: &Moment) -> Surface {
         let Placed {
             triangle,
+            attributes,
             at,
             unit_normal: geometric,
             placement,
@@ -159,7 +186,7 @@ impl World {
         // the front. Reflection-only BSDFs are two-sided by themselves.
         let front_facing = ray.dir.dot(geometric) < 0.0;
         let b0 = 1.0 - hit.b1 - hit.b2;
-        let shading_normal = match triangle.n {
+        let shading_normal = match attributes.and_then(|a| a.n) {
             Some(n) if self.effects.shading_normals => {
                 let mut interpolated = b0 * n[0] + hit.b1 * n[1] + hit.b2 * n[2];
                 // A moving triangle's normals are in object space; they turn with it.
@@ -178,8 +205,8 @@ impl World {
             _ => geometric,
         };
         // Texture coordinates are only ever read by a texture lookup.
-        let uv = triangle
-            .uv
+        let uv = attributes
+            .and_then(|a| a.uv)
             .filter(|_| self.effects.textures)
             .map(|uv| b0 * uv[0] + hit.b1 * uv[1] + hit.b2 * uv[2]);
         Surface {

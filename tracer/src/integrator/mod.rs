@@ -85,8 +85,8 @@ pub struct World {
     /// Whether some material is an index-matched interface, the one surface shadow rays pass
     /// (`scatter.rs`); taken from the scene's materials when the world is made.
     pub interfaces: bool,
-    /// How rays meet the BVH: our robust traversal (the default), or obvhs's own for comparison.
-    pub traversal: Traversal,
+    /// How rays meet the BVH: ours (the default) or a comparison one ([`World::set_traversal`]).
+    traversal: Traversal,
     /// Where secondary rays start: off the error bound of each hit point (the default), or the
     /// fixed-ULP offset for comparison.
     pub offset: OffsetMethod,
@@ -103,13 +103,16 @@ pub struct World {
 
 impl World {
     /// Prepares `scene` for rendering with the still geometry's tree `accel`: builds the moving
-    /// objects' trees and the lights, and moves the arrays every hit reads onto huge pages.
+    /// objects' trees and the lights, moves the arrays every hit reads onto huge pages, and
+    /// frees the binary tree, which only a comparison traversal walks ([`World::set_traversal`]).
     pub fn new(mut scene: Scene, mut accel: Accel, effects: Effects) -> Self {
         // Every hit reads its triangle, at random on large meshes: huge pages spare most of
         // those reads a page-table walk (`geometry/memory.rs`), and the traversal asks for it
         // as soon as it keeps a hit on it, so that the miss overlaps the rest of the query.
         scene.triangles = on_huge_pages(scene.triangles);
-        accel.prefetch_at_hits(&scene.triangles);
+        scene.attributes = on_huge_pages(scene.attributes);
+        accel.prefetch_at_hits(&scene.triangles, &scene.attributes);
+        accel.release_binary_tree();
         // So does every hit on a textured surface read a texel (`scene/texture.rs`).
         for texture in &mut scene.textures {
             texture.on_huge_pages();

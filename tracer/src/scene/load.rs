@@ -14,8 +14,11 @@ use super::motion::{MovingObject, TransformTrack};
 use super::nesting;
 use super::obj::{self, NO_MATERIAL};
 use super::report::{LoadReport, ObjectReport};
-use super::shapes::{Transform, given_keys, shape_triangles};
-use super::{CameraTrack, PointLight, RenderSettings, Scene, Triangle};
+use super::shapes::{Transform, given_keys, shape_mesh};
+use super::{
+    CameraTrack, Mesh, PointLight, RenderSettings, Scene, Triangle, VertexAttributes,
+    append_attributes,
+};
 use crate::environment::{Environment, EnvironmentMap, Portal, decode_exr};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -74,6 +77,7 @@ pub fn load_with_report(
         text,
         table: MaterialTable::new(&toml, text, &spec.materials, &spec.media),
         triangles: Vec::new(),
+        attributes: Vec::new(),
         moving: Vec::new(),
         report: LoadReport::default(),
     };
@@ -109,6 +113,7 @@ pub fn load_with_report(
         log,
         table,
         triangles,
+        attributes,
         moving,
         mut report,
         ..
@@ -119,6 +124,7 @@ pub fn load_with_report(
         camera,
         shutter: shutter(&spec),
         triangles,
+        attributes,
         moving,
         materials: table.materials,
         textures: table.textures,
@@ -139,6 +145,7 @@ struct Builder<'a> {
     text: &'a str,
     table: MaterialTable<'a>,
     triangles: Vec<Triangle>,
+    attributes: Vec<VertexAttributes>,
     moving: Vec<MovingObject>,
     report: LoadReport,
 }
@@ -197,7 +204,7 @@ impl Builder<'_> {
                 "[[object]] `{source}` needs `material = \"name\"`"
             )));
         };
-        let local = shape_triangles(kind, o, material).map_err(err)?;
+        let local = shape_mesh(kind, o, material).map_err(err)?;
         self.place(o, track, source, local).map_err(err)
     }
 
@@ -214,7 +221,7 @@ impl Builder<'_> {
                           such faces";
             return Err(SceneError::at_line(&path, line, detail));
         }
-        let used: BTreeSet<u32> = mesh.triangles.iter().map(|t| t.material).collect();
+        let used: BTreeSet<u32> = mesh.mesh.triangles.iter().map(|t| t.material).collect();
         let mut ids = BTreeMap::new();
         for local in used {
             let id = match local {
@@ -227,21 +234,21 @@ impl Builder<'_> {
             };
             ids.insert(local, id);
         }
-        for t in &mut mesh.triangles {
+        for t in &mut mesh.mesh.triangles {
             t.material = ids[&t.material];
         }
-        self.place(o, track, path.clone(), mesh.triangles)
+        self.place(o, track, path.clone(), mesh.mesh)
             .map_err(|detail| SceneError::in_file(&path, detail))
     }
 
-    /// Transforms `local` triangles into the scene, dropping zero-area ones; or, for an object
-    /// that moves by `track`, keeps them in object space with it.
+    /// Transforms `local` triangles (and their attributes) into the scene, dropping zero-area
+    /// ones; or, for an object that moves by `track`, keeps them in object space with it.
     fn place(
         &mut self,
         o: &ObjectSpec,
         track: Option<TransformTrack>,
         source: String,
-        local: Vec<Triangle>,
+        local: Mesh,
     ) -> Result<(), String> {
         // A still object with keys that all say the same stands at that pose, as if it had no
         // keys; a moving one is checked, and warned about, where its first key places it.
@@ -251,33 +258,53 @@ impl Builder<'_> {
         };
         let transform = Transform::new(pose.scale, pose.rotate_degrees, pose.translate);
         let moving = track.is_some();
-        let total = local.len();
         // The triangles kept, where they lie in `local`: a still object's moved into the world
         // in place, a moving one's left in object space, with its world copies (where the
         // first key places them) in `placed` for the distance check alone. A still mesh is then
         // never held twice: the dragon's 94 MB of triangles set the process's peak while
         // loading when each still object was copied into `kept` and again into `placed`.
-        let mut kept = local;
+        let Mesh {
+            triangles: mut kept,
+            mut attributes,
+        } = local;
+        let total = kept.len();
         let mut placed = Vec::new();
         let mut overflows = false;
-        kept.retain_mut(|t| {
+        // Kept triangles move down to `next`, and their attributes (if any) beside them.
+        let mut next = 0;
+        for i in 0..total {
+            let t = kept[i];
             let world = if transform.is_identity() {
-                *t
+                t
             } else {
-                transform.apply(t)
+                transform.apply(&t)
             };
             let area = world.area_vector().length_squared();
             overflows |= !area.is_finite();
             // A moving triangle must have area where it is modelled too: that is where rays
             // meet it.
             let keep = area > 0.0 && (!moving || t.area_vector().length_squared() > 0.0);
-            if keep && moving {
-                placed.push(world);
-            } else if keep {
-                *t = world;
+            if !keep {
+                continue;
             }
-            keep
-        });
+            // `next <= i`: what is written there has been read already.
+            if moving {
+                placed.push(world);
+                kept[next] = t;
+            } else {
+                kept[next] = world;
+            }
+            if let Some(&a) = attributes.get(i) {
+                attributes[next] = if moving || transform.is_identity() {
+                    a
+                } else {
+                    transform.apply_to_attributes(&a)
+                };
+            }
+            next += 1;
+        }
+        kept.truncate(next);
+        attributes.truncate(next);
         if overflows {
             return Err("a triangle's area overflows 32-bit floats (coordinates too large)".into());
         }
@@ -302,13 +329,21 @@ impl Builder<'_> {
             Some(track) => {
                 self.moving.push(MovingObject {
                     triangles: kept,
+                    attributes,
                     track,
                 });
             }
             // The first still object's triangles become the scene's array as they are, not a
             // copy of them (a scene of one large mesh would hold it twice while copying).
-            None if self.triangles.is_empty() => self.triangles = kept,
-            None => self.triangles.extend(kept),
+            None => {
+                let (before, count) = (self.triangles.len(), kept.len());
+                append_attributes(&mut self.attributes, before, attributes, count);
+                if before == 0 {
+                    self.triangles = kept;
+                } else {
+                    self.triangles.extend(kept);
+                }
+            }
         }
         Ok(())
     }

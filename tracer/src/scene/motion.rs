@@ -91,8 +91,11 @@ pub struct Placement {
 /// An object that moves: its triangles in object space and where they are when.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MovingObject {
-    /// Object-space triangles (shading normals in object space too), zero-area ones dropped.
+    /// Object-space triangles, zero-area ones dropped.
     pub triangles: Vec<Triangle>,
+    /// Their shading normals (in object space) and texture coordinates, by the same index:
+    /// empty where none has any, else one each.
+    pub attributes: Vec<super::VertexAttributes>,
     /// The object's keyframed poses, which place `triangles` in world space at any time.
     pub track: TransformTrack,
 }

@@ -10,17 +10,18 @@
 //! Materials are assigned by `usemtl` through tobj's per-mesh `material_id`, never by `g`/`o`
 //! names (the Cornell box's `g` lines follow their faces; see its PROVENANCE.md).
 
-use super::Triangle;
 use super::error::SceneError;
 use super::files::FileLog;
 use super::mtl::{self, MtlMaterial, parse_number};
+use super::{Mesh, VertexAttributes};
 use glam::{Vec2, Vec3};
 use std::collections::{BTreeMap, HashMap};
 
 /// An OBJ file's triangles in object space and the MTL materials they use.
 pub(crate) struct ObjMesh {
-    /// `material` is an index into `materials`, or [`NO_MATERIAL`] for faces before any `usemtl`.
-    pub triangles: Vec<Triangle>,
+    /// The triangles, whose `material` is an index into `materials`, or [`NO_MATERIAL`] for
+    /// faces before any `usemtl`, with their normals and texture coordinates.
+    pub mesh: Mesh,
     /// Every material of every `mtllib`, in file order.
     pub materials: Vec<MtlMaterial>,
     /// The first face line without a `usemtl`, if any.
@@ -105,12 +106,15 @@ pub(crate) fn load(
     // Exactly the triangles the meshes make (a polygon of k corners makes k - 2): one short,
     // and the array doubled for the last few, which for the dragon was 94 MB more at the peak.
     let count = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
-    let mut triangles = Vec::with_capacity(count);
+    let mut mesh = Mesh {
+        triangles: Vec::with_capacity(count),
+        attributes: Vec::new(),
+    };
     for model in &models {
-        append_triangles(path, &model.mesh, &mut triangles);
+        append_triangles(path, &model.mesh, &mut mesh);
     }
     Ok(ObjMesh {
-        triangles,
+        mesh,
         materials,
         first_face_without_material: scan.first_face_without_material,
     })
@@ -325,7 +329,7 @@ fn check_face(rest: &str, counts: [usize; 3]) -> Result<(), String> {
 /// Appends the triangles of one tobj mesh. Normals and texture coordinates are kept only when
 /// every vertex of the mesh has them: with `single_index`, tobj's arrays fall out of step when
 /// some faces of a mesh have them and others do not.
-fn append_triangles(file: &str, mesh: &tobj::Mesh, out: &mut Vec<Triangle>) {
+fn append_triangles(file: &str, mesh: &tobj::Mesh, out: &mut Mesh) {
     let vertices = mesh.positions.len() / 3;
     let has_normals = mesh.normals.len() == 3 * vertices && vertices > 0;
     let has_uvs = mesh.texcoords.len() == 2 * vertices && vertices > 0;
@@ -341,11 +345,10 @@ fn append_triangles(file: &str, mesh: &tobj::Mesh, out: &mut Vec<Triangle>) {
     for c in mesh.indices.chunks_exact(3) {
         // A zero `vn` has no direction; such a triangle is shaded with its geometric normal.
         let normals = has_normals.then(|| [n(c[0]), n(c[1]), n(c[2])]);
-        out.push(Triangle {
-            p: [p(c[0]), p(c[1]), p(c[2])],
+        let attributes = VertexAttributes {
             n: normals.filter(|n| n.iter().all(|n| *n != Vec3::ZERO)),
             uv: has_uvs.then(|| [uv(c[0]), uv(c[1]), uv(c[2])]),
-            material,
-        });
+        };
+        out.push([p(c[0]), p(c[1]), p(c[2])], material, attributes);
     }
 }

@@ -6,8 +6,8 @@
 //! a transform or a perturbation, so no ray slips between them. The winding defines the outside
 //! (the emitting side of a light); `inward` reverses it and the shading normals.
 
-use super::Triangle;
 use super::format::{ObjectSpec, ShapeKind};
+use super::{Mesh, Triangle, VertexAttributes};
 use glam::{Mat3, Vec2, Vec3};
 use std::collections::HashMap;
 
@@ -27,7 +27,7 @@ pub(crate) struct Sphere {
 }
 
 impl Sphere {
-    pub(crate) fn triangles(&self, material: u32) -> Vec<Triangle> {
+    pub(crate) fn mesh(&self, material: u32) -> Mesh {
         let (mut vertices, faces) = icosphere(self.subdivisions);
         for (i, v) in vertices.iter_mut().enumerate() {
             let jitter = 2.0 * unit_random(self.seed, i as u64) - 1.0;
@@ -47,33 +47,40 @@ impl Sphere {
         }
         let at = |f: &[u32; 3], table: &[Vec3]| f.map(|i| table[i as usize]);
         let normals: Vec<Vec3> = normals.into_iter().map(Vec3::normalize).collect();
-        faces
-            .iter()
-            .map(|f| Triangle {
-                p: at(f, &vertices),
+        let mut mesh = Mesh::default();
+        for f in &faces {
+            let attributes = VertexAttributes {
                 n: self.smooth.then(|| at(f, &normals)),
                 uv: None,
-                material,
-            })
-            .collect()
+            };
+            mesh.push(at(f, &vertices), material, attributes);
+        }
+        mesh
     }
 }
 
 /// Two triangles (0, 1, 2) and (0, 2, 3) with texture coordinates (0,0), (1,0), (1,1), (0,1).
-pub(crate) fn quad(corners: [Vec3; 4], material: u32) -> Vec<Triangle> {
+pub(crate) fn quad(corners: [Vec3; 4], material: u32) -> Mesh {
+    let mut mesh = Mesh::default();
+    append_quad(&mut mesh, corners, material);
+    mesh
+}
+
+/// [`quad`]'s two triangles, appended to `mesh`.
+fn append_quad(mesh: &mut Mesh, corners: [Vec3; 4], material: u32) {
     let uv = [Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y];
-    let tri = |i: [usize; 3]| Triangle {
-        p: i.map(|i| corners[i]),
-        n: None,
-        uv: Some(i.map(|i| uv[i])),
-        material,
-    };
-    vec![tri([0, 1, 2]), tri([0, 2, 3])]
+    for i in [[0, 1, 2], [0, 2, 3]] {
+        let attributes = VertexAttributes {
+            n: None,
+            uv: Some(i.map(|i| uv[i])),
+        };
+        mesh.push(i.map(|i| corners[i]), material, attributes);
+    }
 }
 
 /// An axis-aligned box of 12 triangles facing outwards (inwards when `inward`).
-pub(crate) fn cuboid(min: Vec3, max: Vec3, inward: bool, material: u32) -> Vec<Triangle> {
-    let mut out = Vec::with_capacity(12);
+pub(crate) fn cuboid(min: Vec3, max: Vec3, inward: bool, material: u32) -> Mesh {
+    let mut out = Mesh::default();
     let corner = |x: usize, y: usize, z: usize| {
         Vec3::new([min.x, max.x][x], [min.y, max.y][y], [min.z, max.z][z])
     };
@@ -92,7 +99,7 @@ pub(crate) fn cuboid(min: Vec3, max: Vec3, inward: bool, material: u32) -> Vec<T
             if (normal.dot(outward) > 0.0) == inward {
                 corners.reverse();
             }
-            out.extend(quad(corners, material));
+            append_quad(&mut out, corners, material);
         }
     }
     out
@@ -131,20 +138,30 @@ impl Transform {
     }
 
     /// The placed triangle. A mirroring transform (negative determinant) would turn the winding
-    /// inside out, so two vertices are swapped to keep the front side in front.
+    /// inside out, so two vertices are swapped to keep the front side in front; its attributes
+    /// are placed by [`Transform::apply_to_attributes`], which swaps theirs alike.
     pub(crate) fn apply(&self, t: &Triangle) -> Triangle {
         let mut out = Triangle {
             p: t.p.map(|p| self.linear * p + self.translation),
+            ..*t
+        };
+        if self.mirrors() {
+            out.p.swap(1, 2);
+        }
+        out
+    }
+
+    /// The placed attributes of a triangle that [`Transform::apply`] places.
+    pub(crate) fn apply_to_attributes(&self, a: &VertexAttributes) -> VertexAttributes {
+        let mut out = VertexAttributes {
             // A normal that a near-zero scale sends to infinity has no direction left; such a
             // triangle is shaded with its geometric normal.
-            n: t.n
+            n: a.n
                 .map(|n| n.map(|n| (self.normal * n).normalize_or_zero()))
                 .filter(|n| n.iter().all(|n| *n != Vec3::ZERO)),
-            uv: t.uv,
-            material: t.material,
+            uv: a.uv,
         };
-        if self.linear.determinant() < 0.0 {
-            out.p.swap(1, 2);
+        if self.mirrors() {
             if let Some(n) = &mut out.n {
                 n.swap(1, 2);
             }
@@ -154,14 +171,15 @@ impl Transform {
         }
         out
     }
+
+    /// Whether the transform mirrors (a negative determinant), turning windings inside out.
+    fn mirrors(&self) -> bool {
+        self.linear.determinant() < 0.0
+    }
 }
 
 /// The triangles of a procedural shape in object space; an error names the problem.
-pub(crate) fn shape_triangles(
-    kind: ShapeKind,
-    o: &ObjectSpec,
-    material: u32,
-) -> Result<Vec<Triangle>, String> {
+pub(crate) fn shape_mesh(kind: ShapeKind, o: &ObjectSpec, material: u32) -> Result<Mesh, String> {
     Ok(match kind {
         ShapeKind::Sphere => {
             let subdivisions = o.subdivisions.unwrap_or(3);
@@ -179,7 +197,7 @@ pub(crate) fn shape_triangles(
                 seed: o.seed.unwrap_or(0),
                 smooth: o.smooth.unwrap_or(true),
             }
-            .triangles(material)
+            .mesh(material)
         }
         ShapeKind::Quad => {
             let corners = o
@@ -333,14 +351,20 @@ mod tests {
     fn spheres_are_closed_and_face_the_requested_way() {
         for (inward, perturb) in [(false, 0.0), (true, 0.0), (true, 0.2)] {
             let s = sphere(inward, perturb);
-            let tris = s.triangles(0);
+            let mesh = s.mesh(0);
+            let tris = &mesh.triangles;
             assert_eq!(tris.len(), 20 * 16);
-            assert_closed(&tris);
-            for t in &tris {
+            assert_closed(tris);
+            assert_eq!(
+                mesh.attributes.len(),
+                tris.len(),
+                "every triangle has normals"
+            );
+            for (t, a) in tris.iter().zip(&mesh.attributes) {
                 let centroid = (t.p[0] + t.p[1] + t.p[2]) / 3.0 - s.center;
                 let outward = t.area_vector().dot(centroid) > 0.0;
                 assert_eq!(outward, !inward);
-                let shading = t.n.unwrap()[0].dot(centroid) > 0.0;
+                let shading = a.n.unwrap()[0].dot(centroid) > 0.0;
                 assert_eq!(shading, !inward);
                 if perturb == 0.0 {
                     assert!(
@@ -350,8 +374,9 @@ mod tests {
                 }
             }
         }
-        let bumpy = sphere(false, 0.2).triangles(0);
+        let bumpy = sphere(false, 0.2).mesh(0);
         let radii = bumpy
+            .triangles
             .iter()
             .flat_map(|t| t.p)
             .map(|p| (p - Vec3::new(1.0, 2.0, 3.0)).length());
@@ -370,7 +395,8 @@ mod tests {
                 Vec3::new(3.0, 1.0, 5.0),
                 inward,
                 0,
-            );
+            )
+            .triangles;
             assert_eq!(tris.len(), 12);
             assert_closed(&tris);
             let center = Vec3::new(1.0, 0.5, 3.5);
@@ -388,11 +414,10 @@ mod tests {
             Vec3::new(0.0, 90.0, 0.0),
             Vec3::new(0.0, 0.0, 10.0),
         );
-        let tri = Triangle {
-            p: [Vec3::X, Vec3::Y, Vec3::ZERO],
-            n: Some([Vec3::Z; 3]),
-            uv: None,
-            material: 0,
+        let tri = Triangle::new([Vec3::X, Vec3::Y, Vec3::ZERO], 0);
+        let attributes = VertexAttributes {
+            n: Some([Vec3::X, Vec3::Y, Vec3::Z]),
+            uv: Some([Vec2::ZERO, Vec2::X, Vec2::Y]),
         };
         let placed = t.apply(&tri);
         // x scaled to 2, then rotated 90 degrees about y (x -> -z), then moved 10 along z.
@@ -401,12 +426,16 @@ mod tests {
             "{:?}",
             placed.p
         );
-        let mirrored =
-            Transform::new(Vec3::new(-1.0, 1.0, 1.0), Vec3::ZERO, Vec3::ZERO).apply(&tri);
+        let mirror = Transform::new(Vec3::new(-1.0, 1.0, 1.0), Vec3::ZERO, Vec3::ZERO);
+        let mirrored = mirror.apply(&tri);
         let before = tri.area_vector().normalize();
         let after = mirrored.area_vector().normalize();
         // The mirror maps the normal (0, 0, 1) to itself; the front must stay where it was.
         assert!((before - after).length() < 1e-6);
-        assert!((mirrored.n.unwrap()[0] - Vec3::Z).length() < 1e-6);
+        // The attributes follow their vertices: vertex 0 stays, 1 and 2 swap places.
+        assert_eq!(mirrored.p, [-Vec3::X, Vec3::ZERO, Vec3::Y]);
+        let placed = mirror.apply_to_attributes(&attributes);
+        assert_eq!(placed.n, Some([-Vec3::X, Vec3::Z, Vec3::Y]));
+        assert_eq!(placed.uv, Some([Vec2::ZERO, Vec2::Y, Vec2::X]));
     }
 }

@@ -10,12 +10,8 @@ fn soup(snap: bool) -> impl Strategy<Value = Vec<Triangle>> {
     let vertex = [coordinate.clone(), coordinate.clone(), coordinate].prop_map(move |c| {
         Vec3::from_array(c.map(|x| if snap { (x * 2.0).round() / 2.0 } else { x }))
     });
-    let triangle = [vertex.clone(), vertex.clone(), vertex].prop_map(|p| Triangle {
-        p,
-        n: None,
-        uv: None,
-        material: 0,
-    });
+    let triangle =
+        [vertex.clone(), vertex.clone(), vertex].prop_map(|p| Triangle { p, material: 0 });
     prop::collection::vec(triangle, 1..120)
 }
 
@@ -72,8 +68,6 @@ fn the_bvh_agrees_with_brute_force_on_the_dragon() {
         for f in m.indices.chunks_exact(3) {
             triangles.push(Triangle {
                 p: [v(f[0]), v(f[1]), v(f[2])],
-                n: None,
-                uv: None,
                 material: 0,
             });
         }

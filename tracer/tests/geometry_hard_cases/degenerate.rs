@@ -5,12 +5,7 @@ use super::*;
 #[test]
 fn degenerate_triangles_are_never_hit_and_never_give_nan() {
     let mut rng = Rng(6);
-    let tri = |p: [Vec3; 3]| Triangle {
-        p,
-        n: None,
-        uv: None,
-        material: 0,
-    };
+    let tri = |p: [Vec3; 3]| Triangle { p, material: 0 };
     // Exactly degenerate in f32: small integer coordinates, scaled by powers of two and moved by
     // integers, so every coordinate and product is exact.
     let int = |rng: &mut Rng| rng.index(17) as f32 - 8.0;

@@ -207,9 +207,9 @@ fn shared_cornell_boxes_get_materials_by_usemtl_and_map_mirror_and_glass() {
     assert_eq!(material(&sphere, "rightWall").bsdf, blue);
     assert!(
         sphere
-            .triangles
+            .attributes
             .iter()
-            .any(|t| t.n.is_some() && t.uv.is_some())
+            .any(|a| a.n.is_some() && a.uv.is_some())
     );
 }
 

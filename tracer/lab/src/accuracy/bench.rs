@@ -290,12 +290,12 @@ impl<'a> Bench<'a> {
             rungs,
             "the robust traversal's image",
             |bench, (traversal, camera_rays)| {
-                bench.world.traversal = traversal;
+                bench.world.set_traversal(traversal);
                 bench.world.camera_rays = camera_rays;
                 (rung_name(traversal, camera_rays), settings.clone())
             },
         );
-        self.world.traversal = Traversal::Robust;
+        self.world.set_traversal(Traversal::Robust);
         self.world.camera_rays = CameraRays::default();
         rows
     }
@@ -392,7 +392,7 @@ impl<'a> Bench<'a> {
             setting,
             settings,
             bvh: BuildQuality::default(),
-            traversal: self.world.traversal,
+            traversal: self.world.traversal(),
             camera_rays: self.world.camera_rays,
             build_seconds: 0.0,
             render_seconds: timed.seconds,

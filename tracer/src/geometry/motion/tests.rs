@@ -64,8 +64,6 @@ fn triangles(s: &mut Stream, n: usize) -> Vec<Triangle> {
             let at = s.vec(-1.0, 1.0) + Vec3::new(0.5, 0.0, 0.0);
             Triangle {
                 p: [0, 1, 2].map(|_| at + s.vec(-0.3, 0.3)),
-                n: None,
-                uv: None,
                 material: 0,
             }
         })
@@ -102,6 +100,7 @@ fn objects(s: &mut Stream, count: usize, turn: bool) -> Vec<MovingObject> {
     let mut objects: Vec<MovingObject> = (0..count)
         .map(|_| MovingObject {
             triangles: triangles(s, 30),
+            attributes: Vec::new(),
             track: track(s, turn),
         })
         .collect();
