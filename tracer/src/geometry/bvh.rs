@@ -157,10 +157,13 @@ impl Accel {
             .filter(|&i| !is_degenerate(&triangles[i].p))
             .map(|i| u32::try_from(i).expect("fewer than 2^32 triangles: Hit::triangle is a u32"))
             .collect();
-        let normals = triangles
-            .iter()
-            .map(|t| [plane_normal(&t.p), t.area_vector().normalize()])
-            .collect();
+        // Made after the binary tree, whose build sets the process's peak memory.
+        let normals = || -> Vec<[Vec3; 2]> {
+            triangles
+                .iter()
+                .map(|t| [plane_normal(&t.p), t.area_vector().normalize()])
+                .collect()
+        };
         if kept.is_empty() {
             return Accel {
                 binary: Some(BinaryTree::default()),
@@ -168,7 +171,7 @@ impl Accel {
                 leaf_entries: 0,
                 depth: 0,
                 wide: Bvh8::default(),
-                normals,
+                normals: normals(),
                 hit_records: [None; 2],
                 quality,
             };
@@ -204,7 +207,7 @@ impl Accel {
             }),
             depth,
             wide,
-            normals: on_huge_pages(normals),
+            normals: on_huge_pages(normals()),
             hit_records: [None; 2],
             quality,
         }
