@@ -239,13 +239,22 @@ impl Accel {
         self.quality
     }
 
+    /// Moves the binary tree's leaf arrays onto huge pages, as the wide tree's are, for a
+    /// comparison traversal that walks it ([`crate::integrator::World::set_traversal`]): the
+    /// build leaves them where they are, since a world frees them.
+    pub fn binary_tree_on_huge_pages(&mut self) {
+        if let Some(tree) = &mut self.binary {
+            tree.vertices = on_huge_pages(std::mem::take(&mut tree.vertices));
+            tree.original = on_huge_pages(std::mem::take(&mut tree.original));
+        }
+    }
+
     /// The binary tree, for the traversals that walk it.
     #[inline(always)]
     pub(super) fn binary_tree(&self) -> &BinaryTree {
         self.binary.as_ref().expect(
-            "the binary tree is walked only while kept: it is released only where the wide walk \
-             answers every query, and World::set_traversal rebuilds it for the comparison \
-             traversals",
+            "a comparison traversal (RobustBinary, Obvhs) on an Accel whose binary tree was \
+             released: World::set_traversal builds it again, Accel::build keeps it",
         )
     }
 
@@ -277,6 +286,10 @@ impl Accel {
     }
 
     /// [`Accel::intersect`] by the chosen traversal.
+    ///
+    /// # Panics
+    /// With a comparison traversal on an `Accel` whose binary tree was released
+    /// ([`Accel::release_binary_tree`]).
     #[inline]
     pub fn intersect_with(
         &self,
@@ -293,6 +306,7 @@ impl Accel {
     /// along shadow rays needs the closest blocker (to see whether it is a boundary the ray may
     /// pass), where occlusion needs only any. obvhs's traversal has no certainty rule, for
     /// either query, so it gives its plain closest hit.
+    /// Panics as [`Accel::intersect_with`] does.
     #[inline]
     pub fn intersect_certain_with(
         &self,
@@ -321,6 +335,7 @@ impl Accel {
     }
 
     /// [`Accel::occluded`] by the chosen traversal.
+    /// Panics as [`Accel::intersect_with`] does.
     pub fn occluded_with(
         &self,
         ray: &Ray,

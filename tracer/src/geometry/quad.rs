@@ -44,7 +44,8 @@ pub(super) struct Quad {
     pub(super) p: [[f32x4; 3]; 3],
     /// The leaf entry of lane 0 (its place in the binary tree's leaf order, `BinaryTree`).
     pub(super) entry: u32,
-    /// Each lane's input triangle (its `Accel::original`), which hits report: kept here, in
+    /// Each lane's input triangle (the binary tree's `original` of its leaf entry), which hits
+    /// report: kept here, in
     /// the cache lines the test has just read, rather than read from a separate array at
     /// every candidate (on the dragon a cache miss of its own).
     pub(super) original: [u32; LANES],

@@ -69,6 +69,7 @@ impl World {
             let mut accel =
                 crate::geometry::Accel::build(&self.scene.triangles, self.accel.quality());
             accel.set_box_simd(self.accel.box_simd());
+            accel.binary_tree_on_huge_pages();
             accel.prefetch_at_hits(&self.scene.triangles, &self.scene.attributes);
             self.accel = accel;
         }

@@ -14,7 +14,7 @@ use super::motion::{MovingObject, TransformTrack};
 use super::nesting;
 use super::obj::{self, NO_MATERIAL};
 use super::report::{LoadReport, ObjectReport};
-use super::shapes::{Transform, given_keys, shape_mesh};
+use super::shapes::{BOX_KEYS, QUAD_KEYS, SPHERE_KEYS, Transform, given_keys, shape_mesh};
 use super::{
     CameraTrack, Mesh, PointLight, RenderSettings, Scene, Triangle, VertexAttributes,
     append_attributes,
@@ -149,18 +149,6 @@ struct Builder<'a> {
     moving: Vec<MovingObject>,
     report: LoadReport,
 }
-
-const SPHERE_KEYS: &[&str] = &[
-    "center",
-    "radius",
-    "subdivisions",
-    "inward",
-    "perturb",
-    "seed",
-    "smooth",
-];
-const QUAD_KEYS: &[&str] = &["corners"];
-const BOX_KEYS: &[&str] = &["min", "max", "inward"];
 
 impl Builder<'_> {
     fn object(&mut self, spanned: &Spanned<ObjectSpec>) -> Result<(), SceneError> {
@@ -305,6 +293,11 @@ impl Builder<'_> {
         }
         kept.truncate(next);
         attributes.truncate(next);
+        // Where no kept triangle has any (those that had were dropped, or a transform left
+        // their normals no direction), the object has none: nothing to hold or prefetch.
+        if attributes.iter().all(VertexAttributes::is_empty) {
+            attributes = Vec::new();
+        }
         if overflows {
             return Err("a triangle's area overflows 32-bit floats (coordinates too large)".into());
         }

@@ -115,7 +115,7 @@ pub struct RenderSettings {
     pub media: MediaSampling,
 }
 
-/// One triangle: its vertices, its material, and where its shading attributes are.
+/// One triangle: its vertices and its material; its shading attributes live beside it.
 ///
 /// Its normals and texture coordinates live apart, in an array beside its own
 /// ([`Scene::attributes`], [`MovingObject::attributes`]), empty where no triangle has any, so
@@ -159,7 +159,11 @@ impl Mesh {
     /// Appends a triangle with its attributes.
     pub(crate) fn push(&mut self, p: [Vec3; 3], material: u32, attributes: VertexAttributes) {
         if !attributes.is_empty() || !self.attributes.is_empty() {
-            // The first triangle with attributes gives those before it empty ones.
+            // The first triangle with attributes gives those before it empty ones, and room
+            // for as many as the triangles have (a mesh's are sized to its count).
+            if self.attributes.is_empty() {
+                self.attributes.reserve_exact(self.triangles.capacity());
+            }
             self.attributes
                 .resize(self.triangles.len(), VertexAttributes::default());
             self.attributes.push(attributes);
@@ -232,7 +236,7 @@ impl Scene {
     }
 
     /// Every triangle, still and moving (the moving ones in object space), for what asks only
-    /// which materials and attributes are in use.
+    /// which materials are in use.
     pub fn all_triangles(&self) -> impl Iterator<Item = &Triangle> {
         let moving = self.moving.iter().flat_map(|o| &o.triangles);
         self.triangles.iter().chain(moving)

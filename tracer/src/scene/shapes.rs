@@ -217,6 +217,21 @@ pub(crate) fn shape_mesh(kind: ShapeKind, o: &ObjectSpec, material: u32) -> Resu
     })
 }
 
+/// The keys a sphere takes besides the transform's and `material`.
+pub(crate) const SPHERE_KEYS: &[&str] = &[
+    "center",
+    "radius",
+    "subdivisions",
+    "inward",
+    "perturb",
+    "seed",
+    "smooth",
+];
+/// A quad's.
+pub(crate) const QUAD_KEYS: &[&str] = &["corners"];
+/// A box's.
+pub(crate) const BOX_KEYS: &[&str] = &["min", "max", "inward"];
+
 /// The shape-specific keys an [[object]] table gives (transform keys and `material` apply to all).
 pub(crate) fn given_keys(o: &ObjectSpec) -> Vec<&'static str> {
     let keys = [
