@@ -243,6 +243,8 @@ def run_tessera(tomls, args, seed=0):
             "roulette_depth": paths["russian_roulette_depth"],
             "mrays_per_second": paths["rays_per_second"] / 1e6,
             "image": s["image"],
+            # Resident memory of the whole process (KiB), as Mitsuba's worker reports its own.
+            "memory": s.get("memory"),
         }
         print(f"tessera {Path(s['scene']).stem}: {describe(results[s['scene']])}", file=sys.stderr)
     return results
@@ -355,6 +357,7 @@ def markdown(report):
             f"{c['blocks']['size']}-pixel blocks {c['blocks']['rms'] * 100:.1f}% RMS, {c['blocks']['max'] * 100:.1f}% at most"
             f"{fmt_floor(row)}) |"
         )
+    lines += memory_table(report)
     if s.get("repeats", 1) > 1:
         lines += ["", f"Each renderer's fastest of {s['repeats']} runs, alternated scene by scene; every run's CPU-s:", ""]
         for row in report["rows"]:
@@ -368,6 +371,28 @@ def markdown(report):
         lines += ["", f"{title} mapping: {report[key]}."]
     lines.append("")
     return "\n".join(lines)
+
+
+def memory_table(report):
+    """Each renderer's whole process, resident, in MB: one process per scene on both sides
+    (Mitsuba's includes the Python interpreter and its libraries, its 'before' column)."""
+    mb = lambda kib: f"{kib / 1024:.1f}" if kib is not None else "?"
+    lines = ["", "Memory, the whole process resident, MB (the fastest runs'):", "",
+             "| scene | renderer | before the scene | after the scene | after the render | peak |",
+             "|---|---|---:|---:|---:|---:|"]
+    seen = set()
+    for row in report["rows"]:
+        memory = row["tessera"].get("memory")
+        if row["scene"] not in seen and memory:
+            seen.add(row["scene"])
+            lines.append(f"| {row['scene']} | tessera | | {mb(memory['resident_after_build_kib'])} | "
+                         f"{mb(memory['resident_after_render_kib'])} | {mb(memory['peak_resident_kib'])} |")
+        m = row["mitsuba"]
+        if "error" not in m and m.get("peak_rss_kib") is not None:
+            lines.append(f"| {row['scene']} | Mitsuba {row['variant']} | {mb(m.get('rss_before_scene_kib'))} | "
+                         f"{mb(m.get('rss_after_scene_kib'))} | {mb(m.get('rss_after_render_kib'))} | "
+                         f"{mb(m['peak_rss_kib'])} |")
+    return lines if len(lines) > 5 else []
 
 
 def fmt_floor(row):

@@ -194,6 +194,19 @@ fn meshes_writes_every_still_triangle_the_bench_counts_and_refuses_a_missing_sce
     ]))
     .unwrap();
     assert_eq!(Some(triangles), bench["scenes"][0]["triangles"].as_u64());
+    // The process's memory, as the comparison with Mitsuba reads it: the peak holds the rest.
+    let memory = &bench["scenes"][0]["memory"];
+    let kib = |key: &str| {
+        memory[key]
+            .as_u64()
+            .unwrap_or_else(|| panic!("{key} in {memory}"))
+    };
+    let (built, rendered, peak) = (
+        kib("resident_after_build_kib"),
+        kib("resident_after_render_kib"),
+        kib("peak_resident_kib"),
+    );
+    assert!(built > 0 && peak >= built.max(rendered), "{memory}");
 
     let missing = dir.path().join("absent.toml");
     let failed = tessera(&[

@@ -98,6 +98,21 @@ pub struct SceneBench {
     pub paths: Pass,
     /// Where the full-path image was written (`--out`).
     pub image: Option<String>,
+    /// The whole process's memory around this scene, as the comparison with another renderer
+    /// reports it (`scripts/mitsuba_compare.py`); `None` where there is no procfs.
+    pub memory: Option<Memory>,
+}
+
+/// Resident memory of the whole process, in KiB, from Linux's `/proc/self/status`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Memory {
+    /// Resident once the scene is loaded and its trees built (`VmRSS`).
+    pub resident_after_build_kib: u64,
+    /// Resident after the full-path render (`VmRSS`).
+    pub resident_after_render_kib: u64,
+    /// The most the process has held so far (`VmHWM`): this scene's peak for the first scene
+    /// of a run, the largest of the scenes so far for a later one.
+    pub peak_resident_kib: u64,
 }
 
 /// One timed render of frame 0.
@@ -232,6 +247,7 @@ fn bench_scene(
     let build = timed(|| tracer::World::prepare(scene, None));
     let (mut world, build_seconds, build_cpu_seconds) =
         (build.value, build.seconds, build.cpu_seconds);
+    let resident_after_build = process_status_kib("VmRSS");
     if let Some(depth) = args.max_depth {
         world.scene.settings.max_depth = Some(depth);
     }
@@ -242,6 +258,13 @@ fn bench_scene(
     let (primary, _) = pass(&world, pool);
     world.scene.settings.max_depth = full_depth;
     let (paths, image) = pass(&world, pool);
+    let memory = (|| {
+        Some(Memory {
+            resident_after_build_kib: resident_after_build?,
+            resident_after_render_kib: process_status_kib("VmRSS")?,
+            peak_resident_kib: process_status_kib("VmHWM")?,
+        })
+    })();
 
     let settings = &world.scene.settings;
     let written = match &args.out {
@@ -267,6 +290,7 @@ fn bench_scene(
         primary,
         paths,
         image: written,
+        memory,
     }))
 }
 
@@ -377,6 +401,15 @@ fn print_scene(s: &SceneBench) {
             }
         );
     }
+    if let Some(m) = &s.memory {
+        let mb = |kib: u64| kib as f64 / 1024.0;
+        println!(
+            "  memory: {:.1} MB resident after the build, {:.1} MB after the render, {:.1} MB at the process's peak",
+            mb(m.resident_after_build_kib),
+            mb(m.resident_after_render_kib),
+            mb(m.peak_resident_kib)
+        );
+    }
     if let Some(image) = &s.image {
         println!("  image: {image}");
     }
@@ -393,6 +426,16 @@ fn process_cpu_seconds() -> Option<f64> {
     let user: u64 = fields.get(11)?.parse().ok()?;
     let system: u64 = fields.get(12)?.parse().ok()?;
     Some((user + system) as f64 / TICKS_PER_SECOND)
+}
+
+/// A field of `/proc/self/status` given in kB (`VmRSS`, `VmHWM`), in KiB as Linux means it.
+/// `None` where there is no procfs.
+fn process_status_kib(field: &str) -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status
+        .lines()
+        .find(|l| l.split(':').next() == Some(field))?;
+    line.split_whitespace().nth(1)?.parse().ok()
 }
 
 fn load_average() -> Option<[f64; 3]> {

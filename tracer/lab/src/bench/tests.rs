@@ -146,6 +146,20 @@ fn cpu_seconds_grow_while_this_process_works() {
 }
 
 #[test]
+fn resident_memory_grows_with_what_this_process_holds_and_the_peak_holds_it() {
+    let before = process_status_kib("VmRSS").expect("procfs is there on Linux");
+    // 256 MiB written, so resident: the reading must grow by about that much (by 200 MiB at
+    // least, whatever the tests running beside this one free meanwhile).
+    let held = std::hint::black_box(vec![1u8; 256 << 20]);
+    let during = process_status_kib("VmRSS").expect("procfs is there on Linux");
+    let peak = process_status_kib("VmHWM").expect("procfs is there on Linux");
+    assert!(during >= before + 200 * 1024, "{before} -> {during} KiB");
+    assert!(peak >= during, "peak {peak} below resident {during} KiB");
+    assert_eq!(process_status_kib("NoSuchField"), None);
+    drop(held);
+}
+
+#[test]
 fn shipped_scenes_are_found_sorted() {
     let scenes = shipped_scenes(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes"))
         .expect("reading scenes/");
