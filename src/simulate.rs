@@ -126,8 +126,8 @@ pub struct SimulateArgs {
     /// Seed of victim choice, jitter, link latencies and loss.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// The run drawn as gantt.svg, as PEERS:POLICY:TILES[:FRAME] (default: at most 16 peers,
-    /// pbt+steal, the first tile count, the middle frame).
+    /// The run drawn as gantt.svg, as PEERS:POLICY:TILES or PEERS:POLICY:TILES:FRAME (default:
+    /// at most 16 peers, pbt+steal, the first tile count, the middle frame).
     #[arg(long)]
     pub gantt: Option<String>,
     /// Line charts to draw: efficiency against peers (one per tile count), against tiles (one

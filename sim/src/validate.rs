@@ -30,7 +30,7 @@ pub struct Given {
 /// One frame, measured and simulated.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrameComparison {
-    /// What the frame added to the real render's time, in seconds ([`frame_intervals`]).
+    /// What the frame added to the real render's time, in seconds (`frame_intervals`).
     pub measured: f64,
     /// The frame's makespan in the simulation, in virtual seconds.
     pub simulated: f64,

@@ -13,7 +13,7 @@
 //!
 //! **Hero wavelengths, three of them** (Wilkie et al. 2014; pbrt-v4's `SampledWavelengths`). A
 //! spectral path carries three wavelengths in the slots where an RGB path carries its channels,
-//! drawn where the eye sees most ([`visible`], pbrt's `SampleVisibleWavelengths`) at
+//! drawn where the eye sees most (`visible`, pbrt's `SampleVisibleWavelengths`) at
 //! `u`, `u + 1/3` and `u + 2/3` of that density's CDF (one uniform `u`, the others stratified
 //! from it), so the
 //! integrator's arithmetic, its Russian roulette and the media's hero-channel MIS
@@ -40,7 +40,7 @@
 //! back exactly, in expectation (a spectral render of an RGB scene has the RGB render's mean),
 //! white stays exactly white, and an albedo in [0, 1] stays in [0, 1] at every wavelength, so
 //! energy is conserved by construction. `scripts/fit_spectral_primaries.py` fits them and writes
-//! both `B` and `S`, every 5 nm, into [`primaries`] (generated; its docstring gives the CIE data's
+//! both `B` and `S`, every 5 nm, into `primaries` (generated; its docstring gives the CIE data's
 //! provenance); both are read by linear interpolation, and the fit's integrals are those of the
 //! interpolants, so the identity holds for what the tracer reads, to about 1e-8.
 //!

@@ -35,7 +35,7 @@
 //! flag); the per-sample counters in [`PathStats`] let tests check that the skipped work is
 //! really skipped, and bit-identity with [`Effects::ALL`] that it really was zero. The path
 //! loop is compiled twice: once for plain worlds (no media, no moving objects, RGB
-//! throughout: [`World::is_plain`]), where those effects' flags are constants and their steps
+//! throughout: `World::is_plain`), where those effects' flags are constants and their steps
 //! are not compiled in, and once for the rest, where the flags are read at run time.
 
 /// The scattering events a path may have at most when `max_depth` is unlimited: Russian

@@ -84,7 +84,7 @@ pub(crate) fn refract_local(wo: Vec3, eta: f32) -> Option<(Vec3, f32)> {
 /// meaning (`eta * eta` overflows near 1.8e19), and nothing physical lies there.
 ///
 /// The one owner of the limit: the scene loader refuses a glass whose relative index leaves it
-/// ([`check_relative_ior`]), and the sampler clamps to it ([`sanitize_ior`]).
+/// ([`check_relative_ior`]), and the sampler clamps to it (`sanitize_ior`).
 pub const RELATIVE_IOR: RangeInclusive<f32> = 1e-3..=1e3;
 
 /// `relative` (inside over outside) when it lies in [`RELATIVE_IOR`], else what is wrong, for

@@ -2,7 +2,7 @@
 //!
 //! Everything is resolved (materials by index, textures decoded, read as linear RGB), and placed in
 //! world space but for moving objects, which keep object space and a track (`motion.rs`), so
-//! that rendering never touches the filesystem. The loader ([`load`]) reads a TOML scene
+//! that rendering never touches the filesystem. The loader ([`load()`]) reads a TOML scene
 //! file and the OBJ/MTL meshes and textures it references through a [`SceneFiles`] source, so the
 //! same code loads from disk or from the in-memory file set a peer received over the network.
 

@@ -232,7 +232,7 @@ pub(crate) const QUAD_KEYS: &[&str] = &["corners"];
 /// A box's.
 pub(crate) const BOX_KEYS: &[&str] = &["min", "max", "inward"];
 
-/// The shape-specific keys an [[object]] table gives (transform keys and `material` apply to all).
+/// The shape-specific keys an `[[object]]` table gives (transform keys and `material` apply to all).
 pub(crate) fn given_keys(o: &ObjectSpec) -> Vec<&'static str> {
     let keys = [
         ("center", o.center.is_some()),
