@@ -115,7 +115,7 @@ pub struct RenderSettings {
     pub media: MediaSampling,
 }
 
-/// One triangle: its vertices and its material; its shading attributes live beside it.
+/// One triangle: its vertices and its material.
 ///
 /// Its normals and texture coordinates live apart, in an array beside its own
 /// ([`Scene::attributes`], [`MovingObject::attributes`]), empty where no triangle has any, so
