@@ -42,12 +42,13 @@ pub(super) struct Quad {
     /// `p[vertex][axis]`: lane `i` holds triangle `entry + i`'s vertex. Unused lanes repeat
     /// the group's first triangle and are masked out by `valid`.
     pub(super) p: [[f32x4; 3]; 3],
-    /// The leaf entry of lane 0 (its place in the binary tree's leaf order, `BinaryTree`).
+    /// The leaf entry of lane 0 (its place in the binary tree's leaf order, `BinaryTree`): no
+    /// walk reads it (an undecided lane's triangle comes from `p`, [`Quad::triangle`]); the
+    /// collapse's test does, to see every leaf entry packed once.
     pub(super) entry: u32,
     /// Each lane's input triangle (the binary tree's `original` of its leaf entry), which hits
-    /// report: kept here, in
-    /// the cache lines the test has just read, rather than read from a separate array at
-    /// every candidate (on the dragon a cache miss of its own).
+    /// report: kept here, in the cache lines the test has just read, rather than read from a
+    /// separate array at every candidate (on the dragon a cache miss of its own).
     pub(super) original: [u32; LANES],
     /// Bit `i` set when lane `i` holds a triangle of the leaf; triangles fill the lowest lanes.
     pub(super) valid: u32,

@@ -364,6 +364,13 @@ pub(super) unsafe fn push_sorted<E: Copy>(
     unsafe { stack.get_unchecked_mut(k) }.write(entry);
 }
 
+/// `items` as [`Accel::prefetch_at_hits`] keeps it: the address of the first and the size of
+/// one; `None` where there is nothing to prefetch.
+fn hit_array<T>(items: &[T]) -> Option<(usize, usize)> {
+    let size = std::mem::size_of::<T>();
+    (!items.is_empty() && size != 0).then_some((items.as_ptr() as usize, size))
+}
+
 /// Where `items[index]` starts, for a prefetch: computed without a bounds check, since a hint
 /// never reads (and never faults, even past the end).
 #[inline(always)]
@@ -379,13 +386,7 @@ impl Accel {
     /// without the hint each is a cache miss that starts only once the query has returned. A
     /// prefetch reads nothing into the computation, so results are unchanged.
     pub fn prefetch_at_hits<T, U>(&mut self, records: &[T], attributes: &[U]) {
-        let array = |base: usize, size: usize| (base != 0 && size != 0).then_some((base, size));
-        self.hit_records = [
-            array(records.as_ptr() as usize, std::mem::size_of::<T>()),
-            (!attributes.is_empty())
-                .then(|| array(attributes.as_ptr() as usize, std::mem::size_of::<U>()))
-                .flatten(),
-        ];
+        self.hit_records = [hit_array(records), hit_array(attributes)];
     }
 
     /// Asks for what the caller will read first if `triangle` stays the closest hit: its

@@ -15,10 +15,7 @@ use super::nesting;
 use super::obj::{self, NO_MATERIAL};
 use super::report::{LoadReport, ObjectReport};
 use super::shapes::{BOX_KEYS, QUAD_KEYS, SPHERE_KEYS, Transform, given_keys, shape_mesh};
-use super::{
-    CameraTrack, Mesh, PointLight, RenderSettings, Scene, Triangle, VertexAttributes,
-    append_attributes,
-};
+use super::{CameraTrack, Mesh, PointLight, RenderSettings, Scene, Triangle, VertexAttributes};
 use crate::environment::{Environment, EnvironmentMap, Portal, decode_exr};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -76,15 +73,14 @@ pub fn load_with_report(
         toml: &toml,
         text,
         table: MaterialTable::new(&toml, text, &spec.materials, &spec.media),
-        triangles: Vec::new(),
-        attributes: Vec::new(),
+        still: Mesh::default(),
         moving: Vec::new(),
         report: LoadReport::default(),
     };
     for object in &spec.objects {
         builder.object(object)?;
     }
-    if builder.triangles.is_empty() && builder.moving.is_empty() {
+    if builder.still.triangles.is_empty() && builder.moving.is_empty() {
         return Err(SceneError::in_file(&toml, "the scene has no triangles"));
     }
     if let Some(unused) = builder.table.unused_definition() {
@@ -97,7 +93,7 @@ pub fn load_with_report(
     builder.table.place_outside(camera_medium);
     let table = &builder.table;
     if let Some(c) = nesting::check(
-        &builder.triangles,
+        &builder.still.triangles,
         &table.materials,
         &table.indices,
         camera_medium,
@@ -112,8 +108,7 @@ pub fn load_with_report(
     let Builder {
         log,
         table,
-        triangles,
-        attributes,
+        still,
         moving,
         mut report,
         ..
@@ -123,8 +118,8 @@ pub fn load_with_report(
         settings: render_settings(&spec, &camera, &moving),
         camera,
         shutter: shutter(&spec),
-        triangles,
-        attributes,
+        triangles: still.triangles,
+        attributes: still.attributes,
         moving,
         materials: table.materials,
         textures: table.textures,
@@ -144,8 +139,8 @@ struct Builder<'a> {
     toml: &'a str,
     text: &'a str,
     table: MaterialTable<'a>,
-    triangles: Vec<Triangle>,
-    attributes: Vec<VertexAttributes>,
+    /// The still objects' triangles and attributes, in world space.
+    still: Mesh,
     moving: Vec<MovingObject>,
     report: LoadReport,
 }
@@ -326,17 +321,10 @@ impl Builder<'_> {
                     track,
                 });
             }
-            // The first still object's triangles become the scene's array as they are, not a
-            // copy of them (a scene of one large mesh would hold it twice while copying).
-            None => {
-                let (before, count) = (self.triangles.len(), kept.len());
-                append_attributes(&mut self.attributes, before, attributes, count);
-                if before == 0 {
-                    self.triangles = kept;
-                } else {
-                    self.triangles.extend(kept);
-                }
-            }
+            None => self.still.append(Mesh {
+                triangles: kept,
+                attributes,
+            }),
         }
         Ok(())
     }

@@ -170,30 +170,26 @@ impl Mesh {
         }
         self.triangles.push(Triangle::new(p, material));
     }
-}
 
-/// Appends to `table`, the attributes of `before` triangles (empty where none has any, else one
-/// each), `added`, those of `count` more (likewise). The table stays empty while no triangle
-/// has attributes; once one has, every triangle has an entry, empty where it has none.
-pub(crate) fn append_attributes(
-    table: &mut Vec<VertexAttributes>,
-    before: usize,
-    mut added: Vec<VertexAttributes>,
-    count: usize,
-) {
-    if added.is_empty() && table.is_empty() {
-        return;
-    }
-    if table.is_empty() && before == 0 {
-        // Moved, not copied: a large mesh's attributes are never held twice.
-        *table = added;
-        return;
-    }
-    table.resize(before, VertexAttributes::default());
-    if added.is_empty() {
-        table.resize(before + count, VertexAttributes::default());
-    } else {
-        table.append(&mut added);
+    /// Appends `other`'s triangles and attributes. The attributes stay empty while no triangle
+    /// has any; once one has, every triangle has an entry, empty where it has none.
+    pub(crate) fn append(&mut self, mut other: Mesh) {
+        if self.triangles.is_empty() {
+            // Moved, not copied: a scene of one large mesh never holds it twice.
+            *self = other;
+            return;
+        }
+        if !self.attributes.is_empty() || !other.attributes.is_empty() {
+            let (before, count) = (self.triangles.len(), other.triangles.len());
+            self.attributes.resize(before, VertexAttributes::default());
+            if other.attributes.is_empty() {
+                self.attributes
+                    .resize(before + count, VertexAttributes::default());
+            } else {
+                self.attributes.append(&mut other.attributes);
+            }
+        }
+        self.triangles.append(&mut other.triangles);
     }
 }
 
