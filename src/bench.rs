@@ -34,6 +34,11 @@ pub struct BenchArgs {
     /// pays) or one (`spectral-single`).
     #[arg(long, default_value = "rgb", value_parser = ["rgb", "spectral-hero", "spectral-single"])]
     pub spectral: String,
+    /// How a pixel's paths are advanced: `lanes` (up to eight at a time, their shading in
+    /// vector instructions, where the scene allows it: the default) or `one-by-one`; the same
+    /// image either way.
+    #[arg(long, default_value = "lanes", value_parser = ["lanes", "one-by-one"])]
+    pub paths: String,
 }
 
 /// Measures as the flags say; the image overrides are applied with `tessera render`'s checks.
@@ -62,6 +67,10 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         spectral: tracer::spectrum::SpectralSampling::ALL
             .into_iter()
             .find(|s| s.name() == args.spectral)
+            .unwrap_or_default(),
+        paths: tracer::PathLanes::ALL
+            .into_iter()
+            .find(|p| p.name() == args.paths)
             .unwrap_or_default(),
     })?;
     Ok(())

@@ -47,5 +47,5 @@ pub use scene::{Scene, SceneError};
 
 pub use effects::Effects;
 pub use frame::{FrameConfig, render_frame, render_frame_by, tile_grid};
-pub use integrator::{CameraRays, PathStats, World};
+pub use integrator::{CameraRays, PathLanes, PathStats, World};
 pub use tile::{BLOCK_SIZE, Film, Rect, TileCost, TileOutput, render_tile};

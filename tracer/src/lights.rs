@@ -22,7 +22,7 @@ use crate::effects::Effects;
 use crate::environment::{Environment, MapSampler, PortalSampler};
 use crate::geometry::{Moment, SurfacePoint};
 use crate::scene::Scene;
-use build::TriangleShape;
+pub(crate) use build::TriangleShape;
 use glam::{Vec2, Vec3};
 use moving::placed_shape;
 use std::f32::consts::PI;
@@ -171,6 +171,31 @@ impl Lights {
         self.cdf[index] - self.cdf_below(index)
     }
 
+    /// Whether every light is a still emissive triangle (what the paths in lanes sample:
+    /// `integrator/lanes.rs`).
+    pub(crate) fn only_still_triangles(&self) -> bool {
+        !self.lights.is_empty()
+            && self
+                .lights
+                .iter()
+                .all(|light| matches!(light, Light::Triangle(_)))
+    }
+
+    /// The light `u_choice` picks where every light is a still triangle
+    /// ([`Lights::only_still_triangles`]), as [`Lights::sample`] picks it: its triangle, the
+    /// probability of the choice and its shape, for the lanes to sample as `triangle_sample` does.
+    #[inline(always)]
+    pub(crate) fn still_triangle_choice(&self, u_choice: f32) -> (u32, f32, TriangleShape) {
+        let index = self
+            .cdf
+            .partition_point(|&c| c <= u_choice)
+            .min(self.lights.len() - 1);
+        let Light::Triangle(triangle) = self.lights[index] else {
+            unreachable!("only_still_triangles: every light is a still triangle")
+        };
+        (triangle, self.choice_pdf(index), self.shapes[index])
+    }
+
     /// The cumulative probability of the lights before `index`: where its share of the choice's
     /// number starts.
     fn cdf_below(&self, index: usize) -> f32 {
@@ -224,12 +249,8 @@ impl Lights {
         }
         if let Light::Triangle(t) = self.lights[index] {
             let triangle = &scene.triangles[t as usize];
-            let shape = &self.shapes[index];
-            let su = u.x.sqrt();
-            let (b1, b2) = (su * (1.0 - u.y), su * u.y);
-            let at = SurfacePoint::on_triangle_with_normal(&triangle.p, b1, b2, shape.plane_normal);
             let radiance = scene.materials[triangle.material as usize].emission;
-            *out = area_sample(p, at, (shape.area, shape.normal), radiance, choice);
+            *out = triangle_sample(&triangle.p, &self.shapes[index], (radiance, choice), p, u);
             return;
         }
         *out = self.sample_other(scene, moment, p, (index, choice), u);
@@ -348,10 +369,28 @@ impl Lights {
     }
 }
 
+/// A point on the still triangle `v` of shape `shape`, uniform in its area (from `u`), as
+/// seen from `p`: emitting `radiance`, chosen with probability `choice` (what the paths in
+/// lanes, `integrator/lanes.rs`, write out lane by lane).
+#[inline(always)]
+fn triangle_sample(
+    v: &[Vec3; 3],
+    shape: &TriangleShape,
+    (radiance, choice): (Vec3, f32),
+    p: Vec3,
+    u: Vec2,
+) -> Option<LightSample> {
+    let su = u.x.sqrt();
+    let (b1, b2) = (su * (1.0 - u.y), su * u.y);
+    let at = SurfacePoint::on_triangle_with_normal(v, b1, b2, shape.plane_normal);
+    area_sample(p, at, (shape.area, shape.normal), radiance, choice)
+}
+
 /// The light sample of point `at` on an area emitter of `area` whose emitting side faces
 /// `normal`, seen from `p`, chosen with probability `choice`: the one conversion of an area
 /// density into a solid-angle one, for still and moving triangles alike. `None` where the point
 /// shows its back (which does not emit) or the emitter has no area.
+#[inline(always)]
 fn area_sample(
     p: Vec3,
     at: SurfacePoint,

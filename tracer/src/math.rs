@@ -62,19 +62,64 @@ pub fn cosh(x: f32) -> f32 {
 /// Shirley and Chiu's concentric map of the unit square onto the unit disk: uniform in area,
 /// and it keeps neighbouring points neighbours (stratification survives). The one map of the
 /// tracer's cosine-weighted directions and of its thin lens.
+///
+/// Written without branches (each choice is a select), so that a loop over paths in lanes
+/// turns it into vector instructions (`integrator/lanes.rs`); a point's angle is taken from
+/// the axis nearer to it, within an eighth of a turn, where [`sin_cos_quarter`] needs no
+/// reduction: a point off the y axis by `phi` lies at `pi/2 - phi`, whose sine and cosine
+/// are `phi`'s cosine and sine.
+#[inline(always)]
 pub fn concentric_disk(u: glam::Vec2) -> glam::Vec2 {
-    use std::f32::consts::{FRAC_PI_2, FRAC_PI_4};
+    use std::f32::consts::FRAC_PI_4;
     let o = 2.0 * u - glam::Vec2::ONE;
-    if o == glam::Vec2::ZERO {
-        return glam::Vec2::ZERO;
-    }
-    let (r, theta) = if o.x.abs() > o.y.abs() {
-        (o.x, FRAC_PI_4 * (o.y / o.x))
+    let x_nearer = o.x.abs() > o.y.abs();
+    let (r, ratio) = if x_nearer {
+        (o.x, o.y / o.x)
     } else {
-        (o.y, FRAC_PI_2 - FRAC_PI_4 * (o.x / o.y))
+        (o.y, o.x / o.y)
     };
-    let (sin, cos) = sin_cos(theta);
-    r * glam::Vec2::new(cos, sin)
+    let (sin, cos) = sin_cos_quarter(FRAC_PI_4 * ratio);
+    let d = if x_nearer {
+        glam::Vec2::new(cos, sin)
+    } else {
+        glam::Vec2::new(sin, cos)
+    };
+    // The centre, where both branches divided zero by zero.
+    if o == glam::Vec2::ZERO {
+        glam::Vec2::ZERO
+    } else {
+        r * d
+    }
+}
+
+/// `(sin x, cos x)` for `|x| <= pi/4`: the two kernels `libm`'s `sincosf` evaluates over that
+/// range (musl's, from FreeBSD: polynomials in f64, rounded once to f32), with no branch and
+/// no reduction, so that it vectorises. Below `2^-12` `sincosf` returns `(x, 1)` without the
+/// kernels, and so does this (the kernels round to the same but for `sin(-0)`); at `pi/4` itself (as an f32, just above the exact value)
+/// `sincosf` reduces by `pi/2` first, and this keeps the kernels.
+#[inline(always)]
+// The constants are musl's decimal literals verbatim, so that a reader can hold them to the
+// source; they parse to the same doubles as the hexadecimal forms beside them there.
+#[allow(clippy::excessive_precision)]
+pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
+    const S1: f64 = -0.166666666416265235595;
+    const S2: f64 = 0.0083333293858894631756;
+    const S3: f64 = -0.000198393348360966317347;
+    const S4: f64 = 0.0000027183114939898219064;
+    const C0: f64 = -0.499999997251031003120;
+    const C1: f64 = 0.0416666233237390631894;
+    const C2: f64 = -0.00138867637746099294692;
+    const C3: f64 = 0.0000243904487962774090654;
+    let tiny = x.abs() < f32::from_bits(0x3980_0000);
+    let y = f64::from(x);
+    let z = y * y;
+    let w = z * z;
+    let s = z * y;
+    let sin = (y + s * (S1 + z * S2)) + s * w * (S3 + z * S4);
+    let cos = ((1.0 + z * C0) + w * C1) + (w * z) * (C2 + z * C3);
+    // Below 2^-12 the sine is `x` itself, as `sincosf` returns it: the kernel agrees but
+    // for the sign of zero (`-0 + 0` is `+0`).
+    (if tiny { x } else { sin as f32 }, cos as f32)
 }
 
 #[cfg(test)]
@@ -112,6 +157,31 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// `sin_cos_quarter` is `libm`'s `sincosf` wherever `sincosf` evaluates the same kernels
+    /// (below `pi/4` in magnitude), to the bit: every 31st float of that range, both signs,
+    /// and every float around `2^-12`, where `sincosf` stops calling them.
+    #[test]
+    fn the_quarter_kernels_are_libms() {
+        let check = |bits: u32| {
+            for x in [f32::from_bits(bits), -f32::from_bits(bits)] {
+                let (s, c) = sin_cos_quarter(x);
+                let (ls, lc) = libm::sincosf(x);
+                assert!(
+                    s.to_bits() == ls.to_bits() && c.to_bits() == lc.to_bits(),
+                    "sin_cos_quarter({x:e}) = ({s:e}, {c:e}), sincosf ({ls:e}, {lc:e})"
+                );
+            }
+        };
+        let last = std::f32::consts::FRAC_PI_4.to_bits() - 1;
+        (0..=last).step_by(31).chain([last]).for_each(check);
+        (0x3980_0000 - 20_000..0x3980_0000 + 20_000).for_each(check);
+        // At pi/4 itself, the kernels against the true values.
+        let (s, c) = sin_cos_quarter(std::f32::consts::FRAC_PI_4);
+        let exact = f64::from(std::f32::consts::FRAC_PI_4);
+        assert!((f64::from(s) - exact.sin()).abs() < 1e-7);
+        assert!((f64::from(c) - exact.cos()).abs() < 1e-7);
     }
 
     /// Against the standard library's (the platform's) functions, which are within an ulp or

@@ -92,6 +92,7 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
     let mut pixels = Vec::with_capacity(rect.area() as usize);
     let mut stats = PathStats::default();
     let spp = settings.samples_per_pixel.max(1);
+    let lanes = world.lanes_fit();
     for y in rect.y..rect.y + rect.h {
         for x in rect.x..rect.x + rect.w {
             let mut pixel_stats = PathStats::default();
@@ -139,6 +140,22 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
                 let mut hits = [None; PACKET];
                 let found =
                     world.camera_hits(&rays[..n], &mut hits[..n], &mut pixel_stats.traversal);
+                if lanes {
+                    let values = world.radiance_lanes(
+                        &rays[..n],
+                        found.then_some(&hits[..n]),
+                        &mut samplers,
+                        &mut pixel_stats,
+                    );
+                    for radiance in &values[..n] {
+                        if radiance.is_finite() {
+                            sum += *radiance;
+                        } else {
+                            pixel_stats.invalid_samples += 1;
+                        }
+                    }
+                    continue;
+                }
                 for k in 0..n {
                     let first_hit = found.then_some(hits[k]);
                     let radiance = world.radiance_from(

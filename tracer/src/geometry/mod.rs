@@ -64,6 +64,7 @@ pub use offset::{
     OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, plane_normal, spawn_ray, spawn_ray_to,
 };
 pub use packet::PACKET;
+pub(crate) use triangle::gamma;
 pub use triangle::{TriangleHit, intersect_triangle, is_degenerate};
 pub use wide::BoxSimd;
 

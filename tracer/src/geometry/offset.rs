@@ -147,6 +147,7 @@ impl Hit {
 /// distance travelled). Why this form and not `b0 p0 + b1 p1 + b2 p2`: far from the origin
 /// each of the three products rounds by an ULP of the coordinates, and `b0 = 1 - b1 - b2`
 /// rounds too, so the bound on the error (and the offset) came to about 15 ULPs of the point.
+#[inline(always)]
 pub fn hit_point(p: &[Vec3; 3], b1: f32, b2: f32) -> Vec3 {
     p[0] + (b1 * (p[1] - p[0]) + b2 * (p[2] - p[0]))
 }
@@ -196,6 +197,7 @@ pub fn spawn_ray(from: &SurfacePoint, dir: Vec3, method: OffsetMethod) -> Ray {
 /// Limitation: a segment that runs within rounding of the plane it leaves (both ends on an
 /// edge two triangles share) has no side that is certainly right, and may be reported blocked
 /// by the surface it runs along. Light arriving along a surface carries a cosine of zero.
+#[inline(always)]
 pub fn spawn_ray_to(from: &SurfacePoint, to: &SurfacePoint, method: OffsetMethod) -> Ray {
     let origin = offset_ray_origin(from, to.p - from.p, method);
     let widened = SurfacePoint {

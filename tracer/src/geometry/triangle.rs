@@ -64,6 +64,7 @@ pub fn is_degenerate(p: &[Vec3; 3]) -> bool {
 
 /// `gamma(n)` of pbrt: a bound on the relative error of `n` successive roundings, `n u / (1 - n u)`
 /// with `u` the unit roundoff of `f32` (half its machine epsilon).
+#[inline(always)]
 pub(crate) const fn gamma(n: u32) -> f32 {
     let nu = n as f32 * (f32::EPSILON * 0.5);
     nu / (1.0 - nu)

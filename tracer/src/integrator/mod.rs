@@ -63,11 +63,13 @@ use std::mem::ManuallyDrop;
 
 mod direct;
 mod hits;
+mod lanes;
 mod scatter;
 mod stats;
 
 pub use direct::AreaLightSampling;
 pub use hits::CameraRays;
+pub use lanes::PathLanes;
 pub use stats::PathStats;
 
 /// A scene prepared for rendering: its acceleration structure, lights and effect set.
@@ -99,6 +101,10 @@ pub struct World {
     /// How a pixel's camera rays meet the BVH: walked together, up to eight samples at a time
     /// (the default), or one by one (for comparison); the same hits either way.
     pub camera_rays: CameraRays,
+    /// How a pixel's paths are advanced: up to eight at a time in lanes where the world allows
+    /// it (the default, [`World::lanes_fit`]), or one by one (for comparison); the same bits
+    /// either way.
+    pub paths: PathLanes,
 }
 
 impl World {
@@ -139,6 +145,7 @@ impl World {
             spectral: SpectralSampling::default(),
             area_lights: AreaLightSampling::default(),
             camera_rays: CameraRays::default(),
+            paths: PathLanes::default(),
         }
     }
 
@@ -374,19 +381,8 @@ impl World {
             }
 
             if effects.area_lights && material.emission != Vec3::ZERO && surface.front_facing {
-                let weight = if last_delta {
-                    1.0
-                } else {
-                    self.area_lights.bsdf_hit_weight(last_pdf, || {
-                        self.lights.triangle_pdf(
-                            &self.scene,
-                            moment,
-                            hit.triangle,
-                            last_point,
-                            surface.at.p,
-                        )
-                    })
-                };
+                let last = (last_pdf, last_delta, last_point);
+                let weight = self.hit_emitter_weight(moment, hit.triangle, surface.at.p, last);
                 radiance += weighed(media, beta, ratio) * spectrum.of(material.emission) * weight;
             }
             if depth >= settings.max_depth.unwrap_or(UNLIMITED_DEPTH) {

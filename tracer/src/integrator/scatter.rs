@@ -188,7 +188,7 @@ impl World {
             let front_facing = shadow.dir.dot(placed.unit_normal) < 0.0;
             medium = self.medium_across(material, front_facing);
             stats.shadow_rays += 1;
-            shadow = self.shadow_ray(&placed.at, light);
+            shadow = super::direct::shadow_ray(&placed.at, light, self.offset);
         }
     }
 

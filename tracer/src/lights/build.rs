@@ -116,14 +116,14 @@ impl Lights {
 /// The per-triangle values light sampling needs, computed once, by the same expressions the
 /// sampling used to evaluate each time, so they are the same bits.
 #[derive(Clone, Copy, Debug, Default)]
-pub(super) struct TriangleShape {
+pub(crate) struct TriangleShape {
     /// Half the length of `(p1 - p0) x (p2 - p0)`.
-    pub(super) area: f32,
+    pub(crate) area: f32,
     /// That cross product normalised in f32, zero without area.
-    pub(super) normal: Vec3,
+    pub(crate) normal: Vec3,
     /// The f64 plane normal that spawning shadow rays off the light uses
     /// ([`crate::geometry::plane_normal`]).
-    pub(super) plane_normal: Vec3,
+    pub(crate) plane_normal: Vec3,
 }
 
 impl TriangleShape {

@@ -22,6 +22,7 @@ pub struct Frame {
 impl Frame {
     /// The frame around the unit normal `n`. The tangents are a fixed function of `n`, so a
     /// frame rebuilt on another peer from the same normal is bit-identical.
+    #[inline(always)]
     pub fn from_normal(n: Vec3) -> Self {
         // Duff et al. 2017, listing 3. `signum` is -1 for -0.0, so `sign + n.z` never cancels:
         // its magnitude is at least 1 for every unit normal.
@@ -34,11 +35,13 @@ impl Frame {
     }
 
     /// World direction to local coordinates (normal = +z).
+    #[inline(always)]
     pub fn to_local(&self, v: Vec3) -> Vec3 {
         Vec3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
     }
 
     /// Local direction to world coordinates.
+    #[inline(always)]
     pub fn to_world(&self, v: Vec3) -> Vec3 {
         self.s * v.x + self.t * v.y + self.n * v.z
     }

@@ -51,6 +51,9 @@ pub struct Config {
     /// Which wavelengths paths sample: RGB until dispersive glass (the default), or spectral
     /// from the camera on, to measure what the always-spectral pipeline costs.
     pub spectral: tracer::spectrum::SpectralSampling,
+    /// How a pixel's paths are advanced: in lanes where the scene allows it (the default), or
+    /// one by one, to measure what the lanes buy (the same image either way).
+    pub paths: tracer::PathLanes,
 }
 
 /// Everything one `tessera bench` run measured.
@@ -86,6 +89,8 @@ pub struct SceneBench {
     pub height: u32,
     /// Samples per pixel rendered.
     pub samples_per_pixel: u32,
+    /// Whether the full paths ran in lanes (`tracer::World::lanes_fit`), or one by one.
+    pub path_lanes: bool,
     /// Reading and validating the TOML and OBJ/MTL files.
     pub load_seconds: f64,
     /// Building the BVH (and the light tables, which take a small fraction of it).
@@ -252,6 +257,7 @@ fn bench_scene(
         world.scene.settings.max_depth = Some(depth);
     }
     world.spectral = args.spectral;
+    world.paths = args.paths;
     let full_depth = world.scene.settings.max_depth;
 
     world.scene.settings.max_depth = Some(0);
@@ -284,6 +290,7 @@ fn bench_scene(
         width: settings.width,
         height: settings.height,
         samples_per_pixel: settings.samples_per_pixel,
+        path_lanes: world.lanes_fit(),
         load_seconds,
         build_seconds,
         build_cpu_seconds,
@@ -371,12 +378,17 @@ fn shipped_scenes(dir: &Path) -> Result<Vec<PathBuf>, LabError> {
 fn print_scene(s: &SceneBench) {
     let cpu = |seconds: Option<f64>| seconds.map_or("?".to_owned(), |s| format!("{s:.2}"));
     println!(
-        "{}: {} triangles, {}x{}, {} spp; load {:.3} s, BVH build {:.3} s ({} CPU-s)",
+        "{}: {} triangles, {}x{}, {} spp, paths {}; load {:.3} s, BVH build {:.3} s ({} CPU-s)",
         s.scene,
         s.triangles,
         s.width,
         s.height,
         s.samples_per_pixel,
+        if s.path_lanes {
+            "in lanes"
+        } else {
+            "one by one"
+        },
         s.load_seconds,
         s.build_seconds,
         cpu(s.build_cpu_seconds)

@@ -19,6 +19,7 @@ fn args() -> Config {
         steal_rtt: 0,
         json: true,
         spectral: SpectralSampling::default(),
+        paths: tracer::PathLanes::default(),
     }
 }
 

@@ -1,0 +1,471 @@
+//! A pixel's paths in lanes: up to eight of its samples' paths advanced a bounce at a time,
+//! their shading computed together in vector instructions, for the worlds whose every path
+//! can be ([`World::lanes_fit`]): plain ones ([`World::is_plain`]) of untextured diffuse
+//! surfaces without shading normals, lit by still emissive triangles alone.
+//!
+//! Each bounce has three phases. The first, one lane at a time, draws the lane's numbers,
+//! walks its ray through the tree, finds the surface and what it emits, and picks a light:
+//! the walks and the lookups, whose branches and loads are each lane's own. The second
+//! computes, for all lanes together, the shading frame, the sampled direction, the light
+//! sample, its weighed value and both rays' origins, in one loop over the lanes whose body
+//! has no branch the compiler cannot make a select, so that it vectorises (with AVX where the
+//! processor has it, chosen at run time). The third, one lane at a time again, traces the
+//! shadow rays and ends or continues each path.
+//!
+//! **Exactness.** Every lane computes what the scalar path ([`World::radiance_from`])
+//! computes for its sample, operation for operation and in the same order: the second phase
+//! calls `Frame`, `concentric_disk` (whose sine and cosine are `libm`'s kernels without a
+//! branch, `math::sin_cos_quarter`, in both) and `power_heuristic` as the scalar path does,
+//! and writes out the rest of a diffuse bounce lane by lane; vector instructions round each
+//! lane as the scalar ones do (no fused multiply-add, no reassociation: Rust never contracts
+//! or reorders float arithmetic). A pixel's samples are added in sample order, so an image is
+//! the same bits either way, and so are the counted work and the statistics.
+//! `tracer/tests/path_lanes.rs` holds the two to each other image by image.
+//!
+//! Why this pays where a lockstep loop of scalar kernels did not (docs/bench.md, issue 12,
+//! twenty-ninth and thirty-first rounds): the shading's divisions, square roots and
+//! polynomials are latency chains the scalar path waits on; eight lanes run eight of them in
+//! the time of one.
+
+use super::direct::power_heuristic;
+use super::scatter::BounceNumbers;
+use super::{PathStats, UNLIMITED_DEPTH, World};
+use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray};
+
+use super::AreaLightSampling;
+use crate::geometry::gamma;
+use crate::material::{Bsdf, Frame};
+use crate::math::concentric_disk;
+use crate::sampler::PixelSampler;
+use crate::spectrum::SpectralSampling;
+use glam::{Vec2, Vec3};
+use std::f32::consts::FRAC_1_PI;
+
+/// The lanes: a pixel's samples, as many as a camera packet holds.
+const LANES: usize = PACKET;
+
+/// How a pixel's paths are advanced (a comparison knob: both give the same bits).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum PathLanes {
+    /// Up to eight paths a bounce at a time, their shading in vector instructions, where the
+    /// world allows it ([`World::lanes_fit`]); one by one elsewhere.
+    #[default]
+    Lanes,
+    /// One path after another, each bounce by bounce.
+    OneByOne,
+}
+
+impl PathLanes {
+    /// Both ways, the default first.
+    pub const ALL: [PathLanes; 2] = [PathLanes::Lanes, PathLanes::OneByOne];
+
+    /// The name in reports and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            PathLanes::Lanes => "lanes",
+            PathLanes::OneByOne => "one-by-one",
+        }
+    }
+}
+
+/// Lane values: one per path.
+type Lanes<T> = [T; LANES];
+
+/// Points and directions of every lane, a coordinate at a time (so that loads of a coordinate
+/// for all lanes are one vector load).
+#[derive(Clone, Copy, Default)]
+struct Points {
+    x: Lanes<f32>,
+    y: Lanes<f32>,
+    z: Lanes<f32>,
+}
+
+impl Points {
+    #[inline(always)]
+    fn get(&self, i: usize) -> Vec3 {
+        Vec3::new(self.x[i], self.y[i], self.z[i])
+    }
+
+    #[inline(always)]
+    fn set(&mut self, i: usize, v: Vec3) {
+        (self.x[i], self.y[i], self.z[i]) = (v.x, v.y, v.z);
+    }
+}
+
+/// What the first phase hands the second: each lane's surface point (with its error bound and
+/// plane normal), shading normal, incoming direction, albedo and numbers, and the light it
+/// picked. A lane without a surface keeps what it last held, computes on it, and is ignored.
+#[derive(Clone, Copy, Default)]
+struct Gathered {
+    p: Points,
+    error: Points,
+    plane: Points,
+    normal: Points,
+    dir: Points,
+    albedo: Points,
+    scatter: [Lanes<f32>; 2],
+    light: [Lanes<f32>; 2],
+    corners: [Points; 3],
+    light_area: Lanes<f32>,
+    light_normal: Points,
+    light_plane: Points,
+    emission: Points,
+    choice: Lanes<f32>,
+}
+
+/// What the second phase hands the third, per lane.
+#[derive(Clone, Copy, Default)]
+struct Shaded {
+    /// Whether the light sample brings anything (then `value` and the shadow ray's `origin`
+    /// and `reach` hold it).
+    lit: Lanes<bool>,
+    value: Points,
+    origin: Points,
+    reach: Points,
+    /// Whether a direction was sampled (then `weight`, `pdf` and the next ray's `next_origin`
+    /// and `next_dir` hold it).
+    sampled: Lanes<bool>,
+    weight: Points,
+    pdf: Lanes<f32>,
+    next_origin: Points,
+    next_dir: Points,
+}
+
+impl World {
+    /// Whether every path of this world can run in lanes: a plain world
+    /// ([`World::is_plain`]) whose materials are all untextured diffuse, with no shading
+    /// normals, no environment, every light a still emissive triangle, lights found both
+    /// ways and weighed (the default), the default offsets, traversal and RGB sampling, and
+    /// Russian roulette on. Each condition names a step the lanes leave out.
+    pub fn lanes_fit(&self) -> bool {
+        self.paths == PathLanes::Lanes
+            && self.is_plain()
+            && self.scene.attributes.is_empty()
+            && self.scene.environment.is_none()
+            && self.scene.settings.russian_roulette_depth.is_some()
+            && self.lights.only_still_triangles()
+            && self.area_lights == AreaLightSampling::Mis
+            && self.offset == OffsetMethod::ErrorBound
+            && self.spectral == SpectralSampling::Auto
+            && self.effects.area_lights
+            && self.effects.shadows
+            && self
+                .scene
+                .materials
+                .iter()
+                .all(|m| matches!(m.bsdf, Bsdf::Diffuse { texture: None, .. }))
+    }
+
+    /// The radiance of `rays.len()` (one to eight) paths of a pixel, from their camera rays,
+    /// as [`World::radiance_from`] finds each one's; `first` holds their closest hits where
+    /// the camera packet found them. Only for worlds that [`World::lanes_fit`].
+    pub fn radiance_lanes(
+        &self,
+        rays: &[Ray],
+        first: Option<&[Option<Hit>]>,
+        samplers: &mut [PixelSampler],
+        stats: &mut PathStats,
+    ) -> [Vec3; LANES] {
+        assert!(
+            !rays.is_empty() && rays.len() <= LANES && samplers.len() >= rays.len(),
+            "one to eight paths, each with its sampler"
+        );
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx") {
+            // SAFETY: the processor has AVX, just checked.
+            return unsafe { self.lanes_avx(rays, first, samplers, stats) };
+        }
+        self.lanes_with(rays, first, samplers, stats)
+    }
+
+    /// [`World::lanes_with`] compiled with AVX: the second phase's loops eight lanes wide.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn lanes_avx(
+        &self,
+        rays: &[Ray],
+        first: Option<&[Option<Hit>]>,
+        samplers: &mut [PixelSampler],
+        stats: &mut PathStats,
+    ) -> [Vec3; LANES] {
+        self.lanes_with(rays, first, samplers, stats)
+    }
+
+    /// The paths' loop, a bounce of every live lane at a time.
+    #[inline(always)]
+    fn lanes_with(
+        &self,
+        rays: &[Ray],
+        mut first: Option<&[Option<Hit>]>,
+        samplers: &mut [PixelSampler],
+        stats: &mut PathStats,
+    ) -> [Vec3; LANES] {
+        let moment = Moment::default();
+        let settings = &self.scene.settings;
+        let max_depth = settings.max_depth.unwrap_or(UNLIMITED_DEPTH);
+        let mut ray = [rays[0]; LANES];
+        ray[..rays.len()].copy_from_slice(rays);
+        let mut alive = [false; LANES];
+        alive[..rays.len()].fill(true);
+        let mut beta = [Vec3::ONE; LANES];
+        let mut radiance = [Vec3::ZERO; LANES];
+        // The last scattering's density, whether it was a delta, and where it was; the camera
+        // counts as a delta, as in the scalar path.
+        let mut last: [(f32, bool, Vec3); LANES] =
+            std::array::from_fn(|i| (0.0, true, ray[i].origin));
+        let mut roulette = [0.0f32; LANES];
+        let mut gathered = Gathered::default();
+        let mut shaded = Shaded::default();
+        // Which lanes found a surface to shade this bounce.
+        let mut shading = [false; LANES];
+        let mut depth = 0u32;
+        while alive.iter().any(|&a| a) {
+            // First phase: numbers, walk, surface, emission, the light's choice.
+            for i in 0..LANES {
+                shading[i] = false;
+                if !alive[i] {
+                    continue;
+                }
+                let sampler = &mut samplers[i];
+                sampler.start_bounce(depth);
+                let u = BounceNumbers::draw(sampler);
+                stats.rays += 1;
+                let found = match first {
+                    Some(hits) => hits[i],
+                    None => self.closest(&ray[i], &moment, &mut stats.traversal),
+                };
+                let Some(hit) = found else {
+                    alive[i] = false;
+                    continue;
+                };
+                stats.hits += 1;
+                let surface = self.surface(&ray[i], &hit, &moment);
+                let material = &self.scene.materials[surface.material as usize];
+                if material.emission != Vec3::ZERO && surface.front_facing {
+                    let weight =
+                        self.hit_emitter_weight(&moment, hit.triangle, surface.at.p, last[i]);
+                    radiance[i] += beta[i] * material.emission * weight;
+                }
+                if depth >= max_depth {
+                    alive[i] = false;
+                    continue;
+                }
+                let Bsdf::Diffuse { albedo, .. } = material.bsdf else {
+                    unreachable!("lanes_fit: every material is diffuse")
+                };
+                stats.light_samples += 1;
+                let (light, choice, shape) = self.lights.still_triangle_choice(u.light_choice);
+                let light = &self.scene.triangles[light as usize];
+                roulette[i] = u.roulette;
+                shading[i] = true;
+                let g = &mut gathered;
+                g.p.set(i, surface.at.p);
+                g.error.set(i, surface.at.error);
+                g.plane.set(i, surface.at.normal);
+                g.normal.set(i, surface.shading_normal);
+                g.dir.set(i, ray[i].dir);
+                g.albedo.set(i, albedo);
+                (g.scatter[0][i], g.scatter[1][i]) = (u.scatter.x, u.scatter.y);
+                (g.light[0][i], g.light[1][i]) = (u.light.x, u.light.y);
+                for (corner, p) in g.corners.iter_mut().zip(light.p) {
+                    corner.set(i, p);
+                }
+                g.light_area[i] = shape.area;
+                g.light_normal.set(i, shape.normal);
+                g.light_plane.set(i, shape.plane_normal);
+                g.emission
+                    .set(i, self.scene.materials[light.material as usize].emission);
+                g.choice[i] = choice;
+            }
+            first = None;
+            // Second phase: every lane's shading at once.
+            shade(&gathered, &mut shaded);
+            // Third phase: shadow rays, then each path's next ray or its end.
+            depth += 1;
+            for i in 0..LANES {
+                if !shading[i] {
+                    continue;
+                }
+                if shaded.lit[i] {
+                    stats.shadow_rays += 1;
+                    let shadow = Ray {
+                        origin: shaded.origin.get(i),
+                        dir: shaded.reach.get(i),
+                        t_max: 1.0,
+                    };
+                    if !self.occluded(&shadow, &moment, &mut stats.traversal) {
+                        radiance[i] += beta[i] * shaded.value.get(i);
+                    }
+                }
+                if !shaded.sampled[i] {
+                    alive[i] = false;
+                    continue;
+                }
+                beta[i] *= shaded.weight.get(i);
+                if beta[i] == Vec3::ZERO || !beta[i].is_finite() {
+                    alive[i] = false;
+                    continue;
+                }
+                last[i] = (shaded.pdf[i], false, gathered.p.get(i));
+                if !self.roulette(false, depth, roulette[i], Vec3::ONE, &mut beta[i]) {
+                    alive[i] = false;
+                    continue;
+                }
+                ray[i] = Ray {
+                    origin: shaded.next_origin.get(i),
+                    dir: shaded.next_dir.get(i),
+                    t_max: f32::INFINITY,
+                };
+            }
+        }
+        radiance
+    }
+}
+
+/// The second phase: each lane's shading, in one loop that vectorises. Its body is the scalar
+/// path's arithmetic, in the scalar path's order, with every choice a select: `Frame`,
+/// `concentric_disk` and `power_heuristic` are called as they are; what `Bsdf::sample`,
+/// `triangle_sample`, `unshadowed` and `spawn_ray` do for a diffuse surface and a still
+/// triangle is written out here lane by lane, because their `Option`s kept the compiler from
+/// vectorising the loop (docs/bench.md, issue 12, thirty-first round). `tracer/tests/
+/// path_lanes.rs` holds every image to the scalar path's, bit for bit.
+#[inline(always)]
+fn shade(g: &Gathered, out: &mut Shaded) {
+    for i in 0..LANES {
+        let (p, error, plane) = (g.p.get(i), g.error.get(i), g.plane.get(i));
+        let frame = Frame::from_normal(g.normal.get(i));
+        let wo = frame.to_local(-g.dir.get(i));
+        // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side.
+        let flip = wo.z < 0.0;
+        let d = concentric_disk(Vec2::new(g.scatter[0][i], g.scatter[1][i]));
+        let z = (1.0 - d.length_squared()).max(0.0).sqrt();
+        out.sampled[i] = wo.z != 0.0 && !wo.z.is_nan() && z > 0.0;
+        out.pdf[i] = z * FRAC_1_PI;
+        out.weight.set(i, g.albedo.get(i));
+        let wi = frame.to_world(Vec3::new(d.x, d.y, if flip { -z } else { z }));
+        out.next_dir.set(i, wi);
+        out.next_origin.set(i, offset(p, error, plane, wi));
+        // `triangle_sample`: a point uniform on the light's triangle, as seen from `p`.
+        let su = g.light[0][i].sqrt();
+        let (b1, b2) = (su * (1.0 - g.light[1][i]), su * g.light[1][i]);
+        let v0 = g.corners[0].get(i);
+        let (e1, e2) = (g.corners[1].get(i) - v0, g.corners[2].get(i) - v0);
+        let q = v0 + (b1 * e1 + b2 * e2);
+        let q_error = gamma(2) * q.abs() + gamma(4) * ((b1 * e1).abs() + (b2 * e2).abs());
+        let to_light = q - p;
+        let distance_squared = to_light.length_squared();
+        let distance = distance_squared.sqrt();
+        let toward = to_light / distance;
+        let cos_light = -toward.dot(g.light_normal.get(i));
+        let area = g.light_area[i];
+        let light_pdf = g.choice[i] * distance_squared / (cos_light * area);
+        let sampled_light = distance_squared != 0.0 && area != 0.0 && cos_light > 0.0;
+        // `unshadowed`: the BSDF towards it, weighed against BSDF sampling.
+        let local = frame.to_local(toward);
+        let (wo_z, wi_z) = if flip {
+            (-wo.z, -local.z)
+        } else {
+            (wo.z, local.z)
+        };
+        let density = if wo_z > 0.0 && wi_z > 0.0 {
+            wi_z * FRAC_1_PI
+        } else {
+            0.0
+        };
+        let f = g.albedo.get(i) * density;
+        let emission = g.emission.get(i);
+        let weight = power_heuristic(light_pdf, density);
+        out.value.set(i, f * emission * (weight / light_pdf));
+        out.lit[i] = sampled_light && f != Vec3::ZERO && emission != Vec3::ZERO && light_pdf > 0.0;
+        // `spawn_ray_to`: both ends off their surfaces.
+        let origin = offset(p, error, plane, to_light);
+        let widened = q_error + gamma(2) * (q - origin).abs();
+        let target = offset(q, widened, g.light_plane.get(i), origin - q);
+        out.origin.set(i, origin);
+        out.reach.set(i, target - origin);
+    }
+}
+
+/// `offset_ray_origin` with the error-bound method, for a still surface: `p` (within `error`
+/// of its plane, of unit normal `plane`) moved off the plane to the side `toward` points to,
+/// and then one float further along each axis it moved, by integer steps on the bits.
+#[inline(always)]
+fn offset(p: Vec3, error: Vec3, plane: Vec3, toward: Vec3) -> Vec3 {
+    let n = if plane.dot(toward) < 0.0 {
+        -plane
+    } else {
+        plane
+    };
+    let d = n.abs().dot(error);
+    let offset = d * n;
+    let moved = p + offset;
+    Vec3::new(
+        step(moved.x, offset.x),
+        step(moved.y, offset.y),
+        step(moved.z, offset.z),
+    )
+}
+
+/// `x.next_up()` where `along > 0`, `x.next_down()` where `along < 0`, `x` elsewhere, with
+/// selects rather than branches: a float's neighbour is the next integer on its bits, up or
+/// down by its sign; zero's are the least subnormals; an infinity away from zero and NaN stay.
+#[inline(always)]
+fn step(x: f32, along: f32) -> f32 {
+    let bits = x.to_bits();
+    let magnitude = bits & 0x7fff_ffff;
+    let up = if magnitude == 0 {
+        1
+    } else if x > 0.0 {
+        bits + 1
+    } else {
+        bits - 1
+    };
+    let down = if magnitude == 0 {
+        0x8000_0001
+    } else if x > 0.0 {
+        bits - 1
+    } else {
+        bits + 1
+    };
+    let stays_up = x.is_nan() || x == f32::INFINITY;
+    let stays_down = x.is_nan() || x == f32::NEG_INFINITY;
+    if along > 0.0 && !stays_up {
+        f32::from_bits(up)
+    } else if along < 0.0 && !stays_down {
+        f32::from_bits(down)
+    } else {
+        x
+    }
+}
+
+/// The neighbours [`step`] finds are the standard library's, for every kind of float.
+#[cfg(test)]
+#[test]
+fn steps_are_next_up_and_next_down() {
+    let values = [
+        0.0f32,
+        -0.0,
+        1.0,
+        -1.0,
+        1.5e-45,
+        -1.5e-45,
+        1.0e-40,
+        f32::MAX,
+        -f32::MAX,
+        f32::MIN_POSITIVE,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+        3.7e12,
+        -2.5e-7,
+    ];
+    for x in values {
+        for (along, expected) in [(1.0, x.next_up()), (-1.0, x.next_down()), (0.0, x)] {
+            let stepped = step(x, along);
+            assert!(
+                stepped.to_bits() == expected.to_bits() || (x.is_nan() && stepped.is_nan()),
+                "step({x:e}, {along}) = {stepped:e}, expected {expected:e}"
+            );
+        }
+    }
+}

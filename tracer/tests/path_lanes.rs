@@ -1,0 +1,146 @@
+//! A pixel's paths in lanes (`integrator/lanes.rs`) render the same bits as the same paths one
+//! by one, with the same counted work: across scales and distances from the origin (where the
+//! offsets of both rays' origins are tested hardest), sample counts that leave a pixel's last
+//! packet partly empty, depths from emitters alone to long paths, Russian roulette from the
+//! first bounce, and the camera's rays found in packets or one by one. Worlds the lanes do not
+//! fit (glass, a texture, no roulette) render one by one whatever the knob says.
+
+use std::path::Path;
+use tracer::scene::{CameraTrack, Scene};
+use tracer::{CameraRays, PathLanes, World};
+
+/// The shipped Cornell box (diffuse walls, one emissive quad), loaded.
+fn cornell_box() -> Scene {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/cornell-box.toml");
+    tracer::scene::load(&path).expect("the shipped Cornell box loads")
+}
+
+/// `scene` scaled by `scale` about the origin, then moved by `shift`: every triangle and the
+/// camera, so that the image is the same picture at another scale and distance.
+fn placed(mut scene: Scene, scale: f32, shift: glam::Vec3) -> Scene {
+    let place = |p: glam::Vec3| p * scale + shift;
+    for triangle in &mut scene.triangles {
+        triangle.p = triangle.p.map(place);
+    }
+    let mut camera = scene.camera.at_time(0.0);
+    camera.position = place(camera.position);
+    camera.look_at = place(camera.look_at);
+    camera.focus_distance *= scale;
+    scene.camera = CameraTrack::fixed(camera);
+    scene
+}
+
+/// The image's bits and the render's statistics, with the paths advanced as `paths` says and
+/// the camera's rays found as `camera_rays` says.
+fn render(
+    scene: Scene,
+    paths: PathLanes,
+    camera_rays: CameraRays,
+) -> (Vec<u32>, tracer::PathStats, bool) {
+    let mut world = World::prepare(scene, None);
+    world.paths = paths;
+    world.camera_rays = camera_rays;
+    let fits = world.lanes_fit();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .expect("a pool of two threads builds");
+    let out = tracer::render_frame(&world, 0, &pool, tracer::FrameConfig::default());
+    let bits = out.pixels.iter().flatten().map(|c| c.to_bits()).collect();
+    (bits, out.stats, fits)
+}
+
+/// Renders `scene` both ways and holds them to each other; returns whether the lanes ran.
+fn same_both_ways(label: &str, scene: Scene, camera_rays: CameraRays) -> bool {
+    let (lanes, lane_stats, fits) = render(scene.clone(), PathLanes::Lanes, camera_rays);
+    let (one_by_one, stats, _) = render(scene, PathLanes::OneByOne, camera_rays);
+    assert!(
+        lanes.iter().any(|&b| f32::from_bits(b) > 0.0),
+        "{label}: black"
+    );
+    let differing = lanes
+        .iter()
+        .zip(&one_by_one)
+        .filter(|(a, b)| a != b)
+        .count();
+    assert_eq!(differing, 0, "{label}: {differing} channels differ");
+    assert_eq!(lane_stats, stats, "{label}: other work counted");
+    fits
+}
+
+#[test]
+fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
+    let shifts = [
+        (1.0, glam::Vec3::ZERO),
+        (1e-3, glam::Vec3::ZERO),
+        (1e3, glam::Vec3::ZERO),
+        (1.0, glam::Vec3::new(1e4, -2e4, 5e3)),
+        (0.01, glam::Vec3::new(-300.0, 40.0, 1e3)),
+        (50.0, glam::Vec3::new(3e5, 0.0, -3e5)),
+    ];
+    for (scale, shift) in shifts {
+        for (size, spp, depth, roulette) in [
+            (24, 5, Some(7), Some(3)),
+            (16, 13, Some(1), Some(3)),
+            (16, 8, Some(0), Some(3)),
+            (16, 3, None, Some(1)),
+        ] {
+            let mut scene = placed(cornell_box(), scale, shift);
+            scene.settings.width = size;
+            scene.settings.height = size;
+            scene.settings.samples_per_pixel = spp;
+            scene.settings.max_depth = depth;
+            scene.settings.russian_roulette_depth = roulette;
+            let label = format!("scale {scale}, shift {shift}, {spp} spp, depth {depth:?}");
+            let fits = same_both_ways(&label, scene, CameraRays::Packets);
+            assert!(fits, "{label}: the lanes did not run");
+        }
+    }
+    let mut scene = cornell_box();
+    scene.settings.width = 16;
+    scene.settings.height = 16;
+    scene.settings.samples_per_pixel = 6;
+    assert!(same_both_ways(
+        "camera rays one by one",
+        scene,
+        CameraRays::OneByOne
+    ));
+}
+
+#[test]
+fn worlds_the_lanes_do_not_fit_render_one_by_one() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let mut without_roulette = cornell_box();
+    without_roulette.settings.russian_roulette_depth = None;
+    without_roulette.settings.max_depth = Some(4);
+    let glass = tracer::scene::load(&root.join("glass-cluster-pan/glass-cluster-pan.toml"))
+        .expect("a shipped scene loads");
+    for (label, mut scene) in [("no roulette", without_roulette), ("glass", glass)] {
+        scene.settings.width = 12;
+        scene.settings.height = 12;
+        scene.settings.samples_per_pixel = 4;
+        assert!(
+            !same_both_ways(label, scene, CameraRays::Packets),
+            "{label}: the lanes ran"
+        );
+    }
+    let mut world = World::prepare(cornell_box(), None);
+    assert!(world.lanes_fit());
+    world.paths = PathLanes::OneByOne;
+    assert!(!world.lanes_fit(), "the knob turns the lanes off");
+}
+
+#[test]
+fn a_shared_scene_renders_the_same_bits_in_lanes_when_present() {
+    // The Cornell bunny: 69k triangles, diffuse, one light. Its files live in ../shared/scenes,
+    // outside the repository; without them there is nothing to render.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/shared/cornell-bunny.toml");
+    let Ok(mut scene) = tracer::scene::load(&path) else {
+        eprintln!("skipped: {} or its files are absent", path.display());
+        return;
+    };
+    scene.settings.width = 32;
+    scene.settings.height = 32;
+    scene.settings.samples_per_pixel = 9;
+    assert!(same_both_ways("cornell-bunny", scene, CameraRays::Packets));
+}
