@@ -171,29 +171,43 @@ impl Lights {
         self.cdf[index] - self.cdf_below(index)
     }
 
-    /// Whether every light is a still emissive triangle (what the paths in lanes sample:
-    /// `integrator/lanes.rs`).
-    pub(crate) fn only_still_triangles(&self) -> bool {
+    /// Whether every light is one the paths in lanes sample (`integrator/lanes.rs`): a still
+    /// emissive triangle, or a constant environment sampled uniformly over the sphere
+    /// without portals.
+    pub(crate) fn lanes_sample_all(&self, scene: &Scene) -> bool {
+        let constant_sky = matches!(scene.environment, None | Some(Environment::Constant(_)))
+            && self.map_sampler.is_none()
+            && self.portals.is_empty();
         !self.lights.is_empty()
-            && self
-                .lights
-                .iter()
-                .all(|light| matches!(light, Light::Triangle(_)))
+            && self.lights.iter().all(|light| match light {
+                Light::Triangle(_) => true,
+                Light::Environment => constant_sky,
+                Light::Moving { .. } | Light::Point { .. } => false,
+            })
     }
 
-    /// The light `u_choice` picks where every light is a still triangle
-    /// ([`Lights::only_still_triangles`]), as [`Lights::sample`] picks it: its triangle, the
-    /// probability of the choice and its shape, for the lanes to sample as `triangle_sample` does.
+    /// Whether the environment is one of the lights sampled.
+    pub(crate) fn environment_is_light(&self) -> bool {
+        self.lights
+            .iter()
+            .any(|light| matches!(light, Light::Environment))
+    }
+
+    /// The light `u_choice` picks, as [`Lights::sample`] picks it, with the probability of
+    /// the choice, where every light is one the lanes sample ([`Lights::lanes_sample_all`]):
+    /// a still triangle (its index among the scene's, and its shape), or `None` for the
+    /// constant environment.
     #[inline(always)]
-    pub(crate) fn still_triangle_choice(&self, u_choice: f32) -> (u32, f32, TriangleShape) {
+    pub(crate) fn lanes_choice(&self, u_choice: f32) -> (Option<(u32, &TriangleShape)>, f32) {
         let index = self
             .cdf
             .partition_point(|&c| c <= u_choice)
             .min(self.lights.len() - 1);
-        let Light::Triangle(triangle) = self.lights[index] else {
-            unreachable!("only_still_triangles: every light is a still triangle")
+        let light = match self.lights[index] {
+            Light::Triangle(triangle) => Some((triangle, &self.shapes[index])),
+            _ => None,
         };
-        (triangle, self.choice_pdf(index), self.shapes[index])
+        (light, self.choice_pdf(index))
     }
 
     /// The cumulative probability of the lights before `index`: where its share of the choice's
@@ -431,6 +445,6 @@ pub fn luminance(c: Vec3) -> f32 {
 pub fn uniform_sphere(u: Vec2) -> Vec3 {
     let z = 1.0 - 2.0 * u.x;
     let r = (1.0 - z * z).max(0.0).sqrt();
-    let (sin, cos) = crate::math::sin_cos(2.0 * PI * u.y);
+    let (sin, cos) = crate::math::sin_cos_turn(u.y);
     Vec3::new(r * cos, r * sin, z)
 }

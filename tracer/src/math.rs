@@ -98,10 +98,21 @@ pub fn concentric_disk(u: glam::Vec2) -> glam::Vec2 {
 /// kernels, and so does this (the kernels round to the same but for `sin(-0)`); at `pi/4` itself (as an f32, just above the exact value)
 /// `sincosf` reduces by `pi/2` first, and this keeps the kernels.
 #[inline(always)]
+pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
+    let tiny = x.abs() < f32::from_bits(0x3980_0000);
+    let (sin, cos) = quarter_kernels(f64::from(x));
+    // Below 2^-12 the sine is `x` itself, as `sincosf` returns it: the kernel agrees but
+    // for the sign of zero (`-0 + 0` is `+0`).
+    (if tiny { x } else { sin }, cos)
+}
+
+/// `libm`'s `sincosf` kernels (musl's `__sindf` and `__cosdf`): the sine and cosine of `y`,
+/// `|y| <= pi/4`, by polynomials in f64, each rounded once to f32.
+#[inline(always)]
 // The constants are musl's decimal literals verbatim, so that a reader can hold them to the
 // source; they parse to the same doubles as the hexadecimal forms beside them there.
 #[allow(clippy::excessive_precision)]
-pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
+fn quarter_kernels(y: f64) -> (f32, f32) {
     const S1: f64 = -0.166666666416265235595;
     const S2: f64 = 0.0083333293858894631756;
     const S3: f64 = -0.000198393348360966317347;
@@ -110,16 +121,40 @@ pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
     const C1: f64 = 0.0416666233237390631894;
     const C2: f64 = -0.00138867637746099294692;
     const C3: f64 = 0.0000243904487962774090654;
-    let tiny = x.abs() < f32::from_bits(0x3980_0000);
-    let y = f64::from(x);
     let z = y * y;
     let w = z * z;
     let s = z * y;
     let sin = (y + s * (S1 + z * S2)) + s * w * (S3 + z * S4);
     let cos = ((1.0 + z * C0) + w * C1) + (w * z) * (C2 + z * C3);
-    // Below 2^-12 the sine is `x` itself, as `sincosf` returns it: the kernel agrees but
-    // for the sign of zero (`-0 + 0` is `+0`).
-    (if tiny { x } else { sin as f32 }, cos as f32)
+    (sin as f32, cos as f32)
+}
+
+/// `(sin 2 pi u, cos 2 pi u)` for `u` in [0, 1], without a branch, so that it vectorises: the
+/// turn is split, exactly, into the nearest quarter turn `k/4` and the rest `t = u - k/4`
+/// (within an eighth of a turn; the subtraction is exact by Sterbenz's lemma), the rest's
+/// angle `2 pi t` is taken in f64 by the kernels [`sin_cos_quarter`] uses, and the quarter
+/// turns rotate the pair by selects. More accurate than `sin_cos(2 pi u)` in f32, whose angle
+/// rounds by up to half an ulp of `2 pi` before the sine sees it.
+#[inline(always)]
+pub fn sin_cos_turn(u: f32) -> (f32, f32) {
+    let quarters = u32::from(u >= 0.125)
+        + u32::from(u >= 0.375)
+        + u32::from(u >= 0.625)
+        + u32::from(u >= 0.875);
+    let t = u - 0.25 * quarters as f32;
+    let (sin, cos) = quarter_kernels(std::f64::consts::TAU * f64::from(t));
+    // A quarter turn on, the sine is the cosine and the cosine minus the sine.
+    let (sin, cos) = if quarters % 2 == 1 {
+        (cos, sin)
+    } else {
+        (sin, cos)
+    };
+    let sine_negated = quarters == 2 || quarters == 3;
+    let cosine_negated = quarters == 1 || quarters == 2;
+    (
+        if sine_negated { -sin } else { sin },
+        if cosine_negated { -cos } else { cos },
+    )
 }
 
 #[cfg(test)]
@@ -182,6 +217,39 @@ mod tests {
         let exact = f64::from(std::f32::consts::FRAC_PI_4);
         assert!((f64::from(s) - exact.sin()).abs() < 1e-7);
         assert!((f64::from(c) - exact.cos()).abs() < 1e-7);
+    }
+
+    /// `sin_cos_turn` within an ulp of the sine and cosine (f64's) of the turn, over
+    /// every 1021st float of [0, 1) and the quarter and eighth turns themselves, where it
+    /// changes quarter.
+    #[test]
+    fn the_turn_is_within_an_ulp() {
+        let ulp = |x: f32| (f32::from_bits(x.abs().to_bits() + 1) - x.abs()) as f64;
+        let check = |u: f32| {
+            let (s, c) = sin_cos_turn(u);
+            let angle = std::f64::consts::TAU * f64::from(u);
+            for (got, exact) in [(s, angle.sin()), (c, angle.cos())] {
+                let error = (f64::from(got) - exact).abs();
+                // Near a zero of either, the f64 reference's own angle is off by 1e-16.
+                assert!(
+                    error <= ulp(exact as f32).max(1e-15),
+                    "sin_cos_turn({u:e}) = ({s:e}, {c:e}), off by {error:e}"
+                );
+            }
+        };
+        (0..1.0f32.to_bits())
+            .step_by(1021)
+            .map(f32::from_bits)
+            .for_each(check);
+        for eighth in 0..=8 {
+            let u = eighth as f32 / 8.0;
+            for bits in u.to_bits().saturating_sub(3)..=u.to_bits() + 3 {
+                let u = f32::from_bits(bits);
+                if (0.0..=1.0).contains(&u) {
+                    check(u);
+                }
+            }
+        }
     }
 
     /// Against the standard library's (the platform's) functions, which are within an ulp or

@@ -2,8 +2,9 @@
 //! by one, with the same counted work: across scales and distances from the origin (where the
 //! offsets of both rays' origins are tested hardest), sample counts that leave a pixel's last
 //! packet partly empty, depths from emitters alone to long paths, Russian roulette from the
-//! first bounce, and the camera's rays found in packets or one by one. Worlds the lanes do not
-//! fit (glass, a texture, no roulette) render one by one whatever the knob says.
+//! first bounce, and the camera's rays found in packets or one by one; with textures, shading
+//! normals and a constant sky beside an area light. Worlds the lanes do not fit (glass, no
+//! roulette) render one by one whatever the knob says.
 
 use std::path::Path;
 use tracer::scene::{CameraTrack, Scene};
@@ -107,6 +108,61 @@ fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
     ));
 }
 
+/// A floor with texture coordinates, shading normals and a checker texture, a box, a lamp
+/// facing down and a constant sky, written into `dir`; the scene file's path.
+fn textured_room_under_a_sky(dir: &Path) -> std::path::PathBuf {
+    let checker = image::RgbImage::from_fn(4, 4, |x, y| {
+        if (x + y) % 2 == 0 {
+            image::Rgb([230, 200, 40])
+        } else {
+            image::Rgb([20, 60, 200])
+        }
+    });
+    checker
+        .save(dir.join("checker.png"))
+        .expect("the texture is written");
+    let obj = "mtllib room.mtl
+v -2 0 -2\nv 2 0 -2\nv 2 0 2\nv -2 0 2
+vt 0 0\nvt 3 0\nvt 3 3\nvt 0 3
+vn 0.2 1 0\nvn -0.2 1 0.1\nvn 0 1 -0.3\nvn 0.1 1 0.2
+usemtl checker
+f 1/1/1 4/4/4 3/3/3 2/2/2
+v -0.5 0 -0.5\nv 0.5 0 -0.5\nv 0.5 0 0.5\nv -0.5 0 0.5
+v -0.5 1 -0.5\nv 0.5 1 -0.5\nv 0.5 1 0.5\nv -0.5 1 0.5
+usemtl grey
+f 9 10 11 12\nf 5 6 10 9\nf 6 7 11 10\nf 7 8 12 11\nf 8 5 9 12
+v -0.5 2.5 -0.5\nv 0.5 2.5 -0.5\nv 0.5 2.5 0.5\nv -0.5 2.5 0.5
+usemtl lamp
+f 13 14 15 16
+";
+    let mtl = "newmtl checker\nKd 0.8 0.8 0.8\nmap_Kd checker.png\n\
+               newmtl grey\nKd 0.5 0.4 0.3\n\
+               newmtl lamp\nKd 0 0 0\nKe 6 6 6\n";
+    let toml = "[render]\nwidth = 20\nheight = 20\nspp = 7\nmax_depth = 6\n\
+                [camera]\nposition = [0.3, 2, 5]\nlook_at = [0, 0.5, 0]\nvfov = 50\n\
+                [environment]\nradiance = 0.4\n\
+                [[object]]\nobj = \"room.obj\"\n";
+    for (name, text) in [("room.obj", obj), ("room.mtl", mtl), ("room.toml", toml)] {
+        std::fs::write(dir.join(name), text).expect("the scene's files are written");
+    }
+    dir.join("room.toml")
+}
+
+#[test]
+fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let path = textured_room_under_a_sky(dir.path());
+    let scene = tracer::scene::load(&path).expect("the textured room loads");
+    assert!(
+        !scene.textures.is_empty() && scene.has_shading_normals() && scene.environment.is_some()
+    );
+    for spp in [7, 16] {
+        let mut scene = scene.clone();
+        scene.settings.samples_per_pixel = spp;
+        assert!(same_both_ways("textured room", scene, CameraRays::Packets));
+    }
+}
+
 #[test]
 fn worlds_the_lanes_do_not_fit_render_one_by_one() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
@@ -131,16 +187,20 @@ fn worlds_the_lanes_do_not_fit_render_one_by_one() {
 }
 
 #[test]
-fn a_shared_scene_renders_the_same_bits_in_lanes_when_present() {
-    // The Cornell bunny: 69k triangles, diffuse, one light. Its files live in ../shared/scenes,
-    // outside the repository; without them there is nothing to render.
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/shared/cornell-bunny.toml");
-    let Ok(mut scene) = tracer::scene::load(&path) else {
-        eprintln!("skipped: {} or its files are absent", path.display());
-        return;
-    };
-    scene.settings.width = 32;
-    scene.settings.height = 32;
-    scene.settings.samples_per_pixel = 9;
-    assert!(same_both_ways("cornell-bunny", scene, CameraRays::Packets));
+fn shared_scenes_render_the_same_bits_in_lanes_when_present() {
+    // The Cornell bunny (69k triangles, diffuse, one light) and Sponza (textures, the sky
+    // alone). Their files live in ../shared/scenes, outside the repository; without them there
+    // is nothing to render.
+    for name in ["cornell-bunny", "sponza"] {
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../scenes/shared/{name}.toml"));
+        let Ok(mut scene) = tracer::scene::load(&path) else {
+            eprintln!("skipped: {} or its files are absent", path.display());
+            continue;
+        };
+        scene.settings.width = 32;
+        scene.settings.height = 32;
+        scene.settings.samples_per_pixel = 9;
+        assert!(same_both_ways(name, scene, CameraRays::Packets));
+    }
 }

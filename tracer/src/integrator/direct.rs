@@ -211,6 +211,31 @@ impl World {
 }
 
 impl World {
+    /// What the environment sends along `dir`, the direction of a path's ray that met
+    /// nothing, and its weight by multiple importance sampling against light sampling after
+    /// the last scattering (`last`: its density, whether it was a delta, where it was);
+    /// `None` where the world has no environment. For the scalar paths and the lanes alike.
+    #[inline(always)]
+    pub(super) fn environment_seen(
+        &self,
+        dir: Vec3,
+        (last_pdf, last_delta, last_point): (f32, bool, Vec3),
+        stats: &mut PathStats,
+    ) -> Option<(Vec3, f32)> {
+        if !self.effects.environment {
+            return None;
+        }
+        let environment = self.scene.environment.as_ref()?;
+        stats.environment_lookups += 1;
+        let weight = if last_delta {
+            1.0
+        } else {
+            let light_pdf = self.lights.environment_pdf(&self.scene, last_point, dir);
+            power_heuristic(last_pdf, light_pdf)
+        };
+        Some((environment.radiance(dir), weight))
+    }
+
     /// The weight of an emitter that a path's ray found at `at` (triangle `hit.triangle`),
     /// after a scattering at `last_point` that sampled the ray with density `last_pdf`, or a
     /// delta (or the camera) where `last_delta`: multiple importance sampling against light

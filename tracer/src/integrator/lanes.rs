@@ -1,11 +1,13 @@
 //! A pixel's paths in lanes: up to eight of its samples' paths advanced a bounce at a time,
 //! their shading computed together in vector instructions, for the worlds whose every path
-//! can be ([`World::lanes_fit`]): plain ones ([`World::is_plain`]) of untextured diffuse
-//! surfaces without shading normals, lit by still emissive triangles alone.
+//! can be ([`World::lanes_fit`]): plain ones ([`World::is_plain`]) of diffuse surfaces
+//! (textured or not, with shading normals or not), lit by still emissive triangles and a
+//! constant sky. The Cornell scenes and Sponza are such worlds.
 //!
 //! Each bounce has three phases. The first, one lane at a time, draws the lane's numbers,
-//! walks its ray through the tree, finds the surface and what it emits, and picks a light:
-//! the walks and the lookups, whose branches and loads are each lane's own. The second
+//! walks its ray through the tree, finds the surface, its texel and what it emits (or what
+//! the sky sends, where the ray escapes), and picks a light: the walks and the lookups, whose
+//! branches and loads are each lane's own. The second
 //! computes, for all lanes together, the shading frame, the sampled direction, the light
 //! sample, its weighed value and both rays' origins, in one loop over the lanes whose body
 //! has no branch the compiler cannot make a select, so that it vectorises (with AVX where the
@@ -28,18 +30,21 @@
 //! the time of one.
 
 use super::direct::power_heuristic;
-use super::scatter::BounceNumbers;
+use super::scatter::{BounceNumbers, resolve};
 use super::{PathStats, UNLIMITED_DEPTH, World};
 use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray};
 
 use super::AreaLightSampling;
+use crate::environment::Environment;
 use crate::geometry::gamma;
+use crate::lights::uniform_sphere;
 use crate::material::{Bsdf, Frame};
 use crate::math::concentric_disk;
 use crate::sampler::PixelSampler;
 use crate::spectrum::SpectralSampling;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
+use std::f32::consts::PI;
 
 /// The lanes: a pixel's samples, as many as a camera packet holds.
 const LANES: usize = PACKET;
@@ -111,6 +116,9 @@ struct Gathered {
     light_plane: Points,
     emission: Points,
     choice: Lanes<f32>,
+    /// Whether the light picked is the constant environment (then `emission` is its
+    /// radiance, and the triangle's values are stale).
+    sky: Lanes<bool>,
 }
 
 /// What the second phase hands the third, per lane.
@@ -132,28 +140,26 @@ struct Shaded {
 }
 
 impl World {
-    /// Whether every path of this world can run in lanes: a plain world
-    /// ([`World::is_plain`]) whose materials are all untextured diffuse, with no shading
-    /// normals, no environment, every light a still emissive triangle, lights found both
-    /// ways and weighed (the default), the default offsets, traversal and RGB sampling, and
-    /// Russian roulette on. Each condition names a step the lanes leave out.
+    /// Whether every path of this world can run in lanes: a plain world (no media, no
+    /// moving objects, RGB throughout) whose materials are all diffuse, every light a still emissive
+    /// triangle or a constant environment without portals (`Lights::lanes_sample_all`), lights found both ways and weighed (the default), the
+    /// default offsets and RGB sampling, shadow rays on, and Russian roulette on. Each
+    /// condition names a step the lanes leave out; a world that fails one renders one path
+    /// at a time, as every world can.
     pub fn lanes_fit(&self) -> bool {
         self.paths == PathLanes::Lanes
             && self.is_plain()
-            && self.scene.attributes.is_empty()
-            && self.scene.environment.is_none()
             && self.scene.settings.russian_roulette_depth.is_some()
-            && self.lights.only_still_triangles()
+            && self.lights.lanes_sample_all(&self.scene)
             && self.area_lights == AreaLightSampling::Mis
             && self.offset == OffsetMethod::ErrorBound
             && self.spectral == SpectralSampling::Auto
-            && self.effects.area_lights
             && self.effects.shadows
             && self
                 .scene
                 .materials
                 .iter()
-                .all(|m| matches!(m.bsdf, Bsdf::Diffuse { texture: None, .. }))
+                .all(|m| matches!(m.bsdf, Bsdf::Diffuse { .. }))
     }
 
     /// The radiance of `rays.len()` (one to eight) paths of a pixel, from their camera rays,
@@ -219,6 +225,13 @@ impl World {
         // Which lanes found a surface to shade this bounce.
         let mut shading = [false; LANES];
         let mut depth = 0u32;
+        // What the constant environment sends every way, where it is a light; where it is
+        // not, the shading is compiled without its sampling.
+        let sky = match &self.scene.environment {
+            Some(Environment::Constant(radiance)) => *radiance,
+            _ => Vec3::ZERO,
+        };
+        let sky_is_light = self.lights.environment_is_light();
         while alive.iter().any(|&a| a) {
             // First phase: numbers, walk, surface, emission, the light's choice.
             for i in 0..LANES {
@@ -235,13 +248,21 @@ impl World {
                     None => self.closest(&ray[i], &moment, &mut stats.traversal),
                 };
                 let Some(hit) = found else {
+                    if let Some((arriving, weight)) =
+                        self.environment_seen(ray[i].dir, last[i], stats)
+                    {
+                        radiance[i] += beta[i] * arriving * weight;
+                    }
                     alive[i] = false;
                     continue;
                 };
                 stats.hits += 1;
                 let surface = self.surface(&ray[i], &hit, &moment);
                 let material = &self.scene.materials[surface.material as usize];
-                if material.emission != Vec3::ZERO && surface.front_facing {
+                if self.effects.area_lights
+                    && material.emission != Vec3::ZERO
+                    && surface.front_facing
+                {
                     let weight =
                         self.hit_emitter_weight(&moment, hit.triangle, surface.at.p, last[i]);
                     radiance[i] += beta[i] * material.emission * weight;
@@ -250,12 +271,21 @@ impl World {
                     alive[i] = false;
                     continue;
                 }
-                let Bsdf::Diffuse { albedo, .. } = material.bsdf else {
-                    unreachable!("lanes_fit: every material is diffuse")
+                let albedo = match material.bsdf {
+                    Bsdf::Diffuse {
+                        albedo,
+                        texture: None,
+                    } => albedo,
+                    _ => {
+                        let texel = self.texel_ahead(&material.bsdf, &surface);
+                        let Bsdf::Diffuse { albedo, .. } = resolve(&material.bsdf, texel) else {
+                            unreachable!("lanes_fit: every material is diffuse")
+                        };
+                        albedo
+                    }
                 };
                 stats.light_samples += 1;
-                let (light, choice, shape) = self.lights.still_triangle_choice(u.light_choice);
-                let light = &self.scene.triangles[light as usize];
+                let (light, choice) = self.lights.lanes_choice(u.light_choice);
                 roulette[i] = u.roulette;
                 shading[i] = true;
                 let g = &mut gathered;
@@ -267,19 +297,30 @@ impl World {
                 g.albedo.set(i, albedo);
                 (g.scatter[0][i], g.scatter[1][i]) = (u.scatter.x, u.scatter.y);
                 (g.light[0][i], g.light[1][i]) = (u.light.x, u.light.y);
-                for (corner, p) in g.corners.iter_mut().zip(light.p) {
-                    corner.set(i, p);
-                }
-                g.light_area[i] = shape.area;
-                g.light_normal.set(i, shape.normal);
-                g.light_plane.set(i, shape.plane_normal);
-                g.emission
-                    .set(i, self.scene.materials[light.material as usize].emission);
                 g.choice[i] = choice;
+                g.sky[i] = light.is_none();
+                match light {
+                    Some((triangle, shape)) => {
+                        let triangle = &self.scene.triangles[triangle as usize];
+                        for (corner, p) in g.corners.iter_mut().zip(triangle.p) {
+                            corner.set(i, p);
+                        }
+                        g.light_area[i] = shape.area;
+                        g.light_normal.set(i, shape.normal);
+                        g.light_plane.set(i, shape.plane_normal);
+                        let emission = self.scene.materials[triangle.material as usize].emission;
+                        g.emission.set(i, emission);
+                    }
+                    None => g.emission.set(i, sky),
+                }
             }
             first = None;
             // Second phase: every lane's shading at once.
-            shade(&gathered, &mut shaded);
+            if sky_is_light {
+                shade::<true>(&gathered, &mut shaded);
+            } else {
+                shade::<false>(&gathered, &mut shaded);
+            }
             // Third phase: shadow rays, then each path's next ray or its end.
             depth += 1;
             for i in 0..LANES {
@@ -291,7 +332,7 @@ impl World {
                     let shadow = Ray {
                         origin: shaded.origin.get(i),
                         dir: shaded.reach.get(i),
-                        t_max: 1.0,
+                        t_max: if gathered.sky[i] { f32::INFINITY } else { 1.0 },
                     };
                     if !self.occluded(&shadow, &moment, &mut stats.traversal) {
                         radiance[i] += beta[i] * shaded.value.get(i);
@@ -330,7 +371,7 @@ impl World {
 /// vectorising the loop (docs/bench.md, issue 12, thirty-first round). `tracer/tests/
 /// path_lanes.rs` holds every image to the scalar path's, bit for bit.
 #[inline(always)]
-fn shade(g: &Gathered, out: &mut Shaded) {
+fn shade<const SKY: bool>(g: &Gathered, out: &mut Shaded) {
     for i in 0..LANES {
         let (p, error, plane) = (g.p.get(i), g.error.get(i), g.plane.get(i));
         let frame = Frame::from_normal(g.normal.get(i));
@@ -355,11 +396,18 @@ fn shade(g: &Gathered, out: &mut Shaded) {
         let to_light = q - p;
         let distance_squared = to_light.length_squared();
         let distance = distance_squared.sqrt();
-        let toward = to_light / distance;
-        let cos_light = -toward.dot(g.light_normal.get(i));
+        let cos_light = -(to_light / distance).dot(g.light_normal.get(i));
         let area = g.light_area[i];
-        let light_pdf = g.choice[i] * distance_squared / (cos_light * area);
-        let sampled_light = distance_squared != 0.0 && area != 0.0 && cos_light > 0.0;
+        // Or the constant environment's, uniform over the sphere (`Lights::sample`).
+        let sky = SKY && g.sky[i];
+        let sky_way = uniform_sphere(Vec2::new(g.light[0][i], g.light[1][i]));
+        let toward = if sky { sky_way } else { to_light / distance };
+        let light_pdf = if sky {
+            g.choice[i] / (4.0 * PI)
+        } else {
+            g.choice[i] * distance_squared / (cos_light * area)
+        };
+        let sampled_light = sky || (distance_squared != 0.0 && area != 0.0 && cos_light > 0.0);
         // `unshadowed`: the BSDF towards it, weighed against BSDF sampling.
         let local = frame.to_local(toward);
         let (wo_z, wi_z) = if flip {
@@ -377,12 +425,13 @@ fn shade(g: &Gathered, out: &mut Shaded) {
         let weight = power_heuristic(light_pdf, density);
         out.value.set(i, f * emission * (weight / light_pdf));
         out.lit[i] = sampled_light && f != Vec3::ZERO && emission != Vec3::ZERO && light_pdf > 0.0;
-        // `spawn_ray_to`: both ends off their surfaces.
-        let origin = offset(p, error, plane, to_light);
+        // `spawn_ray_to`: both ends off their surfaces; towards the sky, `spawn_ray`.
+        let origin = offset(p, error, plane, if sky { sky_way } else { to_light });
         let widened = q_error + gamma(2) * (q - origin).abs();
         let target = offset(q, widened, g.light_plane.get(i), origin - q);
         out.origin.set(i, origin);
-        out.reach.set(i, target - origin);
+        out.reach
+            .set(i, if sky { sky_way } else { target - origin });
     }
 }
 

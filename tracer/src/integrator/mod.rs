@@ -56,7 +56,7 @@ use crate::medium::{Flight, hero_channel, mean_ratio, sample_henyey_greenstein};
 use crate::sampler::PixelSampler;
 use crate::scene::Scene;
 use crate::spectrum::{PathSpectrum, SpectralSampling};
-use direct::{LightSamples, power_heuristic};
+use direct::LightSamples;
 use glam::Vec3;
 use scatter::{BounceNumbers, Phase, SurfaceScatter, resolve};
 use std::mem::ManuallyDrop;
@@ -351,21 +351,9 @@ impl World {
                 }
             }
             let Some(hit) = found else {
-                if effects.environment
-                    && let Some(environment) = &self.scene.environment
-                {
-                    stats.environment_lookups += 1;
-                    let weight = if last_delta {
-                        1.0
-                    } else {
-                        let light_pdf =
-                            self.lights
-                                .environment_pdf(&self.scene, last_point, ray.dir);
-                        power_heuristic(last_pdf, light_pdf)
-                    };
-                    radiance += weighed(media, beta, ratio)
-                        * spectrum.of(environment.radiance(ray.dir))
-                        * weight;
+                let last = (last_pdf, last_delta, last_point);
+                if let Some((arriving, weight)) = self.environment_seen(ray.dir, last, stats) {
+                    radiance += weighed(media, beta, ratio) * spectrum.of(arriving) * weight;
                 }
                 break;
             };

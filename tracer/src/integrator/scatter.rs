@@ -135,7 +135,7 @@ impl World {
     /// that always tracks media pays: a closest-hit query instead of an any-hit one.
     ///
     /// `shadow` is taken by reference: passed by value, it was copied just after
-    /// [`World::shadow_ray`] wrote it, in wide loads across that function's narrower stores,
+    /// [`shadow_ray`](super::direct::shadow_ray) wrote it, in wide loads across that function's narrower stores,
     /// which the processor cannot forward (docs/bench.md, issue 12, twenty-sixth round).
     pub(super) fn transmittance(
         &self,
