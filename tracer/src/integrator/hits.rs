@@ -30,6 +30,16 @@ pub(super) struct Surface {
     pub front_facing: bool,
 }
 
+/// What a hit's surface shows the ray that found it ([`World::shading`]).
+pub(super) struct Shading {
+    /// Whether the ray arrives on the side the triangle's winding faces.
+    pub front_facing: bool,
+    /// The shading normal, on the side of the geometric one.
+    pub normal: Vec3,
+    /// The texture coordinates, where a texture will read them.
+    pub uv: Option<Vec2>,
+}
+
 /// A hit's triangle and where it is: the point with its bound, the unit winding normal, and for
 /// a moving triangle (in object space) its placement.
 pub(super) struct Placed<'a> {
@@ -182,12 +192,39 @@ impl World {
             unit_normal: geometric,
             placement,
         } = self.placed(hit, moment);
+        let Shading {
+            front_facing,
+            normal: shading_normal,
+            uv,
+        } = self.shading(ray.dir, hit, attributes, placement, geometric);
+        Surface {
+            at,
+            shading_normal,
+            uv,
+            material: triangle.material,
+            front_facing,
+        }
+    }
+
+    /// What the surface a ray along `dir` hit (`hit`, on a triangle of unit normal `geometric`
+    /// with `attributes`, placed by `placement` where it moves) shows it: its side, its
+    /// shading normal and its texture coordinates. [`World::surface`]'s, and the lanes' for
+    /// the hits they gather (`lanes.rs`).
+    #[inline(always)]
+    pub(super) fn shading(
+        &self,
+        dir: Vec3,
+        hit: &Hit,
+        attributes: Option<&VertexAttributes>,
+        placement: Option<&Placement>,
+        geometric: Vec3,
+    ) -> Shading {
         // Normals keep the winding's orientation: the side a ray arrives from is what tells a
         // dielectric whether it is entering or leaving, and an emitter whether it is seen from
         // the front. Reflection-only BSDFs are two-sided by themselves.
-        let front_facing = ray.dir.dot(geometric) < 0.0;
+        let front_facing = dir.dot(geometric) < 0.0;
         let b0 = 1.0 - hit.b1 - hit.b2;
-        let shading_normal = match attributes.and_then(|a| a.n) {
+        let normal = match attributes.and_then(|a| a.n) {
             Some(n) if self.effects.shading_normals => {
                 let mut interpolated = b0 * n[0] + hit.b1 * n[1] + hit.b2 * n[2];
                 // A moving triangle's normals are in object space; they turn with it.
@@ -210,12 +247,10 @@ impl World {
             .and_then(|a| a.uv)
             .filter(|_| self.effects.textures)
             .map(|uv| b0 * uv[0] + hit.b1 * uv[1] + hit.b2 * uv[2]);
-        Surface {
-            at,
-            shading_normal,
-            uv,
-            material: triangle.material,
+        Shading {
             front_facing,
+            normal,
+            uv,
         }
     }
 }

@@ -5,11 +5,11 @@
 //! constant sky. The Cornell scenes and Sponza are such worlds.
 //!
 //! Each bounce has three phases. The first, one lane at a time, draws the lane's numbers,
-//! walks its ray through the tree, finds the surface, its texel and what it emits (or what
-//! the sky sends, where the ray escapes), and picks a light: the walks and the lookups, whose
-//! branches and loads are each lane's own. The second
-//! computes, for all lanes together, the shading frame, the sampled direction, the light
-//! sample, its weighed value and both rays' origins, in one loop over the lanes whose body
+//! walks its ray through the tree, finds the surface's side, shading normal, texel and what
+//! it emits (or what the sky sends, where the ray escapes), and picks a light: the walks and
+//! the lookups, whose branches and loads are each lane's own. The second computes, for all
+//! lanes together, the hit's point and error bound, the shading frame, the sampled
+//! direction, the light sample, its weighed value and both rays' origins, in one loop over the lanes whose body
 //! has no branch the compiler cannot make a select, so that it vectorises (with AVX where the
 //! processor has it, chosen at run time). The third, one lane at a time again, traces the
 //! shadow rays and ends or continues each path.
@@ -32,7 +32,7 @@
 use super::direct::power_heuristic;
 use super::scatter::{BounceNumbers, resolve};
 use super::{PathStats, UNLIMITED_DEPTH, World};
-use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray};
+use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, SurfacePoint, hit_point};
 
 use super::AreaLightSampling;
 use crate::environment::Environment;
@@ -97,13 +97,15 @@ impl Points {
     }
 }
 
-/// What the first phase hands the second: each lane's surface point (with its error bound and
-/// plane normal), shading normal, incoming direction, albedo and numbers, and the light it
+/// What the first phase hands the second: each lane's hit (its triangle's corners and plane
+/// normal, the barycentric coordinates), shading normal, incoming direction, albedo and numbers, and the light it
 /// picked. A lane without a surface keeps what it last held, computes on it, and is ignored.
 #[derive(Clone, Copy, Default)]
 struct Gathered {
-    p: Points,
-    error: Points,
+    /// The corners of the triangle hit, and the hit's barycentric coordinates of corners 1
+    /// and 2 (the point and its error bound are the second phase's).
+    hit: [Points; 3],
+    barycentric: [Lanes<f32>; 2],
     plane: Points,
     normal: Points,
     dir: Points,
@@ -124,6 +126,8 @@ struct Gathered {
 /// What the second phase hands the third, per lane.
 #[derive(Clone, Copy, Default)]
 struct Shaded {
+    /// The point hit, where the next ray leaves from.
+    p: Points,
     /// Whether the light sample brings anything (then `value` and the shadow ray's `origin`
     /// and `reach` hold it).
     lit: Lanes<bool>,
@@ -257,14 +261,17 @@ impl World {
                     continue;
                 };
                 stats.hits += 1;
-                let surface = self.surface(&ray[i], &hit, &moment);
-                let material = &self.scene.materials[surface.material as usize];
-                if self.effects.area_lights
-                    && material.emission != Vec3::ZERO
-                    && surface.front_facing
+                // `World::surface`, but for the point and its error bound, which the second
+                // phase computes from the corners gathered below.
+                let triangle = &self.scene.triangles[hit.triangle as usize];
+                let geometric = self.accel.unit_normal(hit.triangle);
+                let attributes = self.scene.attributes.get(hit.triangle as usize);
+                let seen = self.shading(ray[i].dir, &hit, attributes, None, geometric);
+                let material = &self.scene.materials[triangle.material as usize];
+                if self.effects.area_lights && material.emission != Vec3::ZERO && seen.front_facing
                 {
-                    let weight =
-                        self.hit_emitter_weight(&moment, hit.triangle, surface.at.p, last[i]);
+                    let at = hit_point(&triangle.p, hit.b1, hit.b2);
+                    let weight = self.hit_emitter_weight(&moment, hit.triangle, at, last[i]);
                     radiance[i] += beta[i] * material.emission * weight;
                 }
                 if depth >= max_depth {
@@ -277,7 +284,7 @@ impl World {
                         texture: None,
                     } => albedo,
                     _ => {
-                        let texel = self.texel_ahead(&material.bsdf, &surface);
+                        let texel = self.texel_ahead(&material.bsdf, seen.uv);
                         let Bsdf::Diffuse { albedo, .. } = resolve(&material.bsdf, texel) else {
                             unreachable!("lanes_fit: every material is diffuse")
                         };
@@ -289,10 +296,12 @@ impl World {
                 roulette[i] = u.roulette;
                 shading[i] = true;
                 let g = &mut gathered;
-                g.p.set(i, surface.at.p);
-                g.error.set(i, surface.at.error);
-                g.plane.set(i, surface.at.normal);
-                g.normal.set(i, surface.shading_normal);
+                for (corner, p) in g.hit.iter_mut().zip(triangle.p) {
+                    corner.set(i, p);
+                }
+                (g.barycentric[0][i], g.barycentric[1][i]) = (hit.b1, hit.b2);
+                g.plane.set(i, self.accel.plane_normal(hit.triangle));
+                g.normal.set(i, seen.normal);
                 g.dir.set(i, ray[i].dir);
                 g.albedo.set(i, albedo);
                 (g.scatter[0][i], g.scatter[1][i]) = (u.scatter.x, u.scatter.y);
@@ -347,7 +356,7 @@ impl World {
                     alive[i] = false;
                     continue;
                 }
-                last[i] = (shaded.pdf[i], false, gathered.p.get(i));
+                last[i] = (shaded.pdf[i], false, shaded.p.get(i));
                 if !self.roulette(false, depth, roulette[i], Vec3::ONE, &mut beta[i]) {
                     alive[i] = false;
                     continue;
@@ -373,7 +382,16 @@ impl World {
 #[inline(always)]
 fn shade<const SKY: bool>(g: &Gathered, out: &mut Shaded) {
     for i in 0..LANES {
-        let (p, error, plane) = (g.p.get(i), g.error.get(i), g.plane.get(i));
+        let hit = [g.hit[0].get(i), g.hit[1].get(i), g.hit[2].get(i)];
+        let plane = g.plane.get(i);
+        let at = SurfacePoint::on_triangle_with_normal(
+            &hit,
+            g.barycentric[0][i],
+            g.barycentric[1][i],
+            plane,
+        );
+        let (p, error) = (at.p, at.error);
+        out.p.set(i, p);
         let frame = Frame::from_normal(g.normal.get(i));
         let wo = frame.to_local(-g.dir.get(i));
         // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side.

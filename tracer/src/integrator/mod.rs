@@ -383,7 +383,7 @@ impl World {
             // A textured surface's texel is, on scenes whose textures outgrow a core's caches,
             // a long wait on memory. Ask for it now, and read it only after what does not need
             // it: the frame, the bounce's numbers, and where the light samples land.
-            let texel = self.texel_ahead(&material.bsdf, &surface);
+            let texel = self.texel_ahead(&material.bsdf, surface.uv);
             let frame = Frame::from_normal(surface.shading_normal);
             let wo = frame.to_local(-ray.dir);
             let shadows = effects.shadows && !material.bsdf.is_delta();

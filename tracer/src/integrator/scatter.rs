@@ -14,7 +14,6 @@
 //! segment's transmittance is taken in the medium that segment lies in.
 
 use super::World;
-use super::hits::Surface;
 use crate::geometry::{Moment, Ray};
 use crate::lights::LightSample;
 use crate::material::{Bsdf, Frame, Material};
@@ -192,14 +191,14 @@ impl World {
         }
     }
 
-    /// The texel a textured `bsdf` reads at `surface`, where textures are simulated: its
+    /// The texel a textured `bsdf` reads at texture coordinates `uv`, where textures are simulated: its
     /// texture and index (none for a surface without coordinates, which reads white), found
     /// once here and asked for from memory now, so that [`resolve`] reads it after other work
     /// has overlapped the wait.
     pub(super) fn texel_ahead(
         &self,
         bsdf: &Bsdf,
-        surface: &Surface,
+        uv: Option<Vec2>,
     ) -> Option<(&Texture, Option<usize>)> {
         let texture = match *bsdf {
             Bsdf::Diffuse {
@@ -208,7 +207,7 @@ impl World {
             } if self.effects.textures => &self.scene.textures[texture as usize],
             _ => return None,
         };
-        let index = surface.uv.map(|uv| texture.nearest(uv));
+        let index = uv.map(|uv| texture.nearest(uv));
         if let Some(index) = index {
             texture.prefetch(index);
         }
