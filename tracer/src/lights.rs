@@ -171,7 +171,7 @@ impl Lights {
         self.cdf[index] - self.cdf_below(index)
     }
 
-    /// Whether every light is one the paths in lanes sample (`integrator/lanes.rs`): a still
+    /// Whether every light is one the paths in lanes sample (`integrator/lanes/`): a still
     /// emissive triangle, or a constant environment sampled uniformly over the sphere
     /// without portals.
     pub(crate) fn lanes_sample_all(&self, scene: &Scene) -> bool {
@@ -385,7 +385,7 @@ impl Lights {
 
 /// A point on the still triangle `v` of shape `shape`, uniform in its area (from `u`), as
 /// seen from `p`: emitting `radiance`, chosen with probability `choice` (what the paths in
-/// lanes, `integrator/lanes.rs`, write out lane by lane).
+/// lanes, `integrator/lanes/`, write out lane by lane).
 #[inline(always)]
 fn triangle_sample(
     v: &[Vec3; 3],

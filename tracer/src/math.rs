@@ -64,7 +64,7 @@ pub fn cosh(x: f32) -> f32 {
 /// tracer's cosine-weighted directions and of its thin lens.
 ///
 /// Written without branches (each choice is a select), so that a loop over paths in lanes
-/// turns it into vector instructions (`integrator/lanes.rs`); a point's angle is taken from
+/// turns it into vector instructions (`integrator/lanes/`); a point's angle is taken from
 /// the axis nearer to it, within an eighth of a turn, where [`sin_cos_quarter`] needs no
 /// reduction: a point off the y axis by `phi` lies at `pi/2 - phi`, whose sine and cosine
 /// are `phi`'s cosine and sine.

@@ -209,7 +209,7 @@ impl World {
     /// What the surface a ray along `dir` hit (`hit`, on a triangle of unit normal `geometric`
     /// with `attributes`, placed by `placement` where it moves) shows it: its side, its
     /// shading normal and its texture coordinates. [`World::surface`]'s, and the lanes' for
-    /// the hits they gather (`lanes.rs`).
+    /// the hits they gather (`lanes/`).
     #[inline(always)]
     pub(super) fn shading(
         &self,

@@ -29,25 +29,22 @@
 //! polynomials are latency chains the scalar path waits on; eight lanes run eight of them in
 //! the time of one.
 
-use super::direct::power_heuristic;
+use super::AreaLightSampling;
 use super::scatter::{BounceNumbers, resolve};
 use super::{PathStats, UNLIMITED_DEPTH, World};
-use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, SurfacePoint, hit_point};
-
-use super::AreaLightSampling;
 use crate::environment::Environment;
-use crate::geometry::gamma;
-use crate::lights::uniform_sphere;
-use crate::material::{Bsdf, Frame};
-use crate::math::concentric_disk;
+use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, hit_point};
+use crate::material::Bsdf;
 use crate::sampler::PixelSampler;
 use crate::spectrum::SpectralSampling;
-use glam::{Vec2, Vec3};
-use std::f32::consts::FRAC_1_PI;
-use std::f32::consts::PI;
+use glam::Vec3;
 
 /// The lanes: a pixel's samples, as many as a camera packet holds.
 const LANES: usize = PACKET;
+
+mod shade;
+
+use shade::{Gathered, Shaded, shade};
 
 /// How a pixel's paths are advanced (a comparison knob: both give the same bits).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -71,76 +68,6 @@ impl PathLanes {
             PathLanes::OneByOne => "one-by-one",
         }
     }
-}
-
-/// Lane values: one per path.
-type Lanes<T> = [T; LANES];
-
-/// Points and directions of every lane, a coordinate at a time (so that loads of a coordinate
-/// for all lanes are one vector load).
-#[derive(Clone, Copy, Default)]
-struct Points {
-    x: Lanes<f32>,
-    y: Lanes<f32>,
-    z: Lanes<f32>,
-}
-
-impl Points {
-    #[inline(always)]
-    fn get(&self, i: usize) -> Vec3 {
-        Vec3::new(self.x[i], self.y[i], self.z[i])
-    }
-
-    #[inline(always)]
-    fn set(&mut self, i: usize, v: Vec3) {
-        (self.x[i], self.y[i], self.z[i]) = (v.x, v.y, v.z);
-    }
-}
-
-/// What the first phase hands the second: each lane's hit (its triangle's corners and plane
-/// normal, the barycentric coordinates), shading normal, incoming direction, albedo and numbers, and the light it
-/// picked. A lane without a surface keeps what it last held, computes on it, and is ignored.
-#[derive(Clone, Copy, Default)]
-struct Gathered {
-    /// The corners of the triangle hit, and the hit's barycentric coordinates of corners 1
-    /// and 2 (the point and its error bound are the second phase's).
-    hit: [Points; 3],
-    barycentric: [Lanes<f32>; 2],
-    plane: Points,
-    normal: Points,
-    dir: Points,
-    albedo: Points,
-    scatter: [Lanes<f32>; 2],
-    light: [Lanes<f32>; 2],
-    corners: [Points; 3],
-    light_area: Lanes<f32>,
-    light_normal: Points,
-    light_plane: Points,
-    emission: Points,
-    choice: Lanes<f32>,
-    /// Whether the light picked is the constant environment (then `emission` is its
-    /// radiance, and the triangle's values are stale).
-    sky: Lanes<bool>,
-}
-
-/// What the second phase hands the third, per lane.
-#[derive(Clone, Copy, Default)]
-struct Shaded {
-    /// The point hit, where the next ray leaves from.
-    p: Points,
-    /// Whether the light sample brings anything (then `value` and the shadow ray's `origin`
-    /// and `reach` hold it).
-    lit: Lanes<bool>,
-    value: Points,
-    origin: Points,
-    reach: Points,
-    /// Whether a direction was sampled (then `weight`, `pdf` and the next ray's `next_origin`
-    /// and `next_dir` hold it).
-    sampled: Lanes<bool>,
-    weight: Points,
-    pdf: Lanes<f32>,
-    next_origin: Points,
-    next_dir: Points,
 }
 
 impl World {
@@ -369,170 +296,5 @@ impl World {
             }
         }
         radiance
-    }
-}
-
-/// The second phase: each lane's shading, in one loop that vectorises. Its body is the scalar
-/// path's arithmetic, in the scalar path's order, with every choice a select: `Frame`,
-/// `concentric_disk` and `power_heuristic` are called as they are; what `Bsdf::sample`,
-/// `triangle_sample`, `unshadowed` and `spawn_ray` do for a diffuse surface and a still
-/// triangle is written out here lane by lane, because their `Option`s kept the compiler from
-/// vectorising the loop (docs/bench.md, issue 12, thirty-first round). `tracer/tests/
-/// path_lanes.rs` holds every image to the scalar path's, bit for bit.
-#[inline(always)]
-fn shade<const SKY: bool>(g: &Gathered, out: &mut Shaded) {
-    for i in 0..LANES {
-        let hit = [g.hit[0].get(i), g.hit[1].get(i), g.hit[2].get(i)];
-        let plane = g.plane.get(i);
-        let at = SurfacePoint::on_triangle_with_normal(
-            &hit,
-            g.barycentric[0][i],
-            g.barycentric[1][i],
-            plane,
-        );
-        let (p, error) = (at.p, at.error);
-        out.p.set(i, p);
-        let frame = Frame::from_normal(g.normal.get(i));
-        let wo = frame.to_local(-g.dir.get(i));
-        // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side.
-        let flip = wo.z < 0.0;
-        let d = concentric_disk(Vec2::new(g.scatter[0][i], g.scatter[1][i]));
-        let z = (1.0 - d.length_squared()).max(0.0).sqrt();
-        out.sampled[i] = wo.z != 0.0 && !wo.z.is_nan() && z > 0.0;
-        out.pdf[i] = z * FRAC_1_PI;
-        out.weight.set(i, g.albedo.get(i));
-        let wi = frame.to_world(Vec3::new(d.x, d.y, if flip { -z } else { z }));
-        out.next_dir.set(i, wi);
-        out.next_origin.set(i, offset(p, error, plane, wi));
-        // `triangle_sample`: a point uniform on the light's triangle, as seen from `p`.
-        let su = g.light[0][i].sqrt();
-        let (b1, b2) = (su * (1.0 - g.light[1][i]), su * g.light[1][i]);
-        let v0 = g.corners[0].get(i);
-        let (e1, e2) = (g.corners[1].get(i) - v0, g.corners[2].get(i) - v0);
-        let q = v0 + (b1 * e1 + b2 * e2);
-        let q_error = gamma(2) * q.abs() + gamma(4) * ((b1 * e1).abs() + (b2 * e2).abs());
-        let to_light = q - p;
-        let distance_squared = to_light.length_squared();
-        let distance = distance_squared.sqrt();
-        let cos_light = -(to_light / distance).dot(g.light_normal.get(i));
-        let area = g.light_area[i];
-        // Or the constant environment's, uniform over the sphere (`Lights::sample`).
-        let sky = SKY && g.sky[i];
-        let sky_way = uniform_sphere(Vec2::new(g.light[0][i], g.light[1][i]));
-        let toward = if sky { sky_way } else { to_light / distance };
-        let light_pdf = if sky {
-            g.choice[i] / (4.0 * PI)
-        } else {
-            g.choice[i] * distance_squared / (cos_light * area)
-        };
-        let sampled_light = sky || (distance_squared != 0.0 && area != 0.0 && cos_light > 0.0);
-        // `unshadowed`: the BSDF towards it, weighed against BSDF sampling.
-        let local = frame.to_local(toward);
-        let (wo_z, wi_z) = if flip {
-            (-wo.z, -local.z)
-        } else {
-            (wo.z, local.z)
-        };
-        let density = if wo_z > 0.0 && wi_z > 0.0 {
-            wi_z * FRAC_1_PI
-        } else {
-            0.0
-        };
-        let f = g.albedo.get(i) * density;
-        let emission = g.emission.get(i);
-        let weight = power_heuristic(light_pdf, density);
-        out.value.set(i, f * emission * (weight / light_pdf));
-        out.lit[i] = sampled_light && f != Vec3::ZERO && emission != Vec3::ZERO && light_pdf > 0.0;
-        // `spawn_ray_to`: both ends off their surfaces; towards the sky, `spawn_ray`.
-        let origin = offset(p, error, plane, if sky { sky_way } else { to_light });
-        let widened = q_error + gamma(2) * (q - origin).abs();
-        let target = offset(q, widened, g.light_plane.get(i), origin - q);
-        out.origin.set(i, origin);
-        out.reach
-            .set(i, if sky { sky_way } else { target - origin });
-    }
-}
-
-/// `offset_ray_origin` with the error-bound method, for a still surface: `p` (within `error`
-/// of its plane, of unit normal `plane`) moved off the plane to the side `toward` points to,
-/// and then one float further along each axis it moved, by integer steps on the bits.
-#[inline(always)]
-fn offset(p: Vec3, error: Vec3, plane: Vec3, toward: Vec3) -> Vec3 {
-    let n = if plane.dot(toward) < 0.0 {
-        -plane
-    } else {
-        plane
-    };
-    let d = n.abs().dot(error);
-    let offset = d * n;
-    let moved = p + offset;
-    Vec3::new(
-        step(moved.x, offset.x),
-        step(moved.y, offset.y),
-        step(moved.z, offset.z),
-    )
-}
-
-/// `x.next_up()` where `along > 0`, `x.next_down()` where `along < 0`, `x` elsewhere, with
-/// selects rather than branches: a float's neighbour is the next integer on its bits, up or
-/// down by its sign; zero's are the least subnormals; an infinity away from zero and NaN stay.
-#[inline(always)]
-fn step(x: f32, along: f32) -> f32 {
-    let bits = x.to_bits();
-    let magnitude = bits & 0x7fff_ffff;
-    let up = if magnitude == 0 {
-        1
-    } else if x > 0.0 {
-        bits + 1
-    } else {
-        bits - 1
-    };
-    let down = if magnitude == 0 {
-        0x8000_0001
-    } else if x > 0.0 {
-        bits - 1
-    } else {
-        bits + 1
-    };
-    let stays_up = x.is_nan() || x == f32::INFINITY;
-    let stays_down = x.is_nan() || x == f32::NEG_INFINITY;
-    if along > 0.0 && !stays_up {
-        f32::from_bits(up)
-    } else if along < 0.0 && !stays_down {
-        f32::from_bits(down)
-    } else {
-        x
-    }
-}
-
-/// The neighbours [`step`] finds are the standard library's, for every kind of float.
-#[cfg(test)]
-#[test]
-fn steps_are_next_up_and_next_down() {
-    let values = [
-        0.0f32,
-        -0.0,
-        1.0,
-        -1.0,
-        1.5e-45,
-        -1.5e-45,
-        1.0e-40,
-        f32::MAX,
-        -f32::MAX,
-        f32::MIN_POSITIVE,
-        f32::INFINITY,
-        f32::NEG_INFINITY,
-        f32::NAN,
-        3.7e12,
-        -2.5e-7,
-    ];
-    for x in values {
-        for (along, expected) in [(1.0, x.next_up()), (-1.0, x.next_down()), (0.0, x)] {
-            let stepped = step(x, along);
-            assert!(
-                stepped.to_bits() == expected.to_bits() || (x.is_nan() && stepped.is_nan()),
-                "step({x:e}, {along}) = {stepped:e}, expected {expected:e}"
-            );
-        }
     }
 }
