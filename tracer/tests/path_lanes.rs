@@ -6,6 +6,8 @@
 //! normals and a constant sky beside an area light. Worlds the lanes do not fit (glass, no
 //! roulette) render one by one whatever the knob says.
 
+mod common;
+
 use std::path::Path;
 use tracer::scene::{CameraTrack, Scene};
 use tracer::{CameraRays, PathLanes, World};
@@ -42,11 +44,7 @@ fn render(
     world.paths = paths;
     world.camera_rays = camera_rays;
     let fits = world.lanes_fit();
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(2)
-        .build()
-        .expect("a pool of two threads builds");
-    let out = tracer::render_frame(&world, 0, &pool, tracer::FrameConfig::default());
+    let out = common::render_world(&world, 0);
     let bits = out.pixels.iter().flatten().map(|c| c.to_bits()).collect();
     (bits, out.stats, fits)
 }
