@@ -154,7 +154,7 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
             count("spectral"),
             count("media")
         ],
-        [3, 6, 6, 5, 4, 2, 3, 4, 3, 6]
+        [3, 6, 6, 5, 5, 2, 3, 4, 3, 6]
     );
     // The furnace is one area light: each strategy alone renders other bits than the two
     // weighted (the knob reaches the integrator).
@@ -182,8 +182,12 @@ fn every_knob_is_measured_and_the_reference_is_cached_until_stale() {
         );
     }
     // The binary tree opens other nodes than the 8-wide one, never another hit; nor do camera
-    // rays walked one by one instead of in packets.
-    for setting in ["robustbinary", "robust-one-by-one"] {
+    // rays walked one by one instead of in packets, nor paths one by one instead of in lanes.
+    for setting in [
+        "robustbinary",
+        "robust-one-by-one",
+        "robust-paths-one-by-one",
+    ] {
         let row = rows
             .iter()
             .find(|r| r["knob"] == "traversal" && r["setting"] == setting)

@@ -14,7 +14,7 @@ use std::time::Instant;
 use tracer::geometry::{Accel, BuildQuality, OffsetMethod, Traversal};
 use tracer::output::RgbImage;
 use tracer::scene::RenderSettings;
-use tracer::{CameraRays, FrameConfig, World};
+use tracer::{CameraRays, FrameConfig, PathLanes, World};
 
 /// The side of the square tiles a frame is cut into.
 pub const TILE: u32 = 32;
@@ -57,6 +57,9 @@ pub struct Row {
     pub traversal: Traversal,
     /// How this rung's camera rays met the tree: in packets (the default) or one by one.
     pub camera_rays: CameraRays,
+    /// How this rung's paths were advanced: in lanes where the world allows it (the
+    /// default), or one by one.
+    pub paths: PathLanes,
     /// Seconds to build the BVH (the BVH ladder only; 0 elsewhere).
     pub build_seconds: f64,
     /// Seconds to render the frame (the fastest of the repeats).
@@ -274,29 +277,37 @@ impl<'a> Bench<'a> {
         rows
     }
 
-    /// Our robust traversal (8-wide, what renders use; a pixel's camera rays in packets), the
-    /// same with camera rays one by one, the same tests over the binary tree, and obvhs's own,
-    /// at `spp`; each image is compared with the first's.
+    /// Our robust traversal (8-wide, what renders use; a pixel's camera rays in packets, its
+    /// paths in lanes where the world allows), the same with camera rays one by one, the same
+    /// with paths one by one, the same tests over the binary tree, and obvhs's own, at `spp`;
+    /// each image is compared with the first's.
     pub fn traversal_ladder(&mut self, spp: u32) -> Vec<Row> {
         let settings = self.at_spp(spp);
         let rungs = [
-            (Traversal::Robust, CameraRays::Packets),
-            (Traversal::Robust, CameraRays::OneByOne),
-            (Traversal::RobustBinary, CameraRays::Packets),
-            (Traversal::Obvhs, CameraRays::Packets),
+            (Traversal::Robust, CameraRays::Packets, PathLanes::Lanes),
+            (Traversal::Robust, CameraRays::OneByOne, PathLanes::Lanes),
+            (Traversal::Robust, CameraRays::Packets, PathLanes::OneByOne),
+            (
+                Traversal::RobustBinary,
+                CameraRays::Packets,
+                PathLanes::Lanes,
+            ),
+            (Traversal::Obvhs, CameraRays::Packets, PathLanes::Lanes),
         ];
         let rows = self.compared_ladder(
             Knob::Traversal,
             rungs,
             "the robust traversal's image",
-            |bench, (traversal, camera_rays)| {
+            |bench, (traversal, camera_rays, paths)| {
                 bench.world.set_traversal(traversal);
                 bench.world.camera_rays = camera_rays;
-                (rung_name(traversal, camera_rays), settings.clone())
+                bench.world.paths = paths;
+                (rung_name(traversal, camera_rays, paths), settings.clone())
             },
         );
         self.world.set_traversal(Traversal::Robust);
         self.world.camera_rays = CameraRays::default();
+        self.world.paths = PathLanes::default();
         rows
     }
 
@@ -394,6 +405,7 @@ impl<'a> Bench<'a> {
             bvh: BuildQuality::default(),
             traversal: self.world.traversal(),
             camera_rays: self.world.camera_rays,
+            paths: self.world.paths,
             build_seconds: 0.0,
             render_seconds: timed.seconds,
             rays: timed.rays,
@@ -406,14 +418,18 @@ impl<'a> Bench<'a> {
     }
 }
 
-/// A traversal rung's name: the traversal's ("robust", "robustbinary", "obvhs"), and
-/// "robust-one-by-one" for ours with camera rays one by one (packets are used only by ours).
-pub fn rung_name(traversal: Traversal, camera_rays: CameraRays) -> String {
-    let name = format!("{traversal:?}").to_lowercase();
-    match camera_rays {
-        CameraRays::Packets => name,
-        CameraRays::OneByOne => format!("{name}-one-by-one"),
+/// A traversal rung's name: the traversal's ("robust", "robustbinary", "obvhs"),
+/// "robust-one-by-one" for ours with camera rays one by one (packets are used only by ours),
+/// and "robust-paths-one-by-one" for ours with paths one by one rather than in lanes.
+pub fn rung_name(traversal: Traversal, camera_rays: CameraRays, paths: PathLanes) -> String {
+    let mut name = format!("{traversal:?}").to_lowercase();
+    if camera_rays == CameraRays::OneByOne {
+        name += "-one-by-one";
     }
+    if paths == PathLanes::OneByOne {
+        name += "-paths-one-by-one";
+    }
+    name
 }
 
 /// "identical to WHAT", or how much `image` differs from `other`.

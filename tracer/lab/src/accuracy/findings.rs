@@ -9,9 +9,9 @@ use super::curve::{Curve, loglog_slope};
 use super::leaks::LeakCheck;
 use super::report::Run;
 use super::{Cost, Knob};
-use tracer::CameraRays;
 use tracer::geometry::{BuildQuality, Traversal};
 use tracer::scene::RenderSettings;
+use tracer::{CameraRays, PathLanes};
 
 /// The findings of a run, a few sentences per knob measured.
 pub fn sentences(run: &Run, curve: Option<&Curve>) -> Vec<String> {
@@ -42,6 +42,7 @@ fn timing_sentence(run: &Run) -> Option<String> {
                 && r.bvh == BuildQuality::default()
                 && r.traversal == Traversal::Robust
                 && r.camera_rays == CameraRays::default()
+                && r.paths == PathLanes::default()
         })
         .collect();
     if same.len() < 2 {
@@ -77,6 +78,7 @@ fn work_rate_sentence(run: &Run) -> String {
         .filter(|r| {
             r.traversal == Traversal::Robust
                 && r.camera_rays == CameraRays::default()
+                && r.paths == PathLanes::default()
                 && r.render_seconds > 0.0
         })
         .map(|r| r.work as f64 / 1e6 / r.render_seconds)
@@ -321,9 +323,11 @@ fn bvh_sentence(run: &Run) -> Option<String> {
 }
 
 fn traversal_sentence(run: &Run) -> Option<String> {
-    let robust = run
-        .rows_of(Knob::Traversal)
-        .find(|r| r.traversal == Traversal::Robust && r.camera_rays == CameraRays::Packets)?;
+    let robust = run.rows_of(Knob::Traversal).find(|r| {
+        r.traversal == Traversal::Robust
+            && r.camera_rays == CameraRays::Packets
+            && r.paths == PathLanes::Lanes
+    })?;
     let obvhs = run
         .rows_of(Knob::Traversal)
         .find(|r| r.traversal == Traversal::Obvhs)?;
@@ -350,6 +354,23 @@ fn traversal_sentence(run: &Run) -> Option<String> {
     {
         s += &format!(
             " Ours with a pixel's camera rays in packets: {:.3} s, against {:.3} s with every ray alone, and the image {}.",
+            robust.render_seconds,
+            single.render_seconds,
+            single
+                .note
+                .replace("differs from the robust traversal's image", "differs")
+                .replace(
+                    "bit-identical to the robust traversal's image",
+                    "bit-identical"
+                ),
+        );
+    }
+    if let Some(single) = run
+        .rows_of(Knob::Traversal)
+        .find(|r| r.traversal == Traversal::Robust && r.paths == PathLanes::OneByOne)
+    {
+        s += &format!(
+            " Ours with a pixel's paths in lanes where the scene allows them: {:.3} s, against {:.3} s one path at a time, and the image {}.",
             robust.render_seconds,
             single.render_seconds,
             single

@@ -16,9 +16,9 @@ use super::reference::{Reference, Source};
 use crate::LabError;
 use std::fmt::Write as _;
 use std::path::Path;
-use tracer::CameraRays;
 use tracer::geometry::Traversal;
 use tracer::scene::RenderSettings;
+use tracer::{CameraRays, PathLanes};
 
 /// Everything one run measured, and how.
 pub struct Run<'a> {
@@ -55,12 +55,14 @@ impl Run<'_> {
     }
 
     /// The closed-sphere check shown beside a traversal rung: its traversal's, once per
-    /// traversal (on the rung with camera rays in packets, not again beside the one without,
-    /// since the check traces single rays either way).
+    /// traversal (on the rung with camera rays in packets and paths in lanes, not again beside
+    /// the ones without, since the check traces single rays either way).
     pub fn leak_check_of(&self, row: &Row) -> Option<&LeakCheck> {
-        (row.knob == Knob::Traversal && row.camera_rays == CameraRays::default())
-            .then(|| self.leak_check(row.traversal))
-            .flatten()
+        (row.knob == Knob::Traversal
+            && row.camera_rays == CameraRays::default()
+            && row.paths == PathLanes::default())
+        .then(|| self.leak_check(row.traversal))
+        .flatten()
     }
 }
 
