@@ -199,15 +199,20 @@ impl Lights {
     /// constant environment.
     #[inline(always)]
     pub(crate) fn lanes_choice(&self, u_choice: f32) -> (Option<(u32, &TriangleShape)>, f32) {
-        let index = self
-            .cdf
-            .partition_point(|&c| c <= u_choice)
-            .min(self.lights.len() - 1);
+        let index = self.pick(u_choice);
         let light = match self.lights[index] {
             Light::Triangle(triangle) => Some((triangle, &self.shapes[index])),
             _ => None,
         };
         (light, self.choice_pdf(index))
+    }
+
+    /// The index of the light `u_choice` picks from the choice distribution (there is one).
+    #[inline(always)]
+    fn pick(&self, u_choice: f32) -> usize {
+        self.cdf
+            .partition_point(|&c| c <= u_choice)
+            .min(self.lights.len() - 1)
     }
 
     /// The cumulative probability of the lights before `index`: where its share of the choice's
@@ -253,18 +258,19 @@ impl Lights {
         if self.lights.is_empty() {
             return;
         }
-        let index = self
-            .cdf
-            .partition_point(|&c| c <= u_choice)
-            .min(self.lights.len() - 1);
+        let index = self.pick(u_choice);
         let choice = self.choice_pdf(index);
         if choice <= 0.0 {
             return;
         }
         if let Light::Triangle(t) = self.lights[index] {
             let triangle = &scene.triangles[t as usize];
+            let shape = &self.shapes[index];
+            let su = u.x.sqrt();
+            let (b1, b2) = (su * (1.0 - u.y), su * u.y);
+            let at = SurfacePoint::on_triangle_with_normal(&triangle.p, b1, b2, shape.plane_normal);
             let radiance = scene.materials[triangle.material as usize].emission;
-            *out = triangle_sample(&triangle.p, &self.shapes[index], (radiance, choice), p, u);
+            *out = area_sample(p, at, (shape.area, shape.normal), radiance, choice);
             return;
         }
         *out = self.sample_other(scene, moment, p, (index, choice), u);
@@ -383,28 +389,10 @@ impl Lights {
     }
 }
 
-/// A point on the still triangle `v` of shape `shape`, uniform in its area (from `u`), as
-/// seen from `p`: emitting `radiance`, chosen with probability `choice` (what the paths in
-/// lanes, `integrator/lanes/`, write out lane by lane).
-#[inline(always)]
-fn triangle_sample(
-    v: &[Vec3; 3],
-    shape: &TriangleShape,
-    (radiance, choice): (Vec3, f32),
-    p: Vec3,
-    u: Vec2,
-) -> Option<LightSample> {
-    let su = u.x.sqrt();
-    let (b1, b2) = (su * (1.0 - u.y), su * u.y);
-    let at = SurfacePoint::on_triangle_with_normal(v, b1, b2, shape.plane_normal);
-    area_sample(p, at, (shape.area, shape.normal), radiance, choice)
-}
-
 /// The light sample of point `at` on an area emitter of `area` whose emitting side faces
 /// `normal`, seen from `p`, chosen with probability `choice`: the one conversion of an area
 /// density into a solid-angle one, for still and moving triangles alike. `None` where the point
 /// shows its back (which does not emit) or the emitter has no area.
-#[inline(always)]
 fn area_sample(
     p: Vec3,
     at: SurfacePoint,

@@ -197,7 +197,6 @@ pub fn spawn_ray(from: &SurfacePoint, dir: Vec3, method: OffsetMethod) -> Ray {
 /// Limitation: a segment that runs within rounding of the plane it leaves (both ends on an
 /// edge two triangles share) has no side that is certainly right, and may be reported blocked
 /// by the surface it runs along. Light arriving along a surface carries a cosine of zero.
-#[inline(always)]
 pub fn spawn_ray_to(from: &SurfacePoint, to: &SurfacePoint, method: OffsetMethod) -> Ray {
     let origin = offset_ray_origin(from, to.p - from.p, method);
     let widened = SurfacePoint {

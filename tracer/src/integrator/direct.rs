@@ -15,7 +15,7 @@
 
 use super::scatter::Scatterer;
 use super::{PathStats, World};
-use crate::geometry::{Moment, OffsetMethod, Ray, SurfacePoint, spawn_ray, spawn_ray_to};
+use crate::geometry::{Moment, Ray, SurfacePoint, spawn_ray, spawn_ray_to};
 use crate::lights::LightSample;
 use crate::spectrum::PathSpectrum;
 use glam::{Vec2, Vec3};
@@ -67,7 +67,6 @@ impl AreaLightSampling {
 
     /// Whether this choice drops the light sample `light` before its shadow ray: BSDF sampling
     /// alone drops those on area lights.
-    #[inline(always)]
     pub(super) fn drops(self, light: &LightSample) -> bool {
         self == AreaLightSampling::Bsdf && on_area_light(light)
     }
@@ -76,7 +75,6 @@ impl AreaLightSampling {
     /// direction the scatterer would sample with density `scatter_pdf` (asked only where the
     /// weighting needs it). Delta lights take all the weight whatever the choice; the
     /// environment is weighed by the power heuristic, as its own knob decides how it is sampled.
-    #[inline(always)]
     pub(super) fn light_weight(
         self,
         light: &LightSample,
@@ -186,12 +184,15 @@ impl World {
         numbers: &[f32; 3],
         stats: &mut PathStats,
     ) -> Vec3 {
-        let Some(Unshadowed { value, shadow }) =
-            unshadowed(self.area_lights, self.offset, scatter, at, light, spectrum)
-        else {
+        if self.area_lights.drops(light) {
             return Vec3::ZERO;
-        };
+        }
+        let f = scatter.f(light.wi);
+        if f == Vec3::ZERO || light.radiance == Vec3::ZERO || light.pdf <= 0.0 {
+            return Vec3::ZERO;
+        }
         stats.shadow_rays += 1;
+        let shadow = self.shadow_ray(at, light);
         // Without media a shadow ray is blocked or not; with them it carries what the media let
         // through, and passes index-matched interfaces (`scatter.rs`). A vacuum lets exactly 1
         // through, and `x * 1` is `x`, so the product below keeps its bits either way.
@@ -206,11 +207,22 @@ impl World {
         } else {
             Vec3::ONE
         };
-        value * transmittance
+        let weight = self
+            .area_lights
+            .light_weight(light, || scatter.pdf(light.wi));
+        f * spectrum.of(light.radiance) * (weight / light.pdf) * transmittance
     }
-}
 
-impl World {
+    /// The shadow ray from `at` towards the sampled light: to its point, or along its direction
+    /// when it is infinitely far (the environment).
+    pub(super) fn shadow_ray(&self, at: &SurfacePoint, light: &LightSample) -> Ray {
+        if light.distance.is_finite() {
+            spawn_ray_to(at, &light.at, self.offset)
+        } else {
+            spawn_ray(at, light.wi, self.offset)
+        }
+    }
+
     /// What the environment sends along `dir`, the direction of a path's ray that met
     /// nothing, and its weight by multiple importance sampling against light sampling after
     /// the last scattering (`last`: its density, whether it was a delta, where it was);
@@ -236,7 +248,7 @@ impl World {
         Some((environment.radiance(dir), weight))
     }
 
-    /// The weight of an emitter that a path's ray found at `at` (triangle `hit.triangle`),
+    /// The weight of an emitter that a path's ray found at `at` (on triangle `triangle`),
     /// after a scattering at `last_point` that sampled the ray with density `last_pdf`, or a
     /// delta (or the camera) where `last_delta`: multiple importance sampling against light
     /// sampling, for the scalar paths and the paths in lanes alike.
@@ -259,54 +271,6 @@ impl World {
     }
 }
 
-/// What a light sample brings where nothing blocks it, and the shadow ray that asks whether
-/// something does ([`unshadowed`]).
-#[derive(Clone, Copy)]
-pub(super) struct Unshadowed {
-    /// The sample's weighed contribution, before any transmittance.
-    pub value: Vec3,
-    /// The shadow ray from the point towards the light.
-    pub shadow: Ray,
-}
-
-/// What the light sample `light` brings to `at` through `scatter`, weighed for `sampling`, if
-/// nothing between blocks it; `None` where it brings nothing whatever lies between (no shadow
-/// ray is then traced). Pure, with the world's knobs as arguments.
-#[inline(always)]
-pub(super) fn unshadowed(
-    sampling: AreaLightSampling,
-    offset: OffsetMethod,
-    scatter: &impl Scatterer,
-    at: &SurfacePoint,
-    light: &LightSample,
-    spectrum: &PathSpectrum,
-) -> Option<Unshadowed> {
-    if sampling.drops(light) {
-        return None;
-    }
-    let f = scatter.f(light.wi);
-    if f == Vec3::ZERO || light.radiance == Vec3::ZERO || light.pdf <= 0.0 {
-        return None;
-    }
-    let shadow = shadow_ray(at, light, offset);
-    let weight = sampling.light_weight(light, || scatter.pdf(light.wi));
-    Some(Unshadowed {
-        value: f * spectrum.of(light.radiance) * (weight / light.pdf),
-        shadow,
-    })
-}
-
-/// The shadow ray from `at` towards the sampled light: to its point, or along its direction
-/// when it is infinitely far (the environment).
-#[inline(always)]
-pub(super) fn shadow_ray(at: &SurfacePoint, light: &LightSample, offset: OffsetMethod) -> Ray {
-    if light.distance.is_finite() {
-        spawn_ray_to(at, &light.at, offset)
-    } else {
-        spawn_ray(at, light.wi, offset)
-    }
-}
-
 /// The light samples of one next-event estimation ([`World::sample_lights`]): none where no
 /// light could be sampled; a second, through the environment's portals, where the first is the
 /// environment and the scene declares portals.
@@ -318,7 +282,6 @@ pub(super) struct LightSamples {
 
 /// Whether `light` lies on an area light: of the lights that are not deltas, every one but the
 /// environment (the only one infinitely far) is an emissive triangle.
-#[inline(always)]
 fn on_area_light(light: &LightSample) -> bool {
     !light.delta && light.distance.is_finite()
 }

@@ -134,7 +134,7 @@ impl World {
     /// that always tracks media pays: a closest-hit query instead of an any-hit one.
     ///
     /// `shadow` is taken by reference: passed by value, it was copied just after
-    /// [`shadow_ray`](super::direct::shadow_ray) wrote it, in wide loads across that function's narrower stores,
+    /// [`World::shadow_ray`] wrote it, in wide loads across that function's narrower stores,
     /// which the processor cannot forward (docs/bench.md, issue 12, twenty-sixth round).
     pub(super) fn transmittance(
         &self,
@@ -187,12 +187,12 @@ impl World {
             let front_facing = shadow.dir.dot(placed.unit_normal) < 0.0;
             medium = self.medium_across(material, front_facing);
             stats.shadow_rays += 1;
-            shadow = super::direct::shadow_ray(&placed.at, light, self.offset);
+            shadow = self.shadow_ray(&placed.at, light);
         }
     }
 
-    /// The texel a textured `bsdf` reads at texture coordinates `uv`, where textures are simulated: its
-    /// texture and index (none for a surface without coordinates, which reads white), found
+    /// The texel a textured `bsdf` reads at texture coordinates `uv`, where textures are
+    /// simulated: its texture and index (none for a surface without coordinates, which reads white), found
     /// once here and asked for from memory now, so that [`resolve`] reads it after other work
     /// has overlapped the wait.
     pub(super) fn texel_ahead(

@@ -157,7 +157,10 @@ impl Bsdf {
     /// BSDFs, whose value is a distribution that only [`Bsdf::sample`] can produce.
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         match *self {
-            Bsdf::Diffuse { albedo, .. } => albedo * diffuse_pdf(wo, wi),
+            Bsdf::Diffuse { albedo, .. } => match same_side_upper(wo, wi) {
+                Some((_, wi)) => albedo * (wi.z * FRAC_1_PI),
+                None => Vec3::ZERO,
+            },
             Bsdf::Conductor { f0, alpha } => match same_side_upper(wo, wi) {
                 Some((wo, wi)) => Ggx::new(f0, alpha).eval(wo, wi),
                 None => Vec3::ZERO,
@@ -174,7 +177,10 @@ impl Bsdf {
     /// sample fails because the reflection went below the surface.
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         match *self {
-            Bsdf::Diffuse { .. } => diffuse_pdf(wo, wi),
+            Bsdf::Diffuse { .. } => match same_side_upper(wo, wi) {
+                Some((_, wi)) => wi.z * FRAC_1_PI,
+                None => 0.0,
+            },
             Bsdf::Conductor { f0, alpha } => match same_side_upper(wo, wi) {
                 Some((wo, wi)) => Ggx::new(f0, alpha).pdf(wo, wi),
                 None => 0.0,
@@ -196,7 +202,16 @@ impl Bsdf {
         }
         let flip = wo.z < 0.0;
         match *self {
-            Bsdf::Diffuse { albedo, .. } => sample_diffuse(albedo, flip, u),
+            Bsdf::Diffuse { albedo, .. } => {
+                let wi = sample_cosine_hemisphere(u);
+                (wi.z > 0.0).then(|| BsdfSample {
+                    wi: flip_z(wi, flip),
+                    weight: albedo,
+                    pdf: wi.z * FRAC_1_PI,
+                    delta: false,
+                    transmission: false,
+                })
+            }
             Bsdf::Mirror { reflectance } => Some(BsdfSample {
                 wi: reflect_local(wo),
                 weight: reflectance,
@@ -282,39 +297,12 @@ impl Bsdf {
 /// Maps a pair of directions on the same side of the surface to the upper hemisphere, mirroring
 /// both through the tangent plane when `wo` is below it: the two-sided reflection convention.
 /// `None` when they are on opposite sides or either is in the tangent plane.
-/// A Lambertian surface's density of `wi` seen from `wo`, `cos theta_i / pi` on `wo`'s side
-/// and zero on the other: its `f * |cos|` over its albedo, too, so [`Bsdf::eval`] and
-/// [`Bsdf::pdf`] share it.
-#[inline(always)]
-fn diffuse_pdf(wo: Vec3, wi: Vec3) -> f32 {
-    match same_side_upper(wo, wi) {
-        Some((_, wi)) => wi.z * FRAC_1_PI,
-        None => 0.0,
-    }
-}
-
-/// A Lambertian surface's sample from `u` (cosine-weighted, on the side of `wo`, which is
-/// below the surface where `flip`).
-#[inline(always)]
-fn sample_diffuse(albedo: Vec3, flip: bool, u: Vec2) -> Option<BsdfSample> {
-    let wi = sample_cosine_hemisphere(u);
-    (wi.z > 0.0).then(|| BsdfSample {
-        wi: flip_z(wi, flip),
-        weight: albedo,
-        pdf: wi.z * FRAC_1_PI,
-        delta: false,
-        transmission: false,
-    })
-}
-
-#[inline(always)]
 fn same_side_upper(wo: Vec3, wi: Vec3) -> Option<(Vec3, Vec3)> {
     let flip = wo.z < 0.0;
     let (wo, wi) = (flip_z(wo, flip), flip_z(wi, flip));
     (wo.z > 0.0 && wi.z > 0.0).then_some((wo, wi))
 }
 
-#[inline(always)]
 fn flip_z(v: Vec3, flip: bool) -> Vec3 {
     if flip { Vec3::new(v.x, v.y, -v.z) } else { v }
 }
@@ -322,7 +310,7 @@ fn flip_z(v: Vec3, flip: bool) -> Vec3 {
 /// A cosine-weighted direction in the upper hemisphere (density `cos theta / pi`), by Malley's
 /// method: a uniform point on the unit disk lifted onto the hemisphere.
 #[inline(always)]
-fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
+pub(crate) fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
     let d = crate::math::concentric_disk(u);
     Vec3::new(d.x, d.y, (1.0 - d.length_squared()).max(0.0).sqrt())
 }

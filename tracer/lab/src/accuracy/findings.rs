@@ -322,6 +322,16 @@ fn bvh_sentence(run: &Run) -> Option<String> {
     ))
 }
 
+/// A traversal rung's note against the robust traversal's image, shortened to "differs" or
+/// "bit-identical" for a sentence that has named what it is compared with.
+fn short_note(note: &str) -> String {
+    note.replace("differs from the robust traversal's image", "differs")
+        .replace(
+            "bit-identical to the robust traversal's image",
+            "bit-identical",
+        )
+}
+
 fn traversal_sentence(run: &Run) -> Option<String> {
     let robust = run.rows_of(Knob::Traversal).find(|r| {
         r.traversal == Traversal::Robust
@@ -356,13 +366,7 @@ fn traversal_sentence(run: &Run) -> Option<String> {
             " Ours with a pixel's camera rays in packets: {:.3} s, against {:.3} s with every ray alone, and the image {}.",
             robust.render_seconds,
             single.render_seconds,
-            single
-                .note
-                .replace("differs from the robust traversal's image", "differs")
-                .replace(
-                    "bit-identical to the robust traversal's image",
-                    "bit-identical"
-                ),
+            short_note(&single.note),
         );
     }
     if let Some(single) = run
@@ -373,13 +377,7 @@ fn traversal_sentence(run: &Run) -> Option<String> {
             " Ours with a pixel's paths in lanes where the scene allows them: {:.3} s, against {:.3} s one path at a time, and the image {}.",
             robust.render_seconds,
             single.render_seconds,
-            single
-                .note
-                .replace("differs from the robust traversal's image", "differs")
-                .replace(
-                    "bit-identical to the robust traversal's image",
-                    "bit-identical"
-                ),
+            short_note(&single.note),
         );
     }
     if let (Some(r), Some(o)) = (

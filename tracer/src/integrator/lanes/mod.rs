@@ -16,9 +16,13 @@
 //!
 //! **Exactness.** Every lane computes what the scalar path ([`World::radiance_from`])
 //! computes for its sample, operation for operation and in the same order: the second phase
-//! calls `Frame`, `concentric_disk` (whose sine and cosine are `libm`'s kernels without a
-//! branch, `math::sin_cos_quarter`, in both) and `power_heuristic` as the scalar path does,
-//! and writes out the rest of a diffuse bounce lane by lane; vector instructions round each
+//! calls the scalar path's own functions where they are written without branches it cannot
+//! make selects (`Frame`, the cosine-weighted direction, whose sine and cosine are `libm`'s
+//! kernels without a branch, `math::sin_cos_quarter`; the points with their error bounds; the
+//! power heuristic), and writes out lane by lane the decisions that return `Option`s there
+//! (`Bsdf::sample`'s test of `wo`, `area_sample`, the light sample's value) and the rays'
+//! offsets, whose one-float steps it takes with selects on the bits (`shade.rs` says why
+//! the scalar path keeps its branches); vector instructions round each
 //! lane as the scalar ones do (no fused multiply-add, no reassociation: Rust never contracts
 //! or reorders float arithmetic). A pixel's samples are added in sample order, so an image is
 //! the same bits either way, and so are the counted work and the statistics.

@@ -7,7 +7,7 @@ use crate::geometry::{SurfacePoint, gamma};
 use crate::integrator::direct::power_heuristic;
 use crate::lights::uniform_sphere;
 use crate::material::Frame;
-use crate::math::concentric_disk;
+use crate::material::sample_cosine_hemisphere;
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -83,11 +83,12 @@ pub(super) struct Shaded {
 
 /// The second phase: each lane's shading, in one loop that vectorises. Its body is the scalar
 /// path's arithmetic, in the scalar path's order, with every choice a select: `Frame`,
-/// `concentric_disk` and `power_heuristic` are called as they are; what `Bsdf::sample`,
-/// `triangle_sample`, `unshadowed` and `spawn_ray` do for a diffuse surface and a still
-/// triangle is written out here lane by lane, because their `Option`s kept the compiler from
-/// vectorising the loop (docs/bench.md, issue 12, thirty-first round). `tracer/tests/
-/// path_lanes.rs` holds every image to the scalar path's, bit for bit.
+/// `sample_cosine_hemisphere`, `SurfacePoint::on_triangle_with_normal` and `power_heuristic`
+/// are called as they are; what `Bsdf::sample`, `area_sample`, the light sample's value and
+/// the spawns (`offset` below) do for a diffuse surface is written out here lane by lane,
+/// because their `Option`s and branches kept the compiler from vectorising the loop
+/// (docs/bench.md, issue 12, thirty-first round). `tracer/tests/path_lanes.rs` holds every
+/// image to the scalar path's, bit for bit.
 #[inline(always)]
 pub(super) fn shade<const SKY: bool>(g: &Gathered, out: &mut Shaded) {
     for i in 0..LANES {
@@ -99,28 +100,31 @@ pub(super) fn shade<const SKY: bool>(g: &Gathered, out: &mut Shaded) {
             g.barycentric[1][i],
             plane,
         );
-        let (p, error) = (at.p, at.error);
+        let p = at.p;
         out.p.set(i, p);
         let frame = Frame::from_normal(g.normal.get(i));
         let wo = frame.to_local(-g.dir.get(i));
         // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side.
         let flip = wo.z < 0.0;
-        let d = concentric_disk(Vec2::new(g.scatter[0][i], g.scatter[1][i]));
-        let z = (1.0 - d.length_squared()).max(0.0).sqrt();
-        out.sampled[i] = wo.z != 0.0 && !wo.z.is_nan() && z > 0.0;
-        out.pdf[i] = z * FRAC_1_PI;
+        let local = sample_cosine_hemisphere(Vec2::new(g.scatter[0][i], g.scatter[1][i]));
+        out.sampled[i] = wo.z != 0.0 && !wo.z.is_nan() && local.z > 0.0;
+        out.pdf[i] = local.z * FRAC_1_PI;
         out.weight.set(i, g.albedo.get(i));
-        let wi = frame.to_world(Vec3::new(d.x, d.y, if flip { -z } else { z }));
+        let z = if flip { -local.z } else { local.z };
+        let wi = frame.to_world(Vec3::new(local.x, local.y, z));
         out.next_dir.set(i, wi);
-        out.next_origin.set(i, offset(p, error, plane, wi));
+        out.next_origin.set(i, offset(&at, wi));
         // `triangle_sample`: a point uniform on the light's triangle, as seen from `p`.
         let su = g.light[0][i].sqrt();
         let (b1, b2) = (su * (1.0 - g.light[1][i]), su * g.light[1][i]);
-        let v0 = g.corners[0].get(i);
-        let (e1, e2) = (g.corners[1].get(i) - v0, g.corners[2].get(i) - v0);
-        let q = v0 + (b1 * e1 + b2 * e2);
-        let q_error = gamma(2) * q.abs() + gamma(4) * ((b1 * e1).abs() + (b2 * e2).abs());
-        let to_light = q - p;
+        let corners = [
+            g.corners[0].get(i),
+            g.corners[1].get(i),
+            g.corners[2].get(i),
+        ];
+        let light_at =
+            SurfacePoint::on_triangle_with_normal(&corners, b1, b2, g.light_plane.get(i));
+        let to_light = light_at.p - p;
         let distance_squared = to_light.length_squared();
         let distance = distance_squared.sqrt();
         let cos_light = -(to_light / distance).dot(g.light_normal.get(i));
@@ -152,29 +156,37 @@ pub(super) fn shade<const SKY: bool>(g: &Gathered, out: &mut Shaded) {
         let weight = power_heuristic(light_pdf, density);
         out.value.set(i, f * emission * (weight / light_pdf));
         out.lit[i] = sampled_light && f != Vec3::ZERO && emission != Vec3::ZERO && light_pdf > 0.0;
-        // `spawn_ray_to`: both ends off their surfaces; towards the sky, `spawn_ray`.
-        let origin = offset(p, error, plane, if sky { sky_way } else { to_light });
-        let widened = q_error + gamma(2) * (q - origin).abs();
-        let target = offset(q, widened, g.light_plane.get(i), origin - q);
+        // `shadow_ray`: towards the sky (`spawn_ray`), or with both ends off their surfaces
+        // (`spawn_ray_to`).
+        let origin = offset(&at, if sky { sky_way } else { to_light });
+        let widened = SurfacePoint {
+            error: light_at.error + gamma(2) * (light_at.p - origin).abs(),
+            ..light_at
+        };
+        let target = offset(&widened, origin - light_at.p);
         out.origin.set(i, origin);
         out.reach
             .set(i, if sky { sky_way } else { target - origin });
     }
 }
 
-/// `offset_ray_origin` with the error-bound method, for a still surface: `p` (within `error`
-/// of its plane, of unit normal `plane`) moved off the plane to the side `toward` points to,
-/// and then one float further along each axis it moved, by integer steps on the bits.
+/// `offset_ray_origin` with the error-bound method, for a still surface: `at` moved off its
+/// plane to the side `toward` points to, then one float further along each axis it moved, by
+/// integer steps on the bits. The scalar path's own (`offset_by_error`) steps with
+/// `next_up`/`next_down`, whose branches predict well there: written with these selects, it
+/// made the scalar path 7 % slower on the Cornell box (docs/bench.md, thirty-first round), so
+/// the lanes keep this twin, held to it bit for bit by `tracer/tests/path_lanes.rs` and
+/// `step`'s own test.
 #[inline(always)]
-fn offset(p: Vec3, error: Vec3, plane: Vec3, toward: Vec3) -> Vec3 {
-    let n = if plane.dot(toward) < 0.0 {
-        -plane
+fn offset(at: &SurfacePoint, toward: Vec3) -> Vec3 {
+    let n = if at.normal.dot(toward) < 0.0 {
+        -at.normal
     } else {
-        plane
+        at.normal
     };
-    let d = n.abs().dot(error);
+    let d = n.abs().dot(at.error);
     let offset = d * n;
-    let moved = p + offset;
+    let moved = at.p + offset;
     Vec3::new(
         step(moved.x, offset.x),
         step(moved.y, offset.y),
