@@ -10,7 +10,7 @@ mod common;
 
 use std::path::Path;
 use tracer::scene::{CameraTrack, Scene};
-use tracer::{CameraRays, PathLanes, World};
+use tracer::{CameraRays, PathLanes, Rect, World};
 
 /// The shipped Cornell box (diffuse walls, one emissive quad), loaded.
 fn cornell_box() -> Scene {
@@ -33,37 +33,67 @@ fn placed(mut scene: Scene, scale: f32, shift: glam::Vec3) -> Scene {
     scene
 }
 
-/// The image's bits and the render's statistics, with the paths advanced as `paths` says and
-/// the camera's rays found as `camera_rays` says.
-fn render(
-    scene: Scene,
-    paths: PathLanes,
-    camera_rays: CameraRays,
-) -> (Vec<u32>, tracer::PathStats, bool) {
+/// What a render both ways must agree on: the image's bits, the statistics and the cost map,
+/// of the whole frame and of a tile away from its corner (whose pixels start mid-row, so that
+/// the lanes' stream hands out and stores pixels of rows cut by the tile's edges).
+#[derive(Debug, PartialEq)]
+struct Rendered {
+    bits: Vec<u32>,
+    stats: tracer::PathStats,
+    cost: tracer::TileCost,
+    tile_bits: Vec<u32>,
+    tile_cost: tracer::TileCost,
+}
+
+/// The render with the paths advanced as `paths` says and the camera's rays found as
+/// `camera_rays` says; and whether the lanes ran.
+fn render(scene: Scene, paths: PathLanes, camera_rays: CameraRays) -> (Rendered, bool) {
     let mut world = World::prepare(scene, None);
     world.paths = paths;
     world.camera_rays = camera_rays;
     let fits = world.lanes_fit();
+    let bits = |out: &tracer::TileOutput| -> Vec<u32> {
+        out.pixels.iter().flatten().map(|c| c.to_bits()).collect()
+    };
     let out = common::render_world(&world, 0);
-    let bits = out.pixels.iter().flatten().map(|c| c.to_bits()).collect();
-    (bits, out.stats, fits)
+    let (w, h) = (world.scene.settings.width, world.scene.settings.height);
+    let rect = Rect {
+        x: w / 3,
+        y: h / 4,
+        w: w / 2 + 1,
+        h: h / 3 + 1,
+    };
+    let tile = tracer::render_tile(&world, 0, rect);
+    let rendered = Rendered {
+        bits: bits(&out),
+        stats: out.stats,
+        cost: out.cost,
+        tile_bits: bits(&tile),
+        tile_cost: tile.cost,
+    };
+    (rendered, fits)
 }
 
 /// Renders `scene` both ways and holds them to each other; returns whether the lanes ran.
 fn same_both_ways(label: &str, scene: Scene, camera_rays: CameraRays) -> bool {
-    let (lanes, lane_stats, fits) = render(scene.clone(), PathLanes::Lanes, camera_rays);
-    let (one_by_one, stats, _) = render(scene, PathLanes::OneByOne, camera_rays);
+    let (lanes, fits) = render(scene.clone(), PathLanes::Lanes, camera_rays);
+    let (one_by_one, _) = render(scene, PathLanes::OneByOne, camera_rays);
     assert!(
-        lanes.iter().any(|&b| f32::from_bits(b) > 0.0),
+        lanes.bits.iter().any(|&b| f32::from_bits(b) > 0.0),
         "{label}: black"
     );
     let differing = lanes
+        .bits
         .iter()
-        .zip(&one_by_one)
+        .zip(&one_by_one.bits)
         .filter(|(a, b)| a != b)
         .count();
     assert_eq!(differing, 0, "{label}: {differing} channels differ");
-    assert_eq!(lane_stats, stats, "{label}: other work counted");
+    assert_eq!(lanes.stats, one_by_one.stats, "{label}: other work counted");
+    assert_eq!(
+        lanes, one_by_one,
+        "{label}: the cost map or the tile differ"
+    );
     fits
 }
 

@@ -1,8 +1,14 @@
-//! A pixel's paths in lanes: up to eight of its samples' paths advanced a bounce at a time,
-//! their shading computed together in vector instructions, for the worlds whose every path
-//! can be ([`World::lanes_fit`]): plain ones ([`World::is_plain`]) of diffuse surfaces
-//! (textured or not, with shading normals or not), lit by still emissive triangles and a
-//! constant sky. The Cornell scenes and Sponza are such worlds.
+//! A tile's paths in lanes: eight paths advanced a bounce at a time, their shading computed
+//! together in vector instructions, for the worlds whose every path can be
+//! ([`World::lanes_fit`]): plain ones ([`World::is_plain`]) of diffuse surfaces (textured or
+//! not, with shading normals or not), lit by still emissive triangles and a constant sky. The
+//! Cornell scenes and Sponza are such worlds.
+//!
+//! The paths come from a feed ([`PathFeed`]; the tile's, `tile/lanes.rs`, hands out its
+//! pixels' samples in order, a camera packet at a time) and go back to it as they end, in any
+//! order. A lane whose path ends takes the next path at once, so the lanes stay full: with a
+//! pixel's eight samples alone in the lanes until the last one ended, two lanes in five did
+//! the shading's work for nothing (docs/bench.md, issue 12, thirty-second round).
 //!
 //! Each bounce has three phases. The first, one lane at a time, draws the lane's numbers,
 //! walks its ray through the tree, finds the surface's side, shading normal, texel and what
@@ -24,8 +30,10 @@
 //! offsets, whose one-float steps it takes with selects on the bits (`shade.rs` says why
 //! the scalar path keeps its branches); vector instructions round each
 //! lane as the scalar ones do (no fused multiply-add, no reassociation: Rust never contracts
-//! or reorders float arithmetic). A pixel's samples are added in sample order, so an image is
-//! the same bits either way, and so are the counted work and the statistics.
+//! or reorders float arithmetic). Each path's result depends only on its own numbers, never on
+//! its lane or its neighbours, and the feed adds a pixel's samples in sample order once all
+//! are back, so an image is the same bits either way, and so are the counted work and the
+//! statistics, each path's counted apart and added to its own pixel's.
 //! `tracer/tests/path_lanes.rs` holds the two to each other image by image.
 //!
 //! Why this pays where a lockstep loop of scalar kernels did not (docs/bench.md, issue 12,
@@ -34,8 +42,9 @@
 //! the time of one.
 
 use super::AreaLightSampling;
+use super::PathStats;
 use super::scatter::{BounceNumbers, resolve};
-use super::{PathStats, UNLIMITED_DEPTH, World};
+use super::{UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
 use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, hit_point};
 use crate::material::Bsdf;
@@ -97,69 +106,38 @@ impl World {
                 .all(|m| matches!(m.bsdf, Bsdf::Diffuse { .. }))
     }
 
-    /// The radiance of `rays.len()` (one to eight) paths of a pixel, from their camera rays,
-    /// as [`World::radiance_from`] finds each one's; `first` holds their closest hits where
-    /// the camera packet found them. Only for worlds that [`World::lanes_fit`].
-    pub fn radiance_lanes(
-        &self,
-        rays: &[Ray],
-        first: Option<&[Option<Hit>]>,
-        samplers: &mut [PixelSampler],
-        stats: &mut PathStats,
-    ) -> [Vec3; LANES] {
-        assert!(
-            !rays.is_empty() && rays.len() <= LANES && samplers.len() >= rays.len(),
-            "one to eight paths, each with its sampler"
-        );
+    /// Renders every path `feed` hands out, up to eight at a time, and hands each one's
+    /// radiance and counted work back to `feed` as it ends: each path's, bit for bit, what
+    /// [`World::radiance_from`] finds for it. A lane whose path ends takes the feed's next
+    /// one at once, so that the shading's vector instructions work on eight paths for as
+    /// long as the feed has paths, not on a pixel's dwindling few (at a pixel's last bounces
+    /// only two in five lanes were still busy). Only for worlds that [`World::lanes_fit`].
+    pub(crate) fn radiance_stream(&self, feed: &mut impl PathFeed) {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx") {
             // SAFETY: the processor has AVX, just checked.
-            return unsafe { self.lanes_avx(rays, first, samplers, stats) };
+            return unsafe { self.lanes_avx(feed) };
         }
-        self.lanes_with(rays, first, samplers, stats)
+        self.lanes_with(feed)
     }
 
     /// [`World::lanes_with`] compiled with AVX: the second phase's loops eight lanes wide.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    unsafe fn lanes_avx(
-        &self,
-        rays: &[Ray],
-        first: Option<&[Option<Hit>]>,
-        samplers: &mut [PixelSampler],
-        stats: &mut PathStats,
-    ) -> [Vec3; LANES] {
-        self.lanes_with(rays, first, samplers, stats)
+    unsafe fn lanes_avx(&self, feed: &mut impl PathFeed) {
+        self.lanes_with(feed)
     }
 
-    /// The paths' loop, a bounce of every live lane at a time.
+    /// The paths' loop, a bounce of every busy lane at a time.
     #[inline(always)]
-    fn lanes_with(
-        &self,
-        rays: &[Ray],
-        mut first: Option<&[Option<Hit>]>,
-        samplers: &mut [PixelSampler],
-        stats: &mut PathStats,
-    ) -> [Vec3; LANES] {
+    fn lanes_with(&self, feed: &mut impl PathFeed) {
+        // Still worlds only: every ray is asked at the one moment, made once (it has a drop).
         let moment = Moment::default();
-        let settings = &self.scene.settings;
-        let max_depth = settings.max_depth.unwrap_or(UNLIMITED_DEPTH);
-        let mut ray = [rays[0]; LANES];
-        ray[..rays.len()].copy_from_slice(rays);
-        let mut alive = [false; LANES];
-        alive[..rays.len()].fill(true);
-        let mut beta = [Vec3::ONE; LANES];
-        let mut radiance = [Vec3::ZERO; LANES];
-        // The last scattering's density, whether it was a delta, and where it was; the camera
-        // counts as a delta, as in the scalar path.
-        let mut last: [(f32, bool, Vec3); LANES] =
-            std::array::from_fn(|i| (0.0, true, ray[i].origin));
-        let mut roulette = [0.0f32; LANES];
+        let mut paths = Paths::default();
         let mut gathered = Gathered::default();
         let mut shaded = Shaded::default();
         // Which lanes found a surface to shade this bounce.
         let mut shading = [false; LANES];
-        let mut depth = 0u32;
         // What the constant environment sends every way, where it is a light; where it is
         // not, the shading is compiled without its sampling.
         let sky = match &self.scene.environment {
@@ -167,94 +145,23 @@ impl World {
             _ => Vec3::ZERO,
         };
         let sky_is_light = self.lights.environment_is_light();
-        while alive.iter().any(|&a| a) {
-            // First phase: numbers, walk, surface, emission, the light's choice.
-            for i in 0..LANES {
-                shading[i] = false;
-                if !alive[i] {
-                    continue;
-                }
-                let sampler = &mut samplers[i];
-                sampler.start_bounce(depth);
-                let u = BounceNumbers::draw(sampler);
-                stats.rays += 1;
-                let found = match first {
-                    Some(hits) => hits[i],
-                    None => self.closest(&ray[i], &moment, &mut stats.traversal),
-                };
-                let Some(hit) = found else {
-                    if let Some((arriving, weight)) =
-                        self.environment_seen(ray[i].dir, last[i], stats)
-                    {
-                        radiance[i] += beta[i] * arriving * weight;
+        loop {
+            // First phase: a lane whose path ends here takes the next one, until it has a
+            // surface to shade or the feed is dry.
+            for (i, shading) in shading.iter_mut().enumerate() {
+                *shading = loop {
+                    if !paths.alive[i] && !paths.admit(i, feed) {
+                        break false;
                     }
-                    alive[i] = false;
-                    continue;
-                };
-                stats.hits += 1;
-                // `World::surface`, but for the point and its error bound, which the second
-                // phase computes from the corners gathered below.
-                let triangle = &self.scene.triangles[hit.triangle as usize];
-                let geometric = self.accel.unit_normal(hit.triangle);
-                let attributes = self.scene.attributes.get(hit.triangle as usize);
-                let seen = self.shading(ray[i].dir, &hit, attributes, None, geometric);
-                let material = &self.scene.materials[triangle.material as usize];
-                if self.effects.area_lights && material.emission != Vec3::ZERO && seen.front_facing
-                {
-                    let at = hit_point(&triangle.p, hit.b1, hit.b2);
-                    let weight = self.hit_emitter_weight(&moment, hit.triangle, at, last[i]);
-                    radiance[i] += beta[i] * material.emission * weight;
-                }
-                if depth >= max_depth {
-                    alive[i] = false;
-                    continue;
-                }
-                let albedo = match material.bsdf {
-                    Bsdf::Diffuse {
-                        albedo,
-                        texture: None,
-                    } => albedo,
-                    _ => {
-                        let texel = self.texel_ahead(&material.bsdf, seen.uv);
-                        let Bsdf::Diffuse { albedo, .. } = resolve(&material.bsdf, texel) else {
-                            unreachable!("lanes_fit: every material is diffuse")
-                        };
-                        albedo
+                    if self.first_phase(&moment, &mut paths, i, &mut gathered, sky) {
+                        break true;
                     }
+                    paths.end(i, feed);
                 };
-                stats.light_samples += 1;
-                let (light, choice) = self.lights.lanes_choice(u.light_choice);
-                roulette[i] = u.roulette;
-                shading[i] = true;
-                let g = &mut gathered;
-                for (corner, p) in g.hit.iter_mut().zip(triangle.p) {
-                    corner.set(i, p);
-                }
-                (g.barycentric[0][i], g.barycentric[1][i]) = (hit.b1, hit.b2);
-                g.plane.set(i, self.accel.plane_normal(hit.triangle));
-                g.normal.set(i, seen.normal);
-                g.dir.set(i, ray[i].dir);
-                g.albedo.set(i, albedo);
-                (g.scatter[0][i], g.scatter[1][i]) = (u.scatter.x, u.scatter.y);
-                (g.light[0][i], g.light[1][i]) = (u.light.x, u.light.y);
-                g.choice[i] = choice;
-                g.sky[i] = light.is_none();
-                match light {
-                    Some((triangle, shape)) => {
-                        let triangle = &self.scene.triangles[triangle as usize];
-                        for (corner, p) in g.corners.iter_mut().zip(triangle.p) {
-                            corner.set(i, p);
-                        }
-                        g.light_area[i] = shape.area;
-                        g.light_normal.set(i, shape.normal);
-                        g.light_plane.set(i, shape.plane_normal);
-                        let emission = self.scene.materials[triangle.material as usize].emission;
-                        g.emission.set(i, emission);
-                    }
-                    None => g.emission.set(i, sky),
-                }
             }
-            first = None;
+            if !shading.iter().any(|&s| s) {
+                return;
+            }
             // Second phase: every lane's shading at once.
             if sky_is_light {
                 shade::<true>(&gathered, &mut shaded);
@@ -262,43 +169,249 @@ impl World {
                 shade::<false>(&gathered, &mut shaded);
             }
             // Third phase: shadow rays, then each path's next ray or its end.
-            depth += 1;
-            for i in 0..LANES {
-                if !shading[i] {
-                    continue;
+            for (i, &shading) in shading.iter().enumerate() {
+                if shading && !self.third_phase(&moment, &mut paths, i, &gathered, &shaded) {
+                    paths.end(i, feed);
                 }
-                if shaded.lit[i] {
-                    stats.shadow_rays += 1;
-                    let shadow = Ray {
-                        origin: shaded.origin.get(i),
-                        dir: shaded.reach.get(i),
-                        t_max: if gathered.sky[i] { f32::INFINITY } else { 1.0 },
-                    };
-                    if !self.occluded(&shadow, &moment, &mut stats.traversal) {
-                        radiance[i] += beta[i] * shaded.value.get(i);
-                    }
-                }
-                if !shaded.sampled[i] {
-                    alive[i] = false;
-                    continue;
-                }
-                beta[i] *= shaded.weight.get(i);
-                if beta[i] == Vec3::ZERO || !beta[i].is_finite() {
-                    alive[i] = false;
-                    continue;
-                }
-                last[i] = (shaded.pdf[i], false, shaded.p.get(i));
-                if !self.roulette(false, depth, roulette[i], Vec3::ONE, &mut beta[i]) {
-                    alive[i] = false;
-                    continue;
-                }
-                ray[i] = Ray {
-                    origin: shaded.next_origin.get(i),
-                    dir: shaded.next_dir.get(i),
-                    t_max: f32::INFINITY,
-                };
             }
         }
-        radiance
+    }
+
+    /// Lane `i`'s first phase: its numbers, walk, surface, emission and light. `true` where
+    /// the lane has a surface to shade (its values gathered), `false` where its path ends.
+    #[inline(always)]
+    fn first_phase(
+        &self,
+        moment: &Moment,
+        paths: &mut Paths,
+        i: usize,
+        g: &mut Gathered,
+        sky: Vec3,
+    ) -> bool {
+        let max_depth = self.scene.settings.max_depth.unwrap_or(UNLIMITED_DEPTH);
+        let depth = paths.depth[i];
+        let stats = &mut paths.stats[i];
+        let sampler = &mut paths.sampler[i];
+        sampler.start_bounce(depth);
+        let u = BounceNumbers::draw(sampler);
+        stats.rays += 1;
+        let ray = &paths.ray[i];
+        let found = match paths.first[i].take() {
+            Some(hit) => hit,
+            None => self.closest(ray, moment, &mut stats.traversal),
+        };
+        let last = (paths.last_pdf[i], paths.last_delta[i], paths.last_point[i]);
+        let Some(hit) = found else {
+            if let Some((arriving, weight)) = self.environment_seen(ray.dir, last, stats) {
+                paths.radiance[i] += paths.beta[i] * arriving * weight;
+            }
+            return false;
+        };
+        stats.hits += 1;
+        // `World::surface`, but for the point and its error bound, which the second
+        // phase computes from the corners gathered below.
+        let triangle = &self.scene.triangles[hit.triangle as usize];
+        let geometric = self.accel.unit_normal(hit.triangle);
+        let attributes = self.scene.attributes.get(hit.triangle as usize);
+        let seen = self.shading(ray.dir, &hit, attributes, None, geometric);
+        let material = &self.scene.materials[triangle.material as usize];
+        if self.effects.area_lights && material.emission != Vec3::ZERO && seen.front_facing {
+            let at = hit_point(&triangle.p, hit.b1, hit.b2);
+            let weight = self.hit_emitter_weight(moment, hit.triangle, at, last);
+            paths.radiance[i] += paths.beta[i] * material.emission * weight;
+        }
+        if depth >= max_depth {
+            return false;
+        }
+        let albedo = match material.bsdf {
+            Bsdf::Diffuse {
+                albedo,
+                texture: None,
+            } => albedo,
+            _ => {
+                let texel = self.texel_ahead(&material.bsdf, seen.uv);
+                let Bsdf::Diffuse { albedo, .. } = resolve(&material.bsdf, texel) else {
+                    unreachable!("lanes_fit: every material is diffuse")
+                };
+                albedo
+            }
+        };
+        stats.light_samples += 1;
+        let (light, choice) = self.lights.lanes_choice(u.light_choice);
+        paths.roulette[i] = u.roulette;
+        for (corner, p) in g.hit.iter_mut().zip(triangle.p) {
+            corner.set(i, p);
+        }
+        (g.barycentric[0][i], g.barycentric[1][i]) = (hit.b1, hit.b2);
+        g.plane.set(i, self.accel.plane_normal(hit.triangle));
+        g.normal.set(i, seen.normal);
+        g.dir.set(i, ray.dir);
+        g.albedo.set(i, albedo);
+        (g.scatter[0][i], g.scatter[1][i]) = (u.scatter.x, u.scatter.y);
+        (g.light[0][i], g.light[1][i]) = (u.light.x, u.light.y);
+        g.choice[i] = choice;
+        g.sky[i] = light.is_none();
+        match light {
+            Some((triangle, shape)) => {
+                let triangle = &self.scene.triangles[triangle as usize];
+                for (corner, p) in g.corners.iter_mut().zip(triangle.p) {
+                    corner.set(i, p);
+                }
+                g.light_area[i] = shape.area;
+                g.light_normal.set(i, shape.normal);
+                g.light_plane.set(i, shape.plane_normal);
+                let emission = self.scene.materials[triangle.material as usize].emission;
+                g.emission.set(i, emission);
+            }
+            None => g.emission.set(i, sky),
+        }
+        true
+    }
+
+    /// Lane `i`'s third phase: its shadow ray, then its next ray; `false` where its path
+    /// ends.
+    #[inline(always)]
+    fn third_phase(
+        &self,
+        moment: &Moment,
+        paths: &mut Paths,
+        i: usize,
+        g: &Gathered,
+        shaded: &Shaded,
+    ) -> bool {
+        let stats = &mut paths.stats[i];
+        let beta = &mut paths.beta[i];
+        if shaded.lit[i] {
+            stats.shadow_rays += 1;
+            let shadow = Ray {
+                origin: shaded.origin.get(i),
+                dir: shaded.reach.get(i),
+                t_max: if g.sky[i] { f32::INFINITY } else { 1.0 },
+            };
+            if !self.occluded(&shadow, moment, &mut stats.traversal) {
+                paths.radiance[i] += *beta * shaded.value.get(i);
+            }
+        }
+        paths.depth[i] += 1;
+        if !shaded.sampled[i] {
+            return false;
+        }
+        *beta *= shaded.weight.get(i);
+        if *beta == Vec3::ZERO || !beta.is_finite() {
+            return false;
+        }
+        (paths.last_pdf[i], paths.last_delta[i], paths.last_point[i]) =
+            (shaded.pdf[i], false, shaded.p.get(i));
+        if !self.roulette(false, paths.depth[i], paths.roulette[i], Vec3::ONE, beta) {
+            return false;
+        }
+        paths.ray[i] = Ray {
+            origin: shaded.next_origin.get(i),
+            dir: shaded.next_dir.get(i),
+            t_max: f32::INFINITY,
+        };
+        true
     }
 }
+
+/// A lane's slots for a new path, which [`PathFeed::next_path`] fills in place (returned by
+/// value, a path's start went through narrow stores read back by wider loads, a stall the
+/// processor cannot forward).
+pub(crate) struct NewPath<'a> {
+    /// The camera ray.
+    pub ray: &'a mut Ray,
+    /// The camera ray's closest hit, where the feed found it already (a camera packet).
+    pub first: &'a mut Option<Option<Hit>>,
+    /// The sample's numbers, the camera's already drawn.
+    pub sampler: &'a mut PixelSampler,
+}
+
+/// Where [`World::radiance_stream`]'s paths come from and where their results go.
+pub(crate) trait PathFeed {
+    /// Fills `lane` with the next path to render and returns the feed's name for it, or
+    /// `None` when there are no more.
+    fn next_path(&mut self, lane: NewPath<'_>) -> Option<u64>;
+    /// The radiance of the path named `tag` and its counted work, as it ends (paths end in
+    /// any order).
+    fn path_done(&mut self, tag: u64, radiance: Vec3, stats: &PathStats);
+}
+
+/// The lanes' paths, a value of every lane at a time: the state the scalar path keeps in its
+/// locals. The last scattering's density, whether it was a delta and where it was are three
+/// arrays rather than one of tuples: a 17-byte tuple's copies went through unaligned,
+/// overlapping stores the processor could not forward (docs/bench.md, issue 12,
+/// thirty-second round).
+struct Paths {
+    alive: [bool; LANES],
+    tag: [u64; LANES],
+    ray: [Ray; LANES],
+    first: [Option<Option<Hit>>; LANES],
+    sampler: [PixelSampler; LANES],
+    depth: [u32; LANES],
+    beta: [Vec3; LANES],
+    radiance: [Vec3; LANES],
+    last_pdf: [f32; LANES],
+    last_delta: [bool; LANES],
+    last_point: [Vec3; LANES],
+    roulette: [f32; LANES],
+    stats: [PathStats; LANES],
+}
+
+impl Default for Paths {
+    fn default() -> Self {
+        Paths {
+            alive: [false; LANES],
+            tag: [0; LANES],
+            ray: [UNUSED_RAY; LANES],
+            first: [None; LANES],
+            sampler: std::array::from_fn(|_| PixelSampler::new(0, 0, 0, 0, 0)),
+            depth: [0; LANES],
+            beta: [Vec3::ONE; LANES],
+            radiance: [Vec3::ZERO; LANES],
+            last_pdf: [0.0; LANES],
+            last_delta: [true; LANES],
+            last_point: [Vec3::ZERO; LANES],
+            roulette: [0.0; LANES],
+            stats: [PathStats::default(); LANES],
+        }
+    }
+}
+
+impl Paths {
+    /// Starts the feed's next path in lane `i`, as the scalar path starts a camera ray (the
+    /// camera counts as a delta); `false` where the feed has none.
+    #[inline(always)]
+    fn admit(&mut self, i: usize, feed: &mut impl PathFeed) -> bool {
+        let lane = NewPath {
+            ray: &mut self.ray[i],
+            first: &mut self.first[i],
+            sampler: &mut self.sampler[i],
+        };
+        let Some(tag) = feed.next_path(lane) else {
+            return false;
+        };
+        self.alive[i] = true;
+        self.tag[i] = tag;
+        self.depth[i] = 0;
+        self.beta[i] = Vec3::ONE;
+        self.radiance[i] = Vec3::ZERO;
+        (self.last_pdf[i], self.last_delta[i], self.last_point[i]) =
+            (0.0, true, self.ray[i].origin);
+        self.stats[i] = PathStats::default();
+        true
+    }
+
+    /// Ends lane `i`'s path and hands its result over.
+    #[inline(always)]
+    fn end(&mut self, i: usize, feed: &mut impl PathFeed) {
+        self.alive[i] = false;
+        feed.path_done(self.tag[i], self.radiance[i], &self.stats[i]);
+    }
+}
+
+/// What fills an idle lane's ray; never traced.
+const UNUSED_RAY: Ray = Ray {
+    origin: Vec3::ZERO,
+    dir: Vec3::Z,
+    t_max: 0.0,
+};
