@@ -1,6 +1,6 @@
 //! `tessera bench`: the arguments, and [`lab::bench::run`] on them.
 
-use crate::cli::ImageArgs;
+use crate::cli::{EffectsChoice, ImageArgs};
 use std::path::PathBuf;
 
 /// Measure the tracer: rays per second for camera rays alone and for full paths, BVH build time,
@@ -39,6 +39,10 @@ pub struct BenchArgs {
     /// image either way.
     #[arg(long, default_value = "lanes", value_parser = ["lanes", "one-by-one"])]
     pub paths: String,
+    /// Which light-transport effects to pay for: those the scene calls for, or all of them
+    /// (the generic pipeline, to measure what specialising saves; the same image either way).
+    #[arg(long, value_enum, default_value_t = EffectsChoice::Auto)]
+    pub effects: EffectsChoice,
 }
 
 /// Measures as the flags say; the image overrides are applied with `tessera render`'s checks.
@@ -72,6 +76,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             .into_iter()
             .find(|p| p.name() == args.paths)
             .unwrap_or_default(),
+        effects: args.effects.forced(),
     })?;
     Ok(())
 }

@@ -348,6 +348,16 @@ pub enum EffectsChoice {
     All,
 }
 
+impl EffectsChoice {
+    /// The effect set forced on the world, or `None` for the scene's own.
+    pub fn forced(self) -> Option<tracer::Effects> {
+        match self {
+            EffectsChoice::Auto => None,
+            EffectsChoice::All => Some(tracer::Effects::ALL),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

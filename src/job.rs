@@ -10,7 +10,7 @@ use runtime::node::{self, CompletedFrame, FrameSink, Job};
 use runtime_core::stats::{Accepted, StatsFile};
 use std::sync::Arc;
 use std::time::Instant;
-use tracer::{Effects, Scene, World};
+use tracer::{Scene, World};
 
 /// Loads the scene, runs `drive` with a sink that writes frames, and writes the statistics,
 /// the Gantt chart and a one-line summary.
@@ -323,9 +323,5 @@ pub fn load_scene(args: &FrameArgs) -> anyhow::Result<Scene> {
 
 /// Builds the BVH and the lights, with the effect set the flags ask for.
 pub fn prepare_world(scene: Scene, effects: EffectsChoice) -> World {
-    let effects = match effects {
-        EffectsChoice::Auto => None,
-        EffectsChoice::All => Some(Effects::ALL),
-    };
-    World::prepare(scene, effects)
+    World::prepare(scene, effects.forced())
 }

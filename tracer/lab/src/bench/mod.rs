@@ -54,6 +54,10 @@ pub struct Config {
     /// How a pixel's paths are advanced: in lanes where the scene allows it (the default), or
     /// one by one, to measure what the lanes buy (the same image either way).
     pub paths: tracer::PathLanes,
+    /// The effects paid for: `None`, those each scene calls for (the default), or a set
+    /// forced on (`tracer::Effects::ALL`: the generic pipeline, to measure what specialising
+    /// saves; the same image either way).
+    pub effects: Option<tracer::Effects>,
 }
 
 /// Everything one `tessera bench` run measured.
@@ -89,6 +93,8 @@ pub struct SceneBench {
     pub height: u32,
     /// Samples per pixel rendered.
     pub samples_per_pixel: u32,
+    /// The effects the world paid for (`tracer::Effects`'s list).
+    pub effects: String,
     /// Whether the full paths ran in lanes (`tracer::World::lanes_fit`), or one by one.
     pub path_lanes: bool,
     /// Reading and validating the TOML and OBJ/MTL files.
@@ -249,7 +255,7 @@ fn bench_scene(
         LabError::Invalid(message).context(format!("benchmarking {}", path.display()))
     })?;
     let load_seconds = started.elapsed().as_secs_f64();
-    let build = timed(|| tracer::World::prepare(scene, None));
+    let build = timed(|| tracer::World::prepare(scene, args.effects));
     let (mut world, build_seconds, build_cpu_seconds) =
         (build.value, build.seconds, build.cpu_seconds);
     let resident_after_build = process_status_kib("VmRSS");
@@ -290,6 +296,7 @@ fn bench_scene(
         width: settings.width,
         height: settings.height,
         samples_per_pixel: settings.samples_per_pixel,
+        effects: world.effects.to_string(),
         path_lanes: world.lanes_fit(),
         load_seconds,
         build_seconds,
@@ -378,12 +385,13 @@ fn shipped_scenes(dir: &Path) -> Result<Vec<PathBuf>, LabError> {
 fn print_scene(s: &SceneBench) {
     let cpu = |seconds: Option<f64>| seconds.map_or("?".to_owned(), |s| format!("{s:.2}"));
     println!(
-        "{}: {} triangles, {}x{}, {} spp, paths {}; load {:.3} s, BVH build {:.3} s ({} CPU-s)",
+        "{}: {} triangles, {}x{}, {} spp, effects {}, paths {}; load {:.3} s, BVH build {:.3} s ({} CPU-s)",
         s.scene,
         s.triangles,
         s.width,
         s.height,
         s.samples_per_pixel,
+        s.effects,
         if s.path_lanes {
             "in lanes"
         } else {

@@ -20,6 +20,7 @@ fn args() -> Config {
         json: true,
         spectral: SpectralSampling::default(),
         paths: tracer::PathLanes::default(),
+        effects: None,
     }
 }
 
