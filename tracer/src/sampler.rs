@@ -36,21 +36,27 @@ impl PixelSampler {
     /// The stream of sample `sample` of pixel (`x`, `y`) of frame `frame` under `seed`: a pure
     /// function of the five, so a pixel's value never depends on who renders it or when.
     pub fn new(seed: u64, frame: u32, x: u32, y: u32, sample: u32) -> Self {
-        let mut key = mix(seed ^ 0x7e55_e7a0_0000_0000);
-        key = mix(key ^ u64::from(frame));
-        key = mix(key ^ (u64::from(x) << 32 | u64::from(y)));
-        key = mix(key ^ u64::from(sample));
-        Self {
-            key,
-            dimension: 0,
-            bounce: 0,
-        }
+        PixelKey::new(seed, frame, x, y).sample(sample)
     }
 
     /// Moves to the first dimension of bounce `bounce` (0 is the camera ray's first hit).
     pub fn start_bounce(&mut self, bounce: u32) {
         self.dimension = CAMERA_DIMENSIONS + bounce * DIMENSIONS_PER_BOUNCE;
         self.bounce = bounce;
+    }
+
+    /// The next `N` numbers, uniform in [0, 1): what `N` calls of [`PixelSampler::next_1d`]
+    /// return, bit for bit. Each dimension's offset is the first one's plus a constant
+    /// multiple of the increment (`(d + k) G = d G + k G` modulo 2^64), so a bounce's block
+    /// takes one multiplication for its offsets rather than one per number.
+    #[inline(always)]
+    pub fn next_nd<const N: usize>(&mut self) -> [f32; N] {
+        let first = u64::from(self.dimension).wrapping_mul(GOLDEN_GAMMA);
+        self.dimension += N as u32;
+        std::array::from_fn(|k| {
+            let offset = first.wrapping_add((k as u64).wrapping_mul(GOLDEN_GAMMA));
+            unit_f32(mix(self.key ^ offset))
+        })
     }
 
     /// The next number, uniform in [0, 1).
@@ -72,8 +78,7 @@ impl PixelSampler {
 
     /// The next two numbers as a point in [0, 1)^2, x drawn first.
     pub fn next_2d(&mut self) -> Vec2 {
-        let x = self.next_1d();
-        Vec2::new(x, self.next_1d())
+        Vec2::from_array(self.next_nd::<2>())
     }
 
     /// The point on the lens, in [0, 1)^2: a fixed pair of camera dimensions in the lens's own
@@ -101,6 +106,29 @@ impl PixelSampler {
     /// other number and the same however often it is asked for.
     pub fn medium(&self) -> Vec2 {
         Self::stream(mix(mix(self.key ^ MEDIUM_STREAM) ^ u64::from(self.bounce))).next_2d()
+    }
+}
+
+/// A pixel's part of its samples' streams: (seed, frame, pixel) hashed once for all of its
+/// samples, which [`PixelKey::sample`] finishes, as [`PixelSampler::new`] does for one.
+#[derive(Clone, Copy, Debug)]
+pub struct PixelKey(u64);
+
+impl PixelKey {
+    /// The key of pixel (`x`, `y`) of frame `frame` under `seed`.
+    pub fn new(seed: u64, frame: u32, x: u32, y: u32) -> Self {
+        let mut key = mix(seed ^ 0x7e55_e7a0_0000_0000);
+        key = mix(key ^ u64::from(frame));
+        PixelKey(mix(key ^ (u64::from(x) << 32 | u64::from(y))))
+    }
+
+    /// The stream of the pixel's sample `sample`.
+    pub fn sample(self, sample: u32) -> PixelSampler {
+        PixelSampler {
+            key: mix(self.0 ^ u64::from(sample)),
+            dimension: 0,
+            bounce: 0,
+        }
     }
 }
 
@@ -159,6 +187,43 @@ mod tests {
         ] {
             let mut o = other;
             assert_ne!(o.next_1d(), a[0]);
+        }
+    }
+
+    /// A block of numbers drawn at once is the numbers drawn one by one, bit for bit, from
+    /// any dimension (bounce blocks, the camera's, far dimensions) and any key; and a pixel's
+    /// key finished per sample is the sample's stream hashed in one go, as the stream was
+    /// first defined (written out here).
+    #[test]
+    fn blocks_and_pixel_keys_draw_what_single_numbers_and_whole_keys_draw() {
+        for (i, dimension) in [0u32, 2, 9, 700, 1 << 20, u32::MAX - 40]
+            .into_iter()
+            .enumerate()
+        {
+            let mut one = PixelSampler::new(3, 1, i as u32, 7, 11);
+            one.dimension = dimension;
+            let mut block = one.clone();
+            let singles: [f32; 7] = std::array::from_fn(|_| one.next_1d());
+            assert_eq!(
+                block.next_nd::<7>().map(f32::to_bits),
+                singles.map(f32::to_bits)
+            );
+            assert_eq!(block.dimension, one.dimension);
+            assert_eq!(
+                block.next_nd::<2>().map(f32::to_bits),
+                [one.next_1d(), one.next_1d()].map(f32::to_bits)
+            );
+        }
+        for (seed, frame, x, y, sample) in [
+            (0, 0, 0, 0, 0),
+            (u64::MAX, 9, 4000, 3, 1023),
+            (42, 1 << 20, 7, 9000, 5),
+        ] {
+            let mut key = mix(seed ^ 0x7e55_e7a0_0000_0000);
+            key = mix(key ^ u64::from(frame));
+            key = mix(key ^ (u64::from(x) << 32 | u64::from(y)));
+            key = mix(key ^ u64::from(sample));
+            assert_eq!(PixelKey::new(seed, frame, x, y).sample(sample).key, key);
         }
     }
 

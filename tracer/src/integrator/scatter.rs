@@ -18,7 +18,7 @@ use crate::geometry::{Moment, Ray};
 use crate::lights::LightSample;
 use crate::material::{Bsdf, Frame, Material};
 use crate::medium::{Medium, Stream, henyey_greenstein};
-use crate::sampler::PixelSampler;
+use crate::sampler::{DIMENSIONS_PER_BOUNCE, PixelSampler};
 use crate::scene::Texture;
 use glam::{Vec2, Vec3};
 
@@ -77,16 +77,20 @@ pub(super) struct BounceNumbers {
 
 impl BounceNumbers {
     pub(super) fn draw(sampler: &mut PixelSampler) -> Self {
-        let light_choice = sampler.next_1d();
-        let light = sampler.next_2d();
-        let choice = sampler.next_1d();
-        let scatter = sampler.next_2d();
-        let roulette = sampler.next_1d();
+        let [
+            light_choice,
+            light_x,
+            light_y,
+            choice,
+            scatter_x,
+            scatter_y,
+            roulette,
+        ] = sampler.next_nd::<{ DIMENSIONS_PER_BOUNCE as usize }>();
         BounceNumbers {
             light_choice,
-            light,
+            light: Vec2::new(light_x, light_y),
             choice,
-            scatter,
+            scatter: Vec2::new(scatter_x, scatter_y),
             roulette,
         }
     }

@@ -9,7 +9,7 @@ mod lanes;
 
 use crate::geometry::{Hit, PACKET, Ray, TraversalStats};
 use crate::integrator::{PathStats, World};
-use crate::sampler::PixelSampler;
+use crate::sampler::{PixelKey, PixelSampler};
 use crate::scene::CameraRays;
 use serde::{Deserialize, Serialize};
 
@@ -207,9 +207,9 @@ impl<'w> Cameras<'w> {
         let settings = &world.scene.settings;
         let n = (self.spp - first).min(PACKET as u32) as usize;
         packet.n = n;
+        let key = PixelKey::new(settings.seed, self.frame, x, y);
         for (k, sampler) in packet.samplers.iter_mut().enumerate() {
-            let sample = first + k.min(n - 1) as u32;
-            *sampler = PixelSampler::new(settings.seed, self.frame, x, y, sample);
+            *sampler = key.sample(first + k.min(n - 1) as u32);
         }
         packet.times = [self.instant; PACKET];
         for k in 0..n {
