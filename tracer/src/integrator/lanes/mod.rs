@@ -46,6 +46,7 @@ use super::PathStats;
 use super::scatter::{BounceNumbers, resolve};
 use super::{UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
+use crate::scene::Texture;
 use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, hit_point};
 use crate::material::Bsdf;
 use crate::sampler::PixelSampler;
@@ -136,6 +137,7 @@ impl World {
         let mut paths = Paths::default();
         let mut gathered = Gathered::default();
         let mut shaded = Shaded::default();
+        let mut texels: [Texel; LANES] = [None; LANES];
         // Which lanes found a surface to shade this bounce.
         let mut shading = [false; LANES];
         // What the constant environment sends every way, where it is a light; where it is
@@ -153,7 +155,8 @@ impl World {
                     if !paths.alive[i] && !paths.admit(i, feed) {
                         break false;
                     }
-                    if self.first_phase(&moment, &mut paths, i, &mut gathered, sky) {
+                    let lane = (&mut gathered, &mut texels[i]);
+                    if self.first_phase(&moment, &mut paths, i, lane, sky) {
                         break true;
                     }
                     paths.end(i, feed);
@@ -161,6 +164,14 @@ impl World {
             }
             if !shading.iter().any(|&s| s) {
                 return;
+            }
+            for (i, texel) in texels.iter_mut().enumerate() {
+                if let Some((bsdf, texel)) = texel.take() {
+                    let Bsdf::Diffuse { albedo, .. } = resolve(bsdf, texel) else {
+                        unreachable!("lanes_fit: every material is diffuse")
+                    };
+                    gathered.albedo.set(i, albedo);
+                }
             }
             // Second phase: every lane's shading at once.
             if sky_is_light {
@@ -180,12 +191,12 @@ impl World {
     /// Lane `i`'s first phase: its numbers, walk, surface, emission and light. `true` where
     /// the lane has a surface to shade (its values gathered), `false` where its path ends.
     #[inline(always)]
-    fn first_phase(
-        &self,
+    fn first_phase<'w>(
+        &'w self,
         moment: &Moment,
         paths: &mut Paths,
         i: usize,
-        g: &mut Gathered,
+        (g, texel): (&mut Gathered, &mut Texel<'w>),
         sky: Vec3,
     ) -> bool {
         let max_depth = self.scene.settings.max_depth.unwrap_or(UNLIMITED_DEPTH);
@@ -223,18 +234,16 @@ impl World {
         if depth >= max_depth {
             return false;
         }
-        let albedo = match material.bsdf {
-            Bsdf::Diffuse {
-                albedo,
-                texture: None,
-            } => albedo,
-            _ => {
-                let texel = self.texel_ahead(&material.bsdf, seen.uv);
-                let Bsdf::Diffuse { albedo, .. } = resolve(&material.bsdf, texel) else {
-                    unreachable!("lanes_fit: every material is diffuse")
-                };
-                albedo
-            }
+        // A texture's texel is asked for from memory here and read after every lane's first
+        // phase (`Texels::resolve`), so that the lanes' misses overlap each other and the
+        // other lanes' walks; read at once, the wait was a third of this function's time on
+        // Sponza (docs/bench.md, issue 12, thirty-second round).
+        *texel = match material.bsdf {
+            Bsdf::Diffuse { texture: None, .. } => None,
+            _ => Some((&material.bsdf, self.texel_ahead(&material.bsdf, seen.uv))),
+        };
+        let Bsdf::Diffuse { albedo, .. } = material.bsdf else {
+            unreachable!("lanes_fit: every material is diffuse")
         };
         stats.light_samples += 1;
         let (light, choice) = self.lights.lanes_choice(u.light_choice);
@@ -313,6 +322,10 @@ impl World {
         true
     }
 }
+
+/// A textured surface's BSDF and the texel it reads, asked for from memory in a lane's first
+/// phase and read after every lane's ([`World::texel_ahead`]).
+type Texel<'w> = Option<(&'w Bsdf, Option<(&'w Texture, Option<usize>)>)>;
 
 /// A lane's slots for a new path, which [`PathFeed::next_path`] fills in place (returned by
 /// value, a path's start went through narrow stores read back by wider loads, a stall the
