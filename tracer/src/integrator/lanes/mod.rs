@@ -46,10 +46,10 @@ use super::PathStats;
 use super::scatter::{BounceNumbers, resolve};
 use super::{UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
-use crate::scene::Texture;
 use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, hit_point};
 use crate::material::Bsdf;
 use crate::sampler::PixelSampler;
+use crate::scene::Texture;
 use crate::spectrum::SpectralSampling;
 use glam::Vec3;
 
@@ -148,19 +148,26 @@ impl World {
         };
         let sky_is_light = self.lights.environment_is_light();
         loop {
-            // First phase: a lane whose path ends here takes the next one, until it has a
-            // surface to shade or the feed is dry.
+            // First phase, in two passes: every lane's walk, then every lane's surface, so
+            // that the hit triangles' records, which the walks ask for from memory as they
+            // keep a hit, arrive while the other lanes walk. A lane whose path ends in either
+            // takes the next one, until it has a surface to shade or the feed is dry.
+            let mut walked = [false; LANES];
+            for (i, walked) in walked.iter_mut().enumerate() {
+                *walked = self.next_hit(&moment, &mut paths, i, feed);
+            }
             for (i, shading) in shading.iter_mut().enumerate() {
-                *shading = loop {
-                    if !paths.alive[i] && !paths.admit(i, feed) {
-                        break false;
-                    }
-                    let lane = (&mut gathered, &mut texels[i]);
-                    if self.first_phase(&moment, &mut paths, i, lane, sky) {
-                        break true;
-                    }
-                    paths.end(i, feed);
-                };
+                *shading = walked[i]
+                    && loop {
+                        let lane = (&mut gathered, &mut texels[i]);
+                        if self.surface_phase(&moment, &mut paths, i, lane, sky) {
+                            break true;
+                        }
+                        paths.end(i, feed);
+                        if !self.next_hit(&moment, &mut paths, i, feed) {
+                            break false;
+                        }
+                    };
             }
             if !shading.iter().any(|&s| s) {
                 return;
@@ -188,10 +195,45 @@ impl World {
         }
     }
 
-    /// Lane `i`'s first phase: its numbers, walk, surface, emission and light. `true` where
-    /// the lane has a surface to shade (its values gathered), `false` where its path ends.
+    /// Lane `i`'s walk to its next hit: the ray of its path, or where that path ends (the ray
+    /// escapes), of the feed's next ones. `true` with the hit kept in the lane, `false` when
+    /// the feed is dry.
     #[inline(always)]
-    fn first_phase<'w>(
+    fn next_hit(
+        &self,
+        moment: &Moment,
+        paths: &mut Paths,
+        i: usize,
+        feed: &mut impl PathFeed,
+    ) -> bool {
+        loop {
+            if !paths.alive[i] && !paths.admit(i, feed) {
+                return false;
+            }
+            let stats = &mut paths.stats[i];
+            stats.rays += 1;
+            let ray = &paths.ray[i];
+            let found = match paths.first[i].take() {
+                Some(hit) => hit,
+                None => self.closest(ray, moment, &mut stats.traversal),
+            };
+            if let Some(hit) = found {
+                paths.hit[i] = hit;
+                return true;
+            }
+            let last = (paths.last_pdf[i], paths.last_delta[i], paths.last_point[i]);
+            if let Some((arriving, weight)) = self.environment_seen(ray.dir, last, stats) {
+                paths.radiance[i] += paths.beta[i] * arriving * weight;
+            }
+            paths.end(i, feed);
+        }
+    }
+
+    /// Lane `i`'s surface, after its walk: its numbers, the surface's side, shading normal,
+    /// texel and emission, and its light. `true` where the lane has a surface to shade (its
+    /// values gathered), `false` where its path ends.
+    #[inline(always)]
+    fn surface_phase<'w>(
         &'w self,
         moment: &Moment,
         paths: &mut Paths,
@@ -205,19 +247,9 @@ impl World {
         let sampler = &mut paths.sampler[i];
         sampler.start_bounce(depth);
         let u = BounceNumbers::draw(sampler);
-        stats.rays += 1;
         let ray = &paths.ray[i];
-        let found = match paths.first[i].take() {
-            Some(hit) => hit,
-            None => self.closest(ray, moment, &mut stats.traversal),
-        };
+        let hit = paths.hit[i];
         let last = (paths.last_pdf[i], paths.last_delta[i], paths.last_point[i]);
-        let Some(hit) = found else {
-            if let Some((arriving, weight)) = self.environment_seen(ray.dir, last, stats) {
-                paths.radiance[i] += paths.beta[i] * arriving * weight;
-            }
-            return false;
-        };
         stats.hits += 1;
         // `World::surface`, but for the point and its error bound, which the second
         // phase computes from the corners gathered below.
@@ -235,8 +267,8 @@ impl World {
             return false;
         }
         // A texture's texel is asked for from memory here and read after every lane's first
-        // phase (`Texels::resolve`), so that the lanes' misses overlap each other and the
-        // other lanes' walks; read at once, the wait was a third of this function's time on
+        // phase, so that the lanes' misses overlap each other and the other lanes' surfaces;
+        // read at once, the wait was a third of this function's time on
         // Sponza (docs/bench.md, issue 12, thirty-second round).
         *texel = match material.bsdf {
             Bsdf::Diffuse { texture: None, .. } => None,
@@ -366,6 +398,8 @@ struct Paths {
     last_pdf: [f32; LANES],
     last_delta: [bool; LANES],
     last_point: [Vec3; LANES],
+    /// The closest hit of the lane's current ray, between its walk and its surface.
+    hit: [Hit; LANES],
     roulette: [f32; LANES],
     stats: [PathStats; LANES],
 }
@@ -384,6 +418,12 @@ impl Default for Paths {
             last_pdf: [0.0; LANES],
             last_delta: [true; LANES],
             last_point: [Vec3::ZERO; LANES],
+            hit: [Hit {
+                t: 0.0,
+                triangle: 0,
+                b1: 0.0,
+                b2: 0.0,
+            }; LANES],
             roulette: [0.0; LANES],
             stats: [PathStats::default(); LANES],
         }
