@@ -7,8 +7,10 @@ benchmark of docs/bench.md.
 The figure is the median of the full-path pass's CPU-seconds, as `scripts/spectral_bench.py`
 measures the always-spectral pipeline: the render alone, since loading the scene and building
 its BVH are the same work in both modes. Beside it, the whole process's CPU-seconds (user +
-system, from the kernel's accounting of the child), which include that shared work; earlier
-rounds of docs/bench.md (before the thirty-second) reported only those.
+system, from the kernel's accounting of the child), which include that shared work and `tessera
+bench`'s pass of camera rays alone (depth 0); the rounds of docs/bench.md before the
+thirty-second reported only whole processes, of `tessera render`, which has no such pass, so
+their figures are not these.
 
 Usage (from the repository root, after `cargo build --release`):
     python3 scripts/media_bench.py --repeats 3 --size 256 --spp 16 SCENE.toml...
@@ -29,12 +31,25 @@ def run(tessera, scene, mode, args, out):
                "--width", str(args.size), "--height", str(args.size), "--spp", str(args.spp),
                "--out", out]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    done = subprocess.run(command, check=True, capture_output=True, text=True)
+    done = subprocess.run(command, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(command)} failed:\n{done.stderr.strip()}")
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    bench = json.loads(done.stdout[done.stdout.index("{"):])["scenes"][0]
+    report = json.loads(done.stdout[done.stdout.index("{"):])
+    if not report["scenes"]:
+        reasons = "; ".join(s["reason"] for s in report["skipped"])
+        raise SystemExit(f"{scene}: skipped by tessera bench: {reasons}")
+    bench = report["scenes"][0]
+    if bench["paths"]["cpu_seconds"] is None:
+        raise SystemExit("tessera bench could not read CPU-seconds here (no procfs?)")
     process = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return {"paths": bench["paths"]["cpu_seconds"], "process": process, "effects": bench["effects"],
             "exr": bench["image"]}
+
+
+def ratio(seconds):
+    """The generic pipeline's time over the specialised one's, where the latter is measurable."""
+    return f"{seconds['all'] / seconds['auto']:.2f}x" if seconds["auto"] > 0 else "n/a (too short to time)"
 
 
 def same_pixels(tessera, a, b):
@@ -71,7 +86,7 @@ def main():
         scratch.cleanup()
         print(f"| {os.path.basename(scene)} | {runs['auto'][0]['effects']} | "
               f"{paths['auto']:.2f} ({process['auto']:.2f}) | {paths['all']:.2f} ({process['all']:.2f}) | "
-              f"{paths['all'] / paths['auto']:.2f}x ({process['all'] / process['auto']:.2f}x) | "
+              f"{ratio(paths)} ({ratio(process)}) | "
               f"{'yes' if same else 'NO'} |", flush=True)
     print(f"\nload after {os.getloadavg()}")
 

@@ -34,7 +34,7 @@ pub struct BenchArgs {
     /// pays) or one (`spectral-single`).
     #[arg(long, default_value = "rgb", value_parser = ["rgb", "spectral-hero", "spectral-single"])]
     pub spectral: String,
-    /// How a pixel's paths are advanced: `lanes` (up to eight at a time, their shading in
+    /// How a tile's paths are advanced: `lanes` (eight at a time, their shading in
     /// vector instructions, where the scene allows it: the default) or `one-by-one`; the same
     /// image either way.
     #[arg(long, default_value = "lanes", value_parser = ["lanes", "one-by-one"])]

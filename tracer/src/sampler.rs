@@ -39,6 +39,12 @@ impl PixelSampler {
         PixelKey::new(seed, frame, x, y).sample(sample)
     }
 
+    /// What fills a sampler slot that holds no sample's stream yet (a packet's past its
+    /// samples, an idle lane's); replaced before any number is drawn from it.
+    pub(crate) fn placeholder() -> Self {
+        Self::stream(0)
+    }
+
     /// Moves to the first dimension of bounce `bounce` (0 is the camera ray's first hit).
     pub fn start_bounce(&mut self, bounce: u32) {
         self.dimension = CAMERA_DIMENSIONS + bounce * DIMENSIONS_PER_BOUNCE;

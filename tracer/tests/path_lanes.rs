@@ -1,7 +1,8 @@
-//! A pixel's paths in lanes (`integrator/lanes.rs`) render the same bits as the same paths one
-//! by one, with the same counted work: across scales and distances from the origin (where the
-//! offsets of both rays' origins are tested hardest), sample counts that leave a pixel's last
-//! packet partly empty, depths from emitters alone to long paths, Russian roulette from the
+//! A tile's paths in lanes (`integrator/lanes/`, fed by `tile/lanes.rs`) render the same bits
+//! as the same paths one by one, with the same counted work and cost map, whole frames and
+//! tiles cut mid-row alike: across scales and distances from the origin (where the offsets of
+//! both rays' origins are tested hardest), one sample per pixel, sample counts that leave a
+//! pixel's last packet partly empty, tiles with fewer paths than lanes and tiles of no pixels, depths from emitters alone to long paths, Russian roulette from the
 //! first bounce, and the camera's rays found in packets or one by one; with textures, shading
 //! normals and a constant sky beside an area light. Worlds the lanes do not fit (glass, no
 //! roulette) render one by one whatever the knob says.
@@ -43,6 +44,10 @@ struct Rendered {
     cost: tracer::TileCost,
     tile_bits: Vec<u32>,
     tile_cost: tracer::TileCost,
+    tile_stats: tracer::PathStats,
+    /// Tiles too small to fill the lanes: a pixel (fewer paths than lanes at the scene's
+    /// sample counts below eight) and a row of two; and a tile of no pixels.
+    small: Vec<(Vec<u32>, tracer::TileCost, tracer::PathStats)>,
 }
 
 /// The render with the paths advanced as `paths` says and the camera's rays found as
@@ -64,12 +69,21 @@ fn render(scene: Scene, paths: PathLanes, camera_rays: CameraRays) -> (Rendered,
         h: h / 3 + 1,
     };
     let tile = tracer::render_tile(&world, 0, rect);
+    let small = [(w / 2, h / 2, 1, 1), (w - 2, 0, 2, 1), (1, 1, 0, 3)]
+        .into_iter()
+        .map(|(x, y, w, h)| {
+            let out = tracer::render_tile(&world, 0, Rect { x, y, w, h });
+            (bits(&out), out.cost, out.stats)
+        })
+        .collect();
     let rendered = Rendered {
         bits: bits(&out),
         stats: out.stats,
         cost: out.cost,
         tile_bits: bits(&tile),
         tile_cost: tile.cost,
+        tile_stats: tile.stats,
+        small,
     };
     (rendered, fits)
 }
@@ -110,6 +124,7 @@ fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
     for (scale, shift) in shifts {
         for (size, spp, depth, roulette) in [
             (24, 5, Some(7), Some(3)),
+            (12, 1, Some(5), Some(2)),
             (16, 13, Some(1), Some(3)),
             (16, 8, Some(0), Some(3)),
             (16, 3, None, Some(1)),

@@ -83,6 +83,14 @@ pub struct Ray {
     pub t_max: f32,
 }
 
+/// What fills a ray slot that holds no ray yet (a packet's past its samples, an idle lane's):
+/// an empty segment, never traced.
+pub(crate) const UNUSED_RAY: Ray = Ray {
+    origin: Vec3::ZERO,
+    dir: Vec3::Z,
+    t_max: 0.0,
+};
+
 /// The closest hit of a ray: distance, triangle index and barycentrics of vertices 1 and 2.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {

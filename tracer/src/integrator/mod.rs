@@ -102,7 +102,7 @@ pub struct World {
     /// How a pixel's camera rays meet the BVH: walked together, up to eight samples at a time
     /// (the default), or one by one (for comparison); the same hits either way.
     pub camera_rays: CameraRays,
-    /// How a pixel's paths are advanced: up to eight at a time in lanes where the world allows
+    /// How a tile's paths are advanced: eight at a time in lanes where the world allows
     /// it (the default, [`World::lanes_fit`]), or one by one (for comparison); the same bits
     /// either way.
     pub paths: PathLanes,

@@ -76,6 +76,9 @@ pub(super) struct BounceNumbers {
 }
 
 impl BounceNumbers {
+    /// Always inlined: out of line, in the lanes' AVX function, its seven hashes cost a
+    /// tenth more instructions (the inliner's choice moved with unrelated changes).
+    #[inline(always)]
     pub(super) fn draw(sampler: &mut PixelSampler) -> Self {
         let [
             light_choice,

@@ -1,7 +1,11 @@
-//! A tile's paths as one stream through the lanes ([`World::radiance_stream`](crate::World::radiance_stream)): the feed
-//! hands out each pixel's samples in order, a camera packet at a time, and takes their
-//! values back in whatever order the lanes end them, adding a pixel's values in sample order
-//! once all have come back, so that the tile is the same bits as one rendered pixel by pixel.
+//! A tile's paths as one stream through the lanes
+//! ([`World::radiance_stream`](crate::World::radiance_stream)): the feed hands out each pixel's
+//! samples in order, a camera packet at a time, and takes their values back in whatever order
+//! the lanes end them. A pixel's values are added in sample order as soon as every earlier
+//! sample's is in, so the tile is the same bits as one rendered pixel by pixel, and a pixel
+//! holds only the values that came back ahead of an earlier sample's, in a ring of
+//! 64 slots (eight lanes hold at most eight paths, so few come back far ahead), not one
+//! per sample, whatever the sample count.
 
 use super::{Cameras, Packet, TilePixels, add_sample};
 use crate::integrator::{NewPath, PathFeed, PathStats};
@@ -25,16 +29,19 @@ pub(super) struct TileFeed<'a, 'w> {
     /// index.
     open: VecDeque<OpenPixel>,
     oldest: u64,
-    /// The value arrays of finished pixels, kept for the next ones.
-    spare: Vec<Vec<Vec3>>,
+    /// The sums of finished pixels, kept for the next ones (each holds a ring of values).
+    /// Boxed, as in [`OpenPixel`], so that a pixel's start and end move a pointer, not the
+    /// ring's kilobyte.
+    #[allow(clippy::vec_box)]
+    spare: Vec<Box<InOrder>>,
 }
 
 /// A pixel whose samples are out.
 struct OpenPixel {
     x: u32,
     y: u32,
-    /// Each sample's radiance, by sample index.
-    values: Vec<Vec3>,
+    /// The sum of its samples' values so far, in sample order.
+    sum: Box<InOrder>,
     /// The samples not yet back.
     remaining: u32,
     /// The pixel's counted work: its camera packets' and its paths'.
@@ -65,8 +72,8 @@ impl<'a, 'w> TileFeed<'a, 'w> {
         );
     }
 
-    /// Starts the tile's next pixel, if it has one left, and returns its index.
-    fn start_pixel(&mut self) -> Option<u64> {
+    /// Starts the tile's next pixel, if it has one left.
+    fn start_pixel(&mut self) -> Option<()> {
         let rect = self.tile.rect;
         let index = self.next_pixel;
         if index >= rect.area() {
@@ -77,26 +84,28 @@ impl<'a, 'w> TileFeed<'a, 'w> {
             rect.x + (index % u64::from(rect.w)) as u32,
             rect.y + (index / u64::from(rect.w)) as u32,
         );
-        let mut values = self.spare.pop().unwrap_or_default();
-        values.clear();
-        values.resize(self.cameras.spp as usize, Vec3::ZERO);
         self.open.push_back(OpenPixel {
             x,
             y,
-            values,
+            sum: self.spare.pop().map_or_else(
+                || Box::new(InOrder::new()),
+                |mut sum| {
+                    sum.clear();
+                    sum
+                },
+            ),
             remaining: self.cameras.spp,
             stats: PathStats::default(),
         });
         self.next_sample = 0;
-        Some(index)
+        Some(())
     }
 }
 
 impl PathFeed for TileFeed<'_, '_> {
     fn next_path(&mut self, lane: NewPath<'_>) -> Option<u64> {
-        let spp = self.cameras.spp;
         if self.handed >= self.packet.n {
-            if self.next_sample >= spp {
+            if self.next_sample >= self.cameras.spp {
                 self.start_pixel()?;
             }
             let first = self.next_sample;
@@ -113,30 +122,26 @@ impl PathFeed for TileFeed<'_, '_> {
         }
         let (packet, k) = (&self.packet, self.handed);
         self.handed += 1;
-        let pixel = self.oldest + self.open.len() as u64 - 1;
         *lane.ray = packet.rays[k];
         *lane.first = packet.found.then_some(packet.hits[k]);
         lane.sampler.clone_from(&packet.samplers[k]);
-        Some(tag(pixel, self.packet_start + k as u32))
+        // The packet's pixel is the newest one started.
+        Some(tag(self.next_pixel - 1, self.packet_start + k as u32))
     }
 
     fn path_done(&mut self, tag: u64, radiance: Vec3, stats: &PathStats) {
-        let (pixel, sample) = ((tag >> 32) as u32, tag as u32 as usize);
+        let (pixel, sample) = ((tag >> 32) as u32, tag as u32);
         let open = &mut self.open[pixel.wrapping_sub(self.oldest as u32) as usize];
-        open.values[sample] = radiance;
         open.stats.add(stats);
         open.remaining -= 1;
+        open.sum.add(sample, radiance, &mut open.stats);
         while self.open.front().is_some_and(|p| p.remaining == 0) {
-            let mut done = self.open.pop_front().expect("just checked");
+            let done = self.open.pop_front().expect("just checked");
             self.oldest += 1;
-            let mut sum = Vec3::ZERO;
-            for &value in &done.values {
-                add_sample(&mut sum, value, &mut done.stats);
-            }
             let spp = self.cameras.spp;
             self.tile
-                .push(done.x, done.y, sum / spp as f32, &done.stats);
-            self.spare.push(done.values);
+                .push(done.x, done.y, done.sum.sum / spp as f32, &done.stats);
+            self.spare.push(done.sum);
         }
     }
 }
@@ -146,4 +151,153 @@ impl PathFeed for TileFeed<'_, '_> {
 /// where a division by the sample count showed in the profile.
 fn tag(pixel: u64, sample: u32) -> u64 {
     (pixel << 32) | u64::from(sample)
+}
+
+/// The slots of a pixel's ring of early values: 64, one bit each in a word. With a depth cap
+/// of 7, while one lane's path lives its eight bounces the seven others end at most 56 paths,
+/// so no value comes back 64 samples ahead of one still out; only much longer paths (no cap,
+/// Russian roulette alone) can, and those few wait aside ([`InOrder::far`]).
+const WINDOW: u32 = 64;
+
+/// A pixel's sum of its samples' values in sample order, from values that come back in any
+/// order: the next sample's value is added as soon as it is in, and the values of later
+/// samples that came back first wait in a ring, sample `s` in slot `s % WINDOW`.
+pub(super) struct InOrder {
+    sum: Vec3,
+    /// The next sample to add.
+    next: u32,
+    slots: [Vec3; WINDOW as usize],
+    /// Which slots hold a value.
+    full: u64,
+    /// Values too far ahead for the ring, with their samples (almost always empty).
+    far: Vec<(u32, Vec3)>,
+}
+
+impl InOrder {
+    fn new() -> Self {
+        InOrder {
+            sum: Vec3::ZERO,
+            next: 0,
+            slots: [Vec3::ZERO; WINDOW as usize],
+            full: 0,
+            far: Vec::new(),
+        }
+    }
+
+    /// Starts a new pixel's sum.
+    fn clear(&mut self) {
+        debug_assert!(
+            self.full == 0 && self.far.is_empty(),
+            "every value was added"
+        );
+        (self.sum, self.next) = (Vec3::ZERO, 0);
+    }
+
+    /// Takes sample `sample`'s value (each sample's once), and adds every value that is now
+    /// next in sample order; a non-finite one is dropped and counted in `stats`.
+    #[inline]
+    fn add(&mut self, sample: u32, value: Vec3, stats: &mut PathStats) {
+        self.keep(sample, value);
+        loop {
+            // The run of values in from the next sample on, added in sample order.
+            let start = self.next % WINDOW;
+            let run = self.full.rotate_right(start).trailing_ones();
+            for k in 0..run {
+                add_sample(
+                    &mut self.sum,
+                    self.slots[((start + k) % WINDOW) as usize],
+                    stats,
+                );
+            }
+            let taken = if run == WINDOW {
+                u64::MAX
+            } else {
+                (1 << run) - 1
+            };
+            self.full &= !taken.rotate_left(start);
+            self.next += run;
+            // Values aside that the ring now reaches join it, and may continue the run.
+            if self.far.is_empty() || run == 0 {
+                return;
+            }
+            let before = self.far.len();
+            let next = self.next;
+            let mut aside = std::mem::take(&mut self.far);
+            aside.retain(|&(sample, value)| {
+                let fits = sample - next < WINDOW;
+                if fits {
+                    self.keep(sample, value);
+                }
+                !fits
+            });
+            self.far = aside;
+            if self.far.len() == before {
+                return;
+            }
+        }
+    }
+
+    /// Puts sample `sample`'s value in its slot, or aside where the ring does not reach it.
+    #[inline]
+    fn keep(&mut self, sample: u32, value: Vec3) {
+        if sample - self.next < WINDOW {
+            let slot = sample % WINDOW;
+            self.slots[slot as usize] = value;
+            self.full |= 1 << slot;
+        } else {
+            self.far.push((sample, value));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Values handed to a pixel's sum in scrambled orders (neighbours swapped, blocks reversed,
+    /// samples hundreds ahead of one still out, far past the ring) sum to the same bits as
+    /// the same values added one after another, a non-finite one dropped and counted.
+    #[test]
+    fn values_in_any_order_sum_as_in_sample_order() {
+        let count = 700u32;
+        let value = |s: u32| {
+            if s == 333 {
+                Vec3::NAN
+            } else {
+                // Magnitudes far apart, so that another order of the additions rounds
+                // differently.
+                Vec3::new(1.0 + s as f32 * 1e-3, 1e-7 * s as f32, (s % 7) as f32 * 1e5)
+            }
+        };
+        let mut expected = Vec3::ZERO;
+        let mut dropped = PathStats::default();
+        for s in 0..count {
+            add_sample(&mut expected, value(s), &mut dropped);
+        }
+        let swapped: Vec<u32> = (0..count).map(|s| s ^ 1).collect();
+        let blocks_reversed: Vec<u32> = (0..count)
+            .map(|s| (s / 50) * 50 + 49 - s % 50)
+            .filter(|&s| s < count)
+            .collect();
+        // Sample 0 and then 1 come back last: everything else waits, most of it aside.
+        let late_first: Vec<u32> = (2..count).chain([0, 1]).collect();
+        let strided: Vec<u32> = (0..97).flat_map(|r| (r..count).step_by(97)).collect();
+        for order in [swapped, blocks_reversed, late_first, strided] {
+            assert_eq!(order.len(), count as usize);
+            let mut sum = InOrder::new();
+            let mut stats = PathStats::default();
+            for &s in &order {
+                sum.add(s, value(s), &mut stats);
+            }
+            assert_eq!(sum.next, count, "every value added");
+            assert!(sum.full == 0 && sum.far.is_empty(), "nothing left waiting");
+            assert_eq!(
+                sum.sum.to_array().map(f32::to_bits),
+                expected.to_array().map(f32::to_bits)
+            );
+            assert_eq!(stats.invalid_samples, dropped.invalid_samples);
+            sum.clear();
+            assert_eq!((sum.sum, sum.next), (Vec3::ZERO, 0));
+        }
+    }
 }

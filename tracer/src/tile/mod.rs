@@ -7,7 +7,7 @@
 
 mod lanes;
 
-use crate::geometry::{Hit, PACKET, Ray, TraversalStats};
+use crate::geometry::{Hit, PACKET, Ray, TraversalStats, UNUSED_RAY};
 use crate::integrator::{PathStats, World};
 use crate::sampler::{PixelKey, PixelSampler};
 use crate::scene::CameraRays;
@@ -162,7 +162,7 @@ impl Packet {
     fn new() -> Self {
         Packet {
             n: 0,
-            samplers: std::array::from_fn(|_| PixelSampler::new(0, 0, 0, 0, 0)),
+            samplers: std::array::from_fn(|_| PixelSampler::placeholder()),
             times: [0.0; PACKET],
             rays: [UNUSED_RAY; PACKET],
             hits: [None; PACKET],
@@ -291,13 +291,6 @@ impl TilePixels {
         }
     }
 }
-
-/// What fills a packet's slots past its samples; never traced.
-const UNUSED_RAY: Ray = Ray {
-    origin: glam::Vec3::ZERO,
-    dir: glam::Vec3::Z,
-    t_max: 0.0,
-};
 
 /// A whole frame being assembled from tiles: pixels and the per-block cost map.
 #[derive(Clone, Debug, PartialEq)]

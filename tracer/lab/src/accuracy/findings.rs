@@ -374,7 +374,7 @@ fn traversal_sentence(run: &Run) -> Option<String> {
         .find(|r| r.traversal == Traversal::Robust && r.paths == PathLanes::OneByOne)
     {
         s += &format!(
-            " Ours with a pixel's paths in lanes where the scene allows them: {:.3} s, against {:.3} s one path at a time, and the image {}.",
+            " Ours with the paths in lanes where the scene allows them: {:.3} s, against {:.3} s one path at a time, and the image {}.",
             robust.render_seconds,
             single.render_seconds,
             short_note(&single.note),

@@ -51,7 +51,7 @@ pub struct Config {
     /// Which wavelengths paths sample: RGB until dispersive glass (the default), or spectral
     /// from the camera on, to measure what the always-spectral pipeline costs.
     pub spectral: tracer::spectrum::SpectralSampling,
-    /// How a pixel's paths are advanced: in lanes where the scene allows it (the default), or
+    /// How a tile's paths are advanced: in lanes where the scene allows it (the default), or
     /// one by one, to measure what the lanes buy (the same image either way).
     pub paths: tracer::PathLanes,
     /// The effects paid for: `None`, those each scene calls for (the default), or a set

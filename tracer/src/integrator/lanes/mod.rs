@@ -10,15 +10,18 @@
 //! pixel's eight samples alone in the lanes until the last one ended, two lanes in five did
 //! the shading's work for nothing (docs/bench.md, issue 12, thirty-second round).
 //!
-//! Each bounce has three phases. The first, one lane at a time, draws the lane's numbers,
-//! walks its ray through the tree, finds the surface's side, shading normal, texel and what
-//! it emits (or what the sky sends, where the ray escapes), and picks a light: the walks and
-//! the lookups, whose branches and loads are each lane's own. The second computes, for all
-//! lanes together, the hit's point and error bound, the shading frame, the sampled
-//! direction, the light sample, its weighed value and both rays' origins, in one loop over the lanes whose body
-//! has no branch the compiler cannot make a select, so that it vectorises (with AVX where the
-//! processor has it, chosen at run time). The third, one lane at a time again, traces the
-//! shadow rays and ends or continues each path.
+//! Each bounce has three phases. The first, one lane at a time, in two passes: every lane's
+//! walk through the tree (or, where its ray escapes, what the sky sends, and the lane's next
+//! path), then every lane's surface: its numbers, side, shading normal and what it emits, and
+//! the light it picks; the texels of textured surfaces are asked for from memory there and read
+//! once every lane has had its surface. These are the walks and the lookups, whose branches and
+//! loads are each lane's own; in two passes and with the texels read last, the misses of
+//! different lanes overlap. The second computes, for all lanes together, the hit's point and
+//! error bound, the shading frame, the sampled direction, the light sample, its weighed value
+//! and both rays' origins, in one loop over the lanes whose body has no branch the compiler
+//! cannot make a select, so that it vectorises (with AVX where the processor has it, chosen at
+//! run time). The third, one lane at a time again, traces the shadow rays and ends or
+//! continues each path.
 //!
 //! **Exactness.** Every lane computes what the scalar path ([`World::radiance_from`])
 //! computes for its sample, operation for operation and in the same order: the second phase
@@ -31,9 +34,9 @@
 //! the scalar path keeps its branches); vector instructions round each
 //! lane as the scalar ones do (no fused multiply-add, no reassociation: Rust never contracts
 //! or reorders float arithmetic). Each path's result depends only on its own numbers, never on
-//! its lane or its neighbours, and the feed adds a pixel's samples in sample order once all
-//! are back, so an image is the same bits either way, and so are the counted work and the
-//! statistics, each path's counted apart and added to its own pixel's.
+//! its lane or its neighbours, and the feed adds a pixel's samples in sample order, so an
+//! image is the same bits either way, and so are the counted work and the statistics, each
+//! path's counted apart and added to its own pixel's.
 //! `tracer/tests/path_lanes.rs` holds the two to each other image by image.
 //!
 //! Why this pays where a lockstep loop of scalar kernels did not (docs/bench.md, issue 12,
@@ -41,29 +44,27 @@
 //! polynomials are latency chains the scalar path waits on; eight lanes run eight of them in
 //! the time of one.
 
-use super::AreaLightSampling;
-use super::PathStats;
 use super::scatter::{BounceNumbers, resolve};
-use super::{UNLIMITED_DEPTH, World};
+use super::{AreaLightSampling, PathStats, UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
-use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, hit_point};
+use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, UNUSED_RAY, hit_point};
 use crate::material::Bsdf;
 use crate::sampler::PixelSampler;
 use crate::scene::Texture;
 use crate::spectrum::SpectralSampling;
 use glam::Vec3;
 
-/// The lanes: a pixel's samples, as many as a camera packet holds.
+/// The lanes: as many paths as a camera packet holds rays, eight f32 lanes of AVX.
 const LANES: usize = PACKET;
 
 mod shade;
 
 use shade::{Gathered, Shaded, shade};
 
-/// How a pixel's paths are advanced (a comparison knob: both give the same bits).
+/// How a tile's paths are advanced (a comparison knob: both give the same bits).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum PathLanes {
-    /// Up to eight paths a bounce at a time, their shading in vector instructions, where the
+    /// Eight paths a bounce at a time, their shading in vector instructions, where the
     /// world allows it ([`World::lanes_fit`]); one by one elsewhere.
     #[default]
     Lanes,
@@ -86,8 +87,9 @@ impl PathLanes {
 
 impl World {
     /// Whether every path of this world can run in lanes: a plain world (no media, no
-    /// moving objects, RGB throughout) whose materials are all diffuse, every light a still emissive
-    /// triangle or a constant environment without portals (`Lights::lanes_sample_all`), lights found both ways and weighed (the default), the
+    /// moving objects, RGB throughout) whose materials are all diffuse, every light a still
+    /// emissive triangle or a constant environment without portals
+    /// (`Lights::lanes_sample_all`), lights found both ways and weighed (the default), the
     /// default offsets and RGB sampling, shadow rays on, and Russian roulette on. Each
     /// condition names a step the lanes leave out; a world that fails one renders one path
     /// at a time, as every world can.
@@ -157,17 +159,23 @@ impl World {
                 *walked = self.next_hit(&moment, &mut paths, i, feed);
             }
             for (i, shading) in shading.iter_mut().enumerate() {
-                *shading = walked[i]
-                    && loop {
-                        let lane = (&mut gathered, &mut texels[i]);
-                        if self.surface_phase(&moment, &mut paths, i, lane, sky) {
-                            break true;
-                        }
-                        paths.end(i, feed);
-                        if !self.next_hit(&moment, &mut paths, i, feed) {
-                            break false;
-                        }
-                    };
+                *shading = false;
+                if !walked[i] {
+                    continue;
+                }
+                // A path that ends at its surface (the depth cap) hands the lane on to the
+                // next path, walked and seen at once.
+                loop {
+                    let lane = (&mut gathered, &mut texels[i]);
+                    if self.surface_phase(&moment, &mut paths, i, lane, sky) {
+                        *shading = true;
+                        break;
+                    }
+                    paths.end(i, feed);
+                    if !self.next_hit(&moment, &mut paths, i, feed) {
+                        break;
+                    }
+                }
             }
             if !shading.iter().any(|&s| s) {
                 return;
@@ -333,6 +341,8 @@ impl World {
                 paths.radiance[i] += *beta * shaded.value.get(i);
             }
         }
+        // Counted before the path may end here, where the scalar path counts it after: a path
+        // that ends takes its depth with it, so no number changes.
         paths.depth[i] += 1;
         if !shaded.sampled[i] {
             return false;
@@ -411,7 +421,7 @@ impl Default for Paths {
             tag: [0; LANES],
             ray: [UNUSED_RAY; LANES],
             first: [None; LANES],
-            sampler: std::array::from_fn(|_| PixelSampler::new(0, 0, 0, 0, 0)),
+            sampler: std::array::from_fn(|_| PixelSampler::placeholder()),
             depth: [0; LANES],
             beta: [Vec3::ONE; LANES],
             radiance: [Vec3::ZERO; LANES],
@@ -461,10 +471,3 @@ impl Paths {
         feed.path_done(self.tag[i], self.radiance[i], &self.stats[i]);
     }
 }
-
-/// What fills an idle lane's ray; never traced.
-const UNUSED_RAY: Ray = Ray {
-    origin: Vec3::ZERO,
-    dir: Vec3::Z,
-    t_max: 0.0,
-};

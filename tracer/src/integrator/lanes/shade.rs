@@ -36,8 +36,9 @@ impl Points {
 }
 
 /// What the first phase hands the second: each lane's hit (its triangle's corners and plane
-/// normal, the barycentric coordinates), shading normal, incoming direction, albedo and numbers, and the light it
-/// picked. A lane without a surface keeps what it last held, computes on it, and is ignored.
+/// normal, the barycentric coordinates), shading normal, incoming direction, albedo and
+/// numbers, and the light it picked. A lane without a surface keeps what it last held,
+/// computes on it, and is ignored.
 #[derive(Clone, Copy, Default)]
 pub(super) struct Gathered {
     /// The corners of the triangle hit, and the hit's barycentric coordinates of corners 1
