@@ -1,5 +1,5 @@
 //! The unit tests of the scene measurements: the two passes on the shipped furnace, the
-//! spectral knob, skipping an absent mesh but not a malformed scene, the process's CPU-seconds
+//! spectral knob, every effect forced, skipping an absent mesh but not a malformed scene, the process's CPU-seconds
 //! and finding the shipped scenes. They are a file of their own so that the measurements read
 //! without them; as a child module they still reach the private helpers they test.
 
@@ -102,6 +102,38 @@ fn the_spectral_knob_renders_other_pixels_from_the_same_camera_rays() {
         images[0], images[1],
         "the always-spectral render is another estimate"
     );
+}
+
+/// `--effects all` measures the generic pipeline: every effect paid for, one path at a time,
+/// and the same image as the scene's own effect set in lanes.
+#[test]
+fn forcing_every_effect_renders_the_same_image_one_path_at_a_time() {
+    let scene =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.toml");
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let mut measured = Vec::new();
+    for (name, effects) in [("auto", None), ("all", Some(tracer::Effects::ALL))] {
+        let out = dir.path().join(name);
+        std::fs::create_dir_all(&out).expect("an output folder");
+        let config = Config {
+            out: Some(out.clone()),
+            effects,
+            ..args()
+        };
+        let bench = bench_scene(&scene, &config, &pool())
+            .expect("the box loads")
+            .expect("nothing absent");
+        let image = std::fs::read(out.join("cornell-box.exr")).expect("the image");
+        measured.push((bench.effects, bench.path_lanes, image));
+    }
+    let (auto, all) = (&measured[0], &measured[1]);
+    assert_eq!(
+        auto.0, "area-lights,shadows,diffuse",
+        "the box's own effects"
+    );
+    assert_eq!(all.0, tracer::Effects::ALL.to_string());
+    assert!(auto.1 && !all.1, "lanes only where the effects allow them");
+    assert!(auto.2 == all.2, "the same image either way");
 }
 
 #[test]
