@@ -1,11 +1,10 @@
 //! A tile's paths as one stream through the lanes
 //! ([`World::radiance_stream`](crate::World::radiance_stream)): the feed hands out each pixel's
 //! samples in order, a camera packet at a time, and takes their values back in whatever order
-//! the lanes end them. A pixel's values are added in sample order as soon as every earlier
-//! sample's is in, so the tile is the same bits as one rendered pixel by pixel, and a pixel
-//! holds only the values that came back ahead of an earlier sample's, in a ring of
-//! 64 slots (eight lanes hold at most eight paths, so few come back far ahead), not one
-//! per sample, whatever the sample count.
+//! the lanes end them. A pixel's values are added in sample order, so the tile is the same
+//! bits as one rendered pixel by pixel; they wait in a ring of 64 slots, added up as the ring
+//! needs room and at the pixel's end (eight lanes hold at most eight paths, so few come back
+//! far ahead), so a pixel's memory does not grow with the sample count.
 
 use super::{Cameras, Packet, TilePixels, add_sample};
 use crate::integrator::{NewPath, PathFeed, PathStats};
@@ -136,11 +135,12 @@ impl PathFeed for TileFeed<'_, '_> {
         open.remaining -= 1;
         open.sum.add(sample, radiance, &mut open.stats);
         while self.open.front().is_some_and(|p| p.remaining == 0) {
-            let done = self.open.pop_front().expect("just checked");
+            let mut done = self.open.pop_front().expect("just checked");
             self.oldest += 1;
+            let total = done.sum.total(&mut done.stats);
             let spp = self.cameras.spp;
             self.tile
-                .push(done.x, done.y, done.sum.sum / spp as f32, &done.stats);
+                .push(done.x, done.y, total / spp as f32, &done.stats);
             self.spare.push(done.sum);
         }
     }
@@ -160,8 +160,10 @@ fn tag(pixel: u64, sample: u32) -> u64 {
 const WINDOW: u32 = 64;
 
 /// A pixel's sum of its samples' values in sample order, from values that come back in any
-/// order: the next sample's value is added as soon as it is in, and the values of later
-/// samples that came back first wait in a ring, sample `s` in slot `s % WINDOW`.
+/// order: sample `s`'s value waits in slot `s % WINDOW` of a ring, and the ring is added up in
+/// sample order from the next sample on when a value needs a slot the ring does not reach yet,
+/// and at the pixel's end. Per path a store and a bit; a pixel of at most [`WINDOW`] samples
+/// is added once, at its end, as an array of its values would be.
 pub(super) struct InOrder {
     sum: Vec3,
     /// The next sample to add.
@@ -193,21 +195,41 @@ impl InOrder {
         (self.sum, self.next) = (Vec3::ZERO, 0);
     }
 
-    /// Takes sample `sample`'s value (each sample's once), and adds every value that is now
-    /// next in sample order; a non-finite one is dropped and counted in `stats`.
+    /// Takes sample `sample`'s value (each sample's once); values the sum cannot take yet
+    /// wait. A non-finite value is dropped and counted in `stats` when its turn comes.
     #[inline]
     fn add(&mut self, sample: u32, value: Vec3, stats: &mut PathStats) {
-        self.keep(sample, value);
+        if sample - self.next >= WINDOW {
+            self.add_ready(stats);
+        }
+        if sample - self.next < WINDOW {
+            let slot = sample % WINDOW;
+            self.slots[slot as usize] = value;
+            self.full |= 1 << slot;
+        } else {
+            self.far.push((sample, value));
+        }
+    }
+
+    /// The sum of every value, once all have come back.
+    fn total(&mut self, stats: &mut PathStats) -> Vec3 {
+        self.add_ready(stats);
+        debug_assert!(
+            self.full == 0 && self.far.is_empty(),
+            "every value came back"
+        );
+        self.sum
+    }
+
+    /// Adds the run of values in from the next sample on, in sample order, taking in the
+    /// values waiting aside as the ring comes to reach them.
+    fn add_ready(&mut self, stats: &mut PathStats) {
         loop {
-            // The run of values in from the next sample on, added in sample order.
             let start = self.next % WINDOW;
             let run = self.full.rotate_right(start).trailing_ones();
             for k in 0..run {
-                add_sample(
-                    &mut self.sum,
-                    self.slots[((start + k) % WINDOW) as usize],
-                    stats,
-                );
+                let slot = ((start + k) % WINDOW) as usize;
+                add_sample(&mut self.sum, self.slots[slot], stats);
             }
             let taken = if run == WINDOW {
                 u64::MAX
@@ -216,17 +238,17 @@ impl InOrder {
             };
             self.full &= !taken.rotate_left(start);
             self.next += run;
-            // Values aside that the ring now reaches join it, and may continue the run.
-            if self.far.is_empty() || run == 0 {
+            if self.far.is_empty() {
                 return;
             }
-            let before = self.far.len();
-            let next = self.next;
+            let (next, before) = (self.next, self.far.len());
             let mut aside = std::mem::take(&mut self.far);
             aside.retain(|&(sample, value)| {
                 let fits = sample - next < WINDOW;
                 if fits {
-                    self.keep(sample, value);
+                    let slot = sample % WINDOW;
+                    self.slots[slot as usize] = value;
+                    self.full |= 1 << slot;
                 }
                 !fits
             });
@@ -234,18 +256,6 @@ impl InOrder {
             if self.far.len() == before {
                 return;
             }
-        }
-    }
-
-    /// Puts sample `sample`'s value in its slot, or aside where the ring does not reach it.
-    #[inline]
-    fn keep(&mut self, sample: u32, value: Vec3) {
-        if sample - self.next < WINDOW {
-            let slot = sample % WINDOW;
-            self.slots[slot as usize] = value;
-            self.full |= 1 << slot;
-        } else {
-            self.far.push((sample, value));
         }
     }
 }
@@ -289,10 +299,11 @@ mod tests {
             for &s in &order {
                 sum.add(s, value(s), &mut stats);
             }
+            let total = sum.total(&mut stats);
             assert_eq!(sum.next, count, "every value added");
             assert!(sum.full == 0 && sum.far.is_empty(), "nothing left waiting");
             assert_eq!(
-                sum.sum.to_array().map(f32::to_bits),
+                total.to_array().map(f32::to_bits),
                 expected.to_array().map(f32::to_bits)
             );
             assert_eq!(stats.invalid_samples, dropped.invalid_samples);

@@ -159,23 +159,19 @@ impl World {
                 *walked = self.next_hit(&moment, &mut paths, i, feed);
             }
             for (i, shading) in shading.iter_mut().enumerate() {
-                *shading = false;
-                if !walked[i] {
-                    continue;
-                }
                 // A path that ends at its surface (the depth cap) hands the lane on to the
                 // next path, walked and seen at once.
-                loop {
-                    let lane = (&mut gathered, &mut texels[i]);
-                    if self.surface_phase(&moment, &mut paths, i, lane, sky) {
-                        *shading = true;
-                        break;
-                    }
-                    paths.end(i, feed);
-                    if !self.next_hit(&moment, &mut paths, i, feed) {
-                        break;
-                    }
-                }
+                *shading = walked[i]
+                    && loop {
+                        let lane = (&mut gathered, &mut texels[i]);
+                        if self.surface_phase(&moment, &mut paths, i, lane, sky) {
+                            break true;
+                        }
+                        paths.end(i, feed);
+                        if !self.next_hit(&moment, &mut paths, i, feed) {
+                            break false;
+                        }
+                    };
             }
             if !shading.iter().any(|&s| s) {
                 return;
