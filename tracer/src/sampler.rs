@@ -67,9 +67,8 @@ impl PixelSampler {
 
     /// The next number, uniform in [0, 1).
     pub fn next_1d(&mut self) -> f32 {
-        let bits = mix(self.key ^ u64::from(self.dimension).wrapping_mul(GOLDEN_GAMMA));
-        self.dimension += 1;
-        unit_f32(bits)
+        let [u] = self.next_nd::<1>();
+        u
     }
 
     /// A stream of its own under `key` (the lens's, the time's, a bounce's medium's...), from
@@ -196,10 +195,11 @@ mod tests {
         }
     }
 
-    /// A block of numbers drawn at once is the numbers drawn one by one, bit for bit, from
-    /// any dimension (bounce blocks, the camera's, far dimensions) and any key; and a pixel's
-    /// key finished per sample is the sample's stream hashed in one go, as the stream was
-    /// first defined (written out here).
+    /// A block of numbers drawn at once is the numbers drawn one by one, bit for bit, and
+    /// each is its dimension's number as the stream was first defined, the key XOR the
+    /// dimension times the increment, hashed (written out here), from any dimension (bounce
+    /// blocks, the camera's, far dimensions) and any key; and a pixel's key finished per
+    /// sample is the sample's stream hashed in one go, as first defined (written out too).
     #[test]
     fn blocks_and_pixel_keys_draw_what_single_numbers_and_whole_keys_draw() {
         for (i, dimension) in [0u32, 2, 9, 700, 1 << 20, u32::MAX - 40]
@@ -209,7 +209,12 @@ mod tests {
             let mut one = PixelSampler::new(3, 1, i as u32, 7, 11);
             one.dimension = dimension;
             let mut block = one.clone();
+            let defined: [u32; 7] = std::array::from_fn(|k| {
+                let d = u64::from(dimension + k as u32);
+                unit_f32(mix(one.key ^ d.wrapping_mul(GOLDEN_GAMMA))).to_bits()
+            });
             let singles: [f32; 7] = std::array::from_fn(|_| one.next_1d());
+            assert_eq!(singles.map(f32::to_bits), defined);
             assert_eq!(
                 block.next_nd::<7>().map(f32::to_bits),
                 singles.map(f32::to_bits)

@@ -11,12 +11,14 @@ use crate::integrator::{NewPath, PathFeed, PathStats};
 use glam::Vec3;
 use std::collections::VecDeque;
 
-/// The tile's side of the stream.
-pub(super) struct TileFeed<'a, 'w> {
+/// The tile's side of the stream, handing out the pixels `P` names in the tile's order
+/// (`rect_pixels`).
+pub(super) struct TileFeed<'a, 'w, P> {
     cameras: &'a Cameras<'w>,
     tile: &'a mut TilePixels,
-    /// The index (in the tile's order) of the next pixel to start.
-    next_pixel: u64,
+    /// The pixels not yet started, and how many have been.
+    pixels: P,
+    started: u64,
     /// The packet being handed out, the sample it starts at, and how many of its paths are
     /// out (all of them before the first).
     packet: Packet,
@@ -47,12 +49,13 @@ struct OpenPixel {
     stats: PathStats,
 }
 
-impl<'a, 'w> TileFeed<'a, 'w> {
-    pub(super) fn new(cameras: &'a Cameras<'w>, tile: &'a mut TilePixels) -> Self {
+impl<'a, 'w, P: Iterator<Item = (u32, u32)>> TileFeed<'a, 'w, P> {
+    pub(super) fn new(cameras: &'a Cameras<'w>, tile: &'a mut TilePixels, pixels: P) -> Self {
         TileFeed {
             cameras,
             tile,
-            next_pixel: 0,
+            pixels,
+            started: 0,
             packet: Packet::new(),
             packet_start: 0,
             handed: 0,
@@ -64,25 +67,17 @@ impl<'a, 'w> TileFeed<'a, 'w> {
     }
 
     /// Checks that every pixel was stored.
-    pub(super) fn finish(self) {
+    pub(super) fn finish(mut self) {
         assert!(
-            self.open.is_empty() && self.next_pixel == self.tile.rect.area(),
+            self.open.is_empty() && self.pixels.next().is_none(),
             "the lanes hand back every path they are given"
         );
     }
 
     /// Starts the tile's next pixel, if it has one left.
     fn start_pixel(&mut self) -> Option<()> {
-        let rect = self.tile.rect;
-        let index = self.next_pixel;
-        if index >= rect.area() {
-            return None;
-        }
-        self.next_pixel += 1;
-        let (x, y) = (
-            rect.x + (index % u64::from(rect.w)) as u32,
-            rect.y + (index / u64::from(rect.w)) as u32,
-        );
+        let (x, y) = self.pixels.next()?;
+        self.started += 1;
         self.open.push_back(OpenPixel {
             x,
             y,
@@ -101,7 +96,7 @@ impl<'a, 'w> TileFeed<'a, 'w> {
     }
 }
 
-impl PathFeed for TileFeed<'_, '_> {
+impl<P: Iterator<Item = (u32, u32)>> PathFeed for TileFeed<'_, '_, P> {
     fn next_path(&mut self, lane: NewPath<'_>) -> Option<u64> {
         if self.handed >= self.packet.n {
             if self.next_sample >= self.cameras.spp {
@@ -125,7 +120,7 @@ impl PathFeed for TileFeed<'_, '_> {
         *lane.first = packet.found.then_some(packet.hits[k]);
         lane.sampler.clone_from(&packet.samplers[k]);
         // The packet's pixel is the newest one started.
-        Some(tag(self.next_pixel - 1, self.packet_start + k as u32))
+        Some(tag(self.started - 1, self.packet_start + k as u32))
     }
 
     fn path_done(&mut self, tag: u64, radiance: Vec3, stats: &PathStats) {

@@ -85,7 +85,7 @@ pub fn render_tile(world: &World, frame: u32, rect: Rect) -> TileOutput {
     if world.lanes_fit() {
         // The tile's paths as one stream through the lanes, each pixel's values added in
         // sample order as they come back (`lanes.rs`).
-        let mut feed = lanes::TileFeed::new(&cameras, &mut tile);
+        let mut feed = lanes::TileFeed::new(&cameras, &mut tile, rect_pixels(rect));
         world.radiance_stream(&mut feed);
         feed.finish();
     } else {
@@ -250,6 +250,8 @@ impl<'w> Cameras<'w> {
 /// A tile's pixels and costs as they are rendered, each pixel stored where it lies.
 struct TilePixels {
     rect: Rect,
+    /// The first block's column and row, and the blocks per row ([`Rect::blocks`]).
+    blocks_at: (u32, u32, u32),
     pixels: Vec<[f32; 3]>,
     blocks: Vec<u64>,
     stats: PathStats,
@@ -257,9 +259,10 @@ struct TilePixels {
 
 impl TilePixels {
     fn new(rect: Rect) -> Self {
-        let (_, _, bw, bh) = rect.blocks();
+        let (bx0, by0, bw, bh) = rect.blocks();
         TilePixels {
             rect,
+            blocks_at: (bx0, by0, bw),
             pixels: vec![[0.0; 3]; rect.area() as usize],
             blocks: vec![0u64; (bw * bh) as usize],
             stats: PathStats::default(),
@@ -269,8 +272,9 @@ impl TilePixels {
     /// Stores pixel (`x`, `y`)'s value and adds its work to its block's.
     fn push(&mut self, x: u32, y: u32, value: glam::Vec3, pixel_stats: &PathStats) {
         let rect = self.rect;
-        self.pixels[((y - rect.y) * rect.w + (x - rect.x)) as usize] = [value.x, value.y, value.z];
-        let (bx0, by0, bw, _) = rect.blocks();
+        let index = (y - rect.y) as usize * rect.w as usize + (x - rect.x) as usize;
+        self.pixels[index] = [value.x, value.y, value.z];
+        let (bx0, by0, bw) = self.blocks_at;
         let block = (y / BLOCK_SIZE - by0) * bw + (x / BLOCK_SIZE - bx0);
         self.blocks[block as usize] += pixel_stats.work();
         self.stats.add(pixel_stats);

@@ -225,8 +225,9 @@ impl World {
                 paths.hit[i] = hit;
                 return true;
             }
-            let last = (paths.last_pdf[i], paths.last_delta[i], paths.last_point[i]);
-            if let Some((arriving, weight)) = self.environment_seen(ray.dir, last, stats) {
+            let (dir, last) = (paths.ray[i].dir, paths.last(i));
+            let stats = &mut paths.stats[i];
+            if let Some((arriving, weight)) = self.environment_seen(dir, last, stats) {
                 paths.radiance[i] += paths.beta[i] * arriving * weight;
             }
             paths.end(i, feed);
@@ -247,13 +248,13 @@ impl World {
     ) -> bool {
         let max_depth = self.scene.settings.max_depth.unwrap_or(UNLIMITED_DEPTH);
         let depth = paths.depth[i];
+        let last = paths.last(i);
         let stats = &mut paths.stats[i];
         let sampler = &mut paths.sampler[i];
         sampler.start_bounce(depth);
         let u = BounceNumbers::draw(sampler);
         let ray = &paths.ray[i];
         let hit = paths.hit[i];
-        let last = (paths.last_pdf[i], paths.last_delta[i], paths.last_point[i]);
         stats.hits += 1;
         // `World::surface`, but for the point and its error bound, which the second
         // phase computes from the corners gathered below.
@@ -458,6 +459,13 @@ impl Paths {
             (0.0, true, self.ray[i].origin);
         self.stats[i] = PathStats::default();
         true
+    }
+
+    /// Lane `i`'s last scattering as the scalar path's helpers take it: its density, whether
+    /// it was a delta, and where it was.
+    #[inline(always)]
+    fn last(&self, i: usize) -> (f32, bool, Vec3) {
+        (self.last_pdf[i], self.last_delta[i], self.last_point[i])
     }
 
     /// Ends lane `i`'s path and hands its result over.
