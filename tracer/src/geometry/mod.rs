@@ -83,6 +83,22 @@ pub struct Ray {
     pub t_max: f32,
 }
 
+impl Ray {
+    /// This ray, its seven floats read one at a time (see [`read_apart`]): what a single-ray
+    /// walk starts from. Its callers write a ray a float at a time just before the walk (a
+    /// lane's shadow ray and next ray are gathered from the lanes' rows), and the walk's
+    /// set-up read two neighbouring floats with one eight-byte load.
+    #[inline(always)]
+    pub(crate) fn read_apart(&self) -> Ray {
+        let (o, d) = (&self.origin, &self.dir);
+        Ray {
+            origin: Vec3::new(read_apart(&o.x), read_apart(&o.y), read_apart(&o.z)),
+            dir: Vec3::new(read_apart(&d.x), read_apart(&d.y), read_apart(&d.z)),
+            t_max: read_apart(&self.t_max),
+        }
+    }
+}
+
 /// What fills a ray slot that holds no ray yet (a packet's past its samples, an idle lane's):
 /// an empty segment, never traced.
 pub(crate) const UNUSED_RAY: Ray = Ray {
@@ -103,6 +119,34 @@ pub struct Hit {
     pub b1: f32,
     /// The barycentric coordinate of vertex 2.
     pub b2: f32,
+}
+
+impl Hit {
+    /// This hit, its four fields read one at a time (see [`read_apart`]): for a hit that was
+    /// just written as the walk's two eight-byte halves, or field by field, and would be read
+    /// back whole.
+    #[inline(always)]
+    pub(crate) fn read_apart(&self) -> Hit {
+        Hit {
+            t: read_apart(&self.t),
+            triangle: read_apart(&self.triangle),
+            b1: read_apart(&self.b1),
+            b2: read_apart(&self.b2),
+        }
+    }
+}
+
+/// A field read by a load of its own, never merged with its neighbours' into one
+/// wider load. Where a value was written by narrow stores just before it is read, a wider
+/// load spanning two of them cannot be forwarded from the processor's store buffer: it waits
+/// until both stores reach the cache, a stall of a dozen cycles or more that showed at the
+/// start of every walk (docs/bench.md, issue 12, thirty-third round). A load no wider than the
+/// stores is always forwarded. A volatile read is the one way to keep the compiler from
+/// merging loads; it is an ordinary load of an initialised value, so the bits are the same.
+#[inline(always)]
+fn read_apart<T: Copy>(value: &T) -> T {
+    // SAFETY: `value` is a reference: valid, aligned and initialised for a read of a `T`.
+    unsafe { std::ptr::read_volatile(value) }
 }
 
 /// Counted traversal work: the deterministic cost measure of a tile.

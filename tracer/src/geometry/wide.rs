@@ -183,6 +183,7 @@ impl Accel {
         // count was a store to the caller's memory, which LLVM may not keep in a register.
         let mut counted = *stats;
         let mut stack: WalkStack<StackEntry> = [MaybeUninit::uninit(); INLINE_STACK];
+        let ray = &ray.read_apart();
         let hit = self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, &mut stack);
         *stats = counted;
         hit

@@ -221,8 +221,9 @@ impl World {
                 Some(hit) => hit,
                 None => self.closest(ray, moment, &mut stats.traversal),
             };
-            if let Some(hit) = found {
-                paths.hit[i] = hit;
+            if let Some(hit) = &found {
+                // Read apart: the walk's hit was just written as two halves.
+                paths.hit[i] = hit.read_apart();
                 return true;
             }
             let (dir, last) = (paths.ray[i].dir, paths.last(i));
