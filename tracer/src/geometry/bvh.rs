@@ -15,8 +15,8 @@
 use super::build::{build_bvh2, tree_depth};
 use super::memory::on_huge_pages;
 use super::offset::plane_normal;
-use super::triangle::{ShearedRay, TriangleHit, is_degenerate};
-use super::wide::{BoxSimd, Bvh8};
+use super::triangle::is_degenerate;
+use super::wide::{BoxSimd, Bvh8, SetUp};
 use super::{Hit, Ray, TraversalStats};
 use crate::scene::Triangle;
 use glam::{Vec3, Vec3A};
@@ -297,7 +297,22 @@ impl Accel {
         traversal: Traversal,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
-        self.closest_with::<false>(ray, traversal, stats)
+        self.closest_with::<false>(ray, None, traversal, stats)
+    }
+
+    /// [`Accel::intersect_with`], with the walk's set-up made ahead where `set_up` says so:
+    /// lane `r` of rows made with this very ray as their ray `r` (any other lane's set-up
+    /// walks another ray). The same hit and counts, bit for bit; the comparison traversals
+    /// make their own set-up.
+    #[inline]
+    pub(crate) fn intersect_from(
+        &self,
+        ray: &Ray,
+        set_up: SetUp<'_>,
+        traversal: Traversal,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
+        self.closest_with::<false>(ray, set_up, traversal, stats)
     }
 
     /// The closest hit among those a shadow ray must respect: [`Accel::intersect_with`] whose
@@ -314,7 +329,7 @@ impl Accel {
         traversal: Traversal,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
-        self.closest_with::<true>(ray, traversal, stats)
+        self.closest_with::<true>(ray, None, traversal, stats)
     }
 
     /// The closest hit by `traversal`, whose first accepted hit must be certain with `CERTAIN`.
@@ -324,11 +339,12 @@ impl Accel {
     fn closest_with<const CERTAIN: bool>(
         &self,
         ray: &Ray,
+        set_up: SetUp<'_>,
         traversal: Traversal,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
         match traversal {
-            Traversal::Robust => self.traverse_wide::<false, CERTAIN>(ray, stats),
+            Traversal::Robust => self.traverse_wide::<false, CERTAIN>(ray, set_up, stats),
             Traversal::RobustBinary => self.traverse_robust::<false, CERTAIN>(ray, stats),
             Traversal::Obvhs => self.traverse_obvhs::<false>(ray, stats),
         }
@@ -342,8 +358,23 @@ impl Accel {
         traversal: Traversal,
         stats: &mut TraversalStats,
     ) -> bool {
+        self.occluded_from(ray, None, traversal, stats)
+    }
+
+    /// [`Accel::occluded_with`], with the walk's set-up made ahead where `set_up` says so, as
+    /// [`Accel::intersect_from`] takes it.
+    #[inline(always)]
+    pub(crate) fn occluded_from(
+        &self,
+        ray: &Ray,
+        set_up: SetUp<'_>,
+        traversal: Traversal,
+        stats: &mut TraversalStats,
+    ) -> bool {
         match traversal {
-            Traversal::Robust => self.traverse_wide::<true, true>(ray, stats).is_some(),
+            Traversal::Robust => self
+                .traverse_wide::<true, true>(ray, set_up, stats)
+                .is_some(),
             Traversal::RobustBinary => self.traverse_robust::<true, true>(ray, stats).is_some(),
             Traversal::Obvhs => self.traverse_obvhs::<true>(ray, stats).is_some(),
         }
@@ -394,100 +425,6 @@ impl std::fmt::Debug for Accel {
             .field("leaf_entries", &self.leaf_entries())
             .field("depth", &self.depth)
             .finish()
-    }
-}
-
-/// The closest hit of `ray` among all `triangles`, testing every one: the reference the BVH is
-/// tested against. Same triangle test and tie rule as [`Accel::intersect`].
-pub fn intersect_brute_force(triangles: &[Triangle], ray: &Ray) -> Option<Hit> {
-    brute_force::<false>(triangles, ray)
-}
-
-/// Whether any of `triangles` is certainly hit, as [`Accel::occluded`] decides, testing every
-/// one: the reference for occlusion queries.
-pub fn occluded_brute_force(triangles: &[Triangle], ray: &Ray) -> bool {
-    brute_force::<true>(triangles, ray).is_some()
-}
-
-fn brute_force<const ANY_HIT: bool>(triangles: &[Triangle], ray: &Ray) -> Option<Hit> {
-    let sheared = ShearedRay::new(ray);
-    let mut closest = Closest::new(ray, ANY_HIT);
-    for (i, triangle) in triangles.iter().enumerate() {
-        if !is_degenerate(&triangle.p) {
-            closest.offer(&sheared, &triangle.p, i as u32);
-        }
-    }
-    closest.best
-}
-
-/// The closest hit found so far, and the rule by which a new hit replaces it.
-#[derive(Clone, Copy)]
-pub(super) struct Closest {
-    pub(super) best: Option<Hit>,
-    /// The end of the search interval: `best`'s `t`, or the ray's own `t_max` while there is
-    /// no hit. Kept beside `best` rather than read from it, which cost a test of the option at
-    /// every node a traversal culls against it.
-    t_max: f32,
-    ray_t_max: f32,
-    /// For occlusion queries: a hit counts only if its `t` plus its error bound is below the
-    /// ray's `t_max` (see [`Accel::occluded`]).
-    certain: bool,
-}
-
-impl Closest {
-    pub(super) fn new(ray: &Ray, certain: bool) -> Self {
-        Closest {
-            best: None,
-            t_max: ray.t_max,
-            ray_t_max: ray.t_max,
-            certain,
-        }
-    }
-
-    /// The current end of the search interval: the best `t`, or the ray's own `t_max`.
-    #[inline(always)]
-    pub(super) fn t_max(&self) -> f32 {
-        self.t_max
-    }
-
-    /// Tests one triangle and keeps its hit if closer; returns whether it was kept. A hit
-    /// replaces the best one when strictly closer, or equally close with a lower triangle
-    /// index, so the result does not depend on the order triangles are tested in. The ray's own
-    /// `t_max` is exclusive.
-    #[inline(always)]
-    pub(super) fn offer(&mut self, sheared: &ShearedRay, p: &[Vec3; 3], triangle: u32) -> bool {
-        let Some(h) = sheared.intersect(p, self.t_max()) else {
-            return false;
-        };
-        self.keep(h, triangle)
-    }
-
-    /// [`Closest::offer`] for a hit already computed, up to the triangle test's final
-    /// `t <= t_max` check, which is made here against the same `t_max` that `offer` passes.
-    #[inline(always)]
-    pub(super) fn offer_hit(&mut self, h: TriangleHit, triangle: u32) -> bool {
-        h.t <= self.t_max() && self.keep(h, triangle)
-    }
-
-    #[inline(always)]
-    fn keep(&mut self, h: TriangleHit, triangle: u32) -> bool {
-        let better = match self.best {
-            // The sum rounds monotonically and t_max is a float: it stays >= t_max if the
-            // exact sum is.
-            None if self.certain => h.t + h.t_error < self.ray_t_max,
-            None => h.t < self.ray_t_max,
-            Some(best) => h.t < best.t || (h.t == best.t && triangle < best.triangle),
-        };
-        if better {
-            self.t_max = h.t;
-            self.best = Some(Hit {
-                t: h.t,
-                triangle,
-                b1: h.b1,
-                b2: h.b2,
-            });
-        }
-        better
     }
 }
 

@@ -9,7 +9,8 @@
 //! the same triangle whether it came in a pair or a group. Counted work is the same too: a
 //! pair counts what its two groups count one by one.
 
-use super::bvh::{Accel, Closest};
+use super::bvh::Accel;
+use super::closest::Closest;
 use super::node8::BoxTest;
 use super::quad::{LANES, LaneHits, Quad, QuadRay};
 use super::triangle::ShearedRay;

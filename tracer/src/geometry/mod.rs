@@ -40,6 +40,7 @@
 
 mod build;
 mod bvh;
+mod closest;
 mod collapse;
 mod leaf;
 mod memory;
@@ -57,16 +58,19 @@ mod traverse;
 mod triangle;
 mod wide;
 
-pub use bvh::{Accel, BuildQuality, Traversal, intersect_brute_force, occluded_brute_force};
+pub use bvh::{Accel, BuildQuality, Traversal};
+pub use closest::{intersect_brute_force, occluded_brute_force};
 pub(crate) use memory::{on_huge_pages, prefetch, release_freed_memory};
 pub use motion::{Moment, MotionAccel, MovingTriangle, placed_point};
 pub use offset::{
     OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, plane_normal, spawn_ray, spawn_ray_to,
 };
 pub use packet::PACKET;
+pub(crate) use ray_setup::SetUpRows;
 pub(crate) use triangle::gamma;
 pub use triangle::{TriangleHit, intersect_triangle, is_degenerate};
 pub use wide::BoxSimd;
+pub(crate) use wide::SetUp;
 
 use glam::Vec3;
 

@@ -28,7 +28,8 @@
 //! triangles for every ray tested against it. It depends on the companions (the order of the
 //! walk is the packet's), so the renderer makes packets of one pixel's samples only.
 
-use super::bvh::{Accel, Closest};
+use super::bvh::Accel;
+use super::closest::Closest;
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
 use super::node8::{BoxTest, Portable, WIDTH};

@@ -115,9 +115,15 @@ pub(super) struct QuadRay {
 impl QuadRay {
     #[inline(always)]
     pub(super) fn new(sheared: &ShearedRay) -> Self {
+        Self::from_parts(sheared.kz, Self::scalars_of(sheared))
+    }
+
+    /// The set-up of a ray that moves axis `kz` to z, with these [`QuadRay::scalars`].
+    #[inline(always)]
+    pub(super) fn from_parts(kz: usize, scalars: [f32; 6]) -> Self {
         QuadRay {
-            axes: AXES[sheared.kz],
-            scalars: Self::scalars_of(sheared),
+            axes: AXES[kz],
+            scalars,
         }
     }
 

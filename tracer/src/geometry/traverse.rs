@@ -18,7 +18,8 @@
 //! Costs are counted in [`TraversalStats`]: `nodes` is the number of boxes tested (the root and
 //! both children of every inner node opened), `triangles` the number of triangle tests.
 
-use super::bvh::{Accel, BinaryTree, Closest};
+use super::bvh::{Accel, BinaryTree};
+use super::closest::Closest;
 use super::triangle::{ShearedRay, gamma};
 use super::{Hit, Ray, TraversalStats};
 use glam::{BVec3A, Vec3A};

@@ -25,17 +25,17 @@
 //! other copy of the vertices, and the binary tree's can be freed
 //! ([`Accel::release_binary_tree`]).
 
-use super::bvh::{Accel, Closest};
+use super::bvh::Accel;
+use super::closest::Closest;
 use super::memory::prefetch;
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
 use super::node8::{BoxTest, Node8, Portable, WIDTH, avx_available};
 use super::packed_hit::PackedHit;
 use super::quad::{LANES, Quad, QuadRay};
-use super::ray_setup::WideRay;
+use super::ray_setup::{SetUpRows, WideRay};
 use super::traverse::FAR_SCALE;
 use super::{Hit, Ray, TraversalStats};
-use glam::Vec3;
 use std::mem::MaybeUninit;
 
 /// The instructions that test a node's boxes and a leaf's triangles: AVX where the processor
@@ -116,6 +116,10 @@ impl Bvh8 {
     }
 }
 
+/// A walk's set-up made ahead of it: lane `r` of rows made with the ray's own eight (see
+/// [`SetUpRows`]); `None` where the walk makes its own.
+pub(crate) type SetUp<'a> = Option<(&'a SetUpRows, usize)>;
+
 impl Accel {
     /// Closest hit (or, with `ANY_HIT`, the first certain hit found) by the wide traversal,
     /// with the box test [`Bvh8::simd`] names.
@@ -127,6 +131,7 @@ impl Accel {
     pub(super) fn traverse_wide<const ANY_HIT: bool, const CERTAIN: bool>(
         &self,
         ray: &Ray,
+        set_up: SetUp<'_>,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
         if self.wide.nodes.is_empty() {
@@ -139,9 +144,9 @@ impl Accel {
         if self.wide.simd == BoxSimd::Avx {
             // SAFETY: `simd` is `Avx` only where `is_x86_feature_detected!("avx")` said yes
             // (`best_simd`, `Accel::set_box_simd`).
-            return unsafe { self.traverse_avx::<ANY_HIT, CERTAIN>(ray, stats) }.unpack();
+            return unsafe { self.traverse_avx::<ANY_HIT, CERTAIN>(ray, set_up, stats) }.unpack();
         }
-        self.traverse_portable::<ANY_HIT, CERTAIN>(ray, stats)
+        self.traverse_portable::<ANY_HIT, CERTAIN>(ray, set_up, stats)
             .unpack()
     }
 
@@ -150,9 +155,10 @@ impl Accel {
     fn traverse_portable<const ANY_HIT: bool, const CERTAIN: bool>(
         &self,
         ray: &Ray,
+        set_up: SetUp<'_>,
         stats: &mut TraversalStats,
     ) -> PackedHit {
-        PackedHit::pack(self.traverse_with::<ANY_HIT, CERTAIN, Portable>(ray, stats))
+        PackedHit::pack(self.traverse_with::<ANY_HIT, CERTAIN, Portable>(ray, set_up, stats))
     }
 
     /// The traversal compiled with AVX enabled: its box test and its test of two triangle
@@ -168,23 +174,39 @@ impl Accel {
     unsafe fn traverse_avx<const ANY_HIT: bool, const CERTAIN: bool>(
         &self,
         ray: &Ray,
+        set_up: SetUp<'_>,
         stats: &mut TraversalStats,
     ) -> PackedHit {
-        PackedHit::pack(self.traverse_with::<ANY_HIT, CERTAIN, Avx>(ray, stats))
+        PackedHit::pack(self.traverse_with::<ANY_HIT, CERTAIN, Avx>(ray, set_up, stats))
     }
 
     #[inline(always)]
     fn traverse_with<const ANY_HIT: bool, const CERTAIN: bool, B: BoxTest>(
         &self,
         ray: &Ray,
+        set_up: SetUp<'_>,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
         // Counted in a local copy, written back once: through `stats` itself, every node's
         // count was a store to the caller's memory, which LLVM may not keep in a register.
         let mut counted = *stats;
         let mut stack: WalkStack<StackEntry> = [MaybeUninit::uninit(); INLINE_STACK];
-        let ray = &ray.read_apart();
-        let hit = self.wide_with_stack::<ANY_HIT, CERTAIN, B>(ray, &mut counted, &mut stack);
+        let copy;
+        let (ray, wide, quad_ray) = match set_up {
+            Some((rows, lane)) => {
+                let (wide, quad_ray) = rows.lane(lane);
+                (ray, wide, quad_ray)
+            }
+            None => {
+                copy = ray.read_apart();
+                (&copy, WideRay::new(&copy), QuadRay::for_ray(&copy))
+            }
+        };
+        let hit = self.wide_with_stack::<ANY_HIT, CERTAIN, B>(
+            (ray, &wide, &quad_ray),
+            &mut counted,
+            &mut stack,
+        );
         *stats = counted;
         hit
     }
@@ -203,13 +225,11 @@ impl Accel {
     #[inline(always)]
     fn wide_with_stack<const ANY_HIT: bool, const CERTAIN: bool, B: BoxTest>(
         &self,
-        ray: &Ray,
+        (ray, wide, quad_ray): (&Ray, &WideRay, &QuadRay),
         stats: &mut TraversalStats,
         stack: &mut [MaybeUninit<StackEntry>],
     ) -> Option<Hit> {
         let nodes = &self.wide.nodes;
-        let wide = WideRay::new(ray);
-        let quad_ray = QuadRay::for_ray(ray);
         let mut closest = Closest::new(ray, CERTAIN);
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         let mut current = StackEntry {
@@ -227,7 +247,7 @@ impl Accel {
                         current.child,
                         current.count,
                         ray,
-                        &quad_ray,
+                        quad_ray,
                         &mut closest,
                         stats,
                     )
@@ -242,7 +262,7 @@ impl Accel {
                 // which exists since the empty tree returned above.
                 let node = unsafe { nodes.get_unchecked(current.child as usize) };
                 stats.nodes += u64::from(node.children);
-                let (mut entered, t_near) = B::enter(&wide, node, cull(&closest));
+                let (mut entered, t_near) = B::enter(wide, node, cull(&closest));
                 let base = len;
                 while entered != 0 {
                     let lane = entered.trailing_zeros() as usize;
@@ -260,7 +280,7 @@ impl Accel {
                                 entry.child,
                                 entry.count,
                                 ray,
-                                &quad_ray,
+                                quad_ray,
                                 &mut closest,
                                 stats,
                             )
@@ -365,13 +385,6 @@ pub(super) unsafe fn push_sorted<E: Copy>(
     unsafe { stack.get_unchecked_mut(k) }.write(entry);
 }
 
-/// `items` as [`Accel::prefetch_at_hits`] keeps it: the address of the first and the size of
-/// one; `None` where there is nothing to prefetch.
-fn hit_array<T>(items: &[T]) -> Option<(usize, usize)> {
-    let size = std::mem::size_of::<T>();
-    (!items.is_empty() && size != 0).then_some((items.as_ptr() as usize, size))
-}
-
 /// Where `items[index]` starts, for a prefetch: computed without a bounds check, since a hint
 /// never reads (and never faults, even past the end).
 #[inline(always)]
@@ -379,44 +392,12 @@ fn address_of<T>(items: &[T], index: u32) -> *const u8 {
     items.as_ptr().wrapping_add(index as usize).cast()
 }
 
-impl Accel {
-    /// Prefetch `records[triangle]` and `attributes[triangle]` (an array that may be empty),
-    /// with this tree's own normals of the triangle, whenever a closest-hit query keeps a hit
-    /// on it, while the traversal goes on. What the caller reads first at a hit is that record
-    /// and those attributes (on Sponza, the texture coordinates whose texel is the next miss);
-    /// without the hint each is a cache miss that starts only once the query has returned. A
-    /// prefetch reads nothing into the computation, so results are unchanged.
-    pub fn prefetch_at_hits<T, U>(&mut self, records: &[T], attributes: &[U]) {
-        self.hit_records = [hit_array(records), hit_array(attributes)];
-    }
-
-    /// Asks for what the caller will read first if `triangle` stays the closest hit: its
-    /// normals here and its record (`Accel::prefetch_at_hits`), every line of each, down to
-    /// its last byte, so that a record straddling lines comes whole. A hit later replaced wastes only the hint.
-    #[inline(always)]
-    pub(super) fn prefetch_hit(&self, triangle: u32) {
-        let normals = self.normals.as_ptr().cast::<u8>();
-        let size = std::mem::size_of::<[Vec3; 2]>();
-        let at = normals.wrapping_add(triangle as usize * size);
-        prefetch(at);
-        prefetch(at.wrapping_add(size - 1));
-        for &(base, size) in self.hit_records.iter().flatten() {
-            let at = base.wrapping_add(triangle as usize * size);
-            let mut offset = 0;
-            while offset < size {
-                prefetch(at.wrapping_add(offset) as *const u8);
-                offset += 64;
-            }
-            prefetch(at.wrapping_add(size.saturating_sub(1)) as *const u8);
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::geometry::{BuildQuality, PACKET, intersect_brute_force, occluded_brute_force};
     use crate::scene::Triangle;
+    use glam::Vec3;
 
     /// Triangles along the x axis at geometrically shrinking distances from the origin, each
     /// half as large as the one before: a tree over them is many levels deep.

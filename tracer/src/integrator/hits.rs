@@ -16,7 +16,7 @@
 //! on the tile it falls in: the cost map stays the same for every partition.
 
 use super::World;
-use crate::geometry::{Hit, Moment, Ray, SurfacePoint, Traversal, TraversalStats};
+use crate::geometry::{Hit, Moment, Ray, SetUp, SurfacePoint, Traversal, TraversalStats};
 use crate::scene::{Placement, Triangle, VertexAttributes};
 use glam::{Vec2, Vec3};
 
@@ -114,7 +114,22 @@ impl World {
         moment: &Moment,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
-        let hit = self.accel.intersect_with(ray, self.traversal, stats);
+        self.closest_from(ray, None, moment, stats)
+    }
+
+    /// [`World::closest`], with the still tree's walk set up ahead where `set_up` says so
+    /// ([`Accel::intersect_from`](crate::geometry::Accel::intersect_from)).
+    #[inline(always)]
+    pub(super) fn closest_from(
+        &self,
+        ray: &Ray,
+        set_up: SetUp<'_>,
+        moment: &Moment,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
+        let hit = self
+            .accel
+            .intersect_from(ray, set_up, self.traversal, stats);
         if self.motion.is_empty() {
             return hit;
         }
@@ -144,7 +159,19 @@ impl World {
     /// Whether anything certainly blocks `ray` at `moment`.
     #[inline(always)]
     pub(super) fn occluded(&self, ray: &Ray, moment: &Moment, stats: &mut TraversalStats) -> bool {
-        self.accel.occluded_with(ray, self.traversal, stats)
+        self.occluded_from(ray, None, moment, stats)
+    }
+
+    /// [`World::occluded`], with the still tree's walk set up ahead where `set_up` says so.
+    #[inline(always)]
+    pub(super) fn occluded_from(
+        &self,
+        ray: &Ray,
+        set_up: SetUp<'_>,
+        moment: &Moment,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        self.accel.occluded_from(ray, set_up, self.traversal, stats)
             || (!self.motion.is_empty() && self.motion.occluded(moment, ray, self.traversal, stats))
     }
 

@@ -2,6 +2,7 @@
 //! deterministic build, and obvhs's traversal agreeing with ours on interior hits.
 
 use super::*;
+use crate::geometry::intersect_brute_force;
 
 fn triangle(p: [Vec3; 3]) -> Triangle {
     Triangle { p, material: 0 }

@@ -47,7 +47,7 @@
 use super::scatter::{BounceNumbers, resolve};
 use super::{AreaLightSampling, PathStats, UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
-use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, UNUSED_RAY, hit_point};
+use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, SetUpRows, UNUSED_RAY, hit_point};
 use crate::material::Bsdf;
 use crate::sampler::PixelSampler;
 use crate::scene::Texture;
@@ -184,15 +184,19 @@ impl World {
                     gathered.albedo.set(i, albedo);
                 }
             }
-            // Second phase: every lane's shading at once.
+            // Second phase: every lane's shading at once, then the walks' set-ups of every
+            // lane's shadow ray and next ray, eight at a time.
             if sky_is_light {
                 shade::<true>(&gathered, &mut shaded);
             } else {
                 shade::<false>(&gathered, &mut shaded);
             }
+            let shadows = SetUpRows::new(shaded.origin.rows(), shaded.reach.rows());
+            paths.set_up = SetUpRows::new(shaded.next_origin.rows(), shaded.next_dir.rows());
             // Third phase: shadow rays, then each path's next ray or its end.
             for (i, &shading) in shading.iter().enumerate() {
-                if shading && !self.third_phase(&moment, &mut paths, i, &gathered, &shaded) {
+                let lane = (&gathered, &shaded, &shadows);
+                if shading && !self.third_phase(&moment, &mut paths, i, lane) {
                     paths.end(i, feed);
                 }
             }
@@ -219,7 +223,10 @@ impl World {
             let ray = &paths.ray[i];
             let found = match paths.first[i].take() {
                 Some(hit) => hit,
-                None => self.closest(ray, moment, &mut stats.traversal),
+                None => {
+                    let set_up = paths.set_up_ready[i].then_some((&paths.set_up, i));
+                    self.closest_from(ray, set_up, moment, &mut stats.traversal)
+                }
             };
             if let Some(hit) = &found {
                 // Read apart: the walk's hit was just written as two halves.
@@ -323,8 +330,7 @@ impl World {
         moment: &Moment,
         paths: &mut Paths,
         i: usize,
-        g: &Gathered,
-        shaded: &Shaded,
+        (g, shaded, shadows): (&Gathered, &Shaded, &SetUpRows),
     ) -> bool {
         let stats = &mut paths.stats[i];
         let beta = &mut paths.beta[i];
@@ -335,7 +341,7 @@ impl World {
                 dir: shaded.reach.get(i),
                 t_max: if g.sky[i] { f32::INFINITY } else { 1.0 },
             };
-            if !self.occluded(&shadow, moment, &mut stats.traversal) {
+            if !self.occluded_from(&shadow, Some((shadows, i)), moment, &mut stats.traversal) {
                 paths.radiance[i] += *beta * shaded.value.get(i);
             }
         }
@@ -359,6 +365,7 @@ impl World {
             dir: shaded.next_dir.get(i),
             t_max: f32::INFINITY,
         };
+        paths.set_up_ready[i] = true;
         true
     }
 }
@@ -408,6 +415,10 @@ struct Paths {
     last_point: [Vec3; LANES],
     /// The closest hit of the lane's current ray, between its walk and its surface.
     hit: [Hit; LANES],
+    /// The walks' set-ups of the lanes' next rays, made after the shading, and whether the
+    /// lane's current ray is the one its set-up was made for (not a new path's camera ray).
+    set_up: SetUpRows,
+    set_up_ready: [bool; LANES],
     roulette: [f32; LANES],
     stats: [PathStats; LANES],
 }
@@ -432,6 +443,8 @@ impl Default for Paths {
                 b1: 0.0,
                 b2: 0.0,
             }; LANES],
+            set_up: SetUpRows::default(),
+            set_up_ready: [false; LANES],
             roulette: [0.0; LANES],
             stats: [PathStats::default(); LANES],
         }
@@ -453,6 +466,7 @@ impl Paths {
         };
         self.alive[i] = true;
         self.tag[i] = tag;
+        self.set_up_ready[i] = false;
         self.depth[i] = 0;
         self.beta[i] = Vec3::ONE;
         self.radiance[i] = Vec3::ZERO;

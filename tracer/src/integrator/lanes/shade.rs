@@ -33,6 +33,12 @@ impl Points {
     pub(super) fn set(&mut self, i: usize, v: Vec3) {
         (self.x[i], self.y[i], self.z[i]) = (v.x, v.y, v.z);
     }
+
+    /// The three coordinates' rows.
+    #[inline(always)]
+    pub(super) fn rows(&self) -> [&Lanes<f32>; 3] {
+        [&self.x, &self.y, &self.z]
+    }
 }
 
 /// What the first phase hands the second: each lane's hit (its triangle's corners and plane
