@@ -251,23 +251,8 @@ mod tests {
             eprintln!("skipped: this processor has no AVX, where the AVX gather never runs");
             return;
         }
-        // Values whose bits a conversion or an arithmetic step would change: zeros of both
-        // signs, a subnormal, infinities, a NaN with a payload, the extremes.
-        let hard = [
-            0.0,
-            -0.0,
-            1.0e-40,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            f32::from_bits(0x7fc0_1234),
-            f32::MAX,
-            -f32::MIN_POSITIVE,
-        ];
         let mut state = 11;
-        let value = |s: &mut u64| {
-            let pick = (next(s).abs() * 24.0) as usize;
-            hard.get(pick).copied().unwrap_or_else(|| next(s) * 100.0)
-        };
+        let value = |s: &mut u64| test_value(100.0, s);
         for round in 0..4_000 {
             let count = 1 + round % WIDTH;
             let rays: Vec<Ray> = (0..count)
@@ -287,6 +272,31 @@ mod tests {
         }
     }
 
+    /// Values whose bits a conversion or an arithmetic step would change, or that a set-up
+    /// must treat alike: zeros of both signs (infinite reciprocals, ties between axes), a
+    /// subnormal (an infinite reciprocal from a nonzero value), infinities, a NaN with a
+    /// payload, the extremes, and equal magnitudes of either sign (the major axis's ties).
+    const HARD: [f32; 10] = [
+        0.0,
+        -0.0,
+        1.0e-40,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::from_bits(0x7fc0_1234),
+        f32::MAX,
+        -f32::MIN_POSITIVE,
+        0.5,
+        -0.5,
+    ];
+
+    /// One of [`HARD`] a third of the time, else an ordinary value within `scale` of zero.
+    fn test_value(scale: f32, state: &mut u64) -> f32 {
+        let pick = (next(state).abs() * 3.0 * HARD.len() as f32) as usize;
+        HARD.get(pick)
+            .copied()
+            .unwrap_or_else(|| next(state) * scale)
+    }
+
     /// `SetUpRows::new` compiled with AVX, as the path lanes compile it.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
@@ -296,24 +306,8 @@ mod tests {
 
     #[test]
     fn a_lanes_set_up_is_its_rays_own_bit_for_bit() {
-        // Zeros of both signs (infinite reciprocals, ties between axes), a subnormal (an
-        // infinite reciprocal from a nonzero), infinities, a NaN, equal magnitudes of either
-        // sign (the major axis's ties), and ordinary values.
-        let hard = [
-            0.0,
-            -0.0,
-            1.0e-40,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            f32::NAN,
-            0.5,
-            -0.5,
-        ];
         let mut state = 5;
-        let value = |s: &mut u64| {
-            let pick = (next(s).abs() * 16.0) as usize;
-            hard.get(pick).copied().unwrap_or_else(|| next(s) * 10.0)
-        };
+        let value = |s: &mut u64| test_value(10.0, s);
         let bits = |(wide, quad): (WideRay, QuadRay)| {
             (
                 [wide.origin, wide.inv_dir].map(|v| v.map(f32::to_bits)),
