@@ -5,7 +5,7 @@
 //!
 //! **Exactness.** The shape decides only which boxes a ray tests, and in which order it opens
 //! leaves; every leaf is still reached by every ray whose path crosses its box, and
-//! [`Closest::offer`](super::bvh::Closest)'s tie rule makes the closest hit independent of the
+//! [`Closest::offer`](super::closest::Closest)'s tie rule makes the closest hit independent of the
 //! order. So the collapse changes speed, never a hit or a pixel (`scripts/same_bits.sh`).
 
 use super::node8::{Node8, WIDTH};
