@@ -256,14 +256,12 @@ impl World {
     ) -> bool {
         let max_depth = self.scene.settings.max_depth.unwrap_or(UNLIMITED_DEPTH);
         let depth = paths.depth[i];
-        let last = paths.last(i);
-        let stats = &mut paths.stats[i];
         let sampler = &mut paths.sampler[i];
         sampler.start_bounce(depth);
         let u = BounceNumbers::draw(sampler);
         let ray = &paths.ray[i];
         let hit = paths.hit[i];
-        stats.hits += 1;
+        paths.stats[i].hits += 1;
         // `World::surface`, but for the point and its error bound, which the second
         // phase computes from the corners gathered below.
         let triangle = &self.scene.triangles[hit.triangle as usize];
@@ -273,6 +271,8 @@ impl World {
         let material = &self.scene.materials[triangle.material as usize];
         if self.effects.area_lights && material.emission != Vec3::ZERO && seen.front_facing {
             let at = hit_point(&triangle.p, hit.b1, hit.b2);
+            // The last scattering, read only here, where a light is hit.
+            let last = paths.last(i);
             let weight = self.hit_emitter_weight(moment, hit.triangle, at, last);
             paths.radiance[i] += paths.beta[i] * material.emission * weight;
         }
@@ -290,7 +290,7 @@ impl World {
         let Bsdf::Diffuse { albedo, .. } = material.bsdf else {
             unreachable!("lanes_fit: every material is diffuse")
         };
-        stats.light_samples += 1;
+        paths.stats[i].light_samples += 1;
         let (light, choice) = self.lights.lanes_choice(u.light_choice);
         paths.roulette[i] = u.roulette;
         for (corner, p) in g.hit.iter_mut().zip(triangle.p) {
