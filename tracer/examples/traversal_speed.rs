@@ -50,7 +50,7 @@ fn main() {
     let mut world = World::new(scene, accel, effects);
     println!(
         "{path}: {size}x{size}, {spp} spp, {quality:?} tree built in {build:.2} CPU-s, {:?}",
-        world.accel
+        world.accel()
     );
     let wide_only = args[2..].iter().any(|a| a == "wide");
     let traversals: &[Traversal] = if wide_only {

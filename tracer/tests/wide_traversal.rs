@@ -133,17 +133,17 @@ fn render_with(
     // A world frees the binary tree, and the wide walk answers alone (with the leaves'
     // triangles read from their groups); a comparison traversal builds the tree again.
     assert!(
-        !world.accel.has_binary_tree(),
+        !world.accel().has_binary_tree(),
         "a world keeps the wide tree alone"
     );
     world.set_traversal(traversal);
     assert_eq!(
-        world.accel.has_binary_tree(),
+        world.accel().has_binary_tree(),
         traversal != Traversal::Robust,
         "{traversal:?}"
     );
     if let Some(simd) = simd
-        && !world.accel.set_box_simd(simd)
+        && !world.set_box_simd(simd)
     {
         return (Vec::new(), None);
     }
@@ -259,5 +259,47 @@ fn scenes_render_the_same_bits_and_work_through_the_avx_and_sse_box_tests() {
         );
         assert_eq!(avx.0, sse.0, "{scene}: the image bits");
         assert_eq!(avx.1, sse.1, "{scene}: the counted work");
+    }
+}
+
+#[test]
+fn a_tree_set_on_a_world_is_made_ready_as_the_worlds_own_and_renders_the_same_bits() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/cornell-box.toml");
+    let mut scene = tracer::scene::load(&path).expect("the shipped scene loads");
+    scene.settings.width = 32;
+    scene.settings.height = 32;
+    scene.settings.samples_per_pixel = 2;
+    let mut world = World::prepare(scene, None);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .expect("a pool of two threads builds");
+    let render = |world: &World| {
+        let film = tracer::render_frame(world, 0, &pool, tracer::FrameConfig::default());
+        film.pixels
+            .iter()
+            .flatten()
+            .map(|c| c.to_bits())
+            .collect::<Vec<u32>>()
+    };
+    let own = render(&world);
+    for (quality, traversal) in [
+        (BuildQuality::Fastest, Traversal::Robust),
+        (BuildQuality::VerySlow, Traversal::RobustBinary),
+        (BuildQuality::Medium, Traversal::Robust),
+    ] {
+        world.set_traversal(traversal);
+        // A fresh tree keeps its binary tree; the world frees it where only the wide walk
+        // runs, as it frees its own, and keeps it for a comparison traversal.
+        world.set_accel(Accel::build(&world.scene.triangles, quality));
+        assert_eq!(
+            world.accel().has_binary_tree(),
+            traversal != Traversal::Robust,
+            "{quality:?}, {traversal:?}"
+        );
+        assert!(
+            render(&world) == own,
+            "{quality:?}, {traversal:?}: the image changed"
+        );
     }
 }

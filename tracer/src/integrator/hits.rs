@@ -16,8 +16,8 @@
 //! on the tile it falls in: the cost map stays the same for every partition.
 
 use super::World;
-use crate::geometry::{Hit, Moment, Ray, SetUp, SurfacePoint, Traversal, TraversalStats};
-use crate::scene::{Placement, Triangle, VertexAttributes};
+use crate::geometry::{Accel, Hit, Moment, Ray, SetUp, SurfacePoint, Traversal, TraversalStats};
+use crate::scene::{Placement, Scene, Triangle, VertexAttributes};
 use glam::{Vec2, Vec3};
 
 /// The geometry of a hit; both normals on the winding's side.
@@ -76,14 +76,35 @@ impl World {
     /// with: the same trees, as the build is deterministic.
     pub fn set_traversal(&mut self, traversal: Traversal) {
         if traversal != Traversal::Robust && !self.accel.has_binary_tree() {
-            let mut accel =
-                crate::geometry::Accel::build(&self.scene.triangles, self.accel.quality());
+            let mut accel = Accel::build(&self.scene.triangles, self.accel.quality());
             accel.set_box_simd(self.accel.box_simd());
-            accel.binary_tree_on_huge_pages();
-            accel.prefetch_at_hits(&self.scene.triangles, &self.scene.attributes);
+            make_ready(&mut accel, &self.scene, traversal);
             self.accel = accel;
         }
         self.traversal = traversal;
+    }
+
+    /// The still geometry's tree.
+    pub fn accel(&self) -> &Accel {
+        &self.accel
+    }
+
+    /// Replaces the still geometry's tree with `accel` (built from this world's triangles, at
+    /// another quality, say), made ready as [`World::new`] makes its own: the hits' records
+    /// prefetched, the binary tree freed unless the traversal walks it. Assigned as a bare
+    /// field, a tree rendered without the prefetches its rivals had, which a comparison of
+    /// trees must not do.
+    pub fn set_accel(&mut self, mut accel: Accel) {
+        make_ready(&mut accel, &self.scene, self.traversal);
+        self.accel = accel;
+        // A tree whose binary tree was already freed is built again for a comparison traversal.
+        self.set_traversal(self.traversal);
+    }
+
+    /// Makes the still tree test its boxes and triangles with `simd`, where this processor
+    /// runs it ([`Accel::set_box_simd`]); `false`, changing nothing, where it does not.
+    pub fn set_box_simd(&mut self, simd: crate::geometry::BoxSimd) -> bool {
+        self.accel.set_box_simd(simd)
     }
 
     /// The closest hits of a pixel's camera rays `rays` (at most [`crate::geometry::PACKET`]),
@@ -279,5 +300,18 @@ impl World {
             normal,
             uv,
         }
+    }
+}
+
+/// Makes `accel`, built from `scene`'s still triangles, ready for a world that walks it by
+/// `traversal`: the records every hit reads asked for as the walk keeps a hit
+/// ([`Accel::prefetch_at_hits`]); the binary tree freed where only the wide walk runs, else
+/// moved onto huge pages. The one preparation every tree a world holds gets.
+pub(super) fn make_ready(accel: &mut Accel, scene: &Scene, traversal: Traversal) {
+    accel.prefetch_at_hits(&scene.triangles, &scene.attributes);
+    if traversal == Traversal::Robust {
+        accel.release_binary_tree();
+    } else {
+        accel.binary_tree_on_huge_pages();
     }
 }

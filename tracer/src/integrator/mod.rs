@@ -77,8 +77,9 @@ pub use stats::PathStats;
 pub struct World {
     /// The scene as loaded, its still triangles and textures moved onto huge pages.
     pub scene: Scene,
-    /// The still geometry's tree (the moving objects have theirs in `motion`).
-    pub accel: Accel,
+    /// The still geometry's tree (the moving objects have theirs in `motion`), made ready for
+    /// this world ([`World::set_accel`]); read through [`World::accel`].
+    accel: Accel,
     /// The moving objects' trees, built from [`Scene::moving`]; empty when nothing moves.
     pub motion: MotionAccel,
     /// Every light with its choice distribution, for next-event estimation.
@@ -118,8 +119,7 @@ impl World {
         // as soon as it keeps a hit on it, so that the miss overlaps the rest of the query.
         scene.triangles = on_huge_pages(scene.triangles);
         scene.attributes = on_huge_pages(scene.attributes);
-        accel.prefetch_at_hits(&scene.triangles, &scene.attributes);
-        accel.release_binary_tree();
+        hits::make_ready(&mut accel, &scene, Traversal::default());
         // So does every hit on a textured surface read a texel (`scene/texture.rs`).
         for texture in &mut scene.textures {
             texture.on_huge_pages();

@@ -264,7 +264,7 @@ impl<'a> Bench<'a> {
                         drop(std::hint::black_box(Accel::build(triangles, quality)));
                         again.elapsed().as_secs_f64()
                     });
-                self.world.accel = accel;
+                self.world.set_accel(accel);
                 let (mut row, image) =
                     self.measure(Knob::Bvh, format!("{quality:?}"), settings.clone());
                 row.bvh = quality;
@@ -273,7 +273,8 @@ impl<'a> Bench<'a> {
                 row
             })
             .collect();
-        self.world.accel = Accel::build(&self.world.scene.triangles, BuildQuality::default());
+        let default = Accel::build(&self.world.scene.triangles, BuildQuality::default());
+        self.world.set_accel(default);
         rows
     }
 
