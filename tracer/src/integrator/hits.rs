@@ -24,10 +24,9 @@ use glam::{Vec2, Vec3};
 pub(super) struct Surface {
     /// The hit point, with what spawning rays from it needs: its error bound and plane normal.
     pub at: SurfacePoint,
-    pub shading_normal: Vec3,
-    pub uv: Option<Vec2>,
+    /// What the surface shows the ray: its side, shading normal and texture coordinates.
+    pub seen: Shading,
     pub material: u32,
-    pub front_facing: bool,
 }
 
 /// What a hit's surface shows the ray that found it ([`World::shading`]).
@@ -240,17 +239,10 @@ impl World {
             unit_normal: geometric,
             placement,
         } = self.placed(hit, moment);
-        let Shading {
-            front_facing,
-            normal: shading_normal,
-            uv,
-        } = self.shading(ray.dir, hit, attributes, placement, geometric);
         Surface {
             at,
-            shading_normal,
-            uv,
+            seen: self.shading(ray.dir, hit, attributes, placement, geometric),
             material: triangle.material,
-            front_facing,
         }
     }
 

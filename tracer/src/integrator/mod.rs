@@ -364,12 +364,12 @@ impl World {
             if media && material.bsdf == Bsdf::Interface {
                 // Straight on into the medium beyond, as if nothing were there: no scattering
                 // event, so neither the depth nor the last scattering's densities change.
-                medium = self.medium_across(material, surface.front_facing);
+                medium = self.medium_across(material, surface.seen.front_facing);
                 ray = spawn_ray(&surface.at, ray.dir, self.offset);
                 continue;
             }
 
-            if effects.area_lights && material.emission != Vec3::ZERO && surface.front_facing {
+            if effects.area_lights && material.emission != Vec3::ZERO && surface.seen.front_facing {
                 let last = (last_pdf, last_delta, last_point);
                 let weight = self.hit_emitter_weight(moment, hit.triangle, surface.at.p, last);
                 radiance += weighed(media, beta, ratio) * spectrum.of(material.emission) * weight;
@@ -384,8 +384,8 @@ impl World {
             // A textured surface's texel is, on scenes whose textures outgrow a core's caches,
             // a long wait on memory. Ask for it now, and read it only after what does not need
             // it: the frame, the bounce's numbers, and where the light samples land.
-            let texel = self.texel_ahead(&material.bsdf, surface.uv);
-            let frame = Frame::from_normal(surface.shading_normal);
+            let texel = self.texel_ahead(&material.bsdf, surface.seen.uv);
+            let frame = Frame::from_normal(surface.seen.normal);
             let wo = frame.to_local(-ray.dir);
             let shadows = effects.shadows && !material.bsdf.is_delta();
             let mut lights = LightSamples::default();
@@ -426,7 +426,7 @@ impl World {
             if sample.transmission {
                 stats.refractions += 1;
                 if media {
-                    medium = self.medium_across(material, surface.front_facing);
+                    medium = self.medium_across(material, surface.seen.front_facing);
                 }
             }
             let wi = frame.to_world(sample.wi);
