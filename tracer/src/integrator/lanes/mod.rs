@@ -20,8 +20,10 @@
 //! error bound, the shading frame, the sampled direction, the light sample, its weighed value
 //! and both rays' origins, in one loop over the lanes whose body has no branch the compiler
 //! cannot make a select, so that it vectorises (with AVX where the processor has it, chosen at
-//! run time). The third, one lane at a time again, traces the shadow rays and ends or
-//! continues each path.
+//! run time), and then, as vectors again, the walks' set-ups of every lane's shadow ray and
+//! next ray (`SetUpRows`: each lane exactly the set-up the walk would make of its ray, so a
+//! walk starts without its divisions). The third, one lane at a time again, traces the shadow
+//! rays and ends or continues each path.
 //!
 //! **Exactness.** Every lane computes what the scalar path ([`World::radiance_from`])
 //! computes for its sample, operation for operation and in the same order: the second phase
