@@ -118,24 +118,45 @@ impl World {
     /// long as the feed has paths, not on a pixel's dwindling few (at a pixel's last bounces
     /// only two in five lanes were still busy). Only for worlds that [`World::lanes_fit`].
     pub(crate) fn radiance_stream(&self, feed: &mut impl PathFeed) {
+        // Compiled apart for worlds without textures, which then carry no texels.
+        let textured = (self.scene.materials.iter()).any(|m| {
+            matches!(
+                m.bsdf,
+                Bsdf::Diffuse {
+                    texture: Some(_),
+                    ..
+                }
+            )
+        });
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx") {
             // SAFETY: the processor has AVX, just checked.
-            return unsafe { self.lanes_avx(feed) };
+            return unsafe {
+                if textured {
+                    self.lanes_avx::<true>(feed)
+                } else {
+                    self.lanes_avx::<false>(feed)
+                }
+            };
         }
-        self.lanes_with(feed)
+        if textured {
+            self.lanes_with::<true>(feed)
+        } else {
+            self.lanes_with::<false>(feed)
+        }
     }
 
     /// [`World::lanes_with`] compiled with AVX: the second phase's loops eight lanes wide.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    unsafe fn lanes_avx(&self, feed: &mut impl PathFeed) {
-        self.lanes_with(feed)
+    unsafe fn lanes_avx<const TEXTURED: bool>(&self, feed: &mut impl PathFeed) {
+        self.lanes_with::<TEXTURED>(feed)
     }
 
-    /// The paths' loop, a bounce of every busy lane at a time.
+    /// The paths' loop, a bounce of every busy lane at a time; with `TEXTURED`, reading the
+    /// texels of textured surfaces.
     #[inline(always)]
-    fn lanes_with(&self, feed: &mut impl PathFeed) {
+    fn lanes_with<const TEXTURED: bool>(&self, feed: &mut impl PathFeed) {
         // Still worlds only: every ray is asked at the one moment, made once (it has a drop).
         let moment = Moment::default();
         let mut paths = Paths::default();
@@ -166,7 +187,7 @@ impl World {
                 *shading = walked[i]
                     && loop {
                         let lane = (&mut gathered, &mut texels[i]);
-                        if self.surface_phase(&moment, &mut paths, i, lane, sky) {
+                        if self.surface_phase::<TEXTURED>(&moment, &mut paths, i, lane, sky) {
                             break true;
                         }
                         paths.end(i, feed);
@@ -178,7 +199,7 @@ impl World {
             if !shading.iter().any(|&s| s) {
                 return;
             }
-            for (i, texel) in texels.iter_mut().enumerate() {
+            for (i, texel) in texels.iter_mut().enumerate().filter(|_| TEXTURED) {
                 if let Some((bsdf, texel)) = texel.take() {
                     let Bsdf::Diffuse { albedo, .. } = resolve(bsdf, texel) else {
                         unreachable!("lanes_fit: every material is diffuse")
@@ -248,7 +269,7 @@ impl World {
     /// texel and emission, and its light. `true` where the lane has a surface to shade (its
     /// values gathered), `false` where its path ends.
     #[inline(always)]
-    fn surface_phase<'w>(
+    fn surface_phase<'w, const TEXTURED: bool>(
         &'w self,
         moment: &Moment,
         paths: &mut Paths,
@@ -285,10 +306,12 @@ impl World {
         // phase, so that the lanes' misses overlap each other and the other lanes' surfaces;
         // read at once, the wait was a third of this function's time on
         // Sponza (docs/bench.md, issue 12, thirty-second round).
-        *texel = match material.bsdf {
-            Bsdf::Diffuse { texture: None, .. } => None,
-            _ => Some((&material.bsdf, self.texel_ahead(&material.bsdf, seen.uv))),
-        };
+        if TEXTURED {
+            *texel = match material.bsdf {
+                Bsdf::Diffuse { texture: None, .. } => None,
+                _ => Some((&material.bsdf, self.texel_ahead(&material.bsdf, seen.uv))),
+            };
+        }
         let Bsdf::Diffuse { albedo, .. } = material.bsdf else {
             unreachable!("lanes_fit: every material is diffuse")
         };
