@@ -118,16 +118,9 @@ impl World {
     /// long as the feed has paths, not on a pixel's dwindling few (at a pixel's last bounces
     /// only two in five lanes were still busy). Only for worlds that [`World::lanes_fit`].
     pub(crate) fn radiance_stream(&self, feed: &mut impl PathFeed) {
-        // Compiled apart for worlds without textures, which then carry no texels.
-        let textured = (self.scene.materials.iter()).any(|m| {
-            matches!(
-                m.bsdf,
-                Bsdf::Diffuse {
-                    texture: Some(_),
-                    ..
-                }
-            )
-        });
+        // Compiled apart for worlds without textures, which then carry no texels: where the
+        // world pays for no textures, `texel_ahead` finds none anyway.
+        let textured = self.effects.textures;
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx") {
             // SAFETY: the processor has AVX, just checked.
