@@ -12,6 +12,7 @@
 use super::Ray;
 use super::node8::WIDTH;
 use super::quad::QuadRay;
+use super::triangle::major_axis;
 
 // What `RayRows::gather_avx`'s loads rely on: a ray is seven f32 with nothing between them.
 const _: () = assert!(std::mem::size_of::<Ray>() == 7 * 4 && std::mem::align_of::<Ray>() == 4);
@@ -60,7 +61,8 @@ impl WideRay {
 ///
 /// **Exactness.** Lane `r` of each row is computed with exactly the operations
 /// [`WideRay::new`] and [`QuadRay::for_ray`] apply to ray `r` (the reciprocals, the major
-/// axis with its ties, the permutation as selects, the shear's divisions), and
+/// axis by the triangle test's own `major_axis`, the permutation as selects, the shear's
+/// divisions), and
 /// [`SetUpRows::lane`] assembles them as those do, so a walk from a lane's set-up is the walk
 /// from its ray, bit for bit (a test holds the two to each other on every kind of value).
 #[derive(Clone, Copy)]
@@ -100,16 +102,10 @@ impl SetUpRows {
         for r in 0..WIDTH {
             let o = [origin[0][r], origin[1][r], origin[2][r]];
             let d = [dir[0][r], dir[1][r], dir[2][r]];
-            // `major_axis` and `AXES[kz]` as selects: an index into a lane's array would
-            // keep the loop from vectorising.
-            let [ax, ay, az] = d.map(f32::abs);
-            let kz = if ax > ay {
-                if ax > az { 0 } else { 2 }
-            } else if ay > az {
-                1
-            } else {
-                2
-            };
+            // The triangle test's own major axis (its choices are selects), and `AXES[kz]`
+            // as selects too: an index into a lane's array would keep the loop from
+            // vectorising.
+            let kz = major_axis(d) as u32;
             let pick = |v: [f32; 3], axis: u32| match axis {
                 0 => v[0],
                 1 => v[1],
