@@ -15,8 +15,10 @@
 use glam::Vec3A;
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
-use obvhs::bvh2::{Bvh2, leaf_collapser::collapse, reinsertion::ReinsertionOptimizer};
-use obvhs::ploc::PlocBuilder;
+use obvhs::bvh2::{
+    Bvh2, leaf_collapser::collapse, node::Bvh2Node, reinsertion::ReinsertionOptimizer,
+};
+use obvhs::ploc::{PlocBuilder, PlocSearchDistance};
 use obvhs::splits::split_aabbs_preset;
 use obvhs::triangle::Triangle;
 
@@ -27,14 +29,7 @@ pub(super) fn build_bvh2(shapes: Vec<Triangle>, params: BvhBuildParams) -> Bvh2 
     // Each array freed as soon as the build is past it, not when the function returns: the
     // dragon's triangles, boxes and PLOC's own arrays together set the process's peak memory.
     drop(shapes);
-    let mut bvh = PlocBuilder::with_capacity(aabbs.len()).build(
-        params.ploc_search_distance,
-        &aabbs,
-        indices,
-        params.sort_precision,
-        params.search_depth_threshold,
-    );
-    drop(aabbs);
+    let mut bvh = ploc(aabbs, indices, &params);
     bvh.uses_spatial_splits = params.pre_split;
     let mut reinsertion = ReinsertionOptimizer::default();
     reinsertion.run(&mut bvh, params.reinsertion_batch_ratio, None);
@@ -46,6 +41,51 @@ pub(super) fn build_bvh2(shapes: Vec<Triangle>, params: BvhBuildParams) -> Bvh2 
     let post_collapse =
         params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
     reinsertion.run(&mut bvh, post_collapse, None);
+    bvh
+}
+
+/// obvhs's `PlocBuilder::build`, with the boxes freed once PLOC has made its leaves of them,
+/// before its passes: on the dragon the boxes are 28 MB, and PLOC's passes, with its arrays and
+/// the tree it fills, are the process's peak memory. The same steps in the same order as
+/// `PlocBuilder::build_ploc`, so the same tree.
+fn ploc(aabbs: Vec<Aabb>, indices: Vec<u32>, params: &BvhBuildParams) -> Bvh2 {
+    let count = aabbs.len();
+    let mut builder = PlocBuilder::new();
+    let mut bvh = Bvh2::zeroed(count);
+    bvh.reset_for_reuse(count, Some(indices));
+    let mut total = Aabb::empty();
+    builder.current_nodes = aabbs
+        .iter()
+        .zip(&bvh.primitive_indices)
+        .map(|(aabb, &index)| {
+            total.extend(aabb.min);
+            total.extend(aabb.max);
+            Bvh2Node::new(*aabb, 1, index)
+        })
+        .collect();
+    drop(aabbs);
+    let (precision, threshold) = (params.sort_precision, params.search_depth_threshold);
+    // obvhs's search distances are a const parameter of its passes; this is its own match.
+    match params.ploc_search_distance {
+        PlocSearchDistance::Minimum => {
+            builder.build_ploc_from_leaves::<1, false>(&mut bvh, total, precision, threshold)
+        }
+        PlocSearchDistance::VeryLow => {
+            builder.build_ploc_from_leaves::<2, false>(&mut bvh, total, precision, threshold)
+        }
+        PlocSearchDistance::Low => {
+            builder.build_ploc_from_leaves::<6, false>(&mut bvh, total, precision, threshold)
+        }
+        PlocSearchDistance::Medium => {
+            builder.build_ploc_from_leaves::<14, false>(&mut bvh, total, precision, threshold)
+        }
+        PlocSearchDistance::High => {
+            builder.build_ploc_from_leaves::<24, false>(&mut bvh, total, precision, threshold)
+        }
+        PlocSearchDistance::VeryHigh => {
+            builder.build_ploc_from_leaves::<32, false>(&mut bvh, total, precision, threshold)
+        }
+    }
     bvh
 }
 

@@ -109,8 +109,8 @@ impl Traversal {
 }
 
 /// A BVH over a scene's triangles: the wide tree the renderer walks, with the triangles'
-/// vertices copied into its leaves, and (until [`Accel::release_binary_tree`]) the binary tree
-/// it was collapsed from.
+/// vertices copied into its leaves, and, where built by [`Accel::build`] (until
+/// [`Accel::release_binary_tree`]), the binary tree it was collapsed from.
 #[derive(Clone)]
 pub struct Accel {
     /// The binary tree and its leaves' vertices: what the comparison traversals
@@ -150,9 +150,26 @@ pub(super) struct BinaryTree {
 }
 
 impl Accel {
-    /// Builds the BVH. Degenerate triangles ([`is_degenerate`]) are left out, as they can never
-    /// be hit; with no triangle left every ray misses.
+    /// Builds the BVH, keeping the binary tree for every [`Traversal`]. Degenerate triangles
+    /// ([`is_degenerate`]) are left out, as they can never be hit; with no triangle left every
+    /// ray misses.
     pub fn build(triangles: &[Triangle], quality: BuildQuality) -> Accel {
+        Self::build_keeping(triangles, quality, true)
+    }
+
+    /// The tree a world renders with: what [`Accel::build`] and then
+    /// [`Accel::release_binary_tree`] leave (the same wide tree, the binary tree kept only where
+    /// the wide walk needs it), without ever holding the binary tree beside the wide one. The
+    /// binary tree is freed as soon as it is collapsed, and its copy of the leaves' vertices is
+    /// never made (the collapse reads them from `triangles`): on the Cornell dragon these are
+    /// the 87 MB that set the process's peak memory (docs/bench.md, issue 12, thirty-fourth
+    /// round).
+    pub fn build_for_rendering(triangles: &[Triangle], quality: BuildQuality) -> Accel {
+        Self::build_keeping(triangles, quality, false)
+    }
+
+    /// The build, keeping the binary tree where `keep_binary` asks or the wide walk needs it.
+    fn build_keeping(triangles: &[Triangle], quality: BuildQuality, keep_binary: bool) -> Accel {
         let kept: Vec<u32> = (0..triangles.len())
             .filter(|&i| !is_degenerate(&triangles[i].p))
             .map(|i| u32::try_from(i).expect("fewer than 2^32 triangles: Hit::triangle is a u32"))
@@ -192,19 +209,25 @@ impl Accel {
             .iter()
             .map(|&k| kept[k as usize])
             .collect();
-        let vertices: Vec<[Vec3; 3]> = original.iter().map(|&i| triangles[i as usize].p).collect();
-        let mut wide = Bvh8::collapse(&bvh, &vertices, &original);
+        drop(kept);
+        let vertices_of = |i: u32| triangles[i as usize].p;
+        let mut wide = Bvh8::collapse(&bvh, &original, vertices_of);
+        let (node_count, leaf_entries) = (bvh.nodes.len(), original.len());
+        let binary = (keep_binary || !wide.fits_inline_stack()).then(|| {
+            let vertices = original.iter().map(|&i| vertices_of(i)).collect();
+            BinaryTree {
+                bvh,
+                vertices,
+                original,
+            }
+        });
         // What the renderer's traversal and hits read, at random on large meshes.
         wide.nodes = on_huge_pages(wide.nodes);
         wide.quads = on_huge_pages(wide.quads);
         Accel {
-            node_count: bvh.nodes.len(),
-            leaf_entries: original.len(),
-            binary: Some(BinaryTree {
-                bvh,
-                vertices,
-                original,
-            }),
+            node_count,
+            leaf_entries,
+            binary,
             depth,
             wide,
             normals: on_huge_pages(normals()),

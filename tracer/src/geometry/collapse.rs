@@ -19,9 +19,14 @@ impl Bvh8 {
     /// binary nodes become wide nodes so that the summed surface area of the wide nodes, the
     /// surface area heuristic's measure of how often rays open them, is least ([`Plan`]).
     /// Deterministic: ties go to the first choice considered.
-    /// Leaves are packed into groups of four triangles from `vertices`, with their input
-    /// triangles from `original` (the binary tree's leaf entries, `BinaryTree`).
-    pub(super) fn collapse(bvh: &Bvh2, vertices: &[[Vec3; 3]], original: &[u32]) -> Bvh8 {
+    /// Leaves are packed into groups of four triangles, their input triangles from `original`
+    /// (the binary tree's leaf entries, `BinaryTree`) and each one's vertices
+    /// `vertices_of(input triangle)`.
+    pub(super) fn collapse(
+        bvh: &Bvh2,
+        original: &[u32],
+        vertices_of: impl Fn(u32) -> [Vec3; 3] + Copy,
+    ) -> Bvh8 {
         if bvh.nodes.is_empty() {
             return Bvh8::default();
         }
@@ -30,7 +35,7 @@ impl Bvh8 {
         // (slot of the node being made, the binary node it stands for, its level)
         let mut pending = vec![(0usize, 0usize, 1usize)];
         let mut depth = 0;
-        let mut quads = Vec::with_capacity(vertices.len() / 2);
+        let mut quads = Vec::with_capacity(original.len() / 2);
         let mut children = Vec::with_capacity(WIDTH);
         while let Some((slot, binary, level)) = pending.pop() {
             depth = depth.max(level);
@@ -51,9 +56,9 @@ impl Bvh8 {
                         .expect("build.rs clamps leaves to 255 triangles");
                     let end = first + child.prim_count as usize;
                     quads.extend(Quad::pack(
-                        &vertices[first..end],
                         &original[first..end],
                         child.first_index,
+                        vertices_of,
                     ));
                 } else {
                     let index = nodes.len();

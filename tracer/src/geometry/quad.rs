@@ -59,30 +59,25 @@ pub(super) struct Quad {
 const _: () = assert!(std::mem::size_of::<Quad>() == 192, "three cache lines");
 
 impl Quad {
-    /// The groups of the leaf whose triangles are `vertices`, in order, with `original`, their
-    /// input triangles (as many as `vertices`).
+    /// The groups of the leaf whose input triangles are `original`, in order, each one's
+    /// vertices `vertices_of(original)`.
     pub(super) fn pack<'a>(
-        vertices: &'a [[Vec3; 3]],
         original: &'a [u32],
         first_entry: u32,
+        vertices_of: impl Fn(u32) -> [Vec3; 3] + 'a,
     ) -> impl Iterator<Item = Quad> + 'a {
-        let originals = original.chunks(LANES);
-        vertices
-            .chunks(LANES)
-            .zip(originals)
-            .enumerate()
-            .map(move |(g, (chunk, ids))| {
-                let lane = |i: usize| chunk.get(i).unwrap_or(&chunk[0]);
-                let coordinate =
-                    |v: usize, axis: usize| f32x4::new([0, 1, 2, 3].map(|i| lane(i)[v][axis]));
-                Quad {
-                    p: [0, 1, 2].map(|v| [0, 1, 2].map(|axis| coordinate(v, axis))),
-                    entry: first_entry + (g * LANES) as u32,
-                    original: [0, 1, 2, 3].map(|i| ids.get(i).copied().unwrap_or(ids[0])),
-                    valid: (1 << chunk.len()) - 1,
-                    len: chunk.len() as u32,
-                }
-            })
+        original.chunks(LANES).enumerate().map(move |(g, ids)| {
+            let lane = |i: usize| vertices_of(ids.get(i).copied().unwrap_or(ids[0]));
+            let coordinate =
+                |v: usize, axis: usize| f32x4::new([0, 1, 2, 3].map(|i| lane(i)[v][axis]));
+            Quad {
+                p: [0, 1, 2].map(|v| [0, 1, 2].map(|axis| coordinate(v, axis))),
+                entry: first_entry + (g * LANES) as u32,
+                original: [0, 1, 2, 3].map(|i| ids.get(i).copied().unwrap_or(ids[0])),
+                valid: (1 << ids.len()) - 1,
+                len: ids.len() as u32,
+            }
+        })
     }
 
     /// Lane `i`'s triangle, its vertices as [`Quad::pack`] was given them (the same bits):
@@ -315,7 +310,7 @@ mod tests {
                 t_max: f32::INFINITY,
             };
             let sheared = ShearedRay::new(&ray);
-            let quad = Quad::pack(&triangles, &[0, 1, 2, 3], 0)
+            let quad = Quad::pack(&[0, 1, 2, 3], 0, |i| triangles[i as usize])
                 .next()
                 .expect("four triangles, one group");
             let found = QuadRay::new(&sheared).intersect(&quad);
@@ -391,7 +386,7 @@ mod tests {
             };
             let quad_ray = QuadRay::for_ray(&ray);
             let ids: Vec<u32> = (0..count as u32).collect();
-            let quads: Vec<Quad> = Quad::pack(&triangles, &ids, 0).collect();
+            let quads: Vec<Quad> = Quad::pack(&ids, 0, |i| triangles[i as usize]).collect();
             let four = quad_ray.intersect_pair(&quads[0], &quads[1]);
             // SAFETY: this processor has AVX (checked above).
             let eight = unsafe {
@@ -407,7 +402,7 @@ mod tests {
     #[test]
     fn a_short_leaf_masks_its_unused_lanes() {
         let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
-        let quads: Vec<Quad> = Quad::pack(&[t; 6], &[20, 21, 22, 23, 24, 25], 10).collect();
+        let quads: Vec<Quad> = Quad::pack(&[20, 21, 22, 23, 24, 25], 10, |_| t).collect();
         assert_eq!(quads.len(), 2);
         assert_eq!((quads[0].entry, quads[0].valid), (10, 0b1111));
         assert_eq!((quads[1].entry, quads[1].valid), (14, 0b0011));

@@ -352,7 +352,7 @@ mod tests {
                 mixed += 1;
                 continue;
             };
-            let quad = Quad::pack(&triangles, &[0, 1, 2, 3], 0)
+            let quad = Quad::pack(&[0, 1, 2, 3], 0, |i| triangles[i as usize])
                 .next()
                 .expect("four triangles, one group");
             let alone: Vec<LaneHits<LANES>> =

@@ -154,7 +154,8 @@ impl World {
     /// up; `effects` forces an effect set, `None` derives it from the scene.
     pub fn prepare(scene: Scene, effects: Option<Effects>) -> Self {
         let effects = effects.unwrap_or_else(|| Effects::of(&scene));
-        let accel = Accel::build(&scene.triangles, crate::geometry::BuildQuality::default());
+        let accel =
+            Accel::build_for_rendering(&scene.triangles, crate::geometry::BuildQuality::default());
         Self::new(scene, accel, effects)
     }
 

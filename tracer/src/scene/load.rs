@@ -176,7 +176,7 @@ impl Builder<'_> {
             let at = (self.toml, line_of(self.text, path.span().start));
             let (resolved, bytes) = self.log.read(Some(at), path.get_ref())?;
             let defined = |name: &str| self.table.defines(name);
-            let mesh = obj::load(&mut self.log, &resolved, &bytes, &defined)?;
+            let mesh = obj::load(&mut self.log, &resolved, bytes, &defined)?;
             return self.place_obj(o, track, resolved, mesh, default_material);
         }
         let kind = o

@@ -129,3 +129,62 @@ fn obvhs_traversal_finds_the_same_interior_hits_with_consistent_barycentrics() {
         assert!((ours.b1 - theirs.b1).abs() < 1e-5 && (ours.b2 - theirs.b2).abs() < 1e-5);
     }
 }
+
+#[test]
+fn a_build_for_rendering_is_the_full_build_without_its_binary_tree() {
+    // A bumpy grid with degenerate triangles among its faces (left out of both builds), and
+    // long slivers whose boxes overlap (leaves of up to eight triangles, two groups each).
+    let mut mixed = grid(24);
+    for k in (0..mixed.len()).step_by(7) {
+        let p = mixed[k].p[0];
+        mixed.insert(k, triangle([p, p, p + Vec3::X]));
+    }
+    let mut state = 0x1ea0_u64;
+    let mut next = || crate::geometry::build::tests::next_signed(&mut state);
+    let slivers: Vec<Triangle> = (0..500)
+        .map(|_| {
+            let a = Vec3::new(next(), next(), next());
+            let d = Vec3::new(next(), next(), next()) * 3.0;
+            triangle([a - d, a + d, a + Vec3::splat(0.05)])
+        })
+        .collect();
+    for triangles in [mixed, slivers] {
+        for quality in BuildQuality::ALL {
+            let mut full = Accel::build(&triangles, quality);
+            let lean = Accel::build_for_rendering(&triangles, quality);
+            assert!(full.has_binary_tree() && !lean.has_binary_tree());
+            assert_eq!(wide_bits(&lean), wide_bits(&full), "{quality:?}");
+            assert_eq!(
+                (lean.node_count(), lean.leaf_entries(), lean.depth()),
+                (full.node_count(), full.leaf_entries(), full.depth())
+            );
+            assert!(full.release_binary_tree());
+            assert_eq!(wide_bits(&lean), wide_bits(&full));
+        }
+    }
+}
+
+/// Every bit of the wide tree: its nodes' boxes, children and counts, and its groups'
+/// vertices, entries and input triangles.
+fn wide_bits(accel: &Accel) -> Vec<u32> {
+    let nodes = accel.wide.nodes.iter().flat_map(|n| {
+        let boxes = n.bounds.iter().flatten().map(|b| b.to_bits());
+        let lanes = n.index.iter().copied().chain(n.count.map(u32::from));
+        boxes
+            .chain(lanes)
+            .chain([u32::from(n.valid), u32::from(n.children)])
+            .collect::<Vec<_>>()
+    });
+    let quads = accel.wide.quads.iter().flat_map(|q| {
+        let vertices =
+            q.p.iter()
+                .flatten()
+                .flat_map(|lanes| lanes.to_array().map(f32::to_bits));
+        vertices
+            .chain(q.original)
+            .chain([q.entry, q.valid, q.len])
+            .collect::<Vec<_>>()
+    });
+    let depth = [accel.wide.depth as u32];
+    nodes.chain(quads).chain(depth).collect()
+}
