@@ -161,9 +161,9 @@ impl Accel {
     /// [`Accel::release_binary_tree`] leave (the same wide tree, the binary tree kept only where
     /// the wide walk needs it), without ever holding the binary tree beside the wide one. The
     /// binary tree is freed as soon as it is collapsed, and its copy of the leaves' vertices is
-    /// never made (the collapse reads them from `triangles`): on the Cornell dragon these are
-    /// the 87 MB that set the process's peak memory (docs/bench.md, issue 12, thirty-fourth
-    /// round).
+    /// never made (the collapse reads them from `triangles`): on the Cornell dragon both sat
+    /// beside the wide tree's arrays at the process's peak memory (docs/bench.md, issue 12,
+    /// thirty-fourth round).
     pub fn build_for_rendering(triangles: &[Triangle], quality: BuildQuality) -> Accel {
         Self::build_keeping(triangles, quality, false)
     }
