@@ -153,6 +153,7 @@ pub(super) fn tree_depth(bvh: &Bvh2) -> usize {
 pub(crate) mod tests {
     use super::*;
     use glam::DVec3;
+    use obvhs::ploc::SortPrecision;
 
     /// A splitmix64 step mapped to [0, 1), for test scenes and the SIMD triangle tests.
     pub(crate) fn next(state: &mut u64) -> f32 {
@@ -254,6 +255,58 @@ pub(crate) mod tests {
             assert!(padded.min.cmpge(whole.min).all() && padded.max.cmple(whole.max).all());
         }
         assert!(after.iter().zip(&before).any(|(a, b)| a != b));
+    }
+
+    #[test]
+    fn our_ploc_builds_obvhs_own_tree_at_every_search_distance() {
+        // `ploc` repeats `PlocBuilder::build`'s steps to free the boxes early: held to it node
+        // for node (boxes, counts, indices) and in its primitive order, so an upgrade of obvhs
+        // that changes those steps fails here rather than changing the trees unnoticed.
+        let shapes = scene();
+        let (aabbs, indices) = primitive_boxes(&shapes, true);
+        let distances = [
+            PlocSearchDistance::Minimum,
+            PlocSearchDistance::VeryLow,
+            PlocSearchDistance::Low,
+            PlocSearchDistance::Medium,
+            PlocSearchDistance::High,
+            PlocSearchDistance::VeryHigh,
+        ];
+        let nodes = |bvh: &Bvh2| -> Vec<[u32; 8]> {
+            bvh.nodes
+                .iter()
+                .map(|n| {
+                    let (min, max) = (n.aabb().min, n.aabb().max);
+                    let [a, b, c] = min.to_array().map(f32::to_bits);
+                    let [d, e, f] = max.to_array().map(f32::to_bits);
+                    [a, b, c, d, e, f, n.prim_count, n.first_index]
+                })
+                .collect()
+        };
+        for precision in [SortPrecision::U64, SortPrecision::U128] {
+            for (k, &distance) in distances.iter().enumerate() {
+                let params = BvhBuildParams {
+                    ploc_search_distance: distance,
+                    sort_precision: precision,
+                    search_depth_threshold: k % 3,
+                    ..BvhBuildParams::medium_build()
+                };
+                let ours = ploc(aabbs.clone(), indices.clone(), &params);
+                let theirs = PlocBuilder::with_capacity(aabbs.len()).build(
+                    distance,
+                    &aabbs,
+                    indices.clone(),
+                    precision,
+                    params.search_depth_threshold,
+                );
+                assert!(
+                    ours.nodes.len() > 2 * shapes.len() - 1,
+                    "split boxes are leaves too"
+                );
+                assert_eq!(nodes(&ours), nodes(&theirs), "{distance:?} {precision:?}");
+                assert_eq!(ours.primitive_indices, theirs.primitive_indices);
+            }
+        }
     }
 
     #[test]
