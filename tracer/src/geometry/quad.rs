@@ -67,13 +67,15 @@ impl Quad {
         vertices_of: impl Fn(u32) -> [Vec3; 3] + 'a,
     ) -> impl Iterator<Item = Quad> + 'a {
         original.chunks(LANES).enumerate().map(move |(g, ids)| {
-            let lane = |i: usize| vertices_of(ids.get(i).copied().unwrap_or(ids[0]));
+            // Each lane's triangle, looked up once: unused lanes repeat the group's first.
+            let original = [0, 1, 2, 3].map(|i| ids.get(i).copied().unwrap_or(ids[0]));
+            let lanes = original.map(&vertices_of);
             let coordinate =
-                |v: usize, axis: usize| f32x4::new([0, 1, 2, 3].map(|i| lane(i)[v][axis]));
+                |v: usize, axis: usize| f32x4::new(lanes.map(|vertices| vertices[v][axis]));
             Quad {
                 p: [0, 1, 2].map(|v| [0, 1, 2].map(|axis| coordinate(v, axis))),
                 entry: first_entry + (g * LANES) as u32,
-                original: [0, 1, 2, 3].map(|i| ids.get(i).copied().unwrap_or(ids[0])),
+                original,
                 valid: (1 << ids.len()) - 1,
                 len: ids.len() as u32,
             }
