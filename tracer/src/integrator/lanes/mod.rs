@@ -47,11 +47,10 @@
 //! the time of one.
 
 use super::scatter::{BounceNumbers, resolve};
-use super::{AreaLightSampling, PathStats, UNLIMITED_DEPTH, World};
+use super::{AreaLightSampling, UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
-use crate::geometry::{Hit, Moment, OffsetMethod, PACKET, Ray, SetUpRows, UNUSED_RAY, hit_point};
+use crate::geometry::{Moment, OffsetMethod, PACKET, Ray, SetUpRows, hit_point};
 use crate::material::Bsdf;
-use crate::sampler::PixelSampler;
 use crate::scene::Texture;
 use crate::spectrum::SpectralSampling;
 use glam::Vec3;
@@ -59,33 +58,14 @@ use glam::Vec3;
 /// The lanes: as many paths as a camera packet holds rays, eight f32 lanes of AVX.
 const LANES: usize = PACKET;
 
+mod paths;
 mod shade;
 
+pub use paths::PathLanes;
+use paths::Paths;
+pub(crate) use paths::{NewPath, PathFeed};
+
 use shade::{Gathered, Shaded, shade};
-
-/// How a tile's paths are advanced (a comparison knob: both give the same bits).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum PathLanes {
-    /// Eight paths a bounce at a time, their shading in vector instructions, where the
-    /// world allows it ([`World::lanes_fit`]); one by one elsewhere.
-    #[default]
-    Lanes,
-    /// One path after another, each bounce by bounce.
-    OneByOne,
-}
-
-impl PathLanes {
-    /// Both ways, the default first.
-    pub const ALL: [PathLanes; 2] = [PathLanes::Lanes, PathLanes::OneByOne];
-
-    /// The name in reports and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            PathLanes::Lanes => "lanes",
-            PathLanes::OneByOne => "one-by-one",
-        }
-    }
-}
 
 impl World {
     /// Whether every path of this world can run in lanes: a plain world (no media, no
@@ -391,120 +371,3 @@ impl World {
 /// A textured surface's BSDF and the texel it reads, asked for from memory in a lane's first
 /// phase and read after every lane's ([`World::texel_ahead`]).
 type Texel<'w> = Option<(&'w Bsdf, Option<(&'w Texture, Option<usize>)>)>;
-
-/// A lane's slots for a new path, which [`PathFeed::next_path`] fills in place (returned by
-/// value, a path's start went through narrow stores read back by wider loads, a stall the
-/// processor cannot forward).
-pub(crate) struct NewPath<'a> {
-    /// The camera ray.
-    pub ray: &'a mut Ray,
-    /// The camera ray's closest hit, where the feed found it already (a camera packet).
-    pub first: &'a mut Option<Option<Hit>>,
-    /// The sample's numbers, the camera's already drawn.
-    pub sampler: &'a mut PixelSampler,
-}
-
-/// Where [`World::radiance_stream`]'s paths come from and where their results go.
-pub(crate) trait PathFeed {
-    /// Fills `lane` with the next path to render and returns the feed's name for it, or
-    /// `None` when there are no more.
-    fn next_path(&mut self, lane: NewPath<'_>) -> Option<u64>;
-    /// The radiance of the path named `tag` and its counted work, as it ends (paths end in
-    /// any order).
-    fn path_done(&mut self, tag: u64, radiance: Vec3, stats: &PathStats);
-}
-
-/// The lanes' paths, a value of every lane at a time: the state the scalar path keeps in its
-/// locals. The last scattering's density, whether it was a delta and where it was are three
-/// arrays rather than one of tuples: a 17-byte tuple's copies went through unaligned,
-/// overlapping stores the processor could not forward (docs/bench.md, issue 12,
-/// thirty-second round).
-struct Paths {
-    alive: [bool; LANES],
-    tag: [u64; LANES],
-    ray: [Ray; LANES],
-    first: [Option<Option<Hit>>; LANES],
-    sampler: [PixelSampler; LANES],
-    depth: [u32; LANES],
-    beta: [Vec3; LANES],
-    radiance: [Vec3; LANES],
-    last_pdf: [f32; LANES],
-    last_delta: [bool; LANES],
-    last_point: [Vec3; LANES],
-    /// The closest hit of the lane's current ray, between its walk and its surface.
-    hit: [Hit; LANES],
-    /// The walks' set-ups of the lanes' next rays, made after the shading, and whether the
-    /// lane's current ray is the one its set-up was made for (not a new path's camera ray).
-    set_up: SetUpRows,
-    set_up_ready: [bool; LANES],
-    roulette: [f32; LANES],
-    stats: [PathStats; LANES],
-}
-
-impl Default for Paths {
-    fn default() -> Self {
-        Paths {
-            alive: [false; LANES],
-            tag: [0; LANES],
-            ray: [UNUSED_RAY; LANES],
-            first: [None; LANES],
-            sampler: std::array::from_fn(|_| PixelSampler::placeholder()),
-            depth: [0; LANES],
-            beta: [Vec3::ONE; LANES],
-            radiance: [Vec3::ZERO; LANES],
-            last_pdf: [0.0; LANES],
-            last_delta: [true; LANES],
-            last_point: [Vec3::ZERO; LANES],
-            hit: [Hit {
-                t: 0.0,
-                triangle: 0,
-                b1: 0.0,
-                b2: 0.0,
-            }; LANES],
-            set_up: SetUpRows::default(),
-            set_up_ready: [false; LANES],
-            roulette: [0.0; LANES],
-            stats: [PathStats::default(); LANES],
-        }
-    }
-}
-
-impl Paths {
-    /// Starts the feed's next path in lane `i`, as the scalar path starts a camera ray (the
-    /// camera counts as a delta); `false` where the feed has none.
-    #[inline(always)]
-    fn admit(&mut self, i: usize, feed: &mut impl PathFeed) -> bool {
-        let lane = NewPath {
-            ray: &mut self.ray[i],
-            first: &mut self.first[i],
-            sampler: &mut self.sampler[i],
-        };
-        let Some(tag) = feed.next_path(lane) else {
-            return false;
-        };
-        self.alive[i] = true;
-        self.tag[i] = tag;
-        self.set_up_ready[i] = false;
-        self.depth[i] = 0;
-        self.beta[i] = Vec3::ONE;
-        self.radiance[i] = Vec3::ZERO;
-        (self.last_pdf[i], self.last_delta[i], self.last_point[i]) =
-            (0.0, true, self.ray[i].origin);
-        self.stats[i] = PathStats::default();
-        true
-    }
-
-    /// Lane `i`'s last scattering as the scalar path's helpers take it: its density, whether
-    /// it was a delta, and where it was.
-    #[inline(always)]
-    fn last(&self, i: usize) -> (f32, bool, Vec3) {
-        (self.last_pdf[i], self.last_delta[i], self.last_point[i])
-    }
-
-    /// Ends lane `i`'s path and hands its result over.
-    #[inline(always)]
-    fn end(&mut self, i: usize, feed: &mut impl PathFeed) {
-        self.alive[i] = false;
-        feed.path_done(self.tag[i], self.radiance[i], &self.stats[i]);
-    }
-}

@@ -1,0 +1,150 @@
+//! The lanes' paths: the knob that chooses lanes or one path at a time ([`PathLanes`]), the
+//! feed the lanes take their paths from and hand them back to ([`PathFeed`]), and each lane's
+//! state between bounces ([`Paths`]).
+
+use super::LANES;
+use crate::geometry::{Hit, Ray, SetUpRows, UNUSED_RAY};
+use crate::integrator::PathStats;
+use crate::sampler::PixelSampler;
+use glam::Vec3;
+
+/// How a tile's paths are advanced (a comparison knob: both give the same bits).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum PathLanes {
+    /// Eight paths a bounce at a time, their shading in vector instructions, where the
+    /// world allows it ([`World::lanes_fit`]); one by one elsewhere.
+    #[default]
+    Lanes,
+    /// One path after another, each bounce by bounce.
+    OneByOne,
+}
+
+impl PathLanes {
+    /// Both ways, the default first.
+    pub const ALL: [PathLanes; 2] = [PathLanes::Lanes, PathLanes::OneByOne];
+
+    /// The name in reports and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            PathLanes::Lanes => "lanes",
+            PathLanes::OneByOne => "one-by-one",
+        }
+    }
+}
+
+/// A lane's slots for a new path, which [`PathFeed::next_path`] fills in place (returned by
+/// value, a path's start went through narrow stores read back by wider loads, a stall the
+/// processor cannot forward).
+pub(crate) struct NewPath<'a> {
+    /// The camera ray.
+    pub ray: &'a mut Ray,
+    /// The camera ray's closest hit, where the feed found it already (a camera packet).
+    pub first: &'a mut Option<Option<Hit>>,
+    /// The sample's numbers, the camera's already drawn.
+    pub sampler: &'a mut PixelSampler,
+}
+
+/// Where [`World::radiance_stream`]'s paths come from and where their results go.
+pub(crate) trait PathFeed {
+    /// Fills `lane` with the next path to render and returns the feed's name for it, or
+    /// `None` when there are no more.
+    fn next_path(&mut self, lane: NewPath<'_>) -> Option<u64>;
+    /// The radiance of the path named `tag` and its counted work, as it ends (paths end in
+    /// any order).
+    fn path_done(&mut self, tag: u64, radiance: Vec3, stats: &PathStats);
+}
+
+/// The lanes' paths, a value of every lane at a time: the state the scalar path keeps in its
+/// locals. The last scattering's density, whether it was a delta and where it was are three
+/// arrays rather than one of tuples: a 17-byte tuple's copies went through unaligned,
+/// overlapping stores the processor could not forward (docs/bench.md, issue 12,
+/// thirty-second round).
+pub(super) struct Paths {
+    pub(super) alive: [bool; LANES],
+    pub(super) tag: [u64; LANES],
+    pub(super) ray: [Ray; LANES],
+    pub(super) first: [Option<Option<Hit>>; LANES],
+    pub(super) sampler: [PixelSampler; LANES],
+    pub(super) depth: [u32; LANES],
+    pub(super) beta: [Vec3; LANES],
+    pub(super) radiance: [Vec3; LANES],
+    pub(super) last_pdf: [f32; LANES],
+    pub(super) last_delta: [bool; LANES],
+    pub(super) last_point: [Vec3; LANES],
+    /// The closest hit of the lane's current ray, between its walk and its surface.
+    pub(super) hit: [Hit; LANES],
+    /// The walks' set-ups of the lanes' next rays, made after the shading, and whether the
+    /// lane's current ray is the one its set-up was made for (not a new path's camera ray).
+    pub(super) set_up: SetUpRows,
+    pub(super) set_up_ready: [bool; LANES],
+    pub(super) roulette: [f32; LANES],
+    pub(super) stats: [PathStats; LANES],
+}
+
+impl Default for Paths {
+    fn default() -> Self {
+        Paths {
+            alive: [false; LANES],
+            tag: [0; LANES],
+            ray: [UNUSED_RAY; LANES],
+            first: [None; LANES],
+            sampler: std::array::from_fn(|_| PixelSampler::placeholder()),
+            depth: [0; LANES],
+            beta: [Vec3::ONE; LANES],
+            radiance: [Vec3::ZERO; LANES],
+            last_pdf: [0.0; LANES],
+            last_delta: [true; LANES],
+            last_point: [Vec3::ZERO; LANES],
+            hit: [Hit {
+                t: 0.0,
+                triangle: 0,
+                b1: 0.0,
+                b2: 0.0,
+            }; LANES],
+            set_up: SetUpRows::default(),
+            set_up_ready: [false; LANES],
+            roulette: [0.0; LANES],
+            stats: [PathStats::default(); LANES],
+        }
+    }
+}
+
+impl Paths {
+    /// Starts the feed's next path in lane `i`, as the scalar path starts a camera ray (the
+    /// camera counts as a delta); `false` where the feed has none.
+    #[inline(always)]
+    pub(super) fn admit(&mut self, i: usize, feed: &mut impl PathFeed) -> bool {
+        let lane = NewPath {
+            ray: &mut self.ray[i],
+            first: &mut self.first[i],
+            sampler: &mut self.sampler[i],
+        };
+        let Some(tag) = feed.next_path(lane) else {
+            return false;
+        };
+        self.alive[i] = true;
+        self.tag[i] = tag;
+        self.set_up_ready[i] = false;
+        self.depth[i] = 0;
+        self.beta[i] = Vec3::ONE;
+        self.radiance[i] = Vec3::ZERO;
+        (self.last_pdf[i], self.last_delta[i], self.last_point[i]) =
+            (0.0, true, self.ray[i].origin);
+        self.stats[i] = PathStats::default();
+        true
+    }
+
+    /// Lane `i`'s last scattering as the scalar path's helpers take it: its density, whether
+    /// it was a delta, and where it was.
+    #[inline(always)]
+    pub(super) fn last(&self, i: usize) -> (f32, bool, Vec3) {
+        (self.last_pdf[i], self.last_delta[i], self.last_point[i])
+    }
+
+    /// Ends lane `i`'s path and hands its result over.
+    #[inline(always)]
+    pub(super) fn end(&mut self, i: usize, feed: &mut impl PathFeed) {
+        self.alive[i] = false;
+        feed.path_done(self.tag[i], self.radiance[i], &self.stats[i]);
+    }
+}
