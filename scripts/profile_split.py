@@ -26,18 +26,20 @@ settings:
    functions, and the code its LLVM backend compiled (the anonymous `perf-PID.map` region) as
    the rest; Python, the EXR writer and the kernel are outside the render and left out;
 4. `--repeats N` times over, ours then Mitsuba's, scene by scene; each renderer's run of fewest
-   CPU-seconds is reported (this machine's speed drifts by a third within minutes).
+   CPU-seconds is reported (this machine's speed drifts by a third within minutes), as a table
+   printed and written to OUT/profile.md, every run's classes to OUT/profile.json.
 
 Needs `perf` (sampling works without hardware counters, by the CPU clock), and `nm`, `readelf`
 and `llvm-dwarfdump` to tell the walks' instances apart (without them, all of `traverse_*` is
 one class).
 
 Usage (from the repository root, after `cargo build --release`):
-    python3 scripts/profile_split.py --repeats 3 scenes/shared/cornell-box-original.toml
+    python3 scripts/profile_split.py --repeats 3 --out out/bench/profile scenes/shared/cornell-box-original.toml
 """
 
 import argparse
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -60,13 +62,13 @@ def main():
     parser.add_argument("--segments", type=int, default=8, help="path segments (Mitsuba's max_depth)")
     parser.add_argument("--variant", default="llvm_ad_rgb")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--out", default="out/bench/profile", type=Path)
     args = parser.parse_args()
     if not shutil.which("perf"):
         sys.exit("perf is needed (apt install linux-perf)")
-    import os
-
     load_before = os.getloadavg()
     rows = []
+    runs = {}
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
         for toml in map(Path, args.scenes):
@@ -81,18 +83,31 @@ def main():
                       file=sys.stderr)
             rows.append((toml.stem, min(ours, key=lambda p: p["cpu_seconds"]),
                          min(theirs, key=lambda p: p["cpu_seconds"])))
-    print(f"{processor()}, load {fmt_load(load_before)} before, {fmt_load(os.getloadavg())} after; "
-          f"{args.size}x{args.size}, {args.spp} spp, {args.segments} segments, Mitsuba `{args.variant}`; "
-          f"each renderer's fastest of {args.repeats} runs, CPU-seconds of the render")
-    print()
-    print("| scene | renderer | render | " + " | ".join(CLASSES) + " |")
-    print("|---|---|---:|" + "---:|" * len(CLASSES))
+            runs[toml.stem] = {"tessera": ours, "mitsuba": theirs}
+    load_after = os.getloadavg()
+    lines = [
+        f"{processor()}, load {fmt_load(load_before)} before, {fmt_load(load_after)} after; "
+        f"{args.size}x{args.size}, {args.spp} spp, {args.segments} segments, Mitsuba `{args.variant}`; "
+        f"each renderer's fastest of {args.repeats} runs, CPU-seconds of the render",
+        "",
+        "| scene | renderer | render | " + " | ".join(CLASSES) + " |",
+        "|---|---|---:|" + "---:|" * len(CLASSES),
+    ]
     for scene, our, their in rows:
         for name, p in (("tessera", our), ("Mitsuba (Embree, LLVM)", their)):
-            print(f"| {scene} | {name} | {p['cpu_seconds']:.2f} | "
-                  + " | ".join(f"{p['classes'][c]:.2f}" for c in CLASSES) + " |")
-        print(f"| {scene} | ratio | {our['cpu_seconds'] / their['cpu_seconds']:.2f}x | "
-              + " | ".join(ratio(our['classes'][c], their['classes'][c]) for c in CLASSES) + " |")
+            lines.append(f"| {scene} | {name} | {p['cpu_seconds']:.2f} | "
+                         + " | ".join(f"{p['classes'][c]:.2f}" for c in CLASSES) + " |")
+        lines.append(f"| {scene} | ratio | {our['cpu_seconds'] / their['cpu_seconds']:.2f}x | "
+                     + " | ".join(ratio(our['classes'][c], their['classes'][c]) for c in CLASSES) + " |")
+    table = "\n".join(lines) + "\n"
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "profile.md").write_text(table)
+    report = {"processor": processor(), "load_before": load_before, "load_after": load_after,
+              "settings": {"size": args.size, "spp": args.spp, "segments": args.segments,
+                           "variant": args.variant, "repeats": args.repeats},
+              "runs": runs}
+    (args.out / "profile.json").write_text(json.dumps(report, indent=2) + "\n")
+    print(table, end="")
 
 
 def ratio(a, b):
