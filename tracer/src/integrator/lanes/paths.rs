@@ -12,7 +12,8 @@ use glam::Vec3;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum PathLanes {
     /// Eight paths a bounce at a time, their shading in vector instructions, where the
-    /// world allows it ([`World::lanes_fit`]); one by one elsewhere.
+    /// world allows it ([`World::lanes_fit`](crate::World::lanes_fit)); one by one
+    /// elsewhere.
     #[default]
     Lanes,
     /// One path after another, each bounce by bounce.
@@ -44,7 +45,8 @@ pub(crate) struct NewPath<'a> {
     pub sampler: &'a mut PixelSampler,
 }
 
-/// Where [`World::radiance_stream`]'s paths come from and where their results go.
+/// Where [`World::radiance_stream`](crate::World::radiance_stream)'s paths come from and where
+/// their results go.
 pub(crate) trait PathFeed {
     /// Fills `lane` with the next path to render and returns the feed's name for it, or
     /// `None` when there are no more.
