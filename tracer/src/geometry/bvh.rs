@@ -183,7 +183,8 @@ impl Accel {
         };
         if kept.is_empty() {
             return Accel {
-                binary: Some(BinaryTree::default()),
+                // An empty tree always fits the wide walk's stack: kept only where asked.
+                binary: keep_binary.then(BinaryTree::default),
                 node_count: 0,
                 leaf_entries: 0,
                 depth: 0,

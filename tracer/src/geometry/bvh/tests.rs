@@ -148,7 +148,9 @@ fn a_build_for_rendering_is_the_full_build_without_its_binary_tree() {
             triangle([a - d, a + d, a + Vec3::splat(0.05)])
         })
         .collect();
-    for triangles in [mixed, slivers] {
+    // Degenerate triangles alone: no tree at all, and still none kept beside it.
+    let degenerate = vec![triangle([Vec3::ZERO, Vec3::ZERO, Vec3::X]); 5];
+    for triangles in [mixed, slivers, degenerate] {
         for quality in BuildQuality::ALL {
             let mut full = Accel::build(&triangles, quality);
             let lean = Accel::build_for_rendering(&triangles, quality);
