@@ -204,15 +204,24 @@ def scene_files_present(toml):
     return all((toml.parent / o["obj"]).exists() for o in scene.get("object", []) if "obj" in o)
 
 
-def run_worker(variant, toml, exr, args, roulette_depth, seed=0):
-    """Mitsuba's render of `toml` in a process of its own, with Russian roulette from
-    `roulette_depth` (tessera's, as `tessera bench` reported it; `None`: off)."""
-    command = [sys.executable, __file__, "--worker", variant, str(toml), str(exr)]
-    command += ["--size", str(args.size), "--spp", str(args.spp), "--segments", str(args.segments)]
-    command += ["--integrator", args.integrator, "--seed", str(seed), "--tessera", args.tessera]
+def worker_command(variant, toml, exr, size, spp, segments, tessera, roulette_depth, integrator="auto",
+                   lanes=None, seed=0):
+    """The command that renders `toml` with Mitsuba in a process of its own, with Russian
+    roulette from `roulette_depth` (tessera's, as `tessera bench` reported it; `None`: off);
+    its last line of output is the render's JSON (`render_mitsuba`)."""
+    command = [sys.executable, str(Path(__file__).resolve()), "--worker", variant, str(toml), str(exr)]
+    command += ["--size", str(size), "--spp", str(spp), "--segments", str(segments)]
+    command += ["--integrator", integrator, "--seed", str(seed), "--tessera", tessera]
     command += ["--roulette-depth", "off" if roulette_depth is None else str(roulette_depth)]
-    if args.mitsuba_lanes:
-        command += ["--mitsuba-lanes", str(args.mitsuba_lanes)]
+    if lanes:
+        command += ["--mitsuba-lanes", str(lanes)]
+    return command
+
+
+def run_worker(variant, toml, exr, args, roulette_depth, seed=0):
+    """Mitsuba's render of `toml` in a process of its own (`worker_command`)."""
+    command = worker_command(variant, toml, exr, args.size, args.spp, args.segments, args.tessera, roulette_depth,
+                             args.integrator, args.mitsuba_lanes, seed)
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode != 0:
         return {"error": done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"exit {done.returncode}"}

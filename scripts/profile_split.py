@@ -48,7 +48,7 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from mitsuba_compare import DEFAULT_SCENES, fmt_load, processor, scene_files_present  # noqa: E402
+from mitsuba_compare import DEFAULT_SCENES, fmt_load, processor, scene_files_present, worker_command  # noqa: E402
 
 CLASSES = ("closest-hit walks", "any-hit walks", "the rest")
 
@@ -134,11 +134,8 @@ def profile_tessera(toml, args, data):
 
 def profile_mitsuba(toml, args, roulette_depth, data):
     """Mitsuba's render of `toml` in a worker under perf; the classes of its samples."""
-    script = Path(__file__).resolve().parent / "mitsuba_compare.py"
-    exr = data.with_suffix(".exr")
-    command = [sys.executable, str(script), "--worker", args.variant, str(toml), str(exr), "--size", str(args.size),
-               "--spp", str(args.spp), "--segments", str(args.segments), "--tessera", args.tessera,
-               "--roulette-depth", "off" if roulette_depth is None else str(roulette_depth)]
+    command = worker_command(args.variant, toml, data.with_suffix(".exr"), args.size, args.spp, args.segments,
+                             args.tessera, roulette_depth)
     done = subprocess.run(["perf", "record", "-q", "-F", "1000", "-o", str(data), *command],
                           capture_output=True, text=True, check=True)
     result = json.loads(done.stdout.strip().splitlines()[-1])
