@@ -127,6 +127,10 @@ fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
             (12, 1, Some(5), Some(2)),
             (16, 13, Some(1), Some(3)),
             (16, 8, Some(0), Some(3)),
+            // Paths that end at their first surface: one lane takes every pixel of the tile
+            // while the others hold the first pixel's first samples, whose later ones come
+            // back early.
+            (16, 13, Some(0), Some(3)),
             (16, 3, None, Some(1)),
         ] {
             let mut scene = placed(cornell_box(), scale, shift);

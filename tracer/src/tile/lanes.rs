@@ -2,9 +2,15 @@
 //! ([`World::radiance_stream`](crate::World::radiance_stream)): the feed hands out each pixel's
 //! samples in order, a camera packet at a time, and takes their values back in whatever order
 //! the lanes end them. A pixel's values are added in sample order, so the tile is the same
-//! bits as one rendered pixel by pixel; they wait in a ring of 64 slots, added up as the ring
-//! needs room and at the pixel's end (eight lanes hold at most eight paths, so few come back
-//! far ahead), so a pixel's memory does not grow with the sample count.
+//! bits as one rendered pixel by pixel. A value that comes back in its turn is added at once;
+//! one that comes back ahead of a sample still out waits in a ring of 64 slots, added up as the
+//! ring needs room and at the pixel's end (eight lanes hold at most eight paths, so few come
+//! back far ahead), so a pixel's memory does not grow with the sample count. The ring is taken
+//! for a pixel only when its first early value comes, from the rings of finished pixels: the
+//! open pixels are not always few. Where paths end at their first surface (a depth cap of 0,
+//! `tessera bench`'s camera-ray pass) or escape at once, one lane takes path after path of
+//! pixel after pixel while the others still hold the first pixel's samples, and every pixel of
+//! the tile is open at once, its values coming back in order.
 
 use super::{Cameras, Packet, TilePixels, add_sample};
 use crate::integrator::{NewPath, PathFeed, PathStats};
@@ -30,11 +36,8 @@ pub(super) struct TileFeed<'a, 'w, P> {
     /// index.
     open: VecDeque<OpenPixel>,
     oldest: u64,
-    /// The sums of finished pixels, kept for the next ones (each holds a ring of values).
-    /// Boxed, as in [`OpenPixel`], so that a pixel's start and end move a pointer, not the
-    /// ring's kilobyte.
-    #[allow(clippy::vec_box)]
-    spare: Vec<Box<InOrder>>,
+    /// The rings of early values of finished pixels, kept for the next pixels that need one.
+    spare: Rings,
 }
 
 /// A pixel whose samples are out.
@@ -42,7 +45,7 @@ struct OpenPixel {
     x: u32,
     y: u32,
     /// The sum of its samples' values so far, in sample order.
-    sum: Box<InOrder>,
+    sum: InOrder,
     /// The samples not yet back.
     remaining: u32,
     /// The pixel's counted work: its camera packets' and its paths'.
@@ -81,13 +84,7 @@ impl<'a, 'w, P: Iterator<Item = (u32, u32)>> TileFeed<'a, 'w, P> {
         self.open.push_back(OpenPixel {
             x,
             y,
-            sum: self.spare.pop().map_or_else(
-                || Box::new(InOrder::new()),
-                |mut sum| {
-                    sum.clear();
-                    sum
-                },
-            ),
+            sum: InOrder::new(),
             remaining: self.cameras.spp,
             stats: PathStats::default(),
         });
@@ -128,15 +125,15 @@ impl<P: Iterator<Item = (u32, u32)>> PathFeed for TileFeed<'_, '_, P> {
         let open = &mut self.open[pixel.wrapping_sub(self.oldest as u32) as usize];
         open.stats.add(stats);
         open.remaining -= 1;
-        open.sum.add(sample, radiance, &mut open.stats);
+        open.sum
+            .add(sample, radiance, &mut open.stats, &mut self.spare);
         while self.open.front().is_some_and(|p| p.remaining == 0) {
             let mut done = self.open.pop_front().expect("just checked");
             self.oldest += 1;
-            let total = done.sum.total(&mut done.stats);
+            let total = done.sum.total(&mut done.stats, &mut self.spare);
             let spp = self.cameras.spp;
             self.tile
                 .push(done.x, done.y, total / spp as f32, &done.stats);
-            self.spare.push(done.sum);
         }
     }
 }
@@ -151,18 +148,31 @@ fn tag(pixel: u64, sample: u32) -> u64 {
 /// The slots of a pixel's ring of early values: 64, one bit each in a word. With a depth cap
 /// of 7, while one lane's path lives its eight bounces the seven others end at most 56 paths,
 /// so no value comes back 64 samples ahead of one still out; only much longer paths (no cap,
-/// Russian roulette alone) can, and those few wait aside ([`InOrder::far`]).
+/// Russian roulette alone) can, and those few wait aside ([`Early::far`]).
 const WINDOW: u32 = 64;
 
 /// A pixel's sum of its samples' values in sample order, from values that come back in any
-/// order: sample `s`'s value waits in slot `s % WINDOW` of a ring, and the ring is added up in
-/// sample order from the next sample on when a value needs a slot the ring does not reach yet,
-/// and at the pixel's end. Per path a store and a bit; a pixel of at most [`WINDOW`] samples
-/// is added once, at its end, as an array of its values would be.
+/// order: a value in its turn is added at once, and where a value comes back ahead of one still
+/// out the pixel takes a ring ([`Early`]), in which sample `s`'s value waits in slot
+/// `s % WINDOW`; the ring is added up in sample order from the next sample on when a value
+/// needs a slot the ring does not reach yet, and at the pixel's end, which gives it back. Per
+/// path a store and a bit; a pixel of at most [`WINDOW`] samples is added once, at its end, as
+/// an array of its values would be.
 pub(super) struct InOrder {
     sum: Vec3,
     /// The next sample to add.
     next: u32,
+    /// The values that came back early, once one has.
+    early: Option<Box<Early>>,
+}
+
+/// Rings of early values, each boxed so that taking one and giving it back moves a pointer,
+/// not the ring's kilobyte.
+#[allow(clippy::vec_box)]
+type Rings = Vec<Box<Early>>;
+
+/// A pixel's values that came back ahead of a sample still out.
+struct Early {
     slots: [Vec3; WINDOW as usize],
     /// Which slots hold a value.
     full: u64,
@@ -175,56 +185,70 @@ impl InOrder {
         InOrder {
             sum: Vec3::ZERO,
             next: 0,
-            slots: [Vec3::ZERO; WINDOW as usize],
-            full: 0,
-            far: Vec::new(),
+            early: None,
         }
     }
 
-    /// Starts a new pixel's sum.
-    fn clear(&mut self) {
-        debug_assert!(
-            self.full == 0 && self.far.is_empty(),
-            "every value was added"
-        );
-        (self.sum, self.next) = (Vec3::ZERO, 0);
-    }
-
-    /// Takes sample `sample`'s value (each sample's once); values the sum cannot take yet
-    /// wait. A non-finite value is dropped and counted in `stats` when its turn comes.
+    /// Takes sample `sample`'s value (each sample's once): added at once in its turn while no
+    /// value waits, else put in the pixel's ring, taken from `spare` (or made) when the first
+    /// early value comes. A non-finite value is dropped and counted in `stats` when its turn
+    /// comes.
     #[inline]
-    fn add(&mut self, sample: u32, value: Vec3, stats: &mut PathStats) {
+    fn add(&mut self, sample: u32, value: Vec3, stats: &mut PathStats, spare: &mut Rings) {
+        let early = match &mut self.early {
+            None if sample == self.next => {
+                add_sample(&mut self.sum, value, stats);
+                self.next += 1;
+                return;
+            }
+            Some(early) => early,
+            None => self.early.insert(spare.pop().unwrap_or_else(Early::new)),
+        };
         if sample - self.next >= WINDOW {
-            self.add_ready(stats);
+            early.add_ready(&mut self.sum, &mut self.next, stats);
         }
         if sample - self.next < WINDOW {
             let slot = sample % WINDOW;
-            self.slots[slot as usize] = value;
-            self.full |= 1 << slot;
+            early.slots[slot as usize] = value;
+            early.full |= 1 << slot;
         } else {
-            self.far.push((sample, value));
+            early.far.push((sample, value));
         }
     }
 
-    /// The sum of every value, once all have come back.
-    fn total(&mut self, stats: &mut PathStats) -> Vec3 {
-        self.add_ready(stats);
-        debug_assert!(
-            self.full == 0 && self.far.is_empty(),
-            "every value came back"
-        );
+    /// The sum of every value, once all have come back; the ring, if the pixel took one, goes
+    /// back to `spare`, empty.
+    fn total(&mut self, stats: &mut PathStats, spare: &mut Rings) -> Vec3 {
+        if let Some(mut early) = self.early.take() {
+            early.add_ready(&mut self.sum, &mut self.next, stats);
+            debug_assert!(
+                early.full == 0 && early.far.is_empty(),
+                "every value came back"
+            );
+            spare.push(early);
+        }
         self.sum
     }
+}
 
-    /// Adds the run of values in from the next sample on, in sample order, taking in the
-    /// values waiting aside as the ring comes to reach them.
-    fn add_ready(&mut self, stats: &mut PathStats) {
+impl Early {
+    fn new() -> Box<Self> {
+        Box::new(Early {
+            slots: [Vec3::ZERO; WINDOW as usize],
+            full: 0,
+            far: Vec::new(),
+        })
+    }
+
+    /// Adds to `sum` the run of values in from sample `next` on, in sample order, taking in
+    /// the values waiting aside as the ring comes to reach them.
+    fn add_ready(&mut self, sum: &mut Vec3, next: &mut u32, stats: &mut PathStats) {
         loop {
-            let start = self.next % WINDOW;
+            let start = *next % WINDOW;
             let run = self.full.rotate_right(start).trailing_ones();
             for k in 0..run {
                 let slot = ((start + k) % WINDOW) as usize;
-                add_sample(&mut self.sum, self.slots[slot], stats);
+                add_sample(sum, self.slots[slot], stats);
             }
             let taken = if run == WINDOW {
                 u64::MAX
@@ -232,14 +256,14 @@ impl InOrder {
                 (1 << run) - 1
             };
             self.full &= !taken.rotate_left(start);
-            self.next += run;
+            *next += run;
             if self.far.is_empty() {
                 return;
             }
-            let (next, before) = (self.next, self.far.len());
+            let (reached, before) = (*next, self.far.len());
             let mut aside = std::mem::take(&mut self.far);
             aside.retain(|&(sample, value)| {
-                let fits = sample - next < WINDOW;
+                let fits = sample - reached < WINDOW;
                 if fits {
                     let slot = sample % WINDOW;
                     self.slots[slot as usize] = value;
@@ -279,6 +303,7 @@ mod tests {
         for s in 0..count {
             add_sample(&mut expected, value(s), &mut dropped);
         }
+        let in_order: Vec<u32> = (0..count).collect();
         let swapped: Vec<u32> = (0..count).map(|s| s ^ 1).collect();
         let blocks_reversed: Vec<u32> = (0..count)
             .map(|s| (s / 50) * 50 + 49 - s % 50)
@@ -287,23 +312,33 @@ mod tests {
         // Sample 0 and then 1 come back last: everything else waits, most of it aside.
         let late_first: Vec<u32> = (2..count).chain([0, 1]).collect();
         let strided: Vec<u32> = (0..97).flat_map(|r| (r..count).step_by(97)).collect();
-        for order in [swapped, blocks_reversed, late_first, strided] {
+        // The rings of finished pixels, shared by the pixels one after another as a tile's are.
+        let mut spare = Vec::new();
+        for (round, order) in [in_order, swapped, blocks_reversed, late_first, strided]
+            .into_iter()
+            .enumerate()
+        {
             assert_eq!(order.len(), count as usize);
             let mut sum = InOrder::new();
             let mut stats = PathStats::default();
             for &s in &order {
-                sum.add(s, value(s), &mut stats);
+                sum.add(s, value(s), &mut stats, &mut spare);
             }
-            let total = sum.total(&mut stats);
+            let total = sum.total(&mut stats, &mut spare);
             assert_eq!(sum.next, count, "every value added");
-            assert!(sum.full == 0 && sum.far.is_empty(), "nothing left waiting");
+            assert!(sum.early.is_none(), "the ring is given back at the end");
+            // Values in order take no ring; the first pixel with early values makes one, and
+            // the pixels after it take that one back from the spares.
+            assert_eq!(spare.len(), usize::from(round > 0), "round {round}");
+            assert!(
+                spare.iter().all(|e| e.full == 0 && e.far.is_empty()),
+                "nothing left waiting"
+            );
             assert_eq!(
                 total.to_array().map(f32::to_bits),
                 expected.to_array().map(f32::to_bits)
             );
             assert_eq!(stats.invalid_samples, dropped.invalid_samples);
-            sum.clear();
-            assert_eq!((sum.sum, sum.next), (Vec3::ZERO, 0));
         }
     }
 }
