@@ -9,8 +9,8 @@
 //! for a pixel only when its first early value comes, from the rings of finished pixels: the
 //! open pixels are not always few. Where paths end at their first surface (a depth cap of 0,
 //! `tessera bench`'s camera-ray pass) or escape at once, one lane takes path after path of
-//! pixel after pixel while the others still hold the first pixel's samples, and every pixel of
-//! the tile is open at once, its values coming back in order.
+//! pixel after pixel while the others still hold the first pixel's samples: every pixel of the
+//! tile is open at once, and all but the first have their values back in order.
 
 use super::{Cameras, Packet, TilePixels, add_sample};
 use crate::integrator::{NewPath, PathFeed, PathStats};
