@@ -191,9 +191,10 @@ class WalkNames:
 
     def __init__(self):
         self.starts, self.shift, self.names = {}, {}, {}
+        self.tools = all(shutil.which(tool) for tool in ("nm", "readelf", "llvm-dwarfdump"))
 
     def instance(self, dso, address):
-        if not (shutil.which("nm") and shutil.which("readelf") and shutil.which("llvm-dwarfdump")):
+        if not self.tools:
             return ""
         if dso not in self.starts:
             table = subprocess.run(["nm", dso], capture_output=True, text=True).stdout
