@@ -16,59 +16,18 @@
 use super::bvh::Accel;
 use glam::Vec3;
 
-/// `values`, moved to memory asked to be backed by huge pages before any of it is touched.
-/// Arrays shorter than two huge pages are left where they are. Best effort: a kernel that
-/// refuses leaves ordinary pages.
-///
-/// Why a copy: the arrays come here filled, mostly in heap memory that the scene's loading
-/// touched before, whose small pages the advice alone would leave small. Collapsing them in
-/// place (`MADV_COLLAPSE`, which this did until the thirty-seventh round) copies every page
-/// in the kernel, one huge page at a time: 0.3 CPU-s of the Cornell dragon's 1.0 s build.
-/// Copying the values into a fresh allocation advised first costs a `memcpy` and the huge
-/// pages' first touches instead (docs/bench.md, issue 12, thirty-seventh round). The
-/// allocation is fresh because allocations this large are given their own mappings
-/// ([`fresh_mappings_for_large_allocations`]); where the allocator does not (another libc),
-/// the collapse still runs after the copy, as before, and is nearly free where the pages
-/// are already huge.
+/// `values`, its memory asked to be backed by huge pages: advised for any page not yet touched,
+/// and collapsed into huge pages now where it already is (`MADV_COLLAPSE`, Linux 6.1 and later;
+/// the arrays of a freshly built tree mostly reuse heap memory the scene's loading touched,
+/// which the first request alone would leave on small pages). Arrays shorter than two huge
+/// pages are left alone. Best effort: a kernel that refuses leaves ordinary pages.
 pub(crate) fn on_huge_pages<T: Copy>(values: Vec<T>) -> Vec<T> {
+    const HUGE_PAGE: usize = 2 << 20;
     let bytes = std::mem::size_of_val(values.as_slice());
-    if bytes < LARGE {
-        return values;
+    if bytes >= 2 * HUGE_PAGE {
+        advise_huge_pages(values.as_ptr().cast::<u8>(), bytes);
     }
-    fresh_mappings_for_large_allocations();
-    let mut fresh: Vec<T> = Vec::with_capacity(values.len());
-    advise(fresh.as_ptr().cast::<u8>(), bytes, Advice::HugePages);
-    fresh.extend_from_slice(&values);
-    drop(values);
-    advise(fresh.as_ptr().cast::<u8>(), bytes, Advice::Collapse);
-    fresh
-}
-
-/// The size from which an array is moved to huge pages: two of them, so that at least one
-/// whole aligned huge page lies inside it.
-const LARGE: usize = 2 * HUGE_PAGE;
-const HUGE_PAGE: usize = 2 << 20;
-
-/// Has glibc's `malloc` give every allocation of [`LARGE`] bytes or more a mapping of its
-/// own, untouched until the program writes it, and unmap it when it is freed. By default
-/// glibc serves allocations below a threshold it raises as large blocks are freed (up to
-/// 32 MiB) from its heap, whose pages earlier allocations have touched; those stay small
-/// pages whatever the advice. A fixed threshold also hands large freed blocks (the OBJ
-/// text, obvhs's working arrays) back to the system at once. Set once per process; later
-/// calls do nothing.
-pub(crate) fn fresh_mappings_for_large_allocations() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    {
-        static ONCE: std::sync::Once = std::sync::Once::new();
-        ONCE.call_once(|| {
-            let threshold = libc::c_int::try_from(LARGE).expect("a few MiB fit an int");
-            // SAFETY: `mallopt` only sets a tunable of glibc's allocator; every allocation
-            // made before or after stays valid, and freeing one goes to whichever way it came.
-            unsafe {
-                libc::mallopt(libc::M_MMAP_THRESHOLD, threshold);
-            }
-        });
-    }
+    values
 }
 
 /// Hands the memory the program has freed back to the system, where the allocator holds on to
@@ -99,17 +58,8 @@ pub(crate) fn prefetch(address: *const u8) {
     let _ = address;
 }
 
-/// What [`advise`] asks of the kernel.
-#[derive(Clone, Copy)]
-enum Advice {
-    /// Back the range with huge pages as its pages are first touched.
-    HugePages,
-    /// Copy the range's touched small pages into huge ones now (Linux 6.1 and later).
-    Collapse,
-}
-
 #[cfg(target_os = "linux")]
-fn advise(start: *const u8, bytes: usize, advice: Advice) {
+fn advise_huge_pages(start: *const u8, bytes: usize) {
     const PAGE: usize = 4096;
     /// Linux's `MADV_COLLAPSE` (include/uapi/asm-generic/mman-common.h), which this version of
     /// the `libc` crate does not name.
@@ -121,21 +71,19 @@ fn advise(start: *const u8, bytes: usize, advice: Advice) {
     if end <= first {
         return;
     }
-    let advice = match advice {
-        Advice::HugePages => libc::MADV_HUGEPAGE,
-        Advice::Collapse => MADV_COLLAPSE,
-    };
-    // SAFETY: the range lies within an allocation this process owns; both advices only tell
-    // the kernel how to back it (a collapse copies pages into huge ones, keeping their
-    // contents) and move or free nothing the program sees. An error (a kernel without THP or
-    // without MADV_COLLAPSE) leaves ordinary pages, the fallback wanted.
-    unsafe {
-        libc::madvise(first as *mut libc::c_void, end - first, advice);
+    for advice in [libc::MADV_HUGEPAGE, MADV_COLLAPSE] {
+        // SAFETY: the range lies within an allocation this process owns; both advices only
+        // tell the kernel how to back it (a collapse copies pages into huge ones, keeping
+        // their contents) and move or free nothing the program sees. An error (a kernel
+        // without THP or without MADV_COLLAPSE) leaves ordinary pages, the fallback wanted.
+        unsafe {
+            libc::madvise(first as *mut libc::c_void, end - first, advice);
+        }
     }
 }
 
 #[cfg(not(target_os = "linux"))]
-fn advise(_start: *const u8, _bytes: usize, _advice: Advice) {}
+fn advise_huge_pages(_start: *const u8, _bytes: usize) {}
 
 impl Accel {
     /// Prefetch `records[triangle]` and `attributes[triangle]` (an array that may be empty),
@@ -182,27 +130,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn huge_pages_keep_every_value() {
-        // Large arrays move to fresh memory with every value, in order.
+    fn huge_pages_keep_every_value_in_place() {
         let big: Vec<u64> = (0..1_000_000).map(|i| i * 7 + 3).collect();
-        let copy = big.clone();
-        assert_eq!(on_huge_pages(big), copy);
-        // Elements aligned to cache lines (as the tree's nodes and groups are) stay aligned.
-        #[repr(align(64))]
-        #[derive(Clone, Copy, Debug, PartialEq)]
-        struct Line([u64; 8]);
-        let lines: Vec<Line> = (0..100_000u64).map(|i| Line([i * 3 + 1; 8])).collect();
-        let copy = lines.clone();
-        let kept = on_huge_pages(lines);
+        let (pointer, copy) = (big.as_ptr(), big.clone());
+        let kept = on_huge_pages(big);
+        assert_eq!(kept.as_ptr(), pointer);
         assert_eq!(kept, copy);
-        assert_eq!(kept.as_ptr() as usize % 64, 0);
-        // Small arrays stay where they are.
-        let small = vec![1u8, 2, 3];
-        let pointer = small.as_ptr();
-        let kept = on_huge_pages(small);
-        assert_eq!(
-            (kept.as_ptr(), kept.as_slice()),
-            (pointer, &[1u8, 2, 3][..])
-        );
+        assert_eq!(on_huge_pages(vec![1u8, 2, 3]), [1, 2, 3]);
     }
 }
