@@ -6,7 +6,10 @@ benchmark of docs/bench.md.
 
 The figure is the median of the full-path pass's CPU-seconds, as `scripts/spectral_bench.py`
 measures the always-spectral pipeline: the render alone, since loading the scene and building
-its BVH are the same work in both modes. Beside it, the whole process's CPU-seconds (user +
+its BVH are the same work in both modes. Beside it, the median of each repeat's own ratio
+(its two runs back to back): on a machine whose speed drifts by a tenth or more within
+minutes, the medians of the two modes can come from different spells, while each pair's
+runs share one, so the pairs' ratios leave the drift out. Beside it, the whole process's CPU-seconds (user +
 system, from the kernel's accounting of the child), which include that shared work and `tessera
 bench`'s pass of camera rays alone (depth 0); the rounds of docs/bench.md before the
 thirty-second reported only whole processes, of `tessera render`, which has no such pass, so
@@ -71,8 +74,8 @@ def main():
     print(f"date {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load before {os.getloadavg()}")
     print(f"{args.size}x{args.size}, {args.spp} spp, {args.threads} thread(s), median of {args.repeats}: "
           f"the full-path pass's CPU-seconds (the whole process's in brackets)\n")
-    print("| scene | effects (auto) | auto | all | all / auto | same bits |")
-    print("|---|---|---|---|---|---|")
+    print("| scene | effects (auto) | auto | all | all / auto | each pair's all / auto, median | same bits |")
+    print("|---|---|---|---|---|---|---|")
     for scene in args.scenes:
         runs = {"auto": [], "all": []}
         scratch = tempfile.TemporaryDirectory()
@@ -82,11 +85,14 @@ def main():
                 runs[mode].append(run(args.tessera, scene, mode, args, out))
         paths = {m: statistics.median(r["paths"] for r in runs[m]) for m in runs}
         process = {m: statistics.median(r["process"] for r in runs[m]) for m in runs}
+        pairs = [all_["paths"] / auto["paths"] for auto, all_ in zip(runs["auto"], runs["all"])
+                 if auto["paths"] > 0]
+        paired = f"{statistics.median(pairs):.2f}x" if pairs else "n/a (too short to time)"
         same = same_pixels(args.tessera, runs["all"][0]["exr"], runs["auto"][0]["exr"])
         scratch.cleanup()
         print(f"| {os.path.basename(scene)} | {runs['auto'][0]['effects']} | "
               f"{paths['auto']:.2f} ({process['auto']:.2f}) | {paths['all']:.2f} ({process['all']:.2f}) | "
-              f"{ratio(paths)} ({ratio(process)}) | "
+              f"{ratio(paths)} ({ratio(process)}) | {paired} | "
               f"{'yes' if same else 'NO'} |", flush=True)
     print(f"\nload after {os.getloadavg()}")
 
