@@ -8,9 +8,9 @@ The figure is the median of the full-path pass's CPU-seconds, as `scripts/spectr
 measures the always-spectral pipeline: the render alone, since loading the scene and building
 its BVH are the same work in both modes. Beside it, the median of each repeat's own ratio
 (its two runs back to back): on a machine whose speed drifts by a tenth or more within
-minutes, the medians of the two modes can come from different spells, while each pair's
-runs share one, so the pairs' ratios leave the drift out. Beside it, the whole process's CPU-seconds (user +
-system, from the kernel's accounting of the child), which include that shared work and `tessera
+minutes, the two modes' medians can come from different spells, while a pair's runs share
+one, so the pairs' ratios leave the drift out. In brackets, the whole process's CPU-seconds
+(user + system, from the kernel's accounting of the child), which include that shared work and `tessera
 bench`'s pass of camera rays alone (depth 0); the rounds of docs/bench.md before the
 thirty-second reported only whole processes, of `tessera render`, which has no such pass, so
 their figures are not these.
