@@ -10,10 +10,10 @@ its BVH are the same work in both modes. Beside it, the median of each repeat's 
 (its two runs back to back): on a machine whose speed drifts by a tenth or more within
 minutes, the two modes' medians can come from different spells, while a pair's runs share
 one, so the pairs' ratios leave the drift out. In brackets, the whole process's CPU-seconds
-(user + system, from the kernel's accounting of the child), which include that shared work and `tessera
-bench`'s pass of camera rays alone (depth 0); the rounds of docs/bench.md before the
-thirty-second reported only whole processes, of `tessera render`, which has no such pass, so
-their figures are not these.
+(user + system, from the kernel's accounting of the child), which include that shared work
+and `tessera bench`'s pass of camera rays alone (depth 0); the rounds of docs/bench.md before
+the thirty-second reported only whole processes, of `tessera render`, which has no such pass,
+so their figures are not these.
 
 Usage (from the repository root, after `cargo build --release`):
     python3 scripts/media_bench.py --repeats 3 --size 256 --spp 16 SCENE.toml...
