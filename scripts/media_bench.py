@@ -50,9 +50,20 @@ def run(tessera, scene, mode, args, out):
             "exr": bench["image"]}
 
 
+def ratio_of(auto, all_):
+    """The generic pipeline's time over the specialised one's, or `None` where the latter is too
+    short to measure."""
+    return all_ / auto if auto > 0 else None
+
+
+def shown(ratio):
+    """A ratio as the table prints it."""
+    return f"{ratio:.2f}x" if ratio is not None else "n/a (too short to time)"
+
+
 def ratio(seconds):
-    """The generic pipeline's time over the specialised one's, where the latter is measurable."""
-    return f"{seconds['all'] / seconds['auto']:.2f}x" if seconds["auto"] > 0 else "n/a (too short to time)"
+    """`ratio_of` the two modes' seconds, as the table prints it."""
+    return shown(ratio_of(seconds["auto"], seconds["all"]))
 
 
 def same_pixels(tessera, a, b):
@@ -85,9 +96,9 @@ def main():
                 runs[mode].append(run(args.tessera, scene, mode, args, out))
         paths = {m: statistics.median(r["paths"] for r in runs[m]) for m in runs}
         process = {m: statistics.median(r["process"] for r in runs[m]) for m in runs}
-        pairs = [all_["paths"] / auto["paths"] for auto, all_ in zip(runs["auto"], runs["all"])
-                 if auto["paths"] > 0]
-        paired = f"{statistics.median(pairs):.2f}x" if pairs else "n/a (too short to time)"
+        pairs = [ratio_of(auto["paths"], all_["paths"]) for auto, all_ in zip(runs["auto"], runs["all"])]
+        pairs = [r for r in pairs if r is not None]
+        paired = shown(statistics.median(pairs) if pairs else None)
         same = same_pixels(args.tessera, runs["all"][0]["exr"], runs["auto"][0]["exr"])
         scratch.cleanup()
         print(f"| {os.path.basename(scene)} | {runs['auto'][0]['effects']} | "
