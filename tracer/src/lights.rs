@@ -430,6 +430,11 @@ pub fn luminance(c: Vec3) -> f32 {
 }
 
 /// A direction uniformly distributed on the unit sphere.
+// Always inlined: the lanes' shading loop (`integrator/lanes/shade.rs`) calls it for sky-lit
+// worlds, and a call left in that loop's body keeps the whole loop from vectorising (a build
+// where the compiler's heuristics left it a call ran Sponza's lanes slower than one path at a
+// time).
+#[inline(always)]
 pub fn uniform_sphere(u: Vec2) -> Vec3 {
     let z = 1.0 - 2.0 * u.x;
     let r = (1.0 - z * z).max(0.0).sqrt();

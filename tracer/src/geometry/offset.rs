@@ -115,7 +115,9 @@ impl SurfacePoint {
     /// [`SurfacePoint::on_triangle`] with the triangle's [`plane_normal`] computed beforehand.
     /// Renderers cache the normal per triangle: its f64 cross product and square root cost about
     /// as much as the rest of the point, and the cached value is the same bits.
-    #[inline]
+    // Always inlined: the lanes' shading loop (`integrator/lanes/shade.rs`) calls it, and one
+    // call left in that loop's body keeps the whole loop from vectorising.
+    #[inline(always)]
     pub fn on_triangle_with_normal(v: &[Vec3; 3], b1: f32, b2: f32, normal: Vec3) -> Self {
         let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
         let p = hit_point(v, b1, b2);
