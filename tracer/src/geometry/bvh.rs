@@ -214,7 +214,7 @@ impl Accel {
         let vertices_of = |i: u32| triangles[i as usize].p;
         let mut wide = Bvh8::collapse(&bvh, &original, vertices_of);
         let (node_count, leaf_entries) = (bvh.nodes.len(), original.len());
-        let binary = (keep_binary || !wide.fits_inline_stack()).then(|| {
+        let binary = (keep_binary || !wide.walkable()).then(|| {
             let vertices = original.iter().map(|&i| vertices_of(i)).collect();
             BinaryTree {
                 bvh,
@@ -240,12 +240,13 @@ impl Accel {
     /// Frees the binary tree and its copy of the leaves' vertices (on the Cornell dragon 45 MB
     /// of the 255 MB the scene keeps), where the wide walk alone answers every query: the
     /// renderer's traversal ([`Traversal::Robust`]) walks the wide tree, which holds its own
-    /// copy of the vertices. Kept where the tree is too deep for the wide walk's stack (which
-    /// then walks the binary tree). Returns whether it was freed; after that the comparison
+    /// copy of the vertices. Kept where the wide walks do not take the tree (`Bvh8::walkable`:
+    /// too deep for their stack, or too large for the children's references), which is then
+    /// walked through the binary tree. Returns whether it was freed; after that the comparison
     /// traversals are unavailable (asking for one panics) until a rebuild, which
     /// [`crate::integrator::World::set_traversal`] makes.
     pub fn release_binary_tree(&mut self) -> bool {
-        if !self.wide.fits_inline_stack() {
+        if !self.wide.walkable() {
             return false;
         }
         self.binary = None;

@@ -1,7 +1,7 @@
 //! The wide tree's shape: obvhs's binary tree collapsed into nodes of up to eight children
 //! over the same leaves, choosing which binary nodes become wide nodes by the surface area
-//! heuristic (Ylitie, Karras and Laine 2017), and the leaves packed into groups of four
-//! triangles for the SIMD tests.
+//! heuristic (Ylitie, Karras and Laine 2017), the leaves packed into groups of four triangles
+//! for the SIMD tests, and each child named by one word, its [`reference`].
 //!
 //! **Exactness.** The shape decides only which boxes a ray tests, and in which order it opens
 //! leaves; every leaf is still reached by every ray whose path crosses its box, and
@@ -50,10 +50,12 @@ impl Bvh8 {
                 node.children += 1;
                 if child.is_leaf() {
                     let first = child.first_index as usize;
-                    node.index[lane] =
-                        u32::try_from(quads.len()).expect("fewer groups than leaf entries");
-                    node.count[lane] = u8::try_from(child.prim_count)
+                    let count = u8::try_from(child.prim_count)
                         .expect("build.rs clamps leaves to 255 triangles");
+                    let Some(reference) = reference(quads.len(), count) else {
+                        return Bvh8::unwalkable();
+                    };
+                    node.refs[lane] = reference;
                     let end = first + child.prim_count as usize;
                     quads.extend(Quad::pack(
                         &original[first..end],
@@ -63,8 +65,10 @@ impl Bvh8 {
                 } else {
                     let index = nodes.len();
                     nodes.push(Node8::EMPTY);
-                    node.index[lane] =
-                        u32::try_from(index).expect("fewer wide nodes than binary ones");
+                    let Some(reference) = reference(index, 0) else {
+                        return Bvh8::unwalkable();
+                    };
+                    node.refs[lane] = reference;
                     pending.push((index, c, level + 1));
                 }
             }
@@ -74,9 +78,39 @@ impl Bvh8 {
             nodes,
             quads,
             depth,
+            references_fit: true,
             simd: best_simd(),
         }
     }
+
+    /// The tree of a collapse whose indices outgrew the references: empty, and never walked.
+    pub(super) fn unwalkable() -> Bvh8 {
+        Bvh8 {
+            references_fit: false,
+            ..Bvh8::default()
+        }
+    }
+}
+
+/// The index's bits of a child's [`reference`]; the leaf's triangles take the eight above.
+const INDEX_MASK: u32 = (1 << 24) - 1;
+
+/// A child's reference: `index` (an inner node's in `Bvh8::nodes`, or a leaf's first group's
+/// in `Bvh8::quads`) in the low 24 bits, the leaf's triangles (obvhs's leaves hold at most 255,
+/// `build.rs` clamps them; 0 for an inner node) in the high 8; `None` where the index needs
+/// more bits (a tree of some 67 million triangles or more, which is then walked through the
+/// binary tree, `Bvh8::walkable`). Why one word: a walk's stack entry is then the reference and
+/// the entry distance, eight bytes a push and a pop where the index and the count were twelve
+/// (docs/bench.md, issue 12, thirty-eighth round).
+pub(super) fn reference(index: usize, triangles: u8) -> Option<u32> {
+    let index = u32::try_from(index).ok().filter(|&i| i <= INDEX_MASK)?;
+    Some(index | u32::from(triangles) << 24)
+}
+
+/// A [`reference`]'s index and triangles.
+#[inline(always)]
+pub(super) fn parts(reference: u32) -> (u32, u32) {
+    (reference & INDEX_MASK, reference >> 24)
 }
 
 /// Which binary nodes become wide nodes: the collapse of Ylitie, Karras and Laine ("Efficient
@@ -213,6 +247,22 @@ mod tests {
     }
 
     #[test]
+    fn references_hold_indices_below_two_to_the_24_and_refuse_the_rest() {
+        for (index, triangles) in [(0, 0), (1, 255), ((1 << 24) - 1, 7), (123_456, 4)] {
+            let r = reference(index, triangles).expect("fits");
+            let mut node = Node8::EMPTY;
+            node.refs[3] = r;
+            assert_eq!(
+                (node.index(3), node.count(3)),
+                (index as u32, u32::from(triangles))
+            );
+        }
+        for index in [1 << 24, (1 << 24) + 5, u32::MAX as usize, usize::MAX] {
+            assert_eq!(reference(index, 1), None, "{index}");
+        }
+    }
+
+    #[test]
     fn the_wide_tree_holds_every_leaf_entry_once_in_nodes_of_up_to_eight() {
         for n in [1, 3, 40] {
             let triangles = grid(n);
@@ -223,11 +273,11 @@ mod tests {
                 assert!(node.valid != 0 && node.valid.count_ones() as usize <= WIDTH);
                 assert_eq!(u32::from(node.children), node.valid.count_ones());
                 for lane in (0..WIDTH).filter(|&l| node.valid & (1 << l) != 0) {
-                    if node.count[lane] == 0 {
+                    if node.count(lane) == 0 {
                         continue;
                     }
-                    let groups = (node.count[lane] as usize).div_ceil(LANES);
-                    let first = node.index[lane] as usize;
+                    let groups = (node.count(lane) as usize).div_ceil(LANES);
+                    let first = node.index(lane) as usize;
                     for quad in &wide.quads[first..first + groups] {
                         for i in 0..LANES as u32 {
                             if quad.valid & (1 << i) != 0 {

@@ -149,7 +149,7 @@ mod tests {
             .wide
             .nodes
             .iter()
-            .flat_map(|node| node.count)
+            .flat_map(|node| node.refs.map(|r| r >> 24))
             .filter(|&c| c as usize > LANES)
             .count();
         assert!(

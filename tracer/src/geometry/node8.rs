@@ -21,6 +21,7 @@
 //! `tracer/tests/wide_traversal.rs` renders through both and compares.
 
 use super::Ray;
+use super::collapse::parts;
 use super::packet_box::{PacketBound, PacketRays};
 #[cfg(target_arch = "x86_64")]
 use super::packet_box::{enter_bound_avx, enter_child_avx};
@@ -42,12 +43,10 @@ pub(super) struct Node8 {
     /// The children's boxes, one lane per child: min x, y, z, then max x, y, z. Lanes past
     /// `children` hold an empty box (min +inf, max -inf) and are masked out anyway.
     pub(super) bounds: [[f32; WIDTH]; 6],
-    /// Per child: an inner node's index in `Bvh8::nodes`, or a leaf's first group in
-    /// `Bvh8::quads`.
-    pub(super) index: [u32; WIDTH],
-    /// Per child: the leaf's number of triangles (obvhs's leaves hold at most 255), or 0 for
-    /// an inner node.
-    pub(super) count: [u8; WIDTH],
+    /// Per child, its reference (`collapse::reference`): an inner node's index in `Bvh8::nodes` or a leaf's first
+    /// group in `Bvh8::quads`, and the leaf's number of triangles (0 for an inner node), in
+    /// one word, as the walks' stack entries carry them.
+    pub(super) refs: [u32; WIDTH],
     /// Bit `i` set when lane `i` holds a child; children fill the lowest lanes.
     pub(super) valid: u8,
     /// The number of children, which the stats count as boxes tested (a stored count, since
@@ -67,11 +66,22 @@ impl Node8 {
             [f32::NEG_INFINITY; WIDTH],
             [f32::NEG_INFINITY; WIDTH],
         ],
-        index: [0; WIDTH],
-        count: [0; WIDTH],
+        refs: [0; WIDTH],
         valid: 0,
         children: 0,
     };
+
+    /// Lane `lane`'s child index.
+    #[inline(always)]
+    pub(super) fn index(&self, lane: usize) -> u32 {
+        parts(self.refs[lane]).0
+    }
+
+    /// Lane `lane`'s leaf's triangles, 0 for an inner node.
+    #[inline(always)]
+    pub(super) fn count(&self, lane: usize) -> u32 {
+        parts(self.refs[lane]).1
+    }
 
     pub(super) fn set_bounds(&mut self, lane: usize, min: [f32; 3], max: [f32; 3]) {
         for axis in 0..3 {

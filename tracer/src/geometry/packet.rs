@@ -75,12 +75,13 @@ impl Accel {
             !rays.is_empty() && rays.len() <= PACKET && hits.len() == rays.len(),
             "a packet holds one to eight rays, with a slot for each one's hit"
         );
-        if self.wide.nodes.is_empty() {
+        // A tree the wide walks do not take (`Bvh8::walkable`) is walked ray by ray, through
+        // the binary tree.
+        if self.wide.walkable() && self.wide.nodes.is_empty() {
             hits.fill(None);
             return;
         }
-        // A tree too deep for the walks' stack is walked ray by ray, through the binary tree.
-        let together = self.wide.fits_inline_stack() && self.packet_walk(rays, hits, stats);
+        let together = self.wide.walkable() && self.packet_walk(rays, hits, stats);
         if !together {
             for (ray, hit) in rays.iter().zip(hits) {
                 *hit = self.intersect(ray, stats);
@@ -266,8 +267,8 @@ impl Accel {
                         continue;
                     }
                     let entry = PacketEntry {
-                        child: node.index[lane],
-                        count: u32::from(node.count[lane]),
+                        child: node.index(lane),
+                        count: node.count(lane),
                         rays: entered,
                         order: t_near[entered.trailing_zeros() as usize],
                         t_near,

@@ -27,6 +27,7 @@
 
 use super::bvh::Accel;
 use super::closest::Closest;
+use super::collapse::parts;
 use super::memory::prefetch;
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
@@ -57,6 +58,9 @@ pub(super) struct Bvh8 {
     pub(super) quads: Vec<Quad>,
     /// Levels of 8-wide nodes on the deepest path (0 when empty): bounds the traversal stack.
     pub(super) depth: usize,
+    /// Whether every child's index fitted in its reference (`node8::reference`); where not,
+    /// the tree is left empty and never walked ([`Bvh8::walkable`]).
+    pub(super) references_fit: bool,
     /// How boxes are tested: AVX where this processor has it.
     pub(super) simd: BoxSimd,
 }
@@ -67,6 +71,7 @@ impl Default for Bvh8 {
             nodes: Vec::new(),
             quads: Vec::new(),
             depth: 0,
+            references_fit: true,
             simd: best_simd(),
         }
     }
@@ -85,10 +90,8 @@ pub(super) fn best_simd() -> BoxSimd {
 /// leaf's run of triangle groups.
 #[derive(Clone, Copy)]
 struct StackEntry {
-    /// An inner node's index in `Bvh8::nodes`, or a leaf's first group in `Bvh8::quads`.
-    child: u32,
-    /// The leaf's triangles; 0 for an inner node.
-    count: u32,
+    /// The child's reference (`Node8::refs`): its index and its leaf's triangles.
+    reference: u32,
     /// Where the ray enters the child's box.
     t_near: f32,
 }
@@ -102,17 +105,20 @@ pub(super) const INLINE_STACK: usize = (WIDTH - 1) * 30 + 1;
 /// The stack a walk of the wide tree takes, for the single-ray walk and the packet walk alike:
 /// [`INLINE_STACK`] entries in place, uninitialised (filling 211 entries per ray would cost
 /// more than a node test). A tree too deep for it is never walked wide
-/// ([`Bvh8::fits_inline_stack`]), so the walks carry no heap fallback: no allocator's state
+/// ([`Bvh8::walkable`]), so the walks carry no heap fallback: no allocator's state
 /// to set up per ray, and no release of it at every return.
 pub(super) type WalkStack<E> = [MaybeUninit<E>; INLINE_STACK];
 
 impl Bvh8 {
-    /// Whether every walk's pushes fit in a [`WalkStack`]: at most `7 * depth + 1` entries
-    /// (see [`INLINE_STACK`]). Where not (a tree no real scene has come near), the rays are
-    /// walked through the binary tree instead, which finds the same hits, bit for bit.
+    /// Whether the wide walks take this tree: every walk's pushes fit in a [`WalkStack`] (at
+    /// most `7 * depth + 1` entries, see [`INLINE_STACK`]) and every child's index fitted in
+    /// its reference (`node8::reference`). Where not (trees no real scene has come near:
+    /// thirty levels of wide nodes, or 2^24 nodes or groups, some 67 million triangles), the
+    /// rays are walked through the binary tree instead, which finds the same hits, bit for
+    /// bit.
     #[inline(always)]
-    pub(super) fn fits_inline_stack(&self) -> bool {
-        (WIDTH - 1) * self.depth < INLINE_STACK
+    pub(super) fn walkable(&self) -> bool {
+        self.references_fit && (WIDTH - 1) * self.depth < INLINE_STACK
     }
 }
 
@@ -134,11 +140,11 @@ impl Accel {
         set_up: SetUp<'_>,
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
+        if !self.wide.walkable() {
+            return self.traverse_robust::<ANY_HIT, CERTAIN>(ray, stats);
+        }
         if self.wide.nodes.is_empty() {
             return None;
-        }
-        if !self.wide.fits_inline_stack() {
-            return self.traverse_robust::<ANY_HIT, CERTAIN>(ray, stats);
         }
         #[cfg(target_arch = "x86_64")]
         if self.wide.simd == BoxSimd::Avx {
@@ -219,7 +225,7 @@ impl Accel {
     /// An any-hit query stops at any hit, so it tests a node's leaves at once and leaves the
     /// rest unsorted.
     ///
-    /// `stack` holds at least `7 * depth + 1` entries (see [`Bvh8::fits_inline_stack`]).
+    /// `stack` holds at least `7 * depth + 1` entries (see [`Bvh8::walkable`]).
     /// Entries below `len` are always initialised: every push writes one before `len` grows
     /// past it.
     #[inline(always)]
@@ -233,24 +239,17 @@ impl Accel {
         let mut closest = Closest::new(ray, CERTAIN);
         let cull = |closest: &Closest| closest.t_max() * FAR_SCALE;
         let mut current = StackEntry {
-            child: 0,
-            count: 0,
+            reference: 0,
             t_near: 0.0,
         };
         let mut len = 0usize;
         loop {
-            if current.count > 0 {
+            let (child, count) = parts(current.reference);
+            if count > 0 {
                 // SAFETY: every entry with triangles is a lane of a node of this tree (pushed
-                // below from `node.index` and `node.count`), and this one has some.
+                // below from `node.refs`), and this one has some.
                 if unsafe {
-                    self.test_leaf::<ANY_HIT, B>(
-                        current.child,
-                        current.count,
-                        ray,
-                        quad_ray,
-                        &mut closest,
-                        stats,
-                    )
+                    self.test_leaf::<ANY_HIT, B>(child, count, ray, quad_ray, &mut closest, stats)
                 } && ANY_HIT
                 {
                     return closest.best;
@@ -260,7 +259,7 @@ impl Accel {
                 // index, which `Bvh8::collapse` set to a slot of `nodes` it had pushed (a leaf
                 // never has 0 triangles: obvhs's leaves hold at least one), or the root's 0,
                 // which exists since the empty tree returned above.
-                let node = unsafe { nodes.get_unchecked(current.child as usize) };
+                let node = unsafe { nodes.get_unchecked(child as usize) };
                 stats.nodes += u64::from(node.children);
                 let (mut entered, t_near) = B::enter(wide, node, cull(&closest));
                 let base = len;
@@ -268,17 +267,17 @@ impl Accel {
                     let lane = entered.trailing_zeros() as usize;
                     entered &= entered - 1;
                     let entry = StackEntry {
-                        child: node.index[lane],
-                        count: u32::from(node.count[lane]),
+                        reference: node.refs[lane],
                         t_near: t_near[lane],
                     };
-                    self.prefetch_child(entry.child, entry.count);
-                    if ANY_HIT && entry.count > 0 {
+                    let (child, count) = parts(entry.reference);
+                    self.prefetch_child(child, count);
+                    if ANY_HIT && count > 0 {
                         // SAFETY: a lane of this node, with triangles.
                         if unsafe {
                             self.test_leaf::<ANY_HIT, B>(
-                                entry.child,
-                                entry.count,
+                                child,
+                                count,
                                 ray,
                                 quad_ray,
                                 &mut closest,
@@ -418,15 +417,30 @@ mod tests {
     }
 
     #[test]
-    fn a_tree_too_deep_for_the_inline_stack_is_walked_through_the_binary_tree_with_the_same_hits() {
+    fn trees_the_wide_walks_do_not_take_are_walked_through_the_binary_tree_with_the_same_hits() {
         let triangles = chain(120);
-        let mut accel = Accel::build(&triangles, BuildQuality::default());
-        assert!(accel.wide.fits_inline_stack());
-        // No tree of real scenes outgrows the inline stack (thirty levels of wide nodes), so
-        // the depth the walks check is raised past it: single rays and packets alike are then
-        // walked through the binary tree, as a deeper tree's would be.
-        accel.wide.depth = accel.wide.depth.max(INLINE_STACK / (WIDTH - 1) + 1);
-        assert!(!accel.wide.fits_inline_stack());
+        // No tree of real scenes outgrows the inline stack (thirty levels of wide nodes) or the
+        // references (2^24 nodes or groups), so each is made so: the depth the walks check
+        // raised past the stack, and the tree the collapse leaves where its indices outgrow
+        // the references. Single rays and packets alike are then walked through the binary
+        // tree, as such a tree's would be.
+        for too_large in [false, true] {
+            let mut accel = Accel::build(&triangles, BuildQuality::default());
+            assert!(accel.wide.walkable());
+            if too_large {
+                accel.wide = Bvh8::unwalkable();
+            } else {
+                accel.wide.depth = accel.wide.depth.max(INLINE_STACK / (WIDTH - 1) + 1);
+            }
+            assert!(!accel.wide.walkable());
+            assert!(!accel.release_binary_tree(), "the binary tree is kept");
+            same_hits_as_brute_force(accel, &triangles);
+        }
+    }
+
+    /// Rays from beyond the largest of the `chain` triangles back toward the origin give the
+    /// brute-force hits through `accel`, alone and in packets, with either box test.
+    fn same_hits_as_brute_force(mut accel: Accel, triangles: &[Triangle]) {
         // Rays from beyond the largest triangle back toward the origin, through the
         // triangles' planes at several slants, and segments ending between triangles.
         let rays: Vec<Ray> = (0..200)
@@ -453,24 +467,24 @@ mod tests {
                 let hit = accel.intersect(ray, &mut stats);
                 assert_eq!(
                     hit,
-                    intersect_brute_force(&triangles, ray),
+                    intersect_brute_force(triangles, ray),
                     "{simd:?} {ray:?}"
                 );
                 hits += usize::from(hit.is_some());
                 assert_eq!(
                     accel.occluded(ray, &mut stats),
-                    occluded_brute_force(&triangles, ray),
+                    occluded_brute_force(triangles, ray),
                     "{simd:?} {ray:?}"
                 );
             }
-            // The packet walk checks the same depth.
+            // The packet walk checks the same.
             for packet in rays.chunks(PACKET) {
                 let mut found = [None; PACKET];
                 accel.intersect_packet(packet, &mut found[..packet.len()], &mut stats);
                 for (ray, hit) in packet.iter().zip(found) {
                     assert_eq!(
                         hit,
-                        intersect_brute_force(&triangles, ray),
+                        intersect_brute_force(triangles, ray),
                         "{simd:?} packet"
                     );
                 }

@@ -171,7 +171,7 @@ fn a_build_for_rendering_is_the_full_build_without_its_binary_tree() {
 fn wide_bits(accel: &Accel) -> Vec<u32> {
     let nodes = accel.wide.nodes.iter().flat_map(|n| {
         let boxes = n.bounds.iter().flatten().map(|b| b.to_bits());
-        let lanes = n.index.iter().copied().chain(n.count.map(u32::from));
+        let lanes = n.refs.iter().copied();
         boxes
             .chain(lanes)
             .chain([u32::from(n.valid), u32::from(n.children)])
