@@ -255,7 +255,7 @@ impl Accel {
                     return closest.best;
                 }
             } else {
-                // SAFETY: `current.child` of an entry with no triangles is an inner node's
+                // SAFETY: the `child` of an entry with no triangles is an inner node's
                 // index, which `Bvh8::collapse` set to a slot of `nodes` it had pushed (a leaf
                 // never has 0 triangles: obvhs's leaves hold at least one), or the root's 0,
                 // which exists since the empty tree returned above.
