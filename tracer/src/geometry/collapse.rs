@@ -1,7 +1,7 @@
 //! The wide tree's shape: obvhs's binary tree collapsed into nodes of up to eight children
 //! over the same leaves, choosing which binary nodes become wide nodes by the surface area
 //! heuristic (Ylitie, Karras and Laine 2017), the leaves packed into groups of four triangles
-//! for the SIMD tests, and each child named by one word, its [`reference`].
+//! for the SIMD tests, and each child named by one word, its [`child_reference`].
 //!
 //! **Exactness.** The shape decides only which boxes a ray tests, and in which order it opens
 //! leaves; every leaf is still reached by every ray whose path crosses its box, and
@@ -52,7 +52,7 @@ impl Bvh8 {
                     let first = child.first_index as usize;
                     let count = u8::try_from(child.prim_count)
                         .expect("build.rs clamps leaves to 255 triangles");
-                    let Some(reference) = reference(quads.len(), count) else {
+                    let Some(reference) = child_reference(quads.len(), count) else {
                         return Bvh8::unwalkable();
                     };
                     node.refs[lane] = reference;
@@ -65,7 +65,7 @@ impl Bvh8 {
                 } else {
                     let index = nodes.len();
                     nodes.push(Node8::EMPTY);
-                    let Some(reference) = reference(index, 0) else {
+                    let Some(reference) = child_reference(index, 0) else {
                         return Bvh8::unwalkable();
                     };
                     node.refs[lane] = reference;
@@ -92,7 +92,7 @@ impl Bvh8 {
     }
 }
 
-/// The index's bits of a child's [`reference`]; the leaf's triangles take the eight above.
+/// The index's bits of a child's [`child_reference`]; the leaf's triangles take the eight above.
 const INDEX_MASK: u32 = (1 << 24) - 1;
 
 /// A child's reference: `index` (an inner node's in `Bvh8::nodes`, or a leaf's first group's
@@ -102,14 +102,14 @@ const INDEX_MASK: u32 = (1 << 24) - 1;
 /// binary tree, `Bvh8::walkable`). Why one word: a walk's stack entry is then the reference and
 /// the entry distance, eight bytes a push and a pop where the index and the count were twelve
 /// (docs/bench.md, issue 12, thirty-eighth round).
-pub(super) fn reference(index: usize, triangles: u8) -> Option<u32> {
+pub(super) fn child_reference(index: usize, triangles: u8) -> Option<u32> {
     let index = u32::try_from(index).ok().filter(|&i| i <= INDEX_MASK)?;
     Some(index | u32::from(triangles) << 24)
 }
 
-/// A [`reference`]'s index and triangles.
+/// A [`child_reference`]'s index and triangles.
 #[inline(always)]
-pub(super) fn parts(reference: u32) -> (u32, u32) {
+pub(super) fn reference_parts(reference: u32) -> (u32, u32) {
     (reference & INDEX_MASK, reference >> 24)
 }
 
@@ -249,7 +249,7 @@ mod tests {
     #[test]
     fn references_hold_indices_below_two_to_the_24_and_refuse_the_rest() {
         for (index, triangles) in [(0, 0), (1, 255), ((1 << 24) - 1, 7), (123_456, 4)] {
-            let r = reference(index, triangles).expect("fits");
+            let r = child_reference(index, triangles).expect("fits");
             let mut node = Node8::EMPTY;
             node.refs[3] = r;
             assert_eq!(
@@ -258,7 +258,7 @@ mod tests {
             );
         }
         for index in [1 << 24, (1 << 24) + 5, u32::MAX as usize, usize::MAX] {
-            assert_eq!(reference(index, 1), None, "{index}");
+            assert_eq!(child_reference(index, 1), None, "{index}");
         }
     }
 

@@ -21,7 +21,7 @@
 //! `tracer/tests/wide_traversal.rs` renders through both and compares.
 
 use super::Ray;
-use super::collapse::parts;
+use super::collapse::reference_parts;
 use super::packet_box::{PacketBound, PacketRays};
 #[cfg(target_arch = "x86_64")]
 use super::packet_box::{enter_bound_avx, enter_child_avx};
@@ -43,7 +43,7 @@ pub(super) struct Node8 {
     /// The children's boxes, one lane per child: min x, y, z, then max x, y, z. Lanes past
     /// `children` hold an empty box (min +inf, max -inf) and are masked out anyway.
     pub(super) bounds: [[f32; WIDTH]; 6],
-    /// Per child, its reference (`collapse::reference`): an inner node's index in `Bvh8::nodes` or a leaf's first
+    /// Per child, its reference (`collapse::child_reference`): an inner node's index in `Bvh8::nodes` or a leaf's first
     /// group in `Bvh8::quads`, and the leaf's number of triangles (0 for an inner node), in
     /// one word, as the walks' stack entries carry them.
     pub(super) refs: [u32; WIDTH],
@@ -74,13 +74,13 @@ impl Node8 {
     /// Lane `lane`'s child index.
     #[inline(always)]
     pub(super) fn index(&self, lane: usize) -> u32 {
-        parts(self.refs[lane]).0
+        reference_parts(self.refs[lane]).0
     }
 
     /// Lane `lane`'s leaf's triangles, 0 for an inner node.
     #[inline(always)]
     pub(super) fn count(&self, lane: usize) -> u32 {
-        parts(self.refs[lane]).1
+        reference_parts(self.refs[lane]).1
     }
 
     pub(super) fn set_bounds(&mut self, lane: usize, min: [f32; 3], max: [f32; 3]) {

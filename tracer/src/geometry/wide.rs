@@ -27,7 +27,7 @@
 
 use super::bvh::Accel;
 use super::closest::Closest;
-use super::collapse::parts;
+use super::collapse::reference_parts;
 use super::memory::prefetch;
 #[cfg(target_arch = "x86_64")]
 use super::node8::Avx;
@@ -58,7 +58,7 @@ pub(super) struct Bvh8 {
     pub(super) quads: Vec<Quad>,
     /// Levels of 8-wide nodes on the deepest path (0 when empty): bounds the traversal stack.
     pub(super) depth: usize,
-    /// Whether every child's index fitted in its reference (`node8::reference`); where not,
+    /// Whether every child's index fitted in its reference (`collapse::child_reference`); where not,
     /// the tree is left empty and never walked ([`Bvh8::walkable`]).
     pub(super) references_fit: bool,
     /// How boxes are tested: AVX where this processor has it.
@@ -112,7 +112,7 @@ pub(super) type WalkStack<E> = [MaybeUninit<E>; INLINE_STACK];
 impl Bvh8 {
     /// Whether the wide walks take this tree: every walk's pushes fit in a [`WalkStack`] (at
     /// most `7 * depth + 1` entries, see [`INLINE_STACK`]) and every child's index fitted in
-    /// its reference (`node8::reference`). Where not (trees no real scene has come near:
+    /// its reference (`collapse::child_reference`). Where not (trees no real scene has come near:
     /// thirty levels of wide nodes, or 2^24 nodes or groups, some 67 million triangles), the
     /// rays are walked through the binary tree instead, which finds the same hits, bit for
     /// bit.
@@ -244,7 +244,7 @@ impl Accel {
         };
         let mut len = 0usize;
         loop {
-            let (child, count) = parts(current.reference);
+            let (child, count) = reference_parts(current.reference);
             if count > 0 {
                 // SAFETY: every entry with triangles is a lane of a node of this tree (pushed
                 // below from `node.refs`), and this one has some.
@@ -270,7 +270,7 @@ impl Accel {
                         reference: node.refs[lane],
                         t_near: t_near[lane],
                     };
-                    let (child, count) = parts(entry.reference);
+                    let (child, count) = reference_parts(entry.reference);
                     self.prefetch_child(child, count);
                     if ANY_HIT && count > 0 {
                         // SAFETY: a lane of this node, with triangles.
