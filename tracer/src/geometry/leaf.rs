@@ -122,6 +122,7 @@ impl Accel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::node8::WIDTH;
     use crate::geometry::{BoxSimd, BuildQuality, Ray};
     use crate::scene::Triangle;
     use glam::Vec3;
@@ -149,7 +150,7 @@ mod tests {
             .wide
             .nodes
             .iter()
-            .flat_map(|node| node.refs.map(|r| r >> 24))
+            .flat_map(|node| (0..WIDTH).map(|lane| node.count(lane)))
             .filter(|&c| c as usize > LANES)
             .count();
         assert!(

@@ -43,9 +43,9 @@ pub(super) struct Node8 {
     /// The children's boxes, one lane per child: min x, y, z, then max x, y, z. Lanes past
     /// `children` hold an empty box (min +inf, max -inf) and are masked out anyway.
     pub(super) bounds: [[f32; WIDTH]; 6],
-    /// Per child, its reference (`collapse::child_reference`): an inner node's index in `Bvh8::nodes` or a leaf's first
-    /// group in `Bvh8::quads`, and the leaf's number of triangles (0 for an inner node), in
-    /// one word, as the walks' stack entries carry them.
+    /// Per child, its reference (`collapse::child_reference`): an inner node's index in
+    /// `Bvh8::nodes` or a leaf's first group in `Bvh8::quads`, and the leaf's number of
+    /// triangles (0 for an inner node), in one word, as the walks' stack entries carry them.
     pub(super) refs: [u32; WIDTH],
     /// Bit `i` set when lane `i` holds a child; children fill the lowest lanes.
     pub(super) valid: u8,

@@ -58,8 +58,8 @@ pub(super) struct Bvh8 {
     pub(super) quads: Vec<Quad>,
     /// Levels of 8-wide nodes on the deepest path (0 when empty): bounds the traversal stack.
     pub(super) depth: usize,
-    /// Whether every child's index fitted in its reference (`collapse::child_reference`); where not,
-    /// the tree is left empty and never walked ([`Bvh8::walkable`]).
+    /// Whether every child's index fitted in its reference (`collapse::child_reference`);
+    /// where not, the tree is left empty and never walked ([`Bvh8::walkable`]).
     pub(super) references_fit: bool,
     /// How boxes are tested: AVX where this processor has it.
     pub(super) simd: BoxSimd,
@@ -112,10 +112,10 @@ pub(super) type WalkStack<E> = [MaybeUninit<E>; INLINE_STACK];
 impl Bvh8 {
     /// Whether the wide walks take this tree: every walk's pushes fit in a [`WalkStack`] (at
     /// most `7 * depth + 1` entries, see [`INLINE_STACK`]) and every child's index fitted in
-    /// its reference (`collapse::child_reference`). Where not (trees no real scene has come near:
-    /// thirty levels of wide nodes, or 2^24 nodes or groups, some 67 million triangles), the
-    /// rays are walked through the binary tree instead, which finds the same hits, bit for
-    /// bit.
+    /// its reference (`collapse::child_reference`). Where not (trees no real scene has come
+    /// near: thirty levels of wide nodes, or 2^24 nodes or groups, some 67 million
+    /// triangles), the rays are walked through the binary tree instead, which finds the same
+    /// hits, bit for bit.
     #[inline(always)]
     pub(super) fn walkable(&self) -> bool {
         self.references_fit && (WIDTH - 1) * self.depth < INLINE_STACK
@@ -438,8 +438,8 @@ mod tests {
         }
     }
 
-    /// Rays from beyond the largest of the `chain` triangles back toward the origin give the
-    /// brute-force hits through `accel`, alone and in packets, with either box test.
+    /// Rays through `chain` triangles find the brute-force hits through `accel`, alone and in
+    /// packets, with either box test.
     fn same_hits_as_brute_force(mut accel: Accel, triangles: &[Triangle]) {
         // Rays from beyond the largest triangle back toward the origin, through the
         // triangles' planes at several slants, and segments ending between triangles.
