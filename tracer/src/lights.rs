@@ -124,8 +124,13 @@ pub struct LightSample {
 #[derive(Clone, Debug)]
 pub struct Lights {
     lights: Vec<Light>,
-    /// Cumulative choice probabilities, last entry 1.
-    cdf: Vec<f32>,
+    /// Where each light's share of the choice's number starts and ends: light `i` takes
+    /// `bounds[i]..bounds[i + 1]`; the first is 0 and the last 1, and there are none without
+    /// lights. The leading 0 is kept so that where a share starts is a load for every light:
+    /// as a branch on the first light, it was mispredicted as often as the number fell on
+    /// either side of a two-triangle lamp, some 6 % of a Cornell render's mispredicted branches
+    /// (docs/bench.md, issue 12, thirty-ninth round).
+    bounds: Vec<f32>,
     /// For each scene triangle, its light's index, or `u32::MAX` when it does not emit; moving
     /// triangles follow the still ones, by the global index hits report.
     triangle_light: Vec<u32>,
@@ -168,7 +173,7 @@ impl Lights {
 
     /// The probability that `sample` chooses light `index`.
     fn choice_pdf(&self, index: usize) -> f32 {
-        self.cdf[index] - self.cdf_below(index)
+        self.bounds[index + 1] - self.bounds[index]
     }
 
     /// Whether every light is one the paths in lanes sample (`integrator/lanes/`): a still
@@ -210,7 +215,7 @@ impl Lights {
     /// The index of the light `u_choice` picks from the choice distribution (there is one).
     #[inline(always)]
     fn pick(&self, u_choice: f32) -> usize {
-        self.cdf
+        self.bounds[1..]
             .partition_point(|&c| c <= u_choice)
             .min(self.lights.len() - 1)
     }
@@ -218,7 +223,7 @@ impl Lights {
     /// The cumulative probability of the lights before `index`: where its share of the choice's
     /// number starts.
     fn cdf_below(&self, index: usize) -> f32 {
-        if index == 0 { 0.0 } else { self.cdf[index - 1] }
+        self.bounds[index]
     }
 
     /// Samples a light as seen from `p` at `moment` (where moving emitters are). `u_choice`

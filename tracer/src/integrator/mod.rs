@@ -459,10 +459,8 @@ impl World {
     /// The survival probability follows what the path would contribute ([`weighed`], with
     /// `media` whether the path's media are tracked).
     fn roulette(&self, media: bool, depth: u32, u: f32, ratio: Vec3, beta: &mut Vec3) -> bool {
-        if let Some(start) = self.scene.settings.russian_roulette_depth
-            && depth >= start
-        {
-            let survive = weighed(media, *beta, ratio).max_element().min(0.95);
+        if self.roulette_plays(depth) {
+            let survive = survival(weighed(media, *beta, ratio));
             if u >= survive {
                 return false;
             }
@@ -470,6 +468,24 @@ impl World {
         }
         true
     }
+
+    /// Whether Russian roulette is played at `depth` ([`World::roulette`]'s count): from the
+    /// settings' start depth on, where they have one.
+    #[inline(always)]
+    fn roulette_plays(&self, depth: u32) -> bool {
+        self.scene
+            .settings
+            .russian_roulette_depth
+            .is_some_and(|start| depth >= start)
+    }
+}
+
+/// The probability that Russian roulette lets a path of (weighed) throughput `beta` go on:
+/// its largest channel, at most 0.95. The scalar path's game and the lanes', which plays it
+/// for every lane at once (`lanes/shade.rs`), both take it from here.
+#[inline(always)]
+fn survival(beta: Vec3) -> f32 {
+    beta.max_element().min(0.95)
 }
 
 /// What a path of throughput `beta` and spectral ratios `ratio` contributes per unit of what it

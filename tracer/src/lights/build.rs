@@ -74,7 +74,7 @@ impl Lights {
                 add(Light::Environment, p);
             }
         }
-        let cdf = choice_cdf(&lights, &power);
+        let bounds = choice_bounds(&lights, &power);
         let moving_triangles: usize = scene.moving.iter().map(|o| o.triangles.len()).sum();
         let mut triangle_light = vec![u32::MAX; scene.triangles.len() + moving_triangles];
         let mut environment_light = None;
@@ -99,7 +99,7 @@ impl Lights {
         let mut result = Self {
             shapes,
             lights,
-            cdf,
+            bounds,
             triangle_light,
             environment_choice: 0.0,
             environment_index: environment_light.map_or(0, |i| i as usize),
@@ -137,9 +137,11 @@ impl TriangleShape {
     }
 }
 
-/// The cumulative choice probabilities: each kind of light with positive total power equally
-/// likely, lights within a kind by power. Empty when there is no light; every power is positive.
-fn choice_cdf(lights: &[Light], power: &[f32]) -> Vec<f32> {
+/// The bounds of the lights' shares of the choice's number ([`Lights`]'s `bounds`): 0, then
+/// the cumulative choice probabilities, each kind of light with positive total power equally
+/// likely, lights within a kind by power, the last set to 1. Empty when there is no light;
+/// every power is positive.
+fn choice_bounds(lights: &[Light], power: &[f32]) -> Vec<f32> {
     let kind = |light: &Light| match light {
         Light::Triangle(_) | Light::Moving { .. } => 0,
         Light::Point { .. } => 1,
@@ -154,21 +156,18 @@ fn choice_cdf(lights: &[Light], power: &[f32]) -> Vec<f32> {
         return Vec::new();
     }
     let mut running = 0.0f64;
-    let mut cdf: Vec<f32> = lights
-        .iter()
-        .zip(power)
-        .map(|(light, &p)| {
-            let total = kind_power[kind(light)];
-            if total > 0.0 {
-                running += f64::from(p) / total / kinds as f64;
-            }
-            running as f32
-        })
-        .collect();
-    if let Some(last) = cdf.last_mut() {
+    let cumulative = lights.iter().zip(power).map(|(light, &p)| {
+        let total = kind_power[kind(light)];
+        if total > 0.0 {
+            running += f64::from(p) / total / kinds as f64;
+        }
+        running as f32
+    });
+    let mut bounds: Vec<f32> = std::iter::once(0.0).chain(cumulative).collect();
+    if let Some(last) = bounds.last_mut() {
         *last = 1.0;
     }
-    cdf
+    bounds
 }
 
 /// The radius of a sphere around every triangle: half the diagonal of their bounding box.

@@ -17,10 +17,10 @@
 //! once every lane has had its surface. These are the walks and the lookups, whose branches and
 //! loads are each lane's own; in two passes and with the texels read last, the misses of
 //! different lanes overlap. The second computes, for all lanes together, the hit's point and
-//! error bound, the shading frame, the sampled direction, the light sample, its weighed value
-//! and both rays' origins, in one loop over the lanes whose body has no branch the compiler
-//! cannot make a select, so that it vectorises (with AVX where the processor has it, chosen at
-//! run time), and then, as vectors again, the walks' set-ups of every lane's shadow ray and
+//! error bound, the shading frame, the sampled direction, the throughput it leaves and
+//! Russian roulette's verdict, the light sample, its weighed value and both rays' origins, in
+//! one loop over the lanes whose body has no branch the compiler cannot make a select, so
+//! that it vectorises (with AVX where the processor has it, chosen at run time), and then, as vectors again, the walks' set-ups of every lane's shadow ray and
 //! next ray (`SetUpRows`: each lane exactly the set-up the walk would make of its ray, so a
 //! walk starts without its divisions). The third, one lane at a time again, traces the shadow
 //! rays and ends or continues each path.
@@ -183,9 +183,9 @@ impl World {
             // Second phase: every lane's shading at once, then the walks' set-ups of every
             // lane's shadow ray and next ray, eight at a time.
             if sky_is_light {
-                shade::<true>(&gathered, &mut shaded);
+                shade::<true>(&gathered, &paths.beta, &mut shaded);
             } else {
-                shade::<false>(&gathered, &mut shaded);
+                shade::<false>(&gathered, &paths.beta, &mut shaded);
             }
             let shadows = SetUpRows::new(shaded.origin.rows(), shaded.reach.rows());
             paths.set_up = SetUpRows::new(shaded.next_origin.rows(), shaded.next_dir.rows());
@@ -232,7 +232,7 @@ impl World {
             let (dir, last) = (paths.ray[i].dir, paths.last(i));
             let stats = &mut paths.stats[i];
             if let Some((arriving, weight)) = self.environment_seen(dir, last, stats) {
-                paths.radiance[i] += paths.beta[i] * arriving * weight;
+                paths.radiance[i] += paths.beta.get(i) * arriving * weight;
             }
             paths.end(i, feed);
         }
@@ -270,7 +270,7 @@ impl World {
             // The last scattering, read only here, where a light is hit.
             let last = paths.last(i);
             let weight = self.hit_emitter_weight(moment, hit.triangle, at, last);
-            paths.radiance[i] += paths.beta[i] * material.emission * weight;
+            paths.radiance[i] += paths.beta.get(i) * material.emission * weight;
         }
         if depth >= max_depth {
             return false;
@@ -290,7 +290,8 @@ impl World {
         };
         paths.stats[i].light_samples += 1;
         let (light, choice) = self.lights.lanes_choice(u.light_choice);
-        paths.roulette[i] = u.roulette;
+        // Counted as the third phase will count it, once this bounce is done.
+        (g.roulette[i], g.playing[i]) = (u.roulette, self.roulette_plays(depth + 1));
         for (corner, p) in g.hit.iter_mut().zip(triangle.p) {
             corner.set(i, p);
         }
@@ -331,7 +332,6 @@ impl World {
         (g, shaded, shadows): (&Gathered, &Shaded, &SetUpRows),
     ) -> bool {
         let stats = &mut paths.stats[i];
-        let beta = &mut paths.beta[i];
         if shaded.lit[i] {
             stats.shadow_rays += 1;
             let shadow = Ray {
@@ -340,24 +340,19 @@ impl World {
                 t_max: if g.sky[i] { f32::INFINITY } else { 1.0 },
             };
             if !self.occluded_from(&shadow, Some((shadows, i)), moment, &mut stats.traversal) {
-                paths.radiance[i] += *beta * shaded.value.get(i);
+                paths.radiance[i] += paths.beta.get(i) * shaded.value.get(i);
             }
         }
         // Counted before the path may end here, where the scalar path counts it after: a path
         // that ends takes its depth with it, so no number changes.
         paths.depth[i] += 1;
-        if !shaded.sampled[i] {
+        // The throughput, its checks and Russian roulette were the second phase's.
+        if !shaded.continues[i] {
             return false;
         }
-        *beta *= shaded.weight.get(i);
-        if *beta == Vec3::ZERO || !beta.is_finite() {
-            return false;
-        }
+        paths.beta.set(i, shaded.beta.get(i));
         (paths.last_pdf[i], paths.last_delta[i], paths.last_point[i]) =
             (shaded.pdf[i], false, shaded.p.get(i));
-        if !self.roulette(false, paths.depth[i], paths.roulette[i], Vec3::ONE, beta) {
-            return false;
-        }
         paths.ray[i] = Ray {
             origin: shaded.next_origin.get(i),
             dir: shaded.next_dir.get(i),

@@ -3,6 +3,7 @@
 //! state between bounces ([`Paths`]).
 
 use super::LANES;
+use super::shade::Points;
 use crate::geometry::{Hit, Ray, SetUpRows, UNUSED_RAY};
 use crate::integrator::PathStats;
 use crate::sampler::PixelSampler;
@@ -68,7 +69,7 @@ pub(super) struct Paths {
     pub(super) first: [Option<Option<Hit>>; LANES],
     pub(super) sampler: [PixelSampler; LANES],
     pub(super) depth: [u32; LANES],
-    pub(super) beta: [Vec3; LANES],
+    pub(super) beta: Points,
     pub(super) radiance: [Vec3; LANES],
     pub(super) last_pdf: [f32; LANES],
     pub(super) last_delta: [bool; LANES],
@@ -79,7 +80,6 @@ pub(super) struct Paths {
     /// lane's current ray is the one its set-up was made for (not a new path's camera ray).
     pub(super) set_up: SetUpRows,
     pub(super) set_up_ready: [bool; LANES],
-    pub(super) roulette: [f32; LANES],
     pub(super) stats: [PathStats; LANES],
 }
 
@@ -92,7 +92,7 @@ impl Default for Paths {
             first: [None; LANES],
             sampler: std::array::from_fn(|_| PixelSampler::placeholder()),
             depth: [0; LANES],
-            beta: [Vec3::ONE; LANES],
+            beta: Points::default(),
             radiance: [Vec3::ZERO; LANES],
             last_pdf: [0.0; LANES],
             last_delta: [true; LANES],
@@ -105,7 +105,6 @@ impl Default for Paths {
             }; LANES],
             set_up: SetUpRows::default(),
             set_up_ready: [false; LANES],
-            roulette: [0.0; LANES],
             stats: [PathStats::default(); LANES],
         }
     }
@@ -128,7 +127,7 @@ impl Paths {
         self.tag[i] = tag;
         self.set_up_ready[i] = false;
         self.depth[i] = 0;
-        self.beta[i] = Vec3::ONE;
+        self.beta.set(i, Vec3::ONE);
         self.radiance[i] = Vec3::ZERO;
         (self.last_pdf[i], self.last_delta[i], self.last_point[i]) =
             (0.0, true, self.ray[i].origin);

@@ -5,6 +5,7 @@
 use super::LANES;
 use crate::geometry::{SurfacePoint, gamma};
 use crate::integrator::direct::power_heuristic;
+use crate::integrator::survival;
 use crate::lights::uniform_sphere;
 use crate::material::Frame;
 use crate::material::sample_cosine_hemisphere;
@@ -66,6 +67,9 @@ pub(super) struct Gathered {
     /// Whether the light picked is the constant environment (then `emission` is its
     /// radiance, and the triangle's values are stale).
     pub(super) sky: Lanes<bool>,
+    /// Russian roulette's number, and whether the game is played after this bounce.
+    pub(super) roulette: Lanes<f32>,
+    pub(super) playing: Lanes<bool>,
 }
 
 /// What the second phase hands the third, per lane.
@@ -79,10 +83,12 @@ pub(super) struct Shaded {
     pub(super) value: Points,
     pub(super) origin: Points,
     pub(super) reach: Points,
-    /// Whether a direction was sampled (then `weight`, `pdf` and the next ray's `next_origin`
-    /// and `next_dir` hold it).
-    pub(super) sampled: Lanes<bool>,
-    pub(super) weight: Points,
+    /// Whether the path goes on: a direction was sampled, the throughput it leaves is neither
+    /// zero nor more than finite, and Russian roulette let it survive. Then `beta` is that
+    /// throughput (raised by the roulette where played), `pdf` the direction's density, and
+    /// the next ray's `next_origin` and `next_dir` hold it.
+    pub(super) continues: Lanes<bool>,
+    pub(super) beta: Points,
     pub(super) pdf: Lanes<f32>,
     pub(super) next_origin: Points,
     pub(super) next_dir: Points,
@@ -94,10 +100,15 @@ pub(super) struct Shaded {
 /// are called as they are; what `Bsdf::sample`, `area_sample`, the light sample's value and
 /// the spawns (`offset` below) do for a diffuse surface is written out here lane by lane,
 /// because their `Option`s and branches kept the compiler from vectorising the loop
-/// (docs/bench.md, issue 12, thirty-first round). `tracer/tests/path_lanes.rs` holds every
-/// image to the scalar path's, bit for bit.
+/// (docs/bench.md, issue 12, thirty-first round). So is what the scalar path does with the
+/// sampled direction's weight: `beta`, the lanes' throughputs, times the weight, the path's
+/// end where that is zero or not finite, and Russian roulette (`World::roulette`), whose
+/// division by one where the game is not yet played is exact (`x / 1` is `x`): played
+/// lane by lane in the third phase, its branch on the depth was mispredicted as often as the
+/// lanes' depths differed (docs/bench.md, issue 12, thirty-ninth round).
+/// `tracer/tests/path_lanes.rs` holds every image to the scalar path's, bit for bit.
 #[inline(always)]
-pub(super) fn shade<const SKY: bool>(g: &Gathered, out: &mut Shaded) {
+pub(super) fn shade<const SKY: bool>(g: &Gathered, beta: &Points, out: &mut Shaded) {
     for i in 0..LANES {
         let hit = [g.hit[0].get(i), g.hit[1].get(i), g.hit[2].get(i)];
         let plane = g.plane.get(i);
@@ -114,9 +125,19 @@ pub(super) fn shade<const SKY: bool>(g: &Gathered, out: &mut Shaded) {
         // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side.
         let flip = wo.z < 0.0;
         let local = sample_cosine_hemisphere(Vec2::new(g.scatter[0][i], g.scatter[1][i]));
-        out.sampled[i] = wo.z != 0.0 && !wo.z.is_nan() && local.z > 0.0;
+        let sampled = wo.z != 0.0 && !wo.z.is_nan() && local.z > 0.0;
         out.pdf[i] = local.z * FRAC_1_PI;
-        out.weight.set(i, g.albedo.get(i));
+        // The diffuse sample's weight is the albedo.
+        let next = beta.get(i) * g.albedo.get(i);
+        let survive = survival(next);
+        let playing = g.playing[i];
+        // `&`, not `&&`: short-circuits are branches, and with them this loop no longer
+        // vectorised (the box's instructions 774 M to 973 M, 96x96, 16 spp).
+        out.continues[i] = sampled
+            & (next != Vec3::ZERO)
+            & next.is_finite()
+            & !(playing & (g.roulette[i] >= survive));
+        out.beta.set(i, next / if playing { survive } else { 1.0 });
         let z = if flip { -local.z } else { local.z };
         let wi = frame.to_world(Vec3::new(local.x, local.y, z));
         out.next_dir.set(i, wi);
