@@ -177,18 +177,49 @@ impl Lights {
     }
 
     /// Whether every light is one the paths in lanes sample (`integrator/lanes/`): a still
-    /// emissive triangle, or a constant environment sampled uniformly over the sphere
-    /// without portals.
+    /// emissive triangle, or an environment without portals that is constant (sampled
+    /// uniformly over the sphere) or a map sampled by its importance.
     pub(crate) fn lanes_sample_all(&self, scene: &Scene) -> bool {
-        let constant_sky = matches!(scene.environment, None | Some(Environment::Constant(_)))
-            && self.map_sampler.is_none()
-            && self.portals.is_empty();
+        let sky_in_lanes = self.portals.is_empty()
+            && match (&scene.environment, &self.map_sampler) {
+                (None | Some(Environment::Constant(_)), None) => true,
+                (Some(Environment::Map(_)), Some(_)) => true,
+                // A map sampled uniformly (a comparison knob) is read at every direction
+                // drawn, which the lanes' vector shading does not do.
+                _ => false,
+            };
         !self.lights.is_empty()
             && self.lights.iter().all(|light| match light {
                 Light::Triangle(_) => true,
-                Light::Environment => constant_sky,
+                Light::Environment => sky_in_lanes,
                 Light::Moving { .. } | Light::Point { .. } => false,
             })
+    }
+
+    /// The environment's own sample for the numbers `u`, the environment being chosen among
+    /// the lights with probability `choice`: the direction, what arrives along it, and the
+    /// density of both choices; its map by importance, or the sphere uniformly. `None` where
+    /// the map gives no direction. The scalar path's next-event estimation and the lanes'
+    /// (for maps, `integrator/lanes/`) both sample it here.
+    #[inline]
+    pub(crate) fn environment_sample(
+        &self,
+        environment: &Environment,
+        u: Vec2,
+        choice: f32,
+    ) -> Option<(Vec3, Vec3, f32)> {
+        // The uniform density is written as before maps existed, `choice / 4 pi`, so that
+        // constant environments keep their bits.
+        match (&self.map_sampler, environment) {
+            (Some(sampler), Environment::Map(map)) => {
+                let sample = sampler.sample(map, u)?;
+                Some((sample.wi, sample.radiance, choice * sample.pdf))
+            }
+            _ => {
+                let wi = uniform_sphere(u);
+                Some((wi, environment.radiance(wi), choice / (4.0 * PI)))
+            }
+        }
     }
 
     /// Whether the environment is one of the lights sampled.
@@ -324,18 +355,7 @@ impl Lights {
                     .environment
                     .as_ref()
                     .expect("the environment is listed only when the scene has one");
-                // The uniform density is written as before maps existed, `choice / 4 pi`, so
-                // that constant environments keep their bits.
-                let (wi, radiance, pdf) = match (&self.map_sampler, environment) {
-                    (Some(sampler), Environment::Map(map)) => {
-                        let sample = sampler.sample(map, u)?;
-                        (sample.wi, sample.radiance, choice * sample.pdf)
-                    }
-                    _ => {
-                        let wi = uniform_sphere(u);
-                        (wi, environment.radiance(wi), choice / (4.0 * PI))
-                    }
-                };
+                let (wi, radiance, pdf) = self.environment_sample(environment, u, choice)?;
                 // With portals, the same direction might have come through one.
                 let other_pdf = if self.portals.is_empty() {
                     0.0

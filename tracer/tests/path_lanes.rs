@@ -210,6 +210,61 @@ fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
     }
 }
 
+/// The textured room under the shipped sky map (`scenes/fog-window/sky.exr`, turned and
+/// tinted), with its lamp (the choice between the lamp and the map) and without it (the map
+/// alone): each a world the lanes take, drawing the map's samples lane by lane, with the
+/// scalar path's bits; a portal over the room takes the map out of the lanes, whose shading
+/// has no second sample through it.
+#[test]
+fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let path = textured_room_under_a_sky(dir.path());
+    // Beside the scene file: a scene names its files inside its own tree.
+    let sky = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/fog-window/sky.exr");
+    std::fs::copy(&sky, dir.path().join("sky.exr")).expect("the sky map is copied");
+    let text = std::fs::read_to_string(&path).expect("the room's scene file");
+    let mapped = text.replace(
+        "radiance = 0.4",
+        "map = \"sky.exr\"\nrotate = 30\nscale = [1.0, 0.9, 0.8]",
+    );
+    assert_ne!(mapped, text, "the room's sky became the map");
+    let portal = mapped.replace(
+        "scale = [1.0, 0.9, 0.8]",
+        "scale = [1.0, 0.9, 0.8]\nportals = [[[-3, 3, -3], [3, 3, -3], [3, 3, 3], [-3, 3, 3]]]",
+    );
+    let mtl = dir.path().join("room.mtl");
+    let lit = std::fs::read_to_string(&mtl).expect("the room's materials");
+    // The lamp's emission is in the materials: left out, the map is the one light.
+    let dark = lit.replace("Ke 6 6 6", "Ke 0 0 0");
+    assert_ne!(dark, lit, "the lamp went dark");
+    let variants = [
+        ("map and lamp", &mapped, &lit, true),
+        ("map alone", &mapped, &dark, true),
+        ("map through a portal", &portal, &lit, false),
+    ];
+    for (label, text, materials, in_lanes) in variants {
+        std::fs::write(&path, text).expect("the scene file is written");
+        std::fs::write(&mtl, materials).expect("the materials are written");
+        let scene = tracer::scene::load(&path).expect("the room under the map loads");
+        assert!(
+            matches!(
+                scene.environment,
+                Some(tracer::environment::Environment::Map(_))
+            ),
+            "{label}: a map"
+        );
+        for spp in [5, 16] {
+            let mut scene = scene.clone();
+            scene.settings.samples_per_pixel = spp;
+            assert_eq!(
+                same_both_ways(label, scene, CameraRays::Packets),
+                in_lanes,
+                "{label}: the lanes ran or not"
+            );
+        }
+    }
+}
+
 #[test]
 fn worlds_the_lanes_do_not_fit_render_one_by_one() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
@@ -235,10 +290,10 @@ fn worlds_the_lanes_do_not_fit_render_one_by_one() {
 
 #[test]
 fn shared_scenes_render_the_same_bits_in_lanes_when_present() {
-    // The Cornell bunny (69k triangles, diffuse, one light) and Sponza (textures, the sky
-    // alone). Their files live in ../shared/scenes, outside the repository; without them there
-    // is nothing to render.
-    for name in ["cornell-bunny", "sponza"] {
+    // The Cornell bunny (69k triangles, diffuse, one light), Sponza (textures, the sky
+    // alone) and the Stanford bunny under a sky map. Their files live in ../shared/scenes,
+    // outside the repository; without them there is nothing to render.
+    for name in ["cornell-bunny", "sponza", "stanford-bunny-sky"] {
         let path =
             Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../scenes/shared/{name}.toml"));
         let Ok(mut scene) = tracer::scene::load(&path) else {

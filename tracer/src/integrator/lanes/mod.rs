@@ -1,8 +1,8 @@
 //! A tile's paths in lanes: eight paths advanced a bounce at a time, their shading computed
 //! together in vector instructions, for the worlds whose every path can be
 //! ([`World::lanes_fit`]): plain ones ([`World::is_plain`]) of diffuse surfaces (textured or
-//! not, with shading normals or not), lit by still emissive triangles and a constant sky. The
-//! Cornell scenes and Sponza are such worlds.
+//! not, with shading normals or not), lit by still emissive triangles and a constant sky or an
+//! environment map. The Cornell scenes and Sponza are such worlds.
 //!
 //! The paths come from a feed ([`PathFeed`]; the tile's, `tile/lanes.rs`, hands out its
 //! pixels' samples in order, a camera packet at a time) and go back to it as they end, in any
@@ -70,8 +70,8 @@ use shade::{Gathered, Shaded, shade};
 impl World {
     /// Whether every path of this world can run in lanes: a plain world (no media, no
     /// moving objects, RGB throughout) whose materials are all diffuse, every light a still
-    /// emissive triangle or a constant environment without portals
-    /// (`Lights::lanes_sample_all`), lights found both ways and weighed (the default), the
+    /// emissive triangle or an environment without portals, constant or a map sampled by its
+    /// importance (`Lights::lanes_sample_all`), lights found both ways and weighed (the default), the
     /// default offsets and RGB sampling, shadow rays on, and Russian roulette on. Each
     /// condition names a step the lanes leave out; a world that fails one renders one path
     /// at a time, as every world can.
@@ -145,6 +145,7 @@ impl World {
             _ => Vec3::ZERO,
         };
         let sky_is_light = self.lights.environment_is_light();
+        let sky_map = matches!(self.scene.environment, Some(Environment::Map(_)));
         loop {
             // First phase, in two passes: every lane's walk, then every lane's surface, so
             // that the hit triangles' records, which the walks ask for from memory as they
@@ -160,6 +161,7 @@ impl World {
                 *shading = walked[i]
                     && loop {
                         let lane = (&mut gathered, &mut texels[i]);
+                        let sky = (sky, sky_map);
                         if self.surface_phase::<TEXTURED>(&moment, &mut paths, i, lane, sky) {
                             break true;
                         }
@@ -182,10 +184,10 @@ impl World {
             }
             // Second phase: every lane's shading at once, then the walks' set-ups of every
             // lane's shadow ray and next ray, eight at a time.
-            if sky_is_light {
-                shade::<true>(&gathered, &paths.beta, &mut shaded);
-            } else {
-                shade::<false>(&gathered, &paths.beta, &mut shaded);
+            match (sky_is_light, sky_map) {
+                (true, true) => shade::<true, true>(&gathered, &paths.beta, &mut shaded),
+                (true, false) => shade::<true, false>(&gathered, &paths.beta, &mut shaded),
+                (false, _) => shade::<false, false>(&gathered, &paths.beta, &mut shaded),
             }
             let shadows = SetUpRows::new(shaded.origin.rows(), shaded.reach.rows());
             paths.set_up = SetUpRows::new(shaded.next_origin.rows(), shaded.next_dir.rows());
@@ -248,7 +250,7 @@ impl World {
         paths: &mut Paths,
         i: usize,
         (g, texel): (&mut Gathered, &mut Texel<'w>),
-        sky: Vec3,
+        (sky, sky_map): (Vec3, bool),
     ) -> bool {
         let max_depth = self.scene.settings.max_depth.unwrap_or(UNLIMITED_DEPTH);
         let depth = paths.depth[i];
@@ -315,6 +317,17 @@ impl World {
                 g.light_plane.set(i, shape.plane_normal);
                 let emission = self.scene.materials[triangle.material as usize].emission;
                 g.emission.set(i, emission);
+            }
+            // An environment map's sample is drawn here, lane by lane, where a constant
+            // environment's is drawn in the vector shading.
+            None if sky_map => {
+                let environment = self.scene.environment.as_ref();
+                let sample =
+                    environment.and_then(|e| self.lights.environment_sample(e, u.light, choice));
+                let (dir, arriving, pdf) = sample.unwrap_or((Vec3::Z, Vec3::ZERO, 0.0));
+                g.sky_dir.set(i, dir);
+                g.emission.set(i, arriving);
+                g.sky_pdf[i] = pdf;
             }
             None => g.emission.set(i, sky),
         }

@@ -64,9 +64,13 @@ pub(super) struct Gathered {
     pub(super) light_plane: Points,
     pub(super) emission: Points,
     pub(super) choice: Lanes<f32>,
-    /// Whether the light picked is the constant environment (then `emission` is its
-    /// radiance, and the triangle's values are stale).
+    /// Whether the light picked is the environment (then `emission` is what it sends, and
+    /// the triangle's values are stale).
     pub(super) sky: Lanes<bool>,
+    /// An environment map's sample, drawn in the first phase: its direction and density (the
+    /// choice's included; 0 where the map gave no direction, whose `emission` is then zero).
+    pub(super) sky_dir: Points,
+    pub(super) sky_pdf: Lanes<f32>,
     /// Russian roulette's number, and whether the game is played after this bounce.
     pub(super) roulette: Lanes<f32>,
     pub(super) playing: Lanes<bool>,
@@ -107,8 +111,16 @@ pub(super) struct Shaded {
 /// lane by lane in the third phase, its branch on the depth was mispredicted as often as the
 /// lanes' depths differed (docs/bench.md, issue 12, thirty-ninth round).
 /// `tracer/tests/path_lanes.rs` holds every image to the scalar path's, bit for bit.
+///
+/// `SKY` where the environment is a light, `MAP` where it is a map, whose sample the first
+/// phase drew (its inversions search tables, each lane its own way); a constant one's is drawn
+/// here.
 #[inline(always)]
-pub(super) fn shade<const SKY: bool>(g: &Gathered, beta: &Points, out: &mut Shaded) {
+pub(super) fn shade<const SKY: bool, const MAP: bool>(
+    g: &Gathered,
+    beta: &Points,
+    out: &mut Shaded,
+) {
     for i in 0..LANES {
         let hit = [g.hit[0].get(i), g.hit[1].get(i), g.hit[2].get(i)];
         let plane = g.plane.get(i);
@@ -157,12 +169,21 @@ pub(super) fn shade<const SKY: bool>(g: &Gathered, beta: &Points, out: &mut Shad
         let distance = distance_squared.sqrt();
         let cos_light = -(to_light / distance).dot(g.light_normal.get(i));
         let area = g.light_area[i];
-        // Or the constant environment's, uniform over the sphere (`Lights::sample`).
+        // Or the environment's: a map's as drawn, a constant one's uniform over the sphere
+        // (`Lights::environment_sample`).
         let sky = SKY && g.sky[i];
-        let sky_way = uniform_sphere(Vec2::new(g.light[0][i], g.light[1][i]));
+        let sky_way = if MAP {
+            g.sky_dir.get(i)
+        } else {
+            uniform_sphere(Vec2::new(g.light[0][i], g.light[1][i]))
+        };
         let toward = if sky { sky_way } else { to_light / distance };
         let light_pdf = if sky {
-            g.choice[i] / (4.0 * PI)
+            if MAP {
+                g.sky_pdf[i]
+            } else {
+                g.choice[i] / (4.0 * PI)
+            }
         } else {
             g.choice[i] * distance_squared / (cos_light * area)
         };
