@@ -20,9 +20,10 @@
 //! error bound, the shading frame, the sampled direction, the throughput it leaves and
 //! Russian roulette's verdict, the light sample, its weighed value and both rays' origins, in
 //! one loop over the lanes whose body has no branch the compiler cannot make a select, so
-//! that it vectorises (with AVX where the processor has it, chosen at run time), and then, as vectors again, the walks' set-ups of every lane's shadow ray and
-//! next ray (`SetUpRows`: each lane exactly the set-up the walk would make of its ray, so a
-//! walk starts without its divisions). The third, one lane at a time again, traces the shadow
+//! that it vectorises (with AVX where the processor has it, chosen at run time), and then, as
+//! vectors again, the walks' set-ups of every lane's shadow ray and next ray (`SetUpRows`:
+//! each lane exactly the set-up the walk would make of its ray, so a walk starts without its
+//! divisions). The third, one lane at a time again, traces the shadow
 //! rays and ends or continues each path.
 //!
 //! **Exactness.** Every lane computes what the scalar path ([`World::radiance_from`])
@@ -71,10 +72,10 @@ impl World {
     /// Whether every path of this world can run in lanes: a plain world (no media, no
     /// moving objects, RGB throughout) whose materials are all diffuse, every light a still
     /// emissive triangle or an environment without portals, constant or a map sampled by its
-    /// importance (`Lights::lanes_sample_all`), lights found both ways and weighed (the default), the
-    /// default offsets and RGB sampling, shadow rays on, and Russian roulette on. Each
-    /// condition names a step the lanes leave out; a world that fails one renders one path
-    /// at a time, as every world can.
+    /// importance (`Lights::lanes_sample_all`), lights found both ways and weighed (the
+    /// default), the default offsets and RGB sampling, shadow rays on, and Russian roulette
+    /// on. Each condition names a step the lanes leave out; a world that fails one renders
+    /// one path at a time, as every world can.
     pub fn lanes_fit(&self) -> bool {
         self.paths == PathLanes::Lanes
             && self.is_plain()
