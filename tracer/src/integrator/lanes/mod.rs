@@ -139,14 +139,7 @@ impl World {
         let mut texels: [Texel; LANES] = [None; LANES];
         // Which lanes found a surface to shade this bounce.
         let mut shading = [false; LANES];
-        // What the constant environment sends every way, where it is a light; where it is
-        // not, the shading is compiled without its sampling.
-        let sky = match &self.scene.environment {
-            Some(Environment::Constant(radiance)) => *radiance,
-            _ => Vec3::ZERO,
-        };
-        let sky_is_light = self.lights.environment_is_light();
-        let sky_map = matches!(self.scene.environment, Some(Environment::Map(_)));
+        let sky = SkyLight::of(self);
         loop {
             // First phase, in two passes: every lane's walk, then every lane's surface, so
             // that the hit triangles' records, which the walks ask for from memory as they
@@ -162,7 +155,6 @@ impl World {
                 *shading = walked[i]
                     && loop {
                         let lane = (&mut gathered, &mut texels[i]);
-                        let sky = (sky, sky_map);
                         if self.surface_phase::<TEXTURED>(&moment, &mut paths, i, lane, sky) {
                             break true;
                         }
@@ -185,10 +177,11 @@ impl World {
             }
             // Second phase: every lane's shading at once, then the walks' set-ups of every
             // lane's shadow ray and next ray, eight at a time.
-            match (sky_is_light, sky_map) {
-                (true, true) => shade::<true, true>(&gathered, &paths.beta, &mut shaded),
-                (true, false) => shade::<true, false>(&gathered, &paths.beta, &mut shaded),
-                (false, _) => shade::<false, false>(&gathered, &paths.beta, &mut shaded),
+            // Compiled apart for each kind of sky, and without its sampling where it is none.
+            match sky {
+                SkyLight::Map => shade::<true, true>(&gathered, &paths.beta, &mut shaded),
+                SkyLight::Constant(_) => shade::<true, false>(&gathered, &paths.beta, &mut shaded),
+                SkyLight::Absent => shade::<false, false>(&gathered, &paths.beta, &mut shaded),
             }
             let shadows = SetUpRows::new(shaded.origin.rows(), shaded.reach.rows());
             paths.set_up = SetUpRows::new(shaded.next_origin.rows(), shaded.next_dir.rows());
@@ -251,7 +244,7 @@ impl World {
         paths: &mut Paths,
         i: usize,
         (g, texel): (&mut Gathered, &mut Texel<'w>),
-        (sky, sky_map): (Vec3, bool),
+        sky: SkyLight,
     ) -> bool {
         let max_depth = self.scene.settings.max_depth.unwrap_or(UNLIMITED_DEPTH);
         let depth = paths.depth[i];
@@ -321,7 +314,7 @@ impl World {
             }
             // An environment map's sample is drawn here, lane by lane, where a constant
             // environment's is drawn in the vector shading.
-            None if sky_map => {
+            None if matches!(sky, SkyLight::Map) => {
                 let environment = self.scene.environment.as_ref();
                 let sample =
                     environment.and_then(|e| self.lights.environment_sample(e, u.light, choice));
@@ -330,7 +323,7 @@ impl World {
                 g.emission.set(i, arriving);
                 g.sky_pdf[i] = pdf;
             }
-            None => g.emission.set(i, sky),
+            None => g.emission.set(i, sky.constant()),
         }
         true
     }
@@ -374,6 +367,39 @@ impl World {
         };
         paths.set_up_ready[i] = true;
         true
+    }
+}
+
+/// The environment as the lanes sample it where it is one of the lights: a constant one (what
+/// it sends every way), drawn in the vector shading, or a map, drawn lane by lane before it.
+#[derive(Clone, Copy)]
+enum SkyLight {
+    Absent,
+    Constant(Vec3),
+    Map,
+}
+
+impl SkyLight {
+    /// The sky `world`'s lanes sample.
+    fn of(world: &World) -> Self {
+        if !world.lights.environment_is_light() {
+            return SkyLight::Absent;
+        }
+        match &world.scene.environment {
+            Some(Environment::Constant(radiance)) => SkyLight::Constant(*radiance),
+            Some(Environment::Map(_)) => SkyLight::Map,
+            None => SkyLight::Absent,
+        }
+    }
+
+    /// What a constant sky sends every way; zero for the others, whose light is never picked
+    /// as a constant one.
+    #[inline(always)]
+    fn constant(self) -> Vec3 {
+        match self {
+            SkyLight::Constant(radiance) => radiance,
+            SkyLight::Absent | SkyLight::Map => Vec3::ZERO,
+        }
     }
 }
 
