@@ -18,8 +18,9 @@
 use glam::Vec2;
 
 /// The most cells a distribution may have: up to it, an f32 times the cell count is exact in
-/// f64, which the guide table's exactness rests on ([`guide_table`]). An environment map has
-/// at most 2^27 texels (`environment::MAX_MAP_TEXELS`), so its rows and columns are far below.
+/// f64, which the guide table's exactness rests on ([`Distribution1D::sample`]). An environment
+/// map has at most 2^27 texels (`environment::MAX_MAP_TEXELS`), so its rows and columns are far
+/// below.
 pub const MAX_CELLS: usize = (1 << 29) - 1;
 
 /// The largest f32 below 1: samples stay inside the half-open domain.
