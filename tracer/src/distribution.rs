@@ -136,9 +136,10 @@ impl Distribution1D {
 }
 
 /// The guide table of `cells` over `stretches` equal stretches of [0, 1): entry `j`
-/// (`1..=stretches`) counts the cells that start at most at `j / stretches`, entry 0 is 0. The comparison is exact:
-/// an f32 (24 significant bits) times a count below 2^29 ([`MAX_CELLS`]) has at most 53, so it
-/// is exact in f64, and `c <= j / stretches` is `c * stretches <= j` without a rounding.
+/// (`1..=stretches`) counts the cells that start at most at `j / stretches`, entry 0 is 0.
+/// The comparison is exact: an f32 (24 significant bits) times a count below 2^29
+/// ([`MAX_CELLS`]) has at most 53, so it is exact in f64, and `start <= j / stretches` is
+/// `start * stretches <= j` without a rounding.
 fn guide_table(cells: &[Cell], stretches: usize) -> Vec<u32> {
     let mut guide = Vec::with_capacity(stretches + 1);
     guide.push(0);
