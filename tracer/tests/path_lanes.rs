@@ -2,10 +2,11 @@
 //! as the same paths one by one, with the same counted work and cost map, whole frames and
 //! tiles cut mid-row alike: across scales and distances from the origin (where the offsets of
 //! both rays' origins are tested hardest), one sample per pixel, sample counts that leave a
-//! pixel's last packet partly empty, tiles with fewer paths than lanes and tiles of no pixels, depths from emitters alone to long paths, Russian roulette from the
-//! first bounce, and the camera's rays found in packets or one by one; with textures, shading
-//! normals and a constant sky beside an area light. Worlds the lanes do not fit (glass, no
-//! roulette) render one by one whatever the knob says.
+//! pixel's last packet partly empty, tiles with fewer paths than lanes and tiles of no pixels,
+//! depths from emitters alone to long paths, Russian roulette from the first bounce, and the
+//! camera's rays found in packets or one by one; with textures, shading normals and a constant
+//! sky beside an area light; with ideal mirrors among the diffuse surfaces. Worlds the lanes do
+//! not fit (glass, no roulette) render one by one whatever the knob says.
 
 mod common;
 
@@ -17,6 +18,20 @@ use tracer::{CameraRays, PathLanes, Rect, World};
 fn cornell_box() -> Scene {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/cornell-box.toml");
     tracer::scene::load(&path).expect("the shipped Cornell box loads")
+}
+
+/// `scene` with its tall box an ideal mirror (tinted, so that its reflectance shows in every
+/// channel): the lanes' delta bounce, without a light sample, among the diffuse ones.
+fn with_a_mirror(mut scene: Scene) -> Scene {
+    let tall_box = scene
+        .materials
+        .iter_mut()
+        .find(|m| m.name == "tallBox")
+        .expect("the Cornell box has a tall box");
+    tall_box.bsdf = tracer::material::Bsdf::Mirror {
+        reflectance: glam::Vec3::new(0.9, 0.8, 0.7),
+    };
+    scene
 }
 
 /// `scene` scaled by `scale` about the origin, then moved by `shift`: every triangle and the
@@ -140,8 +155,14 @@ fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
             scene.settings.max_depth = depth;
             scene.settings.russian_roulette_depth = roulette;
             let label = format!("scale {scale}, shift {shift}, {spp} spp, depth {depth:?}");
-            let fits = same_both_ways(&label, scene, CameraRays::Packets);
+            let fits = same_both_ways(&label, scene.clone(), CameraRays::Packets);
             assert!(fits, "{label}: the lanes did not run");
+            // The tall box a mirror, at the longest paths and the shortest.
+            if depth.is_none_or(|depth| depth >= 5) {
+                let label = format!("{label}, a mirror");
+                let fits = same_both_ways(&label, with_a_mirror(scene), CameraRays::Packets);
+                assert!(fits, "{label}: the lanes did not run");
+            }
         }
     }
     let mut scene = cornell_box();
@@ -208,6 +229,21 @@ fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
         scene.settings.samples_per_pixel = spp;
         assert!(same_both_ways("textured room", scene, CameraRays::Packets));
     }
+    // Its box a mirror, beside the textured floor.
+    let mtl = dir.path().join("room.mtl");
+    let materials = std::fs::read_to_string(&mtl).expect("the room's materials");
+    let mirrored = materials.replace(
+        "newmtl grey\nKd 0.5 0.4 0.3",
+        "newmtl grey\nillum 5\nKs 0.9 0.8 0.7",
+    );
+    assert_ne!(mirrored, materials, "the box became a mirror");
+    std::fs::write(&mtl, mirrored).expect("the materials are written");
+    let scene = tracer::scene::load(&path).expect("the room with a mirror loads");
+    assert!(same_both_ways(
+        "textured room, a mirror",
+        scene,
+        CameraRays::Packets
+    ));
 }
 
 /// The textured room under the shipped sky map (`scenes/fog-window/sky.exr`, turned and
@@ -237,9 +273,15 @@ fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without()
     // The lamp's emission is in the materials: left out, the map is the one light.
     let dark = lit.replace("Ke 6 6 6", "Ke 0 0 0");
     assert_ne!(dark, lit, "the lamp went dark");
+    let mirrored = dark.replace(
+        "newmtl grey\nKd 0.5 0.4 0.3",
+        "newmtl grey\nillum 5\nKs 0.9 0.8 0.7",
+    );
+    assert_ne!(mirrored, dark, "the box became a mirror");
     let variants = [
         ("map and lamp", &mapped, &lit, true),
         ("map alone", &mapped, &dark, true),
+        ("map alone, a mirror", &mapped, &mirrored, true),
         ("map through a portal", &portal, &lit, false),
     ];
     for (label, text, materials, in_lanes) in variants {
@@ -291,9 +333,15 @@ fn worlds_the_lanes_do_not_fit_render_one_by_one() {
 #[test]
 fn shared_scenes_render_the_same_bits_in_lanes_when_present() {
     // The Cornell bunny (69k triangles, diffuse, one light), Sponza (textures, the sky
-    // alone) and the Stanford bunny under a sky map. Their files live in ../shared/scenes,
-    // outside the repository; without them there is nothing to render.
-    for name in ["cornell-bunny", "sponza", "stanford-bunny-sky"] {
+    // alone), the Stanford bunny under a sky map and the Cornell box with a mirror. Their
+    // files live in ../shared/scenes, outside the repository; without them there is nothing
+    // to render.
+    for name in [
+        "cornell-bunny",
+        "sponza",
+        "stanford-bunny-sky",
+        "cornell-box-mirror",
+    ] {
         let path =
             Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../scenes/shared/{name}.toml"));
         let Ok(mut scene) = tracer::scene::load(&path) else {

@@ -1,8 +1,8 @@
 //! A tile's paths in lanes: eight paths advanced a bounce at a time, their shading computed
 //! together in vector instructions, for the worlds whose every path can be
 //! ([`World::lanes_fit`]): plain ones ([`World::is_plain`]) of diffuse surfaces (textured or
-//! not, with shading normals or not), lit by still emissive triangles and a constant sky or an
-//! environment map. The Cornell scenes and Sponza are such worlds.
+//! not, with shading normals or not) and ideal mirrors, lit by still emissive triangles and a
+//! constant sky or an environment map. The Cornell scenes and Sponza are such worlds.
 //!
 //! The paths come from a feed ([`PathFeed`]; the tile's, `tile/lanes.rs`, hands out its
 //! pixels' samples in order, a camera packet at a time) and go back to it as they end, in any
@@ -70,9 +70,10 @@ use shade::{Gathered, Shaded, shade};
 
 impl World {
     /// Whether every path of this world can run in lanes: a plain world (no media, no
-    /// moving objects, RGB throughout) whose materials are all diffuse, every light a still
-    /// emissive triangle or an environment without portals, constant or a map sampled by its
-    /// importance (`Lights::lanes_sample_all`), lights found both ways and weighed (the
+    /// moving objects, RGB throughout) whose materials are all diffuse or ideal mirrors (a
+    /// delta bounce: no light sample, the reflection weighed by the reflectance), every light
+    /// a still emissive triangle or an environment without portals, constant or a map sampled
+    /// by its importance (`Lights::lanes_sample_all`), lights found both ways and weighed (the
     /// default), the default offsets and RGB sampling, shadow rays on, and Russian roulette
     /// on. Each condition names a step the lanes leave out; a world that fails one renders
     /// one path at a time, as every world can.
@@ -89,7 +90,7 @@ impl World {
                 .scene
                 .materials
                 .iter()
-                .all(|m| matches!(m.bsdf, Bsdf::Diffuse { .. }))
+                .all(|m| matches!(m.bsdf, Bsdf::Diffuse { .. } | Bsdf::Mirror { .. }))
     }
 
     /// Renders every path `feed` hands out, up to eight at a time, and hands each one's
@@ -170,18 +171,23 @@ impl World {
             for (i, texel) in texels.iter_mut().enumerate().filter(|_| TEXTURED) {
                 if let Some((bsdf, texel)) = texel.take() {
                     let Bsdf::Diffuse { albedo, .. } = resolve(bsdf, texel) else {
-                        unreachable!("lanes_fit: every material is diffuse")
+                        unreachable!("only a textured diffuse surface asks for a texel")
                     };
                     gathered.albedo.set(i, albedo);
                 }
             }
             // Second phase: every lane's shading at once, then the walks' set-ups of every
             // lane's shadow ray and next ray, eight at a time.
-            // Compiled apart for each kind of sky, and without its sampling where it is none.
-            match sky {
-                SkyLight::Map => shade::<true, true>(&gathered, &paths.beta, &mut shaded),
-                SkyLight::Constant(_) => shade::<true, false>(&gathered, &paths.beta, &mut shaded),
-                SkyLight::Absent => shade::<false, false>(&gathered, &paths.beta, &mut shaded),
+            // Compiled apart for each kind of sky, and without its sampling where it is none;
+            // and without mirrors' selects where the world has none.
+            let (g, beta, out) = (&gathered, &paths.beta, &mut shaded);
+            match (sky, self.effects.specular_reflection) {
+                (SkyLight::Map, false) => shade::<true, true, false>(g, beta, out),
+                (SkyLight::Constant(_), false) => shade::<true, false, false>(g, beta, out),
+                (SkyLight::Absent, false) => shade::<false, false, false>(g, beta, out),
+                (SkyLight::Map, true) => shade::<true, true, true>(g, beta, out),
+                (SkyLight::Constant(_), true) => shade::<true, false, true>(g, beta, out),
+                (SkyLight::Absent, true) => shade::<false, false, true>(g, beta, out),
             }
             let shadows = SetUpRows::new(shaded.origin.rows(), shaded.reach.rows());
             paths.set_up = SetUpRows::new(shaded.next_origin.rows(), shaded.next_dir.rows());
@@ -277,15 +283,19 @@ impl World {
         // Sponza (docs/bench.md, issue 12, thirty-second round).
         if TEXTURED {
             *texel = match material.bsdf {
-                Bsdf::Diffuse { texture: None, .. } => None,
-                _ => Some((&material.bsdf, self.texel_ahead(&material.bsdf, seen.uv))),
+                Bsdf::Diffuse {
+                    texture: Some(_), ..
+                } => Some((&material.bsdf, self.texel_ahead(&material.bsdf, seen.uv))),
+                _ => None,
             };
         }
-        let Bsdf::Diffuse { albedo, .. } = material.bsdf else {
-            unreachable!("lanes_fit: every material is diffuse")
+        // A mirror's reflectance stands where a diffuse surface's albedo does: each is its
+        // sampled direction's weight.
+        let (albedo, mirror) = match material.bsdf {
+            Bsdf::Diffuse { albedo, .. } => (albedo, false),
+            Bsdf::Mirror { reflectance } => (reflectance, true),
+            _ => unreachable!("lanes_fit: every material is diffuse or a mirror"),
         };
-        paths.stats[i].light_samples += 1;
-        let (light, choice) = self.lights.lanes_choice(u.light_choice);
         // Counted as the third phase will count it, once this bounce is done.
         (g.roulette[i], g.playing[i]) = (u.roulette, self.roulette_plays(depth + 1));
         for (corner, p) in g.hit.iter_mut().zip(triangle.p) {
@@ -296,7 +306,15 @@ impl World {
         g.normal.set(i, seen.normal);
         g.dir.set(i, ray.dir);
         g.albedo.set(i, albedo);
+        g.mirror[i] = mirror;
         (g.scatter[0][i], g.scatter[1][i]) = (u.scatter.x, u.scatter.y);
+        // A mirror samples no light, as the scalar path samples none on a delta BSDF: its
+        // lane's light values stay as they were, and the shading leaves it unlit.
+        if mirror {
+            return true;
+        }
+        paths.stats[i].light_samples += 1;
+        let (light, choice) = self.lights.lanes_choice(u.light_choice);
         (g.light[0][i], g.light[1][i]) = (u.light.x, u.light.y);
         g.choice[i] = choice;
         g.sky[i] = light.is_none();
@@ -359,7 +377,7 @@ impl World {
         }
         paths.beta.set(i, shaded.beta.get(i));
         (paths.last_pdf[i], paths.last_delta[i], paths.last_point[i]) =
-            (shaded.pdf[i], false, shaded.p.get(i));
+            (shaded.pdf[i], g.mirror[i], shaded.p.get(i));
         paths.ray[i] = Ray {
             origin: shaded.next_origin.get(i),
             dir: shaded.next_dir.get(i),

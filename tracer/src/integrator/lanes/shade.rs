@@ -7,8 +7,8 @@ use crate::geometry::{SurfacePoint, gamma};
 use crate::integrator::direct::power_heuristic;
 use crate::integrator::survival;
 use crate::lights::uniform_sphere;
-use crate::material::Frame;
 use crate::material::sample_cosine_hemisphere;
+use crate::material::{Frame, reflect_local};
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -55,7 +55,11 @@ pub(super) struct Gathered {
     pub(super) plane: Points,
     pub(super) normal: Points,
     pub(super) dir: Points,
+    /// The diffuse surface's albedo, or the mirror's reflectance where `mirror`.
     pub(super) albedo: Points,
+    /// Whether the surface is an ideal mirror (then its lane samples no light, and its
+    /// light values are stale).
+    pub(super) mirror: Lanes<bool>,
     pub(super) scatter: [Lanes<f32>; 2],
     pub(super) light: [Lanes<f32>; 2],
     pub(super) corners: [Points; 3],
@@ -114,9 +118,10 @@ pub(super) struct Shaded {
 ///
 /// `SKY` where the environment is a light, `MAP` where it is a map, whose sample the first
 /// phase drew (its inversions search tables, each lane its own way); a constant one's is drawn
-/// here.
+/// here. `MIRROR` where some surfaces are ideal mirrors: `Bsdf::sample`'s reflection about the
+/// shading normal, weighed by the reflectance, with a density of 1, and no light sample.
 #[inline(always)]
-pub(super) fn shade<const SKY: bool, const MAP: bool>(
+pub(super) fn shade<const SKY: bool, const MAP: bool, const MIRROR: bool>(
     g: &Gathered,
     beta: &Points,
     out: &mut Shaded,
@@ -134,12 +139,14 @@ pub(super) fn shade<const SKY: bool, const MAP: bool>(
         out.p.set(i, p);
         let frame = Frame::from_normal(g.normal.get(i));
         let wo = frame.to_local(-g.dir.get(i));
-        // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side.
+        // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side; a mirror's:
+        // `wo` reflected (`reflect_local`).
+        let mirror = MIRROR && g.mirror[i];
         let flip = wo.z < 0.0;
         let local = sample_cosine_hemisphere(Vec2::new(g.scatter[0][i], g.scatter[1][i]));
-        let sampled = wo.z != 0.0 && !wo.z.is_nan() && local.z > 0.0;
-        out.pdf[i] = local.z * FRAC_1_PI;
-        // The diffuse sample's weight is the albedo.
+        let sampled = wo.z != 0.0 && !wo.z.is_nan() && (mirror | (local.z > 0.0));
+        out.pdf[i] = if mirror { 1.0 } else { local.z * FRAC_1_PI };
+        // Either sample's weight is the albedo (the reflectance).
         let next = beta.get(i) * g.albedo.get(i);
         let survive = survival(next);
         let playing = g.playing[i];
@@ -151,7 +158,12 @@ pub(super) fn shade<const SKY: bool, const MAP: bool>(
             & !(playing & (g.roulette[i] >= survive));
         out.beta.set(i, next / if playing { survive } else { 1.0 });
         let z = if flip { -local.z } else { local.z };
-        let wi = frame.to_world(Vec3::new(local.x, local.y, z));
+        let scattered = if mirror {
+            reflect_local(wo)
+        } else {
+            Vec3::new(local.x, local.y, z)
+        };
+        let wi = frame.to_world(scattered);
         out.next_dir.set(i, wi);
         out.next_origin.set(i, offset(&at, wi));
         // `triangle_sample`: a point uniform on the light's triangle, as seen from `p`.
@@ -204,7 +216,11 @@ pub(super) fn shade<const SKY: bool, const MAP: bool>(
         let emission = g.emission.get(i);
         let weight = power_heuristic(light_pdf, density);
         out.value.set(i, f * emission * (weight / light_pdf));
-        out.lit[i] = sampled_light && f != Vec3::ZERO && emission != Vec3::ZERO && light_pdf > 0.0;
+        out.lit[i] = sampled_light
+            & !mirror
+            & (f != Vec3::ZERO)
+            & (emission != Vec3::ZERO)
+            & (light_pdf > 0.0);
         // `shadow_ray`: towards the sky (`spawn_ray`), or with both ends off their surfaces
         // (`spawn_ray_to`).
         let origin = offset(&at, if sky { sky_way } else { to_light });
