@@ -5,8 +5,9 @@
 //! pixel's last packet partly empty, tiles with fewer paths than lanes and tiles of no pixels,
 //! depths from emitters alone to long paths, Russian roulette from the first bounce, and the
 //! camera's rays found in packets or one by one; with textures, shading normals and a constant
-//! sky beside an area light; with ideal mirrors among the diffuse surfaces. Worlds the lanes do
-//! not fit (glass, no roulette) render one by one whatever the knob says.
+//! sky beside an area light; with ideal mirrors and smooth glass among the diffuse surfaces.
+//! Worlds the lanes do not fit (rough metal and point lights, no roulette) render one by one
+//! whatever the knob says.
 
 mod common;
 
@@ -20,17 +21,32 @@ fn cornell_box() -> Scene {
     tracer::scene::load(&path).expect("the shipped Cornell box loads")
 }
 
-/// `scene` with its tall box an ideal mirror (tinted, so that its reflectance shows in every
-/// channel): the lanes' delta bounce, without a light sample, among the diffuse ones.
-fn with_a_mirror(mut scene: Scene) -> Scene {
-    let tall_box = scene
-        .materials
-        .iter_mut()
-        .find(|m| m.name == "tallBox")
-        .expect("the Cornell box has a tall box");
-    tall_box.bsdf = tracer::material::Bsdf::Mirror {
-        reflectance: glam::Vec3::new(0.9, 0.8, 0.7),
-    };
+/// `scene` with its tall box an ideal mirror and its short box smooth glass (both tinted, so
+/// that their weights show in every channel): the lanes' delta bounces, reflected and
+/// refracted, without a light sample, among the diffuse ones.
+fn with_a_mirror_and_glass(mut scene: Scene) -> Scene {
+    for (name, bsdf) in [
+        (
+            "tallBox",
+            tracer::material::Bsdf::Mirror {
+                reflectance: glam::Vec3::new(0.9, 0.8, 0.7),
+            },
+        ),
+        (
+            "shortBox",
+            tracer::material::Bsdf::Dielectric {
+                ior: 1.5,
+                tint: glam::Vec3::new(0.95, 0.9, 1.0),
+            },
+        ),
+    ] {
+        let material = scene
+            .materials
+            .iter_mut()
+            .find(|m| m.name == name)
+            .expect("the Cornell box has both boxes");
+        material.bsdf = bsdf;
+    }
     scene
 }
 
@@ -157,10 +173,11 @@ fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
             let label = format!("scale {scale}, shift {shift}, {spp} spp, depth {depth:?}");
             let fits = same_both_ways(&label, scene.clone(), CameraRays::Packets);
             assert!(fits, "{label}: the lanes did not run");
-            // The tall box a mirror, at the longest paths and the shortest.
+            // The tall box a mirror and the short one glass, on paths long and unlimited.
             if depth.is_none_or(|depth| depth >= 5) {
-                let label = format!("{label}, a mirror");
-                let fits = same_both_ways(&label, with_a_mirror(scene), CameraRays::Packets);
+                let label = format!("{label}, a mirror and glass");
+                let scene = with_a_mirror_and_glass(scene);
+                let fits = same_both_ways(&label, scene, CameraRays::Packets);
                 assert!(fits, "{label}: the lanes did not run");
             }
         }
@@ -229,7 +246,7 @@ fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
         scene.settings.samples_per_pixel = spp;
         assert!(same_both_ways("textured room", scene, CameraRays::Packets));
     }
-    // Its box a mirror, beside the textured floor.
+    // Its box a mirror, then glass, beside the textured floor.
     let mtl = dir.path().join("room.mtl");
     let materials = std::fs::read_to_string(&mtl).expect("the room's materials");
     let mirrored = materials.replace(
@@ -237,13 +254,20 @@ fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
         "newmtl grey\nillum 5\nKs 0.9 0.8 0.7",
     );
     assert_ne!(mirrored, materials, "the box became a mirror");
-    std::fs::write(&mtl, mirrored).expect("the materials are written");
-    let scene = tracer::scene::load(&path).expect("the room with a mirror loads");
-    assert!(same_both_ways(
-        "textured room, a mirror",
-        scene,
-        CameraRays::Packets
-    ));
+    let glass = materials.replace(
+        "newmtl grey\nKd 0.5 0.4 0.3",
+        "newmtl grey\nillum 4\nNi 1.33\nKd 0.5 0.4 0.3",
+    );
+    assert_ne!(glass, materials, "the box became glass");
+    for (label, materials) in [("a mirror", mirrored), ("glass", glass)] {
+        std::fs::write(&mtl, materials).expect("the materials are written");
+        let scene = tracer::scene::load(&path).expect("the room with its box changed loads");
+        let label = format!("textured room, {label}");
+        assert!(
+            same_both_ways(&label, scene, CameraRays::Packets),
+            "{label}"
+        );
+    }
 }
 
 /// The textured room under the shipped sky map (`scenes/fog-window/sky.exr`, turned and
@@ -313,9 +337,12 @@ fn worlds_the_lanes_do_not_fit_render_one_by_one() {
     let mut without_roulette = cornell_box();
     without_roulette.settings.russian_roulette_depth = None;
     without_roulette.settings.max_depth = Some(4);
-    let glass = tracer::scene::load(&root.join("glass-cluster-pan/glass-cluster-pan.toml"))
+    let metal = tracer::scene::load(&root.join("glass-cluster-pan/glass-cluster-pan.toml"))
         .expect("a shipped scene loads");
-    for (label, mut scene) in [("no roulette", without_roulette), ("glass", glass)] {
+    for (label, mut scene) in [
+        ("no roulette", without_roulette),
+        ("metal, a point light", metal),
+    ] {
         scene.settings.width = 12;
         scene.settings.height = 12;
         scene.settings.samples_per_pixel = 4;
@@ -333,14 +360,16 @@ fn worlds_the_lanes_do_not_fit_render_one_by_one() {
 #[test]
 fn shared_scenes_render_the_same_bits_in_lanes_when_present() {
     // The Cornell bunny (69k triangles, diffuse, one light), Sponza (textures, the sky
-    // alone), the Stanford bunny under a sky map and the Cornell box with a mirror. Their
-    // files live in ../shared/scenes, outside the repository; without them there is nothing
-    // to render.
+    // alone), the Stanford bunny under a sky map, and the Cornell box with a mirror, with
+    // water and with a glass sphere. Their files live in ../shared/scenes, outside the
+    // repository; without them there is nothing to render.
     for name in [
         "cornell-bunny",
         "sponza",
         "stanford-bunny-sky",
         "cornell-box-mirror",
+        "cornell-box-water",
+        "cornell-box-sphere",
     ] {
         let path =
             Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../scenes/shared/{name}.toml"));

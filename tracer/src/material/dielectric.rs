@@ -53,7 +53,6 @@ pub fn fresnel_schlick(f0: Vec3, cos_h: f32) -> Vec3 {
 }
 
 /// `w` mirrored about the normal +z: the specular reflection in the local frame.
-#[inline(always)]
 pub(crate) fn reflect_local(w: Vec3) -> Vec3 {
     Vec3::new(-w.x, -w.y, w.z)
 }

@@ -45,8 +45,7 @@ pub use dispersion::{Dispersion, GLASSES};
 pub use frame::Frame;
 pub use microfacet::MIN_ALPHA;
 
-pub(crate) use dielectric::reflect_local;
-use dielectric::sample_dielectric;
+use dielectric::{reflect_local, sample_dielectric};
 use glam::{Vec2, Vec3};
 use microfacet::Ggx;
 use std::f32::consts::FRAC_1_PI;

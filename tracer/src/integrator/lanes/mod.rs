@@ -1,8 +1,9 @@
 //! A tile's paths in lanes: eight paths advanced a bounce at a time, their shading computed
 //! together in vector instructions, for the worlds whose every path can be
 //! ([`World::lanes_fit`]): plain ones ([`World::is_plain`]) of diffuse surfaces (textured or
-//! not, with shading normals or not) and ideal mirrors, lit by still emissive triangles and a
-//! constant sky or an environment map. The Cornell scenes and Sponza are such worlds.
+//! not, with shading normals or not), ideal mirrors and smooth glass, lit by still emissive
+//! triangles and a constant sky or an environment map. The Cornell scenes and Sponza are such
+//! worlds.
 //!
 //! The paths come from a feed ([`PathFeed`]; the tile's, `tile/lanes.rs`, hands out its
 //! pixels' samples in order, a camera packet at a time) and go back to it as they end, in any
@@ -51,13 +52,22 @@ use super::scatter::{BounceNumbers, resolve};
 use super::{AreaLightSampling, UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
 use crate::geometry::{Moment, OffsetMethod, PACKET, Ray, SetUpRows, hit_point};
-use crate::material::Bsdf;
+use crate::material::{Bsdf, BsdfSample, Frame};
 use crate::scene::Texture;
 use crate::spectrum::SpectralSampling;
 use glam::Vec3;
 
 /// The lanes: as many paths as a camera packet holds rays, eight f32 lanes of AVX.
 const LANES: usize = PACKET;
+
+/// What a delta lane holds where `Bsdf::sample` drew nothing (the path ends there).
+const NO_SAMPLE: BsdfSample = BsdfSample {
+    wi: Vec3::Z,
+    weight: Vec3::ZERO,
+    pdf: 0.0,
+    delta: true,
+    transmission: false,
+};
 
 mod paths;
 mod shade;
@@ -70,8 +80,8 @@ use shade::{Gathered, Shaded, shade};
 
 impl World {
     /// Whether every path of this world can run in lanes: a plain world (no media, no
-    /// moving objects, RGB throughout) whose materials are all diffuse or ideal mirrors (a
-    /// delta bounce: no light sample, the reflection weighed by the reflectance), every light
+    /// moving objects, RGB throughout) whose materials are all diffuse, ideal mirrors or smooth
+    /// glass (a delta bounce: no light sample, the direction drawn by `Bsdf::sample`), every light
     /// a still emissive triangle or an environment without portals, constant or a map sampled
     /// by its importance (`Lights::lanes_sample_all`), lights found both ways and weighed (the
     /// default), the default offsets and RGB sampling, shadow rays on, and Russian roulette
@@ -86,11 +96,12 @@ impl World {
             && self.offset == OffsetMethod::ErrorBound
             && self.spectral == SpectralSampling::Auto
             && self.effects.shadows
-            && self
-                .scene
-                .materials
-                .iter()
-                .all(|m| matches!(m.bsdf, Bsdf::Diffuse { .. } | Bsdf::Mirror { .. }))
+            && self.scene.materials.iter().all(|m| {
+                matches!(
+                    m.bsdf,
+                    Bsdf::Diffuse { .. } | Bsdf::Mirror { .. } | Bsdf::Dielectric { .. }
+                )
+            })
     }
 
     /// Renders every path `feed` hands out, up to eight at a time, and hands each one's
@@ -179,9 +190,10 @@ impl World {
             // Second phase: every lane's shading at once, then the walks' set-ups of every
             // lane's shadow ray and next ray, eight at a time.
             // Compiled apart for each kind of sky, and without its sampling where it is none;
-            // and without mirrors' selects where the world has none.
+            // and without the delta bounces' selects where the world has no mirror or glass.
             let (g, beta, out) = (&gathered, &paths.beta, &mut shaded);
-            match (sky, self.effects.specular_reflection) {
+            let delta = self.effects.specular_reflection || self.effects.refraction;
+            match (sky, delta) {
                 (SkyLight::Map, false) => shade::<true, true, false>(g, beta, out),
                 (SkyLight::Constant(_), false) => shade::<true, false, false>(g, beta, out),
                 (SkyLight::Absent, false) => shade::<false, false, false>(g, beta, out),
@@ -289,13 +301,6 @@ impl World {
                 _ => None,
             };
         }
-        // A mirror's reflectance stands where a diffuse surface's albedo does: each is its
-        // sampled direction's weight.
-        let (albedo, mirror) = match material.bsdf {
-            Bsdf::Diffuse { albedo, .. } => (albedo, false),
-            Bsdf::Mirror { reflectance } => (reflectance, true),
-            _ => unreachable!("lanes_fit: every material is diffuse or a mirror"),
-        };
         // Counted as the third phase will count it, once this bounce is done.
         (g.roulette[i], g.playing[i]) = (u.roulette, self.roulette_plays(depth + 1));
         for (corner, p) in g.hit.iter_mut().zip(triangle.p) {
@@ -305,14 +310,30 @@ impl World {
         g.plane.set(i, self.accel.plane_normal(hit.triangle));
         g.normal.set(i, seen.normal);
         g.dir.set(i, ray.dir);
-        g.albedo.set(i, albedo);
-        g.mirror[i] = mirror;
         (g.scatter[0][i], g.scatter[1][i]) = (u.scatter.x, u.scatter.y);
-        // A mirror samples no light, as the scalar path samples none on a delta BSDF: its
-        // lane's light values stay as they were, and the shading leaves it unlit.
-        if mirror {
+        let Bsdf::Diffuse { albedo, .. } = material.bsdf else {
+            // A mirror's or a glass's bounce, a delta: its direction drawn here, lane by lane,
+            // by the scalar path's own `Bsdf::sample` in the scalar path's frame (the vector
+            // shading makes the same frame again), its weight where a diffuse surface's albedo
+            // goes. It samples no light, as the scalar path samples none on a delta BSDF: the
+            // lane's light values stay as they were, and the shading leaves it unlit.
+            let frame = Frame::from_normal(seen.normal);
+            let sample = material
+                .bsdf
+                .sample(frame.to_local(-ray.dir), u.choice, u.scatter);
+            if sample.is_some_and(|s| s.transmission) {
+                paths.stats[i].refractions += 1;
+            }
+            g.delta[i] = true;
+            g.delta_sampled[i] = sample.is_some();
+            let sample = sample.unwrap_or(NO_SAMPLE);
+            g.delta_wi.set(i, sample.wi);
+            g.delta_pdf[i] = sample.pdf;
+            g.albedo.set(i, sample.weight);
             return true;
-        }
+        };
+        g.delta[i] = false;
+        g.albedo.set(i, albedo);
         paths.stats[i].light_samples += 1;
         let (light, choice) = self.lights.lanes_choice(u.light_choice);
         (g.light[0][i], g.light[1][i]) = (u.light.x, u.light.y);
@@ -377,7 +398,7 @@ impl World {
         }
         paths.beta.set(i, shaded.beta.get(i));
         (paths.last_pdf[i], paths.last_delta[i], paths.last_point[i]) =
-            (shaded.pdf[i], g.mirror[i], shaded.p.get(i));
+            (shaded.pdf[i], g.delta[i], shaded.p.get(i));
         paths.ray[i] = Ray {
             origin: shaded.next_origin.get(i),
             dir: shaded.next_dir.get(i),

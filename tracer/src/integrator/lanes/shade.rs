@@ -7,8 +7,8 @@ use crate::geometry::{SurfacePoint, gamma};
 use crate::integrator::direct::power_heuristic;
 use crate::integrator::survival;
 use crate::lights::uniform_sphere;
+use crate::material::Frame;
 use crate::material::sample_cosine_hemisphere;
-use crate::material::{Frame, reflect_local};
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -55,11 +55,16 @@ pub(super) struct Gathered {
     pub(super) plane: Points,
     pub(super) normal: Points,
     pub(super) dir: Points,
-    /// The diffuse surface's albedo, or the mirror's reflectance where `mirror`.
+    /// The diffuse surface's albedo, or where `delta` the sampled direction's weight.
     pub(super) albedo: Points,
-    /// Whether the surface is an ideal mirror (then its lane samples no light, and its
-    /// light values are stale).
-    pub(super) mirror: Lanes<bool>,
+    /// Whether the surface scatters by a delta (a mirror, glass): then its direction was drawn
+    /// in the first phase (`delta_sampled` whether one was, `delta_wi` it in the shading
+    /// frame, `delta_pdf` its probability), its lane samples no light, and its light values
+    /// are stale.
+    pub(super) delta: Lanes<bool>,
+    pub(super) delta_sampled: Lanes<bool>,
+    pub(super) delta_wi: Points,
+    pub(super) delta_pdf: Lanes<f32>,
     pub(super) scatter: [Lanes<f32>; 2],
     pub(super) light: [Lanes<f32>; 2],
     pub(super) corners: [Points; 3],
@@ -118,10 +123,10 @@ pub(super) struct Shaded {
 ///
 /// `SKY` where the environment is a light, `MAP` where it is a map, whose sample the first
 /// phase drew (its inversions search tables, each lane its own way); a constant one's is drawn
-/// here. `MIRROR` where some surfaces are ideal mirrors: `Bsdf::sample`'s reflection about the
-/// shading normal, weighed by the reflectance, with a density of 1, and no light sample.
+/// here. `DELTA` where some surfaces scatter by a delta (mirrors, glass): their lanes take the
+/// direction the first phase drew, and no light sample.
 #[inline(always)]
-pub(super) fn shade<const SKY: bool, const MAP: bool, const MIRROR: bool>(
+pub(super) fn shade<const SKY: bool, const MAP: bool, const DELTA: bool>(
     g: &Gathered,
     beta: &Points,
     out: &mut Shaded,
@@ -139,14 +144,22 @@ pub(super) fn shade<const SKY: bool, const MAP: bool, const MIRROR: bool>(
         out.p.set(i, p);
         let frame = Frame::from_normal(g.normal.get(i));
         let wo = frame.to_local(-g.dir.get(i));
-        // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side; a mirror's:
-        // `wo` reflected (`reflect_local`).
-        let mirror = MIRROR && g.mirror[i];
+        // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side; a delta's, as
+        // the first phase drew it.
+        let delta = DELTA && g.delta[i];
         let flip = wo.z < 0.0;
         let local = sample_cosine_hemisphere(Vec2::new(g.scatter[0][i], g.scatter[1][i]));
-        let sampled = wo.z != 0.0 && !wo.z.is_nan() && (mirror | (local.z > 0.0));
-        out.pdf[i] = if mirror { 1.0 } else { local.z * FRAC_1_PI };
-        // Either sample's weight is the albedo (the reflectance).
+        let sampled = if delta {
+            g.delta_sampled[i]
+        } else {
+            wo.z != 0.0 && !wo.z.is_nan() && local.z > 0.0
+        };
+        out.pdf[i] = if delta {
+            g.delta_pdf[i]
+        } else {
+            local.z * FRAC_1_PI
+        };
+        // Either sample's weight is in `albedo`.
         let next = beta.get(i) * g.albedo.get(i);
         let survive = survival(next);
         let playing = g.playing[i];
@@ -158,8 +171,8 @@ pub(super) fn shade<const SKY: bool, const MAP: bool, const MIRROR: bool>(
             & !(playing & (g.roulette[i] >= survive));
         out.beta.set(i, next / if playing { survive } else { 1.0 });
         let z = if flip { -local.z } else { local.z };
-        let scattered = if mirror {
-            reflect_local(wo)
+        let scattered = if delta {
+            g.delta_wi.get(i)
         } else {
             Vec3::new(local.x, local.y, z)
         };
@@ -217,7 +230,7 @@ pub(super) fn shade<const SKY: bool, const MAP: bool, const MIRROR: bool>(
         let weight = power_heuristic(light_pdf, density);
         out.value.set(i, f * emission * (weight / light_pdf));
         out.lit[i] = sampled_light
-            & !mirror
+            & !delta
             & (f != Vec3::ZERO)
             & (emission != Vec3::ZERO)
             & (light_pdf > 0.0);
