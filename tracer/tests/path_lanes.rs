@@ -233,6 +233,21 @@ f 13 14 15 16
     dir.join("room.toml")
 }
 
+/// The MTL lines of a tinted mirror and of glass (index 1.33), for [`box_as`].
+const MIRROR: &str = "illum 5\nKs 0.9 0.8 0.7";
+const GLASS: &str = "illum 4\nNi 1.33\nKd 0.5 0.4 0.3";
+
+/// The textured room's materials (`materials`, its MTL file's text) with its grey box's
+/// lines replaced by `lines`.
+fn box_as(materials: &str, lines: &str) -> String {
+    let changed = materials.replace(
+        "newmtl grey\nKd 0.5 0.4 0.3",
+        &format!("newmtl grey\n{lines}"),
+    );
+    assert_ne!(changed, materials, "the box changed");
+    changed
+}
+
 #[test]
 fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
     let dir = tempfile::tempdir().expect("a temporary folder");
@@ -249,16 +264,7 @@ fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
     // Its box a mirror, then glass, beside the textured floor.
     let mtl = dir.path().join("room.mtl");
     let materials = std::fs::read_to_string(&mtl).expect("the room's materials");
-    let mirrored = materials.replace(
-        "newmtl grey\nKd 0.5 0.4 0.3",
-        "newmtl grey\nillum 5\nKs 0.9 0.8 0.7",
-    );
-    assert_ne!(mirrored, materials, "the box became a mirror");
-    let glass = materials.replace(
-        "newmtl grey\nKd 0.5 0.4 0.3",
-        "newmtl grey\nillum 4\nNi 1.33\nKd 0.5 0.4 0.3",
-    );
-    assert_ne!(glass, materials, "the box became glass");
+    let (mirrored, glass) = (box_as(&materials, MIRROR), box_as(&materials, GLASS));
     for (label, materials) in [("a mirror", mirrored), ("glass", glass)] {
         std::fs::write(&mtl, materials).expect("the materials are written");
         let scene = tracer::scene::load(&path).expect("the room with its box changed loads");
@@ -297,11 +303,7 @@ fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without()
     // The lamp's emission is in the materials: left out, the map is the one light.
     let dark = lit.replace("Ke 6 6 6", "Ke 0 0 0");
     assert_ne!(dark, lit, "the lamp went dark");
-    let mirrored = dark.replace(
-        "newmtl grey\nKd 0.5 0.4 0.3",
-        "newmtl grey\nillum 5\nKs 0.9 0.8 0.7",
-    );
-    assert_ne!(mirrored, dark, "the box became a mirror");
+    let mirrored = box_as(&dark, MIRROR);
     let variants = [
         ("map and lamp", &mapped, &lit, true),
         ("map alone", &mapped, &dark, true),
