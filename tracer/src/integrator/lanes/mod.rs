@@ -16,9 +16,9 @@
 //! path), then every lane's surface: its numbers, side, shading normal and what it emits, and
 //! the light it picks (or, on a mirror or glass, the direction `Bsdf::sample` draws, a delta
 //! that samples no light); the texels of textured surfaces are asked for from memory there and
-//! read once every lane has had its surface. These are the walks and the lookups, whose branches and
-//! loads are each lane's own; in two passes and with the texels read last, the misses of
-//! different lanes overlap. The second computes, for all lanes together, the hit's point and
+//! read once every lane has had its surface. These are the walks and the lookups, whose
+//! branches and loads are each lane's own; in two passes and with the texels read last, the
+//! misses of different lanes overlap. The second computes, for all lanes together, the hit's point and
 //! error bound, the shading frame, the sampled direction, the throughput it leaves and
 //! Russian roulette's verdict, the light sample, its weighed value and both rays' origins, in
 //! one loop over the lanes whose body has no branch the compiler cannot make a select, so
