@@ -18,8 +18,8 @@
 //! that samples no light); the texels of textured surfaces are asked for from memory there and
 //! read once every lane has had its surface. These are the walks and the lookups, whose
 //! branches and loads are each lane's own; in two passes and with the texels read last, the
-//! misses of different lanes overlap. The second computes, for all lanes together, the hit's point and
-//! error bound, the shading frame, the sampled direction, the throughput it leaves and
+//! misses of different lanes overlap. The second computes, for all lanes together, the hit's
+//! point and error bound, the shading frame, the sampled direction, the throughput it leaves and
 //! Russian roulette's verdict, the light sample, its weighed value and both rays' origins, in
 //! one loop over the lanes whose body has no branch the compiler cannot make a select, so
 //! that it vectorises (with AVX where the processor has it, chosen at run time), and then, as
