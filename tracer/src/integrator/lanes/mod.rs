@@ -153,6 +153,9 @@ impl World {
         // Which lanes found a surface to shade this bounce.
         let mut shading = [false; LANES];
         let sky = SkyLight::of(self);
+        // Whether some surface is a mirror or glass: where none is, the shading is compiled
+        // without the delta bounces' selects.
+        let delta = self.effects.specular_reflection || self.effects.refraction;
         loop {
             // First phase, in two passes: every lane's walk, then every lane's surface, so
             // that the hit triangles' records, which the walks ask for from memory as they
@@ -193,7 +196,6 @@ impl World {
             // Compiled apart for each kind of sky, and without its sampling where it is none;
             // and without the delta bounces' selects where the world has no mirror or glass.
             let (g, beta, out) = (&gathered, &paths.beta, &mut shaded);
-            let delta = self.effects.specular_reflection || self.effects.refraction;
             match (sky, delta) {
                 (SkyLight::Map, false) => shade::<true, true, false>(g, beta, out),
                 (SkyLight::Constant(_), false) => shade::<true, false, false>(g, beta, out),
