@@ -278,9 +278,9 @@ fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
 
 /// The textured room under the shipped sky map (`scenes/fog-window/sky.exr`, turned and
 /// tinted), with its lamp (the choice between the lamp and the map) and without it (the map
-/// alone): each a world the lanes take, drawing the map's samples lane by lane, with the
-/// scalar path's bits; a portal over the room takes the map out of the lanes, whose shading
-/// has no second sample through it.
+/// alone, and so with its box a mirror): each a world the lanes take, drawing the map's
+/// samples lane by lane, with the scalar path's bits; a portal over the room takes the map
+/// out of the lanes, whose shading has no second sample through it.
 #[test]
 fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without() {
     let dir = tempfile::tempdir().expect("a temporary folder");
