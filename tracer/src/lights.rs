@@ -56,6 +56,17 @@ pub enum Light {
     Environment,
 }
 
+/// A light as the paths in lanes sample it ([`Lights::lanes_choice`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum LanesLight<'a> {
+    /// A still emissive triangle: its index among the scene's, and its shape.
+    Triangle(u32, &'a TriangleShape),
+    /// A point light: where it is, and its intensity.
+    Point { position: Vec3, intensity: Vec3 },
+    /// The environment.
+    Environment,
+}
+
 /// How next-event estimation samples the environment; every choice is unbiased, and they differ
 /// in noise only. A comparison knob, like [`crate::geometry::Traversal`]: renders pick the default.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -177,8 +188,8 @@ impl Lights {
     }
 
     /// Whether every light is one the paths in lanes sample (`integrator/lanes/`): a still
-    /// emissive triangle, or an environment without portals that is constant (sampled
-    /// uniformly over the sphere) or a map sampled by its importance.
+    /// emissive triangle, a point light, or an environment without portals that is constant
+    /// (sampled uniformly over the sphere) or a map sampled by its importance.
     pub(crate) fn lanes_sample_all(&self, scene: &Scene) -> bool {
         let sky_in_lanes = self.portals.is_empty()
             && match (&scene.environment, &self.map_sampler) {
@@ -190,10 +201,17 @@ impl Lights {
             };
         !self.lights.is_empty()
             && self.lights.iter().all(|light| match light {
-                Light::Triangle(_) => true,
+                Light::Triangle(_) | Light::Point { .. } => true,
                 Light::Environment => sky_in_lanes,
-                Light::Moving { .. } | Light::Point { .. } => false,
+                Light::Moving { .. } => false,
             })
+    }
+
+    /// Whether some light is a point light.
+    pub(crate) fn has_point_lights(&self) -> bool {
+        self.lights
+            .iter()
+            .any(|light| matches!(light, Light::Point { .. }))
     }
 
     /// The environment's own sample for the numbers `u`, the environment being chosen among
@@ -230,15 +248,23 @@ impl Lights {
     }
 
     /// The light `u_choice` picks, as [`Lights::sample`] picks it, with the probability of
-    /// the choice, where every light is one the lanes sample ([`Lights::lanes_sample_all`]):
-    /// a still triangle (its index among the scene's, and its shape), or `None` for the
-    /// constant environment.
+    /// the choice, where every light is one the lanes sample ([`Lights::lanes_sample_all`]).
     #[inline(always)]
-    pub(crate) fn lanes_choice(&self, u_choice: f32) -> (Option<(u32, &TriangleShape)>, f32) {
+    pub(crate) fn lanes_choice(&self, u_choice: f32) -> (LanesLight<'_>, f32) {
         let index = self.pick(u_choice);
         let light = match self.lights[index] {
-            Light::Triangle(triangle) => Some((triangle, &self.shapes[index])),
-            _ => None,
+            Light::Triangle(triangle) => LanesLight::Triangle(triangle, &self.shapes[index]),
+            Light::Point {
+                position,
+                intensity,
+            } => LanesLight::Point {
+                position,
+                intensity,
+            },
+            Light::Environment => LanesLight::Environment,
+            Light::Moving { .. } => {
+                unreachable!("the lanes run only where no light moves (`lanes_sample_all`)")
+            }
         };
         (light, self.choice_pdf(index))
     }

@@ -5,8 +5,9 @@
 //! pixel's last packet partly empty, tiles with fewer paths than lanes and tiles of no pixels,
 //! depths from emitters alone to long paths, Russian roulette from the first bounce, and the
 //! camera's rays found in packets or one by one; with textures, shading normals and a constant
-//! sky beside an area light; with ideal mirrors and smooth glass among the diffuse surfaces.
-//! Worlds the lanes do not fit (rough metal and point lights, no roulette) render one by one
+//! sky beside an area light; with ideal mirrors, smooth glass and rough metals of every
+//! roughness among the diffuse surfaces; with point lights beside area lights, skies and maps,
+//! and alone. Worlds the lanes do not fit (a moving lamp, no roulette) render one by one
 //! whatever the knob says.
 
 mod common;
@@ -47,6 +48,47 @@ fn with_a_mirror_and_glass(mut scene: Scene) -> Scene {
             .expect("the Cornell box has both boxes");
         material.bsdf = bsdf;
     }
+    scene
+}
+
+/// `scene` with its tall box a rough metal of roughness `alpha` (tinted) and its short box
+/// smooth glass, lit by a point light, beside its lamp where `lamp` and alone elsewhere: the
+/// lanes' glossy light samples, weighed by the metal's lobe, and their point lights, whose
+/// shadow rays end on no surface. The light hangs in the room's upper half, or where
+/// `on_ceiling` lies exactly in the ceiling's plane (a fitting on the ceiling), where shadow
+/// rays end on a surface that may block them. Its place and intensity follow the room's
+/// bounds, so that the picture is the same at every scale.
+fn with_metal_and_a_point_light(scene: Scene, alpha: f32, lamp: bool, on_ceiling: bool) -> Scene {
+    let mut scene = with_a_mirror_and_glass(scene);
+    let metal = scene
+        .materials
+        .iter_mut()
+        .find(|m| m.name == "tallBox")
+        .expect("the Cornell box has a tall box");
+    metal.bsdf = tracer::material::Bsdf::Conductor {
+        f0: glam::Vec3::new(0.95, 0.7, 0.5),
+        alpha,
+    };
+    if !lamp {
+        for material in &mut scene.materials {
+            material.emission = glam::Vec3::ZERO;
+        }
+    }
+    let corners = scene.triangles.iter().flat_map(|t| t.p);
+    let (low, high) = corners.fold(
+        (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY),
+        |(low, high), p| (low.min(p), high.max(p)),
+    );
+    let extent = (high - low).max_element();
+    let mut position = low + (high - low) * glam::Vec3::new(0.45, 0.8, 0.4);
+    if on_ceiling {
+        // The ceiling is the room's top: every corner of it has this height, to the bit.
+        position.y = high.y;
+    }
+    scene.point_lights.push(tracer::scene::PointLight {
+        position,
+        intensity: glam::Vec3::new(1.0, 0.9, 0.7) * (0.5 * extent * extent),
+    });
     scene
 }
 
@@ -152,7 +194,10 @@ fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
         (0.01, glam::Vec3::new(-300.0, 40.0, 1e3)),
         (50.0, glam::Vec3::new(3e5, 0.0, -3e5)),
     ];
-    for (scale, shift) in shifts {
+    // A rough metal's roughnesses, from below the least the lobe takes (clamped to it) to
+    // the roughest, a different one at each place.
+    let alphas = [1e-6, 1e-3, 0.05, 0.3, 0.7, 1.0];
+    for (place, (scale, shift)) in shifts.into_iter().enumerate() {
         for (size, spp, depth, roulette) in [
             (24, 5, Some(7), Some(3)),
             (12, 1, Some(5), Some(2)),
@@ -175,10 +220,30 @@ fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
             assert!(fits, "{label}: the lanes did not run");
             // The tall box a mirror and the short one glass, on paths long and unlimited.
             if depth.is_none_or(|depth| depth >= 5) {
-                let label = format!("{label}, a mirror and glass");
-                let scene = with_a_mirror_and_glass(scene);
-                let fits = same_both_ways(&label, scene, CameraRays::Packets);
-                assert!(fits, "{label}: the lanes did not run");
+                let mirrored = format!("{label}, a mirror and glass");
+                let fits = same_both_ways(
+                    &mirrored,
+                    with_a_mirror_and_glass(scene.clone()),
+                    CameraRays::Packets,
+                );
+                assert!(fits, "{mirrored}: the lanes did not run");
+                // The mirror a rough metal, and a point light beside the lamp and alone, in
+                // the room and on its ceiling.
+                let metals = [
+                    (alphas[place], true, false),
+                    (alphas[(place + 3) % 6], false, false),
+                    (alphas[(place + 1) % 6], true, true),
+                ];
+                for (alpha, lamp, on_ceiling) in metals {
+                    let label = format!(
+                        "{label}, metal of roughness {alpha}, lamp {lamp}, on the ceiling \
+                         {on_ceiling}"
+                    );
+                    let scene =
+                        with_metal_and_a_point_light(scene.clone(), alpha, lamp, on_ceiling);
+                    let fits = same_both_ways(&label, scene, CameraRays::Packets);
+                    assert!(fits, "{label}: the lanes did not run");
+                }
             }
         }
     }
@@ -233,9 +298,15 @@ f 13 14 15 16
     dir.join("room.toml")
 }
 
-/// The MTL lines of a tinted mirror and of glass (index 1.33), for [`box_as`].
+/// The MTL lines of a tinted mirror, of glass (index 1.33) and of a rough metal (roughness
+/// 0.2), for [`box_as`].
 const MIRROR: &str = "illum 5\nKs 0.9 0.8 0.7";
 const GLASS: &str = "illum 4\nNi 1.33\nKd 0.5 0.4 0.3";
+const METAL: &str = "Kd 0.1\nKs 0.9 0.6 0.2\nNs 48";
+
+/// A point light's lines in a scene file, to follow the room's own.
+const POINT_LIGHT: &str =
+    "[[light]]\ntype = \"point\"\nposition = [0.8, 1.8, 1.2]\nintensity = 2\n";
 
 /// The textured room's materials (`materials`, its MTL file's text) with its grey box's
 /// lines replaced by `lines`.
@@ -265,8 +336,20 @@ fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
     let mtl = dir.path().join("room.mtl");
     let materials = std::fs::read_to_string(&mtl).expect("the room's materials");
     let (mirrored, glass) = (box_as(&materials, MIRROR), box_as(&materials, GLASS));
-    for (label, materials) in [("a mirror", mirrored), ("glass", glass)] {
+    let metal = box_as(&materials, METAL);
+    let text = std::fs::read_to_string(&path).expect("the room's scene file");
+    let variants = [
+        ("a mirror", mirrored, text.clone()),
+        ("glass", glass, text.clone()),
+        (
+            "a rough metal and a point light",
+            metal,
+            format!("{text}{POINT_LIGHT}"),
+        ),
+    ];
+    for (label, materials, text) in variants {
         std::fs::write(&mtl, materials).expect("the materials are written");
+        std::fs::write(&path, text).expect("the scene file is written");
         let scene = tracer::scene::load(&path).expect("the room with its box changed loads");
         let label = format!("textured room, {label}");
         assert!(
@@ -304,10 +387,18 @@ fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without()
     let dark = lit.replace("Ke 6 6 6", "Ke 0 0 0");
     assert_ne!(dark, lit, "the lamp went dark");
     let mirrored = box_as(&dark, MIRROR);
+    let metal = box_as(&dark, METAL);
+    let with_point = format!("{mapped}{POINT_LIGHT}");
     let variants = [
         ("map and lamp", &mapped, &lit, true),
         ("map alone", &mapped, &dark, true),
         ("map alone, a mirror", &mapped, &mirrored, true),
+        (
+            "map, a point light, a rough metal",
+            &with_point,
+            &metal,
+            true,
+        ),
         ("map through a portal", &portal, &lit, false),
     ];
     for (label, text, materials, in_lanes) in variants {
@@ -339,12 +430,9 @@ fn worlds_the_lanes_do_not_fit_render_one_by_one() {
     let mut without_roulette = cornell_box();
     without_roulette.settings.russian_roulette_depth = None;
     without_roulette.settings.max_depth = Some(4);
-    let metal = tracer::scene::load(&root.join("glass-cluster-pan/glass-cluster-pan.toml"))
+    let moving = tracer::scene::load(&root.join("swinging-lamp/swinging-lamp.toml"))
         .expect("a shipped scene loads");
-    for (label, mut scene) in [
-        ("no roulette", without_roulette),
-        ("metal, a point light", metal),
-    ] {
+    for (label, mut scene) in [("no roulette", without_roulette), ("a moving lamp", moving)] {
         scene.settings.width = 12;
         scene.settings.height = 12;
         scene.settings.samples_per_pixel = 4;
@@ -357,6 +445,25 @@ fn worlds_the_lanes_do_not_fit_render_one_by_one() {
     assert!(world.lanes_fit());
     world.paths = PathLanes::OneByOne;
     assert!(!world.lanes_fit(), "the knob turns the lanes off");
+}
+
+/// The shipped scenes with rough metal or point lights: the README's scene (glass, mirrors
+/// and a metal under a sky and a point light) and a point light at the camera inside a sphere
+/// (every shading point a unit from it).
+#[test]
+fn shipped_scenes_with_metal_and_point_lights_render_the_same_bits_in_lanes() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    for name in ["glass-cluster-pan", "point-in-sphere"] {
+        let path = root.join(format!("{name}/{name}.toml"));
+        let mut scene = tracer::scene::load(&path).expect("a shipped scene loads");
+        scene.settings.width = 24;
+        scene.settings.height = 24;
+        scene.settings.samples_per_pixel = 5;
+        assert!(
+            same_both_ways(name, scene, CameraRays::Packets),
+            "{name}: the lanes did not run"
+        );
+    }
 }
 
 #[test]

@@ -46,6 +46,8 @@ pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
 
 /// Schlick's approximation of a conductor's Fresnel reflectance from its colour at normal
 /// incidence, `f0`; `cos_h` is the cosine between the direction and the microfacet normal.
+/// Inlined, so that the lanes' vector shading (through the GGX lobe's value) vectorises.
+#[inline(always)]
 pub fn fresnel_schlick(f0: Vec3, cos_h: f32) -> Vec3 {
     let m = (1.0 - cos_h.clamp(0.0, 1.0)).max(0.0);
     let m2 = m * m;

@@ -44,26 +44,32 @@ impl Ggx {
     }
 
     /// `f(wo, wi) * cos_i` for `wo.z > 0`; zero unless `wi` is in the upper hemisphere too.
+    ///
+    /// Written without branches (every value computed, the answer a select), so that the
+    /// paths in lanes (`integrator/lanes/`) call it in their vector shading as it is, eight
+    /// lanes at a time; inlined for the same reason. The values it selects are what the
+    /// branches computed, so the bits are those of the branches.
+    #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
-        let Some(h) = half_vector(wo, wi) else {
-            return Vec3::ZERO;
-        };
+        let (h, upper) = half_vector(wo, wi);
         let denominator = 2.0 * (wi.z * self.s(wo) + wo.z * self.s(wi));
         let value = self.d(h) * wi.z / denominator;
-        if denominator > 0.0 && value.is_finite() {
-            fresnel_schlick(self.f0, wo.dot(h)) * value
+        let reflected = fresnel_schlick(self.f0, wo.dot(h)) * value;
+        // `&`, not `&&`: a short-circuit is a branch.
+        if upper & (denominator > 0.0) & value.is_finite() {
+            reflected
         } else {
             Vec3::ZERO
         }
     }
 
-    /// The solid-angle density of [`Ggx::sample`] at `wi`, for `wo.z > 0`.
+    /// The solid-angle density of [`Ggx::sample`] at `wi`, for `wo.z > 0`. Without branches,
+    /// as [`Ggx::eval`] is, and for the same reason.
+    #[inline(always)]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        let Some(h) = half_vector(wo, wi) else {
-            return 0.0;
-        };
+        let (h, upper) = half_vector(wo, wi);
         let pdf = self.d(h) / (2.0 * (wo.z + self.s(wo)));
-        if pdf.is_finite() { pdf } else { 0.0 }
+        if upper & pdf.is_finite() { pdf } else { 0.0 }
     }
 
     /// A direction reflected about a visible normal, as `(wi, weight, pdf)`; `None` when the
@@ -82,6 +88,7 @@ impl Ggx {
     }
 
     /// The GGX normal distribution D(h) for a unit `h` with `h.z > 0`.
+    #[inline(always)]
     fn d(&self, h: Vec3) -> f32 {
         let a2 = self.alpha * self.alpha;
         // 1 + tan^2 / alpha^2, times cos^2: never below 1 for alpha <= 1 and unit h.
@@ -90,6 +97,7 @@ impl Ggx {
     }
 
     /// `s(w) = sqrt(w.z^2 + alpha^2 (w.x^2 + w.y^2))`: `w.z (1 + 2 Lambda(w))` without dividing.
+    #[inline(always)]
     fn s(&self, w: Vec3) -> f32 {
         let a2 = self.alpha * self.alpha;
         (w.z * w.z + a2 * (w.x * w.x + w.y * w.y)).sqrt()
@@ -118,14 +126,14 @@ impl Ggx {
     }
 }
 
-/// The unit half vector of two upper-hemisphere directions; `None` when either is not strictly
-/// above the surface or their sum is too short to normalise.
-fn half_vector(wo: Vec3, wi: Vec3) -> Option<Vec3> {
-    if !(wo.z > 0.0 && wi.z > 0.0) {
-        return None;
-    }
+/// The unit half vector of two directions, and whether it is one of two upper-hemisphere
+/// directions: both strictly above the surface, and their sum long enough to normalise (the
+/// half vector is then above it too). Where it is not, the vector is whatever the arithmetic
+/// gave, for the caller to select away.
+#[inline(always)]
+fn half_vector(wo: Vec3, wi: Vec3) -> (Vec3, bool) {
     let h = (wo + wi).normalize_or_zero();
-    (h.z > 0.0).then_some(h)
+    (h, (wo.z > 0.0) & (wi.z > 0.0) & (h.z > 0.0))
 }
 
 #[cfg(test)]

@@ -47,7 +47,7 @@ pub use microfacet::MIN_ALPHA;
 
 use dielectric::{reflect_local, sample_dielectric};
 use glam::{Vec2, Vec3};
-use microfacet::Ggx;
+pub(crate) use microfacet::Ggx;
 use std::f32::consts::FRAC_1_PI;
 
 /// A surface material: how it scatters and what it emits.

@@ -1,9 +1,9 @@
 //! A tile's paths in lanes: eight paths advanced a bounce at a time, their shading computed
 //! together in vector instructions, for the worlds whose every path can be
 //! ([`World::lanes_fit`]): plain ones ([`World::is_plain`]) of diffuse surfaces (textured or
-//! not, with shading normals or not), ideal mirrors and smooth glass, lit by still emissive
-//! triangles and a constant sky or an environment map. The Cornell scenes and Sponza are such
-//! worlds.
+//! not, with shading normals or not), ideal mirrors, smooth glass and rough metals, lit by
+//! still emissive triangles, point lights and a constant sky or an environment map. The
+//! Cornell scenes, Sponza and the README's scene are such worlds.
 //!
 //! The paths come from a feed ([`PathFeed`]; the tile's, `tile/lanes.rs`, hands out its
 //! pixels' samples in order, a camera packet at a time) and go back to it as they end, in any
@@ -14,9 +14,9 @@
 //! Each bounce has three phases. The first, one lane at a time, in two passes: every lane's
 //! walk through the tree (or, where its ray escapes, what the sky sends, and the lane's next
 //! path), then every lane's surface: its numbers, side, shading normal and what it emits, and
-//! the light it picks (or, on a mirror or glass, the direction `Bsdf::sample` draws, a delta
-//! that samples no light); the texels of textured surfaces are asked for from memory there and
-//! read once every lane has had its surface. These are the walks and the lookups, whose
+//! the light it picks, and on a mirror, glass or a metal the direction `Bsdf::sample` draws
+//! (a mirror's or glass's a delta, which samples no light); the texels of textured surfaces
+//! are asked for from memory there and read once every lane has had its surface. These are the walks and the lookups, whose
 //! branches and loads are each lane's own; in two passes and with the texels read last, the
 //! misses of different lanes overlap. The second computes, for all lanes together, the hit's
 //! point and error bound, the shading frame, the sampled direction, the throughput it leaves and
@@ -53,7 +53,8 @@ use super::scatter::{BounceNumbers, resolve};
 use super::{AreaLightSampling, UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
 use crate::geometry::{Moment, OffsetMethod, PACKET, Ray, SetUpRows, hit_point};
-use crate::material::{Bsdf, BsdfSample, Frame};
+use crate::lights::LanesLight;
+use crate::material::{Bsdf, BsdfSample, Frame, Ggx};
 use crate::scene::Texture;
 use crate::spectrum::SpectralSampling;
 use glam::Vec3;
@@ -61,7 +62,8 @@ use glam::Vec3;
 /// The lanes: as many paths as a camera packet holds rays, eight f32 lanes of AVX.
 const LANES: usize = PACKET;
 
-/// What a delta lane holds where `Bsdf::sample` drew nothing (the path ends there).
+/// What a lane whose direction the first phase draws holds where `Bsdf::sample` drew nothing
+/// (the path ends there).
 const NO_SAMPLE: BsdfSample = BsdfSample {
     wi: Vec3::Z,
     weight: Vec3::ZERO,
@@ -77,16 +79,17 @@ pub use paths::PathLanes;
 use paths::Paths;
 pub(crate) use paths::{NewPath, PathFeed};
 
-use shade::{Gathered, Shaded, shade};
+use shade::{Gathered, Points, Shaded, shade};
 
 impl World {
     /// Whether every path of this world can run in lanes: a plain world (no media, no
-    /// moving objects, RGB throughout) whose materials are all diffuse, ideal mirrors or smooth
-    /// glass (a delta bounce: no light sample, the direction drawn by `Bsdf::sample`), every light
-    /// a still emissive triangle or an environment without portals, constant or a map sampled
-    /// by its importance (`Lights::lanes_sample_all`), lights found both ways and weighed (the
-    /// default), the default offsets and RGB sampling, shadow rays on, and Russian roulette
-    /// on. Each condition names a step the lanes leave out; a world that fails one renders
+    /// moving objects, RGB throughout) whose materials are all diffuse, ideal mirrors, smooth
+    /// glass (a delta bounce: no light sample, the direction drawn by `Bsdf::sample`) or rough
+    /// metals (the direction drawn by `Bsdf::sample`, the light sample weighed by the lobe),
+    /// every light a still emissive triangle, a point light or an environment without
+    /// portals, constant or a map sampled by its importance (`Lights::lanes_sample_all`),
+    /// lights found both ways and weighed (the default), the default offsets and RGB sampling,
+    /// shadow rays on, and Russian roulette on. Each condition names a step the lanes leave out; a world that fails one renders
     /// one path at a time, as every world can.
     pub fn lanes_fit(&self) -> bool {
         self.paths == PathLanes::Lanes
@@ -100,7 +103,10 @@ impl World {
             && self.scene.materials.iter().all(|m| {
                 matches!(
                     m.bsdf,
-                    Bsdf::Diffuse { .. } | Bsdf::Mirror { .. } | Bsdf::Dielectric { .. }
+                    Bsdf::Diffuse { .. }
+                        | Bsdf::Mirror { .. }
+                        | Bsdf::Dielectric { .. }
+                        | Bsdf::Conductor { .. }
                 )
             })
     }
@@ -153,9 +159,8 @@ impl World {
         // Which lanes found a surface to shade this bounce.
         let mut shading = [false; LANES];
         let sky = SkyLight::of(self);
-        // Whether some surface is a mirror or glass: where none is, the shading is compiled
-        // without the delta bounces' selects.
-        let delta = self.effects.specular_reflection || self.effects.refraction;
+        // What the shading is compiled for: the kinds of surface and of light the world has.
+        let kinds = (sky, Surfaces::of(self), self.lights.has_point_lights());
         loop {
             // First phase, in two passes: every lane's walk, then every lane's surface, so
             // that the hit triangles' records, which the walks ask for from memory as they
@@ -193,17 +198,8 @@ impl World {
             }
             // Second phase: every lane's shading at once, then the walks' set-ups of every
             // lane's shadow ray and next ray, eight at a time.
-            // Compiled apart for each kind of sky, and without its sampling where it is none;
-            // and without the delta bounces' selects where the world has no mirror or glass.
-            let (g, beta, out) = (&gathered, &paths.beta, &mut shaded);
-            match (sky, delta) {
-                (SkyLight::Map, false) => shade::<true, true, false>(g, beta, out),
-                (SkyLight::Constant(_), false) => shade::<true, false, false>(g, beta, out),
-                (SkyLight::Absent, false) => shade::<false, false, false>(g, beta, out),
-                (SkyLight::Map, true) => shade::<true, true, true>(g, beta, out),
-                (SkyLight::Constant(_), true) => shade::<true, false, true>(g, beta, out),
-                (SkyLight::Absent, true) => shade::<false, false, true>(g, beta, out),
-            }
+            // Compiled apart for each kind of sky, surface and light the world has.
+            shade_for(kinds, &gathered, &paths.beta, &mut shaded);
             let shadows = SetUpRows::new(shaded.origin.rows(), shaded.reach.rows());
             paths.set_up = SetUpRows::new(shaded.next_origin.rows(), shaded.next_dir.rows());
             // Third phase: shadow rays, then each path's next ray or its end.
@@ -314,12 +310,17 @@ impl World {
         g.normal.set(i, seen.normal);
         g.dir.set(i, ray.dir);
         (g.scatter[0][i], g.scatter[1][i]) = (u.scatter.x, u.scatter.y);
-        let Bsdf::Diffuse { albedo, .. } = material.bsdf else {
-            // A mirror's or a glass's bounce, a delta: its direction drawn here, lane by lane,
-            // by the scalar path's own `Bsdf::sample` in the scalar path's frame (the vector
-            // shading makes the same frame again), its weight where a diffuse surface's albedo
-            // goes. It samples no light, as the scalar path samples none on a delta BSDF: the
-            // lane's light values stay as they were, and the shading leaves it unlit.
+        if let Bsdf::Diffuse { albedo, .. } = material.bsdf {
+            (g.drawn[i], g.delta[i], g.glossy[i]) = (false, false, false);
+            g.albedo.set(i, albedo);
+        } else {
+            // A mirror's, a glass's or a rough metal's bounce: its direction drawn here, lane
+            // by lane, by the scalar path's own `Bsdf::sample` in the scalar path's frame (the
+            // vector shading makes the same frame again), its weight where a diffuse surface's
+            // albedo goes. A delta samples no light, as the scalar path samples none on a
+            // delta BSDF: the lane's light values stay as they were, and the shading leaves it
+            // unlit. A metal samples its light as a diffuse surface does, and the shading
+            // weighs it by the metal's lobe.
             let frame = Frame::from_normal(seen.normal);
             let sample = material
                 .bsdf
@@ -327,23 +328,29 @@ impl World {
             if sample.is_some_and(|s| s.transmission) {
                 paths.stats[i].refractions += 1;
             }
-            g.delta[i] = true;
-            g.delta_sampled[i] = sample.is_some();
+            g.drawn[i] = true;
+            g.drawn_sampled[i] = sample.is_some();
             let sample = sample.unwrap_or(NO_SAMPLE);
-            g.delta_wi.set(i, sample.wi);
-            g.delta_pdf[i] = sample.pdf;
+            g.drawn_wi.set(i, sample.wi);
+            g.drawn_pdf[i] = sample.pdf;
             g.albedo.set(i, sample.weight);
-            return true;
-        };
-        g.delta[i] = false;
-        g.albedo.set(i, albedo);
+            let Bsdf::Conductor { f0, alpha } = material.bsdf else {
+                (g.delta[i], g.glossy[i]) = (true, false);
+                return true;
+            };
+            let lobe = Ggx::new(f0, alpha);
+            (g.delta[i], g.glossy[i]) = (false, true);
+            g.f0.set(i, lobe.f0);
+            g.alpha[i] = lobe.alpha;
+        }
         paths.stats[i].light_samples += 1;
         let (light, choice) = self.lights.lanes_choice(u.light_choice);
         (g.light[0][i], g.light[1][i]) = (u.light.x, u.light.y);
         g.choice[i] = choice;
-        g.sky[i] = light.is_none();
+        g.sky[i] = matches!(light, LanesLight::Environment);
+        g.point[i] = matches!(light, LanesLight::Point { .. });
         match light {
-            Some((triangle, shape)) => {
+            LanesLight::Triangle(triangle, shape) => {
                 let triangle = &self.scene.triangles[triangle as usize];
                 for (corner, p) in g.corners.iter_mut().zip(triangle.p) {
                     corner.set(i, p);
@@ -354,9 +361,16 @@ impl World {
                 let emission = self.scene.materials[triangle.material as usize].emission;
                 g.emission.set(i, emission);
             }
+            LanesLight::Point {
+                position,
+                intensity,
+            } => {
+                g.corners[0].set(i, position);
+                g.emission.set(i, intensity);
+            }
             // An environment map's sample is drawn here, lane by lane, where a constant
             // environment's is drawn in the vector shading.
-            None if matches!(sky, SkyLight::Map) => {
+            LanesLight::Environment if matches!(sky, SkyLight::Map) => {
                 let environment = self.scene.environment.as_ref();
                 let sample =
                     environment.and_then(|e| self.lights.environment_sample(e, u.light, choice));
@@ -365,7 +379,7 @@ impl World {
                 g.emission.set(i, arriving);
                 g.sky_pdf[i] = pdf;
             }
-            None => g.emission.set(i, sky.constant()),
+            LanesLight::Environment => g.emission.set(i, sky.constant()),
         }
         true
     }
@@ -409,6 +423,69 @@ impl World {
         };
         paths.set_up_ready[i] = true;
         true
+    }
+}
+
+/// The kinds of surface a world's lanes shade, each kind's shading compiled apart (`shade`'s
+/// `DRAWN` and `GLOSSY`): a world of diffuse surfaces pays for none of the others' selects.
+#[derive(Clone, Copy)]
+enum Surfaces {
+    /// Diffuse surfaces alone.
+    Diffuse,
+    /// Mirrors or glass among them, whose directions the first phase draws.
+    Deltas,
+    /// Rough metals among them (and perhaps mirrors or glass), whose light samples the GGX
+    /// lobe weighs.
+    Glossy,
+}
+
+impl Surfaces {
+    /// The kinds of surface `world` has.
+    fn of(world: &World) -> Self {
+        let effects = &world.effects;
+        if effects.glossy_reflection {
+            Surfaces::Glossy
+        } else if effects.specular_reflection || effects.refraction {
+            Surfaces::Deltas
+        } else {
+            Surfaces::Diffuse
+        }
+    }
+}
+
+/// The second phase, `shade`, compiled for the world's sky, its surfaces and whether it has
+/// point lights: a constant's choice at each step, so that the instance the world runs is
+/// chosen once per bounce.
+#[inline(always)]
+fn shade_for(
+    (sky, surfaces, point): (SkyLight, Surfaces, bool),
+    g: &Gathered,
+    beta: &Points,
+    out: &mut Shaded,
+) {
+    match sky {
+        SkyLight::Map => shade_with_sky::<true, true>(surfaces, point, g, beta, out),
+        SkyLight::Constant(_) => shade_with_sky::<true, false>(surfaces, point, g, beta, out),
+        SkyLight::Absent => shade_with_sky::<false, false>(surfaces, point, g, beta, out),
+    }
+}
+
+/// [`shade_for`], its sky chosen.
+#[inline(always)]
+fn shade_with_sky<const SKY: bool, const MAP: bool>(
+    surfaces: Surfaces,
+    point: bool,
+    g: &Gathered,
+    beta: &Points,
+    out: &mut Shaded,
+) {
+    match (surfaces, point) {
+        (Surfaces::Diffuse, false) => shade::<SKY, MAP, false, false, false>(g, beta, out),
+        (Surfaces::Diffuse, true) => shade::<SKY, MAP, false, false, true>(g, beta, out),
+        (Surfaces::Deltas, false) => shade::<SKY, MAP, true, false, false>(g, beta, out),
+        (Surfaces::Deltas, true) => shade::<SKY, MAP, true, false, true>(g, beta, out),
+        (Surfaces::Glossy, false) => shade::<SKY, MAP, true, true, false>(g, beta, out),
+        (Surfaces::Glossy, true) => shade::<SKY, MAP, true, true, true>(g, beta, out),
     }
 }
 

@@ -7,8 +7,7 @@ use crate::geometry::{SurfacePoint, gamma};
 use crate::integrator::direct::power_heuristic;
 use crate::integrator::survival;
 use crate::lights::uniform_sphere;
-use crate::material::Frame;
-use crate::material::sample_cosine_hemisphere;
+use crate::material::{Frame, Ggx, sample_cosine_hemisphere};
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -55,24 +54,38 @@ pub(super) struct Gathered {
     pub(super) plane: Points,
     pub(super) normal: Points,
     pub(super) dir: Points,
-    /// The diffuse surface's albedo, or where `delta` the sampled direction's weight.
+    /// The diffuse surface's albedo, or where `drawn` the sampled direction's weight.
     pub(super) albedo: Points,
-    /// Whether the surface scatters by a delta (a mirror, glass): then its direction was drawn
-    /// in the first phase (`delta_sampled` whether one was, `delta_wi` it in the shading
-    /// frame, `delta_pdf` its probability), its lane samples no light, and its light values
-    /// are stale.
+    /// Whether the surface's direction was drawn in the first phase, by `Bsdf::sample` (a
+    /// mirror, glass, a rough metal): `drawn_sampled` whether one was, `drawn_wi` it in the
+    /// shading frame, `drawn_pdf` its density.
+    pub(super) drawn: Lanes<bool>,
+    pub(super) drawn_sampled: Lanes<bool>,
+    pub(super) drawn_wi: Points,
+    pub(super) drawn_pdf: Lanes<f32>,
+    /// Whether the surface scatters by a delta (a mirror, glass): then its direction was drawn,
+    /// its lane samples no light, and its light values are stale.
     pub(super) delta: Lanes<bool>,
-    pub(super) delta_sampled: Lanes<bool>,
-    pub(super) delta_wi: Points,
-    pub(super) delta_pdf: Lanes<f32>,
+    /// Whether the surface is a rough metal, a GGX lobe of colour `f0` at normal incidence and
+    /// roughness `alpha` (clamped, as `Ggx::new` clamps it): its light sample is weighed by the
+    /// lobe's value and density.
+    pub(super) glossy: Lanes<bool>,
+    pub(super) f0: Points,
+    pub(super) alpha: Lanes<f32>,
     pub(super) scatter: [Lanes<f32>; 2],
     pub(super) light: [Lanes<f32>; 2],
+    /// The light triangle's corners; for a point light the first is where it is.
     pub(super) corners: [Points; 3],
     pub(super) light_area: Lanes<f32>,
     pub(super) light_normal: Points,
     pub(super) light_plane: Points,
+    /// What the light emits: a triangle's radiance, a point light's intensity, or what the
+    /// environment sends.
     pub(super) emission: Points,
     pub(super) choice: Lanes<f32>,
+    /// Whether the light picked is a point light (then `corners[0]` is where it is, and the
+    /// triangle's other values are stale).
+    pub(super) point: Lanes<bool>,
     /// Whether the light picked is the environment (then `emission` is what it sends, and
     /// the triangle's values are stale).
     pub(super) sky: Lanes<bool>,
@@ -123,10 +136,19 @@ pub(super) struct Shaded {
 ///
 /// `SKY` where the environment is a light, `MAP` where it is a map, whose sample the first
 /// phase drew (its inversions search tables, each lane its own way); a constant one's is drawn
-/// here. `DELTA` where some surfaces scatter by a delta (mirrors, glass): their lanes take the
-/// direction the first phase drew, and no light sample.
+/// here. `DRAWN` where some surfaces' directions are drawn in the first phase (mirrors, glass,
+/// rough metals): their lanes take that direction, and the deltas among them no light sample.
+/// `GLOSSY` where some surfaces are rough metals, whose light samples the GGX lobe weighs;
+/// `POINT` where some lights are point lights. Each is compiled only for the worlds that have
+/// what it names (`Surfaces`, the parent module's dispatch).
 #[inline(always)]
-pub(super) fn shade<const SKY: bool, const MAP: bool, const DELTA: bool>(
+pub(super) fn shade<
+    const SKY: bool,
+    const MAP: bool,
+    const DRAWN: bool,
+    const GLOSSY: bool,
+    const POINT: bool,
+>(
     g: &Gathered,
     beta: &Points,
     out: &mut Shaded,
@@ -144,24 +166,25 @@ pub(super) fn shade<const SKY: bool, const MAP: bool, const DELTA: bool>(
         out.p.set(i, p);
         let frame = Frame::from_normal(g.normal.get(i));
         let wo = frame.to_local(-g.dir.get(i));
-        // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side; a delta's, as
-        // the first phase drew it.
-        let delta = DELTA && g.delta[i];
-        // Read whatever the lane holds, then selected: read only where `delta`, these loads
+        // `Bsdf::sample`, diffuse: a cosine-weighted direction on `wo`'s side; a mirror's, a
+        // glass's or a metal's, as the first phase drew it.
+        let drawn = DRAWN && g.drawn[i];
+        let delta = DRAWN && g.delta[i];
+        // Read whatever the lane holds, then selected: read only where `drawn`, these loads
         // kept the loop from vectorising (the Cornell box with a mirror took half again as
         // long as with no lanes at all; its instructions 341 M to 437 M at 64x64, 16 spp).
-        let (delta_sampled, delta_pdf, delta_wi) =
-            (g.delta_sampled[i], g.delta_pdf[i], g.delta_wi.get(i));
+        let (drawn_sampled, drawn_pdf, drawn_wi) =
+            (g.drawn_sampled[i], g.drawn_pdf[i], g.drawn_wi.get(i));
         let flip = wo.z < 0.0;
         let local = sample_cosine_hemisphere(Vec2::new(g.scatter[0][i], g.scatter[1][i]));
         let diffuse_sampled = (wo.z != 0.0) & !wo.z.is_nan() & (local.z > 0.0);
-        let sampled = if delta {
-            delta_sampled
+        let sampled = if drawn {
+            drawn_sampled
         } else {
             diffuse_sampled
         };
-        out.pdf[i] = if delta {
-            delta_pdf
+        out.pdf[i] = if drawn {
+            drawn_pdf
         } else {
             local.z * FRAC_1_PI
         };
@@ -177,15 +200,16 @@ pub(super) fn shade<const SKY: bool, const MAP: bool, const DELTA: bool>(
             & !(playing & (g.roulette[i] >= survive));
         out.beta.set(i, next / if playing { survive } else { 1.0 });
         let z = if flip { -local.z } else { local.z };
-        let scattered = if delta {
-            delta_wi
+        let scattered = if drawn {
+            drawn_wi
         } else {
             Vec3::new(local.x, local.y, z)
         };
         let wi = frame.to_world(scattered);
         out.next_dir.set(i, wi);
         out.next_origin.set(i, offset(&at, wi));
-        // `triangle_sample`: a point uniform on the light's triangle, as seen from `p`.
+        // `triangle_sample`: a point uniform on the light's triangle, as seen from `p`; or
+        // where a point light is (`SurfacePoint::exact`: no error, on no surface).
         let su = g.light[0][i].sqrt();
         let (b1, b2) = (su * (1.0 - g.light[1][i]), su * g.light[1][i]);
         let corners = [
@@ -193,8 +217,19 @@ pub(super) fn shade<const SKY: bool, const MAP: bool, const DELTA: bool>(
             g.corners[1].get(i),
             g.corners[2].get(i),
         ];
-        let light_at =
+        let on_triangle =
             SurfacePoint::on_triangle_with_normal(&corners, b1, b2, g.light_plane.get(i));
+        let point = POINT && g.point[i];
+        let light_at = SurfacePoint {
+            p: if point { corners[0] } else { on_triangle.p },
+            error: if point { Vec3::ZERO } else { on_triangle.error },
+            normal: if point {
+                Vec3::ZERO
+            } else {
+                on_triangle.normal
+            },
+            spawn: None,
+        };
         let to_light = light_at.p - p;
         let distance_squared = to_light.length_squared();
         let distance = distance_squared.sqrt();
@@ -209,16 +244,24 @@ pub(super) fn shade<const SKY: bool, const MAP: bool, const DELTA: bool>(
             uniform_sphere(Vec2::new(g.light[0][i], g.light[1][i]))
         };
         let toward = if sky { sky_way } else { to_light / distance };
+        // A point light's density is its choice's alone (a delta in direction).
         let light_pdf = if sky {
             if MAP {
                 g.sky_pdf[i]
             } else {
                 g.choice[i] / (4.0 * PI)
             }
+        } else if point {
+            g.choice[i]
         } else {
             g.choice[i] * distance_squared / (cos_light * area)
         };
-        let sampled_light = sky || (distance_squared != 0.0 && area != 0.0 && cos_light > 0.0);
+        let sampled_light = sky
+            || if point {
+                distance_squared != 0.0
+            } else {
+                distance_squared != 0.0 && area != 0.0 && cos_light > 0.0
+            };
         // `unshadowed`: the BSDF towards it, weighed against BSDF sampling.
         let local = frame.to_local(toward);
         let (wo_z, wi_z) = if flip {
@@ -226,14 +269,40 @@ pub(super) fn shade<const SKY: bool, const MAP: bool, const DELTA: bool>(
         } else {
             (wo.z, local.z)
         };
-        let density = if wo_z > 0.0 && wi_z > 0.0 {
+        let diffuse_density = if wo_z > 0.0 && wi_z > 0.0 {
             wi_z * FRAC_1_PI
         } else {
             0.0
         };
-        let f = g.albedo.get(i) * density;
-        let emission = g.emission.get(i);
-        let weight = power_heuristic(light_pdf, density);
+        // A rough metal's: its lobe's value and density, both directions mirrored to the upper
+        // hemisphere as `Bsdf::eval` mirrors them (where they are not both above it, the
+        // lobe's own test gives zero, as the scalar path's `same_side_upper` does).
+        let glossy = GLOSSY && g.glossy[i];
+        let lobe = Ggx {
+            f0: g.f0.get(i),
+            alpha: g.alpha[i],
+        };
+        let (wo_upper, wi_upper) = (
+            Vec3::new(wo.x, wo.y, wo_z),
+            Vec3::new(local.x, local.y, wi_z),
+        );
+        let (f, density) = if glossy {
+            (lobe.eval(wo_upper, wi_upper), lobe.pdf(wo_upper, wi_upper))
+        } else {
+            (g.albedo.get(i) * diffuse_density, diffuse_density)
+        };
+        // A point light's intensity falls off with the squared distance.
+        let emission = if point {
+            g.emission.get(i) / distance_squared
+        } else {
+            g.emission.get(i)
+        };
+        // A delta light takes all the weight (`AreaLightSampling::light_weight`).
+        let weight = if point {
+            1.0
+        } else {
+            power_heuristic(light_pdf, density)
+        };
         out.value.set(i, f * emission * (weight / light_pdf));
         out.lit[i] = sampled_light
             & !delta
@@ -241,7 +310,7 @@ pub(super) fn shade<const SKY: bool, const MAP: bool, const DELTA: bool>(
             & (emission != Vec3::ZERO)
             & (light_pdf > 0.0);
         // `shadow_ray`: towards the sky (`spawn_ray`), or with both ends off their surfaces
-        // (`spawn_ray_to`).
+        // (`spawn_ray_to`; a point light's end, on no surface, stays where it is).
         let origin = offset(&at, if sky { sky_way } else { to_light });
         let widened = SurfacePoint {
             error: light_at.error + gamma(2) * (light_at.p - origin).abs(),
