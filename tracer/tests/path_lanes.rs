@@ -7,8 +7,8 @@
 //! camera's rays found in packets or one by one; with textures, shading normals and a constant
 //! sky beside an area light; with ideal mirrors, smooth glass and rough metals of every
 //! roughness among the diffuse surfaces; with point lights beside area lights, skies and maps,
-//! and alone. Worlds the lanes do not fit (a moving lamp, no roulette) render one by one
-//! whatever the knob says.
+//! and alone; with Russian roulette off. Worlds the lanes do not fit (a moving lamp, a map
+//! through portals) render one by one whatever the knob says.
 
 mod common;
 
@@ -208,6 +208,8 @@ fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
             // back early.
             (16, 13, Some(0), Some(3)),
             (16, 3, None, Some(1)),
+            // No Russian roulette: paths end at the depth cap or where nothing comes back.
+            (16, 4, Some(6), None),
         ] {
             let mut scene = placed(cornell_box(), scale, shift);
             scene.settings.width = size;
@@ -427,12 +429,14 @@ fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without()
 #[test]
 fn worlds_the_lanes_do_not_fit_render_one_by_one() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    let mut without_roulette = cornell_box();
-    without_roulette.settings.russian_roulette_depth = None;
-    without_roulette.settings.max_depth = Some(4);
-    let moving = tracer::scene::load(&root.join("swinging-lamp/swinging-lamp.toml"))
-        .expect("a shipped scene loads");
-    for (label, mut scene) in [("no roulette", without_roulette), ("a moving lamp", moving)] {
+    let load = |name: &str| {
+        tracer::scene::load(&root.join(format!("{name}/{name}.toml")))
+            .expect("a shipped scene loads")
+    };
+    for (label, mut scene) in [
+        ("a moving lamp", load("swinging-lamp")),
+        ("a map through portals", load("window-room")),
+    ] {
         scene.settings.width = 12;
         scene.settings.height = 12;
         scene.settings.samples_per_pixel = 4;
@@ -447,13 +451,14 @@ fn worlds_the_lanes_do_not_fit_render_one_by_one() {
     assert!(!world.lanes_fit(), "the knob turns the lanes off");
 }
 
-/// The shipped scenes with rough metal or point lights: the README's scene (glass, mirrors
-/// and a metal under a sky and a point light) and a point light at the camera inside a sphere
-/// (every shading point a unit from it).
+/// The shipped scenes with rough metal, point lights or no Russian roulette: the README's
+/// scene (glass, mirrors and a metal under a sky and a point light), a point light at the
+/// camera inside a sphere (every shading point a unit from it), and the furnace (paths to
+/// their depth cap).
 #[test]
-fn shipped_scenes_with_metal_and_point_lights_render_the_same_bits_in_lanes() {
+fn shipped_scenes_with_metal_point_lights_or_no_roulette_render_the_same_bits_in_lanes() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    for name in ["glass-cluster-pan", "point-in-sphere"] {
+    for name in ["glass-cluster-pan", "point-in-sphere", "furnace"] {
         let path = root.join(format!("{name}/{name}.toml"));
         let mut scene = tracer::scene::load(&path).expect("a shipped scene loads");
         scene.settings.width = 24;

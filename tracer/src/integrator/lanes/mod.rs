@@ -89,12 +89,12 @@ impl World {
     /// every light a still emissive triangle, a point light or an environment without
     /// portals, constant or a map sampled by its importance (`Lights::lanes_sample_all`),
     /// lights found both ways and weighed (the default), the default offsets and RGB sampling,
-    /// shadow rays on, and Russian roulette on. Each condition names a step the lanes leave out; a world that fails one renders
-    /// one path at a time, as every world can.
+    /// and shadow rays on. Each condition names a step the lanes leave out; a world that fails
+    /// one renders one path at a time, as every world can. Russian roulette may be off: its
+    /// game is then never played, in the lanes as in the scalar path.
     pub fn lanes_fit(&self) -> bool {
         self.paths == PathLanes::Lanes
             && self.is_plain()
-            && self.scene.settings.russian_roulette_depth.is_some()
             && self.lights.lanes_sample_all(&self.scene)
             && self.area_lights == AreaLightSampling::Mis
             && self.offset == OffsetMethod::ErrorBound
