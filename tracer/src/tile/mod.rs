@@ -212,6 +212,19 @@ impl<'w> Cameras<'w> {
             *sampler = key.sample(first + k.min(n - 1) as u32);
         }
         packet.times = [self.instant; PACKET];
+        // A still pinhole, the common camera: each sample's jitter, then the eight rays at
+        // once, their divisions and square roots in vector lanes (`CameraRays::rays_into`).
+        let lens = world.effects.depth_of_field && self.still.has_lens();
+        if !self.blur && !lens {
+            let (mut px, mut py) = ([x as f32; PACKET], [y as f32; PACKET]);
+            for k in 0..n {
+                let jitter = packet.samplers[k].next_2d();
+                (px[k], py[k]) = (x as f32 + jitter.x, y as f32 + jitter.y);
+            }
+            self.still.rays_into(&px, &py, &mut packet.rays);
+            packet.found = world.camera_hits(&packet.rays[..n], &mut packet.hits[..n], traversal);
+            return;
+        }
         for k in 0..n {
             let sampler = &mut packet.samplers[k];
             let jitter = sampler.next_2d();
