@@ -11,22 +11,21 @@
 //! pixel's eight samples alone in the lanes until the last one ended, two lanes in five did
 //! the shading's work for nothing (docs/bench.md, issue 12, thirty-second round).
 //!
-//! Each bounce has three phases. The first, one lane at a time, in two passes: every lane's
-//! walk through the tree (or, where its ray escapes, what the sky sends, and the lane's next
-//! path), then every lane's surface: its numbers, side, shading normal and what it emits, and
-//! the light it picks, and on a mirror, glass or a metal the direction `Bsdf::sample` draws
-//! (a mirror's or glass's a delta, which samples no light); the texels of textured surfaces
-//! are asked for from memory there and read once every lane has had its surface. These are the walks and the lookups, whose
-//! branches and loads are each lane's own; in two passes and with the texels read last, the
-//! misses of different lanes overlap. The second computes, for all lanes together, the hit's
-//! point and error bound, the shading frame, the sampled direction, the throughput it leaves and
-//! Russian roulette's verdict, the light sample, its weighed value and both rays' origins, in
-//! one loop over the lanes whose body has no branch the compiler cannot make a select, so
-//! that it vectorises (with AVX where the processor has it, chosen at run time), and then, as
-//! vectors again, the walks' set-ups of every lane's shadow ray and next ray (`SetUpRows`:
-//! each lane exactly the set-up the walk would make of its ray, so a walk starts without its
-//! divisions). The third, one lane at a time again, traces the shadow
-//! rays and ends or continues each path.
+//! Each bounce has three phases. The first, one lane at a time, in two passes: every lane's walk
+//! through the tree (or, where its ray escapes, what the sky sends, and the lane's next path), then
+//! every lane's surface: its numbers, side, shading normal and what it emits, and the light it
+//! picks, and on a mirror, glass or a metal the direction `Bsdf::sample` draws (a mirror's or
+//! glass's a delta, which samples no light); the texels of textured surfaces are asked for from
+//! memory there and read once every lane has had its surface. These are the walks and the lookups,
+//! whose branches and loads are each lane's own; in two passes and with the texels read last, the
+//! misses of different lanes overlap. The second computes, for all lanes together, the hit's point
+//! and error bound, the shading frame, the sampled direction, the throughput it leaves and Russian
+//! roulette's verdict, the light sample, its weighed value and both rays' origins, in one loop over
+//! the lanes whose body has no branch the compiler cannot make a select, so that it vectorises
+//! (with AVX where the processor has it, chosen at run time), and then, as vectors again, the
+//! walks' set-ups of every lane's shadow ray and next ray (`SetUpRows`: each lane exactly the
+//! set-up the walk would make of its ray, so a walk starts without its divisions). The third, one
+//! lane at a time again, traces the shadow rays and ends or continues each path.
 //!
 //! **Exactness.** Every lane computes what the scalar path ([`World::radiance_from`])
 //! computes for its sample, operation for operation and in the same order: the second phase
