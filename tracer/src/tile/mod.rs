@@ -212,48 +212,47 @@ impl<'w> Cameras<'w> {
             *sampler = key.sample(first + k.min(n - 1) as u32);
         }
         packet.times = [self.instant; PACKET];
-        // A still pinhole, the common camera: each sample's jitter, then the eight rays at
-        // once, their divisions and square roots in vector lanes (`CameraRays::rays_into`).
+        // Each sample's jitter first (each sample draws from its own sampler, so the order
+        // across samples moves no number).
+        let (mut px, mut py) = ([x as f32; PACKET], [y as f32; PACKET]);
+        for k in 0..n {
+            let jitter = packet.samplers[k].next_2d();
+            (px[k], py[k]) = (x as f32 + jitter.x, y as f32 + jitter.y);
+        }
+        // A still pinhole, the common camera: the eight rays at once, their divisions and
+        // square roots in vector lanes (`CameraRays::rays_into`).
         let lens = world.effects.depth_of_field && self.still.has_lens();
         if !self.blur && !lens {
-            let (mut px, mut py) = ([x as f32; PACKET], [y as f32; PACKET]);
-            for k in 0..n {
-                let jitter = packet.samplers[k].next_2d();
-                (px[k], py[k]) = (x as f32 + jitter.x, y as f32 + jitter.y);
-            }
             self.still.rays_into(&px, &py, &mut packet.rays);
-            packet.found = world.camera_hits(&packet.rays[..n], &mut packet.hits[..n], traversal);
-            return;
-        }
-        for k in 0..n {
-            let sampler = &mut packet.samplers[k];
-            let jitter = sampler.next_2d();
-            let (px, py) = (x as f32 + jitter.x, y as f32 + jitter.y);
-            if self.blur {
-                packet.times[k] = world.scene.shutter.time(self.frame, sampler.time());
-            }
-            let moved;
-            let camera = if self.camera_moves {
-                moved = world
-                    .scene
-                    .camera
-                    .at_time(packet.times[k])
-                    .rays(settings.width, settings.height);
-                &moved
-            } else {
-                &self.still
-            };
-            // A pinhole never draws the lens's numbers, so it traces exactly the rays
-            // it traced before lenses existed.
-            // Each branch writes its ray into the slot itself: as one value chosen
-            // between the two, the ray was built aside field by field and copied
-            // whole into the slot, read back across those narrow stores, which the
-            // processor cannot forward (a stall per camera ray; docs/bench.md, issue
-            // 12, twenty-second round).
-            if world.effects.depth_of_field && camera.has_lens() {
-                packet.rays[k] = camera.ray_through_lens(px, py, sampler.lens());
-            } else {
-                packet.rays[k] = camera.ray(px, py);
+        } else {
+            for k in 0..n {
+                let sampler = &mut packet.samplers[k];
+                if self.blur {
+                    packet.times[k] = world.scene.shutter.time(self.frame, sampler.time());
+                }
+                let moved;
+                let camera = if self.camera_moves {
+                    moved = world
+                        .scene
+                        .camera
+                        .at_time(packet.times[k])
+                        .rays(settings.width, settings.height);
+                    &moved
+                } else {
+                    &self.still
+                };
+                // A pinhole never draws the lens's numbers, so it traces exactly the rays
+                // it traced before lenses existed.
+                // Each branch writes its ray into the slot itself: as one value chosen
+                // between the two, the ray was built aside field by field and copied
+                // whole into the slot, read back across those narrow stores, which the
+                // processor cannot forward (a stall per camera ray; docs/bench.md, issue
+                // 12, twenty-second round).
+                if world.effects.depth_of_field && camera.has_lens() {
+                    packet.rays[k] = camera.ray_through_lens(px[k], py[k], sampler.lens());
+                } else {
+                    packet.rays[k] = camera.ray(px[k], py[k]);
+                }
             }
         }
         packet.found = world.camera_hits(&packet.rays[..n], &mut packet.hits[..n], traversal);
