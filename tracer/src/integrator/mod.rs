@@ -70,7 +70,7 @@ mod stats;
 pub use direct::AreaLightSampling;
 pub use hits::CameraRays;
 pub use lanes::PathLanes;
-pub(crate) use lanes::{NewPath, PathFeed};
+pub(crate) use lanes::{NOT_COUNTED, NewPath, PathFeed};
 pub use stats::PathStats;
 
 /// A scene prepared for rendering: its acceleration structure, lights and effect set.

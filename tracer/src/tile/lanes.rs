@@ -11,9 +11,16 @@
 //! `tessera bench`'s camera-ray pass) or escape at once, one lane takes path after path of
 //! pixel after pixel while the others still hold the first pixel's samples: every pixel of the
 //! tile is open at once, and all but the first have their values back in order.
+//!
+//! Counted work goes to the cost map's block of the pixel it was counted for, not through the
+//! pixel: a lane counts its paths' work (and the camera packets' walks it takes) into one
+//! record for as long as its paths' pixels lie in one block, and the feed adds that record to
+//! the block when the lane's next path lies in another, or when there are no more. Counts are
+//! integers and a block's work is linear in them, so the cost map and the tile's statistics
+//! are the same integers as counted path by path.
 
 use super::{Cameras, Packet, TilePixels, add_sample};
-use crate::integrator::{NewPath, PathFeed, PathStats};
+use crate::integrator::{NOT_COUNTED, NewPath, PathFeed, PathStats};
 use glam::Vec3;
 use std::collections::VecDeque;
 
@@ -36,6 +43,9 @@ pub(super) struct TileFeed<'a, 'w, P> {
     /// index.
     open: VecDeque<OpenPixel>,
     oldest: u64,
+    /// The cost map's block of the newest pixel (`TilePixels::block_of`), whose work the
+    /// lanes given its paths count.
+    newest_block: u32,
     /// The rings of early values of finished pixels, kept for the next pixels that need one.
     spare: Rings,
 }
@@ -48,8 +58,6 @@ struct OpenPixel {
     sum: InOrder,
     /// The samples not yet back.
     remaining: u32,
-    /// The pixel's counted work: its camera packets' and its paths'.
-    stats: PathStats,
 }
 
 impl<'a, 'w, P: Iterator<Item = (u32, u32)>> TileFeed<'a, 'w, P> {
@@ -65,6 +73,7 @@ impl<'a, 'w, P: Iterator<Item = (u32, u32)>> TileFeed<'a, 'w, P> {
             next_sample: cameras.spp,
             open: VecDeque::new(),
             oldest: 0,
+            newest_block: NOT_COUNTED,
             spare: Vec::new(),
         }
     }
@@ -86,26 +95,44 @@ impl<'a, 'w, P: Iterator<Item = (u32, u32)>> TileFeed<'a, 'w, P> {
             y,
             sum: InOrder::new(),
             remaining: self.cameras.spp,
-            stats: PathStats::default(),
         });
+        self.newest_block = self.tile.block_of(x, y);
         self.next_sample = 0;
         Some(())
+    }
+
+    /// Adds a lane's counted work to the block it was counted for, if any, and marks the lane
+    /// as counting for `next` from nothing.
+    fn settle(&mut self, stats: &mut PathStats, counted_for: &mut u32, next: u32) {
+        if *counted_for != NOT_COUNTED {
+            self.tile.count(*counted_for, stats);
+        }
+        *stats = PathStats::default();
+        *counted_for = next;
     }
 }
 
 impl<P: Iterator<Item = (u32, u32)>> PathFeed for TileFeed<'_, '_, P> {
     fn next_path(&mut self, lane: NewPath<'_>) -> Option<u64> {
-        if self.handed >= self.packet.n {
-            if self.next_sample >= self.cameras.spp {
-                self.start_pixel()?;
-            }
+        let fill = self.handed >= self.packet.n;
+        if fill && self.next_sample >= self.cameras.spp && self.start_pixel().is_none() {
+            // No paths left: the lane's counts are taken now, so that none stay behind.
+            self.settle(lane.stats, lane.counted_for, NOT_COUNTED);
+            return None;
+        }
+        // The lane's work is the newest pixel's block's from here on.
+        if *lane.counted_for != self.newest_block {
+            self.settle(lane.stats, lane.counted_for, self.newest_block);
+        }
+        if fill {
             let first = self.next_sample;
-            let newest = self.open.back_mut().expect("a pixel was just started");
+            let newest = self.open.back().expect("a pixel was just started");
+            // The packet's walk is counted with the lane's: the same block.
             self.cameras.fill(
                 &mut self.packet,
                 (newest.x, newest.y),
                 first,
-                &mut newest.stats.traversal,
+                &mut lane.stats.traversal,
             );
             self.next_sample += self.packet.n as u32;
             self.packet_start = first;
@@ -120,20 +147,19 @@ impl<P: Iterator<Item = (u32, u32)>> PathFeed for TileFeed<'_, '_, P> {
         Some(tag(self.started - 1, self.packet_start + k as u32))
     }
 
-    fn path_done(&mut self, tag: u64, radiance: Vec3, stats: &PathStats) {
+    fn path_done(&mut self, tag: u64, radiance: Vec3) {
         let (pixel, sample) = ((tag >> 32) as u32, tag as u32);
         let open = &mut self.open[pixel.wrapping_sub(self.oldest as u32) as usize];
-        open.stats.add(stats);
         open.remaining -= 1;
-        open.sum
-            .add(sample, radiance, &mut open.stats, &mut self.spare);
+        // A dropped value is counted in the tile's statistics, which are not a block's work.
+        let stats = &mut self.tile.stats;
+        open.sum.add(sample, radiance, stats, &mut self.spare);
         while self.open.front().is_some_and(|p| p.remaining == 0) {
             let mut done = self.open.pop_front().expect("just checked");
             self.oldest += 1;
-            let total = done.sum.total(&mut done.stats, &mut self.spare);
+            let total = done.sum.total(&mut self.tile.stats, &mut self.spare);
             let spp = self.cameras.spp;
-            self.tile
-                .push(done.x, done.y, total / spp as f32, &done.stats);
+            self.tile.store(done.x, done.y, total / spp as f32);
         }
     }
 }

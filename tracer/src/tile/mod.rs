@@ -283,13 +283,30 @@ impl TilePixels {
 
     /// Stores pixel (`x`, `y`)'s value and adds its work to its block's.
     fn push(&mut self, x: u32, y: u32, value: glam::Vec3, pixel_stats: &PathStats) {
+        self.store(x, y, value);
+        self.count(self.block_of(x, y), pixel_stats);
+    }
+
+    /// Stores pixel (`x`, `y`)'s value.
+    fn store(&mut self, x: u32, y: u32, value: glam::Vec3) {
         let rect = self.rect;
         let index = (y - rect.y) as usize * rect.w as usize + (x - rect.x) as usize;
         self.pixels[index] = [value.x, value.y, value.z];
+    }
+
+    /// The index in `blocks` of the block that holds pixel (`x`, `y`).
+    fn block_of(&self, x: u32, y: u32) -> u32 {
         let (bx0, by0, bw) = self.blocks_at;
-        let block = (y / BLOCK_SIZE - by0) * bw + (x / BLOCK_SIZE - bx0);
-        self.blocks[block as usize] += pixel_stats.work();
-        self.stats.add(pixel_stats);
+        (y / BLOCK_SIZE - by0) * bw + (x / BLOCK_SIZE - bx0)
+    }
+
+    /// Adds `work`, counted for pixels of block `block` (an index of [`TilePixels::block_of`]),
+    /// to that block's work and the tile's. The work is a sum of counts and
+    /// [`PathStats::work`] is linear in them, so work counted path by path, pixel by pixel
+    /// or for a run of a block's paths at once adds up to the same integers.
+    fn count(&mut self, block: u32, work: &PathStats) {
+        self.blocks[block as usize] += work.work();
+        self.stats.add(work);
     }
 
     fn output(self, frame: u32) -> TileOutput {

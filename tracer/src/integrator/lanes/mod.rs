@@ -76,7 +76,7 @@ mod shade;
 
 pub use paths::PathLanes;
 use paths::Paths;
-pub(crate) use paths::{NewPath, PathFeed};
+pub(crate) use paths::{NOT_COUNTED, NewPath, PathFeed};
 
 use shade::{Gathered, Points, Shaded, shade};
 

@@ -44,17 +44,30 @@ pub(crate) struct NewPath<'a> {
     pub first: &'a mut Option<Option<Hit>>,
     /// The sample's numbers, the camera's already drawn.
     pub sampler: &'a mut PixelSampler,
+    /// The work the lane has counted since the feed last took it: a lane's paths go on
+    /// counting into it, and the feed takes it where the new path's work goes elsewhere (to
+    /// another block of the cost map) and when it has no more paths, so that the lanes
+    /// neither clear a lane's counts at every path nor hand them over at every end (a path's
+    /// 104 bytes of counts, stored in eight-byte steps and read back in wider ones, a stall
+    /// the processor cannot forward).
+    pub stats: &'a mut PathStats,
+    /// The feed's mark of whose `stats` are, [`NOT_COUNTED`] where they are none.
+    pub counted_for: &'a mut u32,
 }
+
+/// What a lane's [`NewPath::counted_for`] holds where it owes the feed no work.
+pub(crate) const NOT_COUNTED: u32 = u32::MAX;
 
 /// Where [`World::radiance_stream`](crate::World::radiance_stream)'s paths come from and where
 /// their results go.
 pub(crate) trait PathFeed {
     /// Fills `lane` with the next path to render and returns the feed's name for it, or
-    /// `None` when there are no more.
+    /// `None` when there are no more; either way takes the lane's counted work
+    /// ([`NewPath::stats`]) where the new path's is not the feed's to add to it, and always
+    /// when there are no more paths, so that none is left in the lanes.
     fn next_path(&mut self, lane: NewPath<'_>) -> Option<u64>;
-    /// The radiance of the path named `tag` and its counted work, as it ends (paths end in
-    /// any order).
-    fn path_done(&mut self, tag: u64, radiance: Vec3, stats: &PathStats);
+    /// The radiance of the path named `tag`, as it ends (paths end in any order).
+    fn path_done(&mut self, tag: u64, radiance: Vec3);
 }
 
 /// The lanes' paths, a value of every lane at a time: the state the scalar path keeps in its
@@ -80,7 +93,10 @@ pub(super) struct Paths {
     /// lane's current ray is the one its set-up was made for (not a new path's camera ray).
     pub(super) set_up: SetUpRows,
     pub(super) set_up_ready: [bool; LANES],
+    /// Each lane's counted work since its feed last took it, and the feed's mark for it
+    /// ([`NewPath::stats`]).
     pub(super) stats: [PathStats; LANES],
+    pub(super) counted_for: [u32; LANES],
 }
 
 impl Default for Paths {
@@ -106,6 +122,7 @@ impl Default for Paths {
             set_up: SetUpRows::default(),
             set_up_ready: [false; LANES],
             stats: [PathStats::default(); LANES],
+            counted_for: [NOT_COUNTED; LANES],
         }
     }
 }
@@ -119,6 +136,8 @@ impl Paths {
             ray: &mut self.ray[i],
             first: &mut self.first[i],
             sampler: &mut self.sampler[i],
+            stats: &mut self.stats[i],
+            counted_for: &mut self.counted_for[i],
         };
         let Some(tag) = feed.next_path(lane) else {
             return false;
@@ -131,7 +150,6 @@ impl Paths {
         self.radiance[i] = Vec3::ZERO;
         (self.last_pdf[i], self.last_delta[i], self.last_point[i]) =
             (0.0, true, self.ray[i].origin);
-        self.stats[i] = PathStats::default();
         true
     }
 
@@ -146,6 +164,6 @@ impl Paths {
     #[inline(always)]
     pub(super) fn end(&mut self, i: usize, feed: &mut impl PathFeed) {
         self.alive[i] = false;
-        feed.path_done(self.tag[i], self.radiance[i], &self.stats[i]);
+        feed.path_done(self.tag[i], self.radiance[i]);
     }
 }
