@@ -30,6 +30,7 @@ use std::f32::consts::PI;
 mod build;
 mod environment;
 mod moving;
+pub(crate) use moving::placed_sample;
 
 /// One light.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,6 +66,8 @@ pub(crate) enum LanesLight<'a> {
     Point { position: Vec3, intensity: Vec3 },
     /// The environment.
     Environment,
+    /// A triangle of a moving object: the object's index and the triangle's among its own.
+    Moving { object: u32, triangle: u32 },
 }
 
 /// How next-event estimation samples the environment; every choice is unbiased, and they differ
@@ -203,7 +206,7 @@ impl Lights {
             && self.lights.iter().all(|light| match light {
                 Light::Triangle(_) | Light::Point { .. } => true,
                 Light::Environment => sky_in_lanes,
-                Light::Moving { .. } => false,
+                Light::Moving { .. } => true,
             })
     }
 
@@ -262,9 +265,7 @@ impl Lights {
                 intensity,
             },
             Light::Environment => LanesLight::Environment,
-            Light::Moving { .. } => {
-                unreachable!("the lanes run only where no light moves (`lanes_sample_all`)")
-            }
+            Light::Moving { object, triangle } => LanesLight::Moving { object, triangle },
         };
         (light, self.choice_pdf(index))
     }

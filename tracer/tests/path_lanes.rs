@@ -7,8 +7,9 @@
 //! camera's rays found in packets or one by one; with textures, shading normals and a constant
 //! sky beside an area light; with ideal mirrors, smooth glass and rough metals of every
 //! roughness among the diffuse surfaces; with point lights beside area lights, skies and maps,
-//! and alone; with Russian roulette off. Worlds the lanes do not fit (a moving lamp, a map
-//! through portals) render one by one whatever the knob says.
+//! and alone; with Russian roulette off; with a moving box and a moving lamp (and the shipped
+//! scenes of motion blur). Worlds the lanes do not fit (a map through portals, fog, dispersive
+//! glass) render one by one whatever the knob says.
 
 mod common;
 
@@ -89,6 +90,83 @@ fn with_metal_and_a_point_light(scene: Scene, alpha: f32, lamp: bool, on_ceiling
         position,
         intensity: glam::Vec3::new(1.0, 0.9, 0.7) * (0.5 * extent * extent),
     });
+    scene
+}
+
+/// `scene` with its short box and its lamp (the triangles of `moved`, materials named) taken
+/// out of the still triangles and keyed to move over frame 0 (the shutter open from 0 to 1),
+/// each about its own centre: the box slides a tenth of the room, turns 50 degrees about the
+/// vertical and stretches; the lamp slides and tilts. The lanes' hits on moving triangles and
+/// their moving light's samples, both placed by the path's moment, and rays leaving from
+/// origins worked out in the objects' space.
+fn with_moving(scene: Scene, moved: &[&str]) -> Scene {
+    with_moving_objects(scene, moved, false)
+}
+
+/// [`with_moving`], each triangle of the materials named its own object where `apart`: more
+/// objects than a path places as it starts (sixteen) and than the motion's flat list holds
+/// (eight), so that paths place them as they meet them, found through the tree over their
+/// swept boxes.
+fn with_moving_objects(mut scene: Scene, moved: &[&str], apart: bool) -> Scene {
+    use tracer::scene::{MovingObject, TransformKey, TransformTrack, Triangle};
+    let corners = scene.triangles.iter().flat_map(|t| t.p);
+    let (low, high) = corners.fold(
+        (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY),
+        |(low, high), p| (low.min(p), high.max(p)),
+    );
+    let extent = (high - low).max_element();
+    assert!(
+        scene.attributes.is_empty(),
+        "the box has no vertex attributes"
+    );
+    for name in moved {
+        let material = scene
+            .materials
+            .iter()
+            .position(|m| m.name == *name)
+            .expect("the Cornell box has the material") as u32;
+        let (ours, rest): (Vec<Triangle>, Vec<Triangle>) =
+            scene.triangles.iter().partition(|t| t.material == material);
+        assert!(!ours.is_empty(), "{name} has triangles");
+        scene.triangles = rest;
+        let groups = if apart {
+            ours.iter().map(|t| vec![*t]).collect()
+        } else {
+            vec![ours]
+        };
+        for (k, group) in groups.into_iter().enumerate() {
+            let centre =
+                group.iter().flat_map(|t| t.p).sum::<glam::Vec3>() / (3 * group.len()) as f32;
+            let key = |frame: u32, slide: f32, turn: glam::Vec3, scale: glam::Vec3| TransformKey {
+                frame,
+                scale,
+                rotate_degrees: turn,
+                translate: centre + glam::Vec3::new(slide, 0.0, -0.5 * slide) * extent,
+            };
+            let still = key(0, 0.0, glam::Vec3::ZERO, glam::Vec3::ONE);
+            let moved = if *name == "light" {
+                key(1, 0.08, glam::Vec3::new(0.0, 0.0, 12.0), glam::Vec3::ONE)
+            } else {
+                let turn = glam::Vec3::new(0.0, 50.0 * (1.0 + k as f32 * 0.37), 0.0);
+                key(1, 0.1, turn, glam::Vec3::new(1.2, 0.8, 1.0))
+            };
+            scene.moving.push(MovingObject {
+                triangles: group
+                    .iter()
+                    .map(|t| Triangle {
+                        p: t.p.map(|p| p - centre),
+                        material,
+                    })
+                    .collect(),
+                attributes: Vec::new(),
+                track: TransformTrack::new(vec![still, moved]).expect("two keys that differ"),
+            });
+        }
+    }
+    scene.shutter = tracer::scene::Shutter {
+        open: 0.0,
+        close: 1.0,
+    };
     scene
 }
 
@@ -236,6 +314,24 @@ fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
                     (alphas[(place + 3) % 6], false, false),
                     (alphas[(place + 1) % 6], true, true),
                 ];
+                // The short box (glass) and the lamp moving, the tall box a metal, a point
+                // light beside them; and the box alone moving under the still lamp.
+                for moved in [&["shortBox", "light"][..], &["shortBox"][..]] {
+                    let label = format!("{label}, moving {moved:?}");
+                    let metal = with_metal_and_a_point_light(scene.clone(), 0.3, true, false);
+                    let scene = with_moving(metal, moved);
+                    let fits = same_both_ways(&label, scene, CameraRays::Packets);
+                    assert!(fits, "{label}: the lanes did not run");
+                }
+                // Every triangle of both boxes and the lamp its own moving object.
+                if spp == 5 {
+                    let label = format!("{label}, many moving objects");
+                    let moved = ["shortBox", "tallBox", "light"];
+                    let scene = with_moving_objects(scene.clone(), &moved, true);
+                    assert!(scene.moving.len() > 16, "{label}: {}", scene.moving.len());
+                    let fits = same_both_ways(&label, scene, CameraRays::Packets);
+                    assert!(fits, "{label}: the lanes did not run");
+                }
                 for (alpha, lamp, on_ceiling) in metals {
                     let label = format!(
                         "{label}, metal of roughness {alpha}, lamp {lamp}, on the ceiling \
@@ -434,8 +530,9 @@ fn worlds_the_lanes_do_not_fit_render_one_by_one() {
             .expect("a shipped scene loads")
     };
     for (label, mut scene) in [
-        ("a moving lamp", load("swinging-lamp")),
         ("a map through portals", load("window-room")),
+        ("fog", load("fog-window")),
+        ("a dispersive prism", load("prism")),
     ] {
         scene.settings.width = 12;
         scene.settings.height = 12;
@@ -458,7 +555,13 @@ fn worlds_the_lanes_do_not_fit_render_one_by_one() {
 #[test]
 fn shipped_scenes_with_metal_point_lights_or_no_roulette_render_the_same_bits_in_lanes() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    for name in ["glass-cluster-pan", "point-in-sphere", "furnace"] {
+    for name in [
+        "glass-cluster-pan",
+        "point-in-sphere",
+        "furnace",
+        "cornell-blur",
+        "swinging-lamp",
+    ] {
         let path = root.join(format!("{name}/{name}.toml"));
         let mut scene = tracer::scene::load(&path).expect("a shipped scene loads");
         scene.settings.width = 24;

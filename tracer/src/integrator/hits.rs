@@ -16,7 +16,9 @@
 //! on the tile it falls in: the cost map stays the same for every partition.
 
 use super::World;
-use crate::geometry::{Accel, Hit, Moment, Ray, SetUp, SurfacePoint, Traversal, TraversalStats};
+use crate::geometry::{
+    Accel, Hit, Moment, MovingTriangle, Ray, SetUp, SurfacePoint, Traversal, TraversalStats,
+};
 use crate::scene::{Placement, Scene, Triangle, VertexAttributes};
 use glam::{Vec2, Vec3};
 
@@ -216,17 +218,27 @@ impl World {
                     placement: None,
                 }
             }
-            Some(moving) => {
-                let at = self.motion.surface(moment, moving, hit);
-                let object = &self.scene.moving[moving.object];
-                Placed {
-                    triangle: &object.triangles[moving.triangle],
-                    attributes: object.attributes.get(moving.triangle),
-                    at,
-                    unit_normal: at.normal,
-                    placement: Some(self.motion.placement(moment, moving.object)),
-                }
-            }
+            Some(moving) => self.placed_moving(moving, hit, moment),
+        }
+    }
+
+    /// [`World::placed`] for a hit on moving triangle `moving`: the lanes' too, which place
+    /// only these in their first phase (a still triangle's point is their vector shading's).
+    #[inline(always)]
+    pub(super) fn placed_moving<'a>(
+        &'a self,
+        moving: MovingTriangle,
+        hit: &Hit,
+        moment: &'a Moment,
+    ) -> Placed<'a> {
+        let at = self.motion.surface(moment, moving, hit);
+        let object = &self.scene.moving[moving.object];
+        Placed {
+            triangle: &object.triangles[moving.triangle],
+            attributes: object.attributes.get(moving.triangle),
+            at,
+            unit_normal: at.normal,
+            placement: Some(self.motion.placement(moment, moving.object)),
         }
     }
 

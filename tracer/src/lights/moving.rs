@@ -15,7 +15,7 @@
 //! weights are the same code (`lights.rs`).
 
 use super::LightSample;
-use crate::geometry::{Moment, placed_point};
+use crate::geometry::{Moment, SurfacePoint, placed_point};
 use crate::scene::{Placement, Scene};
 use glam::{DVec3, Vec2, Vec3};
 
@@ -29,6 +29,20 @@ pub(super) fn sample(
     u: Vec2,
     choice: f32,
 ) -> Option<LightSample> {
+    let (at, area, radiance) = placed_sample(scene, moment, (object, triangle), u);
+    super::area_sample(p, at, (area, at.normal), radiance, choice)
+}
+
+/// The point that [`sample`] draws on triangle `triangle` of moving object `object` for the
+/// numbers `u`, placed at `moment`, with the placed triangle's area and its radiance: all of
+/// the sample that does not depend on the point it is seen from (the paths in lanes draw it
+/// lane by lane and weigh it in their vector shading, as `super::area_sample` does).
+pub(crate) fn placed_sample(
+    scene: &Scene,
+    moment: &Moment,
+    (object, triangle): (u32, u32),
+    u: Vec2,
+) -> (SurfacePoint, f32, Vec3) {
     let triangle = &scene.moving[object as usize].triangles[triangle as usize];
     let placement = moment.placement(object as usize);
     let su = u.x.sqrt();
@@ -37,7 +51,7 @@ pub(super) fn sample(
     let at = placed_point(placement, &triangle.p, b1, b2);
     let (area, _) = placed_shape(placement, &triangle.p);
     let radiance = scene.materials[triangle.material as usize].emission;
-    super::area_sample(p, at, (area, at.normal), radiance, choice)
+    (at, area, radiance)
 }
 
 /// The area of the object-space triangle `v` of object `object` placed by each of its keys,

@@ -143,6 +143,7 @@ impl<P: Iterator<Item = (u32, u32)>> PathFeed for TileFeed<'_, '_, P> {
         *lane.ray = packet.rays[k];
         *lane.first = packet.found.then_some(packet.hits[k]);
         lane.sampler.clone_from(&packet.samplers[k]);
+        *lane.time = packet.times[k];
         // The packet's pixel is the newest one started.
         Some(tag(self.started - 1, self.packet_start + k as u32))
     }

@@ -1,9 +1,14 @@
 //! A tile's paths in lanes: eight paths advanced a bounce at a time, their shading computed
 //! together in vector instructions, for the worlds whose every path can be
-//! ([`World::lanes_fit`]): plain ones ([`World::is_plain`]) of diffuse surfaces (textured or
-//! not, with shading normals or not), ideal mirrors, smooth glass and rough metals, lit by
-//! still emissive triangles, point lights and a constant sky or an environment map. The
-//! Cornell scenes, Sponza and the README's scene are such worlds.
+//! ([`World::lanes_fit`]): worlds without media or dispersion, of diffuse surfaces (textured
+//! or not, with shading normals or not), ideal mirrors, smooth glass and rough metals, still
+//! or moving, lit by emissive triangles (still or moving), point lights and a constant sky or
+//! an environment map. The Cornell scenes, Sponza, the README's scene and the shipped scenes
+//! of motion blur are such worlds. Where objects move, each lane holds its path's moment (its
+//! objects placed as the path starts), its walks ask the moving objects at it, and the first
+//! phase places the points of hits on moving triangles and of moving lights' samples, as the
+//! scalar path does, for the vector shading to take as they are (compiled apart, so that
+//! still worlds pay for none of it).
 //!
 //! The paths come from a feed ([`PathFeed`]; the tile's, `tile/lanes.rs`, hands out its
 //! pixels' samples in order, a camera packet at a time) and go back to it as they end, in any
@@ -52,7 +57,7 @@ use super::scatter::{BounceNumbers, resolve};
 use super::{AreaLightSampling, UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
 use crate::geometry::{Moment, OffsetMethod, PACKET, Ray, SetUpRows, hit_point};
-use crate::lights::LanesLight;
+use crate::lights::{LanesLight, placed_sample};
 use crate::material::{Bsdf, BsdfSample, Frame, Ggx};
 use crate::scene::Texture;
 use crate::spectrum::SpectralSampling;
@@ -81,19 +86,21 @@ pub(crate) use paths::{NOT_COUNTED, NewPath, PathFeed};
 use shade::{Gathered, Points, Shaded, shade};
 
 impl World {
-    /// Whether every path of this world can run in lanes: a plain world (no media, no
-    /// moving objects, RGB throughout) whose materials are all diffuse, ideal mirrors, smooth
-    /// glass (a delta bounce: no light sample, the direction drawn by `Bsdf::sample`) or rough
-    /// metals (the direction drawn by `Bsdf::sample`, the light sample weighed by the lobe),
-    /// every light a still emissive triangle, a point light or an environment without
-    /// portals, constant or a map sampled by its importance (`Lights::lanes_sample_all`),
+    /// Whether every path of this world can run in lanes: a world without media or dispersion
+    /// (RGB throughout; its objects still or moving) whose materials are all diffuse, ideal
+    /// mirrors, smooth glass (a delta bounce: no light sample, the direction drawn by
+    /// `Bsdf::sample`) or rough metals (the direction drawn by `Bsdf::sample`, the light sample
+    /// weighed by the lobe), every light an emissive triangle (still or moving), a point light
+    /// or an environment without portals, constant or a map sampled by its importance
+    /// (`Lights::lanes_sample_all`),
     /// lights found both ways and weighed (the default), the default offsets and RGB sampling,
     /// and shadow rays on. Each condition names a step the lanes leave out; a world that fails
     /// one renders one path at a time, as every world can. Russian roulette may be off: its
     /// game is then never played, in the lanes as in the scalar path.
     pub fn lanes_fit(&self) -> bool {
         self.paths == PathLanes::Lanes
-            && self.is_plain()
+            && !self.effects.media
+            && !self.effects.dispersion
             && self.lights.lanes_sample_all(&self.scene)
             && self.area_lights == AreaLightSampling::Mis
             && self.offset == OffsetMethod::ErrorBound
@@ -117,40 +124,45 @@ impl World {
     /// long as the feed has paths, not on a pixel's dwindling few (at a pixel's last bounces
     /// only two in five lanes were still busy). Only for worlds that [`World::lanes_fit`].
     pub(crate) fn radiance_stream(&self, feed: &mut impl PathFeed) {
-        // Compiled apart for worlds without textures, which then carry no texels: where the
-        // world pays for no textures, `texel_ahead` finds none anyway.
-        let textured = self.effects.textures;
+        // Compiled apart for worlds without textures, which then carry no texels (where the
+        // world pays for no textures, `texel_ahead` finds none anyway), and for worlds whose
+        // objects move, whose paths place them (a still world's lanes never ask where a hit's
+        // triangle lies; asked at run time, that cost the Cornell box 3 % more instructions).
+        let (textured, moves) = (self.effects.textures, !self.motion.is_empty());
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx") {
             // SAFETY: the processor has AVX, just checked.
             return unsafe {
-                if textured {
-                    self.lanes_avx::<true>(feed)
-                } else {
-                    self.lanes_avx::<false>(feed)
+                match (textured, moves) {
+                    (false, false) => self.lanes_avx::<false, false>(feed),
+                    (true, false) => self.lanes_avx::<true, false>(feed),
+                    (false, true) => self.lanes_avx::<false, true>(feed),
+                    (true, true) => self.lanes_avx::<true, true>(feed),
                 }
             };
         }
-        if textured {
-            self.lanes_with::<true>(feed)
-        } else {
-            self.lanes_with::<false>(feed)
+        match (textured, moves) {
+            (false, false) => self.lanes_with::<false, false>(feed),
+            (true, false) => self.lanes_with::<true, false>(feed),
+            (false, true) => self.lanes_with::<false, true>(feed),
+            (true, true) => self.lanes_with::<true, true>(feed),
         }
     }
 
     /// [`World::lanes_with`] compiled with AVX: the second phase's loops eight lanes wide.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    unsafe fn lanes_avx<const TEXTURED: bool>(&self, feed: &mut impl PathFeed) {
-        self.lanes_with::<TEXTURED>(feed)
+    unsafe fn lanes_avx<const TEXTURED: bool, const MOVES: bool>(&self, feed: &mut impl PathFeed) {
+        self.lanes_with::<TEXTURED, MOVES>(feed)
     }
 
     /// The paths' loop, a bounce of every busy lane at a time; with `TEXTURED`, reading the
     /// texels of textured surfaces.
     #[inline(always)]
-    fn lanes_with<const TEXTURED: bool>(&self, feed: &mut impl PathFeed) {
-        // Still worlds only: every ray is asked at the one moment, made once (it has a drop).
-        let moment = Moment::default();
+    fn lanes_with<const TEXTURED: bool, const MOVES: bool>(&self, feed: &mut impl PathFeed) {
+        // Each lane's path's moment: where its moving objects are, placed as the path starts.
+        // In a still world every ray is asked at the one moment, and the lanes keep theirs.
+        let mut moments: [Moment; LANES] = Default::default();
         let mut paths = Paths::default();
         let mut gathered = Gathered::default();
         let mut shaded = Shaded::default();
@@ -159,7 +171,12 @@ impl World {
         let mut shading = [false; LANES];
         let sky = SkyLight::of(self);
         // What the shading is compiled for: the kinds of surface and of light the world has.
-        let kinds = (sky, Surfaces::of(self), self.lights.has_point_lights());
+        let kinds = (
+            sky,
+            Surfaces::of(self),
+            self.lights.has_point_lights(),
+            MOVES,
+        );
         loop {
             // First phase, in two passes: every lane's walk, then every lane's surface, so
             // that the hit triangles' records, which the walks ask for from memory as they
@@ -167,7 +184,7 @@ impl World {
             // takes the next one, until it has a surface to shade or the feed is dry.
             let mut walked = [false; LANES];
             for (i, walked) in walked.iter_mut().enumerate() {
-                *walked = self.next_hit(&moment, &mut paths, i, feed);
+                *walked = self.next_hit::<MOVES>(&mut moments, &mut paths, i, feed);
             }
             for (i, shading) in shading.iter_mut().enumerate() {
                 // A path that ends at its surface (the depth cap) hands the lane on to the
@@ -175,11 +192,13 @@ impl World {
                 *shading = walked[i]
                     && loop {
                         let lane = (&mut gathered, &mut texels[i]);
-                        if self.surface_phase::<TEXTURED>(&moment, &mut paths, i, lane, sky) {
+                        let moment = &moments[lane_moment::<MOVES>(i)];
+                        let phase = Self::surface_phase::<TEXTURED, MOVES>;
+                        if phase(self, moment, &mut paths, i, lane, sky) {
                             break true;
                         }
                         paths.end(i, feed);
-                        if !self.next_hit(&moment, &mut paths, i, feed) {
+                        if !self.next_hit::<MOVES>(&mut moments, &mut paths, i, feed) {
                             break false;
                         }
                     };
@@ -204,7 +223,8 @@ impl World {
             // Third phase: shadow rays, then each path's next ray or its end.
             for (i, &shading) in shading.iter().enumerate() {
                 let lane = (&gathered, &shaded, &shadows);
-                if shading && !self.third_phase(&moment, &mut paths, i, lane) {
+                let moment = &moments[lane_moment::<MOVES>(i)];
+                if shading && !self.third_phase(moment, &mut paths, i, lane) {
                     paths.end(i, feed);
                 }
             }
@@ -215,17 +235,26 @@ impl World {
     /// escapes), of the feed's next ones. `true` with the hit kept in the lane, `false` when
     /// the feed is dry.
     #[inline(always)]
-    fn next_hit(
-        &self,
-        moment: &Moment,
+    fn next_hit<'w, const MOVES: bool>(
+        &'w self,
+        moments: &mut [Moment<'w>; LANES],
         paths: &mut Paths,
         i: usize,
         feed: &mut impl PathFeed,
     ) -> bool {
         loop {
-            if !paths.alive[i] && !paths.admit(i, feed) {
-                return false;
+            if !paths.alive[i] {
+                if !paths.admit(i, feed) {
+                    return false;
+                }
+                if MOVES {
+                    // The last path's placements go back to the thread's spare buffer first,
+                    // for the new one to take: no allocation per path.
+                    moments[i] = Moment::default();
+                    moments[i] = self.motion.moment(paths.time[i]);
+                }
             }
+            let moment = &moments[lane_moment::<MOVES>(i)];
             let stats = &mut paths.stats[i];
             stats.rays += 1;
             let ray = &paths.ray[i];
@@ -254,7 +283,7 @@ impl World {
     /// texel and emission, and its light. `true` where the lane has a surface to shade (its
     /// values gathered), `false` where its path ends.
     #[inline(always)]
-    fn surface_phase<'w, const TEXTURED: bool>(
+    fn surface_phase<'w, const TEXTURED: bool, const MOVES: bool>(
         &'w self,
         moment: &Moment,
         paths: &mut Paths,
@@ -270,15 +299,36 @@ impl World {
         let ray = &paths.ray[i];
         let hit = paths.hit[i];
         paths.stats[i].hits += 1;
-        // `World::surface`, but for the point and its error bound, which the second
-        // phase computes from the corners gathered below.
-        let triangle = &self.scene.triangles[hit.triangle as usize];
-        let geometric = self.accel.unit_normal(hit.triangle);
-        let attributes = self.scene.attributes.get(hit.triangle as usize);
-        let seen = self.shading(ray.dir, &hit, attributes, None, geometric);
+        // `World::surface`, but for a still triangle's point and its error bound, which the
+        // second phase computes from the corners gathered below; a moving triangle's point is
+        // placed here, as the scalar path places it.
+        let moving = if MOVES {
+            self.motion.locate(hit.triangle)
+        } else {
+            None
+        };
+        let placed = moving.map(|moving| self.placed_moving(moving, &hit, moment));
+        let (triangle, attributes, geometric, placement) = match &placed {
+            None => (
+                &self.scene.triangles[hit.triangle as usize],
+                self.scene.attributes.get(hit.triangle as usize),
+                self.accel.unit_normal(hit.triangle),
+                None,
+            ),
+            Some(placed) => (
+                placed.triangle,
+                placed.attributes,
+                placed.unit_normal,
+                placed.placement,
+            ),
+        };
+        let seen = self.shading(ray.dir, &hit, attributes, placement, geometric);
         let material = &self.scene.materials[triangle.material as usize];
         if self.effects.area_lights && material.emission != Vec3::ZERO && seen.front_facing {
-            let at = hit_point(&triangle.p, hit.b1, hit.b2);
+            let at = match &placed {
+                None => hit_point(&triangle.p, hit.b1, hit.b2),
+                Some(placed) => placed.at.p,
+            };
             // The last scattering, read only here, where a light is hit.
             let last = paths.last(i);
             let weight = self.hit_emitter_weight(moment, hit.triangle, at, last);
@@ -301,11 +351,19 @@ impl World {
         }
         // Counted as the third phase will count it, once this bounce is done.
         (g.roulette[i], g.playing[i]) = (u.roulette, self.roulette_plays(depth + 1));
-        for (corner, p) in g.hit.iter_mut().zip(triangle.p) {
-            corner.set(i, p);
+        match &placed {
+            None => {
+                for (corner, p) in g.hit.iter_mut().zip(triangle.p) {
+                    corner.set(i, p);
+                }
+                (g.barycentric[0][i], g.barycentric[1][i]) = (hit.b1, hit.b2);
+                g.plane.set(i, self.accel.plane_normal(hit.triangle));
+            }
+            Some(placed) => g.placed.set(i, &placed.at),
         }
-        (g.barycentric[0][i], g.barycentric[1][i]) = (hit.b1, hit.b2);
-        g.plane.set(i, self.accel.plane_normal(hit.triangle));
+        if MOVES {
+            g.moved[i] = placed.is_some();
+        }
         g.normal.set(i, seen.normal);
         g.dir.set(i, ray.dir);
         (g.scatter[0][i], g.scatter[1][i]) = (u.scatter.x, u.scatter.y);
@@ -379,6 +437,20 @@ impl World {
                 g.sky_pdf[i] = pdf;
             }
             LanesLight::Environment => g.emission.set(i, sky.constant()),
+            // A moving triangle's point is drawn and placed here, lane by lane
+            // (`lights::placed_sample`), and weighed as seen from the surface in the vector
+            // shading, as a still triangle's is.
+            LanesLight::Moving { object, triangle } => {
+                let (at, area, radiance) =
+                    placed_sample(&self.scene, moment, (object, triangle), u.light);
+                g.light_placed.set(i, &at);
+                g.light_area[i] = area;
+                g.light_normal.set(i, at.normal);
+                g.emission.set(i, radiance);
+            }
+        }
+        if MOVES {
+            g.light_moved[i] = matches!(light, LanesLight::Moving { .. });
         }
         true
     }
@@ -425,6 +497,14 @@ impl World {
     }
 }
 
+/// Which of the lanes' moments lane `i` asks: its own where objects move, else the first, the
+/// one moment of a still world (one address for every lane, which the walks then need not
+/// compute lane by lane).
+#[inline(always)]
+fn lane_moment<const MOVES: bool>(i: usize) -> usize {
+    if MOVES { i } else { 0 }
+}
+
 /// The kinds of surface a world's lanes shade, each kind's shading compiled apart (`shade`'s
 /// `DRAWN` and `GLOSSY`): a world of diffuse surfaces pays for none of the others' selects.
 #[derive(Clone, Copy)]
@@ -452,39 +532,45 @@ impl Surfaces {
     }
 }
 
-/// The second phase, `shade`, compiled for the world's sky, its surfaces and whether it has
-/// point lights: a constant's choice at each step, so that the instance the world runs is
-/// chosen once per bounce.
+/// The second phase, `shade`, compiled for the world's sky, its surfaces, whether it has
+/// point lights and whether objects move: a constant's choice at each step, so that the
+/// instance the world runs is chosen once per bounce.
 #[inline(always)]
 fn shade_for(
-    (sky, surfaces, point): (SkyLight, Surfaces, bool),
+    (sky, surfaces, point, moves): (SkyLight, Surfaces, bool, bool),
     g: &Gathered,
     beta: &Points,
     out: &mut Shaded,
 ) {
+    let kinds = (surfaces, point, moves);
     match sky {
-        SkyLight::Map => shade_with_sky::<true, true>(surfaces, point, g, beta, out),
-        SkyLight::Constant(_) => shade_with_sky::<true, false>(surfaces, point, g, beta, out),
-        SkyLight::Absent => shade_with_sky::<false, false>(surfaces, point, g, beta, out),
+        SkyLight::Map => shade_with_sky::<true, true>(kinds, g, beta, out),
+        SkyLight::Constant(_) => shade_with_sky::<true, false>(kinds, g, beta, out),
+        SkyLight::Absent => shade_with_sky::<false, false>(kinds, g, beta, out),
     }
 }
 
 /// [`shade_for`], its sky chosen.
 #[inline(always)]
 fn shade_with_sky<const SKY: bool, const MAP: bool>(
-    surfaces: Surfaces,
-    point: bool,
+    (surfaces, point, moves): (Surfaces, bool, bool),
     g: &Gathered,
     beta: &Points,
     out: &mut Shaded,
 ) {
+    if moves {
+        // A world whose objects move runs the shading compiled for every kind of surface and
+        // light: one instance per sky rather than six more (its selects cost little beside
+        // placing its objects).
+        return shade::<SKY, MAP, true, true, true, true>(g, beta, out);
+    }
     match (surfaces, point) {
-        (Surfaces::Diffuse, false) => shade::<SKY, MAP, false, false, false>(g, beta, out),
-        (Surfaces::Diffuse, true) => shade::<SKY, MAP, false, false, true>(g, beta, out),
-        (Surfaces::Deltas, false) => shade::<SKY, MAP, true, false, false>(g, beta, out),
-        (Surfaces::Deltas, true) => shade::<SKY, MAP, true, false, true>(g, beta, out),
-        (Surfaces::Glossy, false) => shade::<SKY, MAP, true, true, false>(g, beta, out),
-        (Surfaces::Glossy, true) => shade::<SKY, MAP, true, true, true>(g, beta, out),
+        (Surfaces::Diffuse, false) => shade::<SKY, MAP, false, false, false, false>(g, beta, out),
+        (Surfaces::Diffuse, true) => shade::<SKY, MAP, false, false, true, false>(g, beta, out),
+        (Surfaces::Deltas, false) => shade::<SKY, MAP, true, false, false, false>(g, beta, out),
+        (Surfaces::Deltas, true) => shade::<SKY, MAP, true, false, true, false>(g, beta, out),
+        (Surfaces::Glossy, false) => shade::<SKY, MAP, true, true, false, false>(g, beta, out),
+        (Surfaces::Glossy, true) => shade::<SKY, MAP, true, true, true, false>(g, beta, out),
     }
 }
 

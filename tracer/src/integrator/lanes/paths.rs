@@ -44,6 +44,8 @@ pub(crate) struct NewPath<'a> {
     pub first: &'a mut Option<Option<Hit>>,
     /// The sample's numbers, the camera's already drawn.
     pub sampler: &'a mut PixelSampler,
+    /// The sample's time, where the path's moving objects are (frames).
+    pub time: &'a mut f64,
     /// The work the lane has counted since the feed last took it: a lane's paths go on
     /// counting into it, and the feed takes it where the new path's work goes elsewhere (to
     /// another block of the cost map) and when it has no more paths, so that the lanes
@@ -81,6 +83,7 @@ pub(super) struct Paths {
     pub(super) ray: [Ray; LANES],
     pub(super) first: [Option<Option<Hit>>; LANES],
     pub(super) sampler: [PixelSampler; LANES],
+    pub(super) time: [f64; LANES],
     pub(super) depth: [u32; LANES],
     pub(super) beta: Points,
     pub(super) radiance: [Vec3; LANES],
@@ -107,6 +110,7 @@ impl Default for Paths {
             ray: [UNUSED_RAY; LANES],
             first: [None; LANES],
             sampler: std::array::from_fn(|_| PixelSampler::placeholder()),
+            time: [0.0; LANES],
             depth: [0; LANES],
             beta: Points::default(),
             radiance: [Vec3::ZERO; LANES],
@@ -136,6 +140,7 @@ impl Paths {
             ray: &mut self.ray[i],
             first: &mut self.first[i],
             sampler: &mut self.sampler[i],
+            time: &mut self.time[i],
             stats: &mut self.stats[i],
             counted_for: &mut self.counted_for[i],
         };

@@ -41,6 +41,46 @@ impl Points {
     }
 }
 
+/// Points placed in the first phase, with what the second needs of them: a moving
+/// triangle's, whose point, error bound and normal come from its placement, and whose rays
+/// leave from the origins worked out in its object's space (`SurfacePoint::spawn`), above
+/// its plane and below.
+#[derive(Clone, Copy, Default)]
+pub(super) struct PlacedPoints {
+    p: Points,
+    error: Points,
+    normal: Points,
+    above: Points,
+    below: Points,
+}
+
+impl PlacedPoints {
+    /// Keeps lane `i`'s point, which is one placed on a moving triangle (its `spawn` given).
+    #[inline(always)]
+    pub(super) fn set(&mut self, i: usize, at: &SurfacePoint) {
+        let [above, below] = at
+            .spawn
+            .expect("a point placed on a moving triangle carries its rays' origins");
+        self.p.set(i, at.p);
+        self.error.set(i, at.error);
+        self.normal.set(i, at.normal);
+        self.above.set(i, above);
+        self.below.set(i, below);
+    }
+
+    /// Lane `i`'s point (its `spawn` left out) and its origins above and below.
+    #[inline(always)]
+    fn get(&self, i: usize) -> (SurfacePoint, [Vec3; 2]) {
+        let at = SurfacePoint {
+            p: self.p.get(i),
+            error: self.error.get(i),
+            normal: self.normal.get(i),
+            spawn: None,
+        };
+        (at, [self.above.get(i), self.below.get(i)])
+    }
+}
+
 /// What the first phase hands the second: each lane's hit (its triangle's corners and plane
 /// normal, the barycentric coordinates), shading normal, incoming direction, albedo and
 /// numbers, and the light it picked. A lane without a surface keeps what it last held,
@@ -52,6 +92,10 @@ pub(super) struct Gathered {
     pub(super) hit: [Points; 3],
     pub(super) barycentric: [Lanes<f32>; 2],
     pub(super) plane: Points,
+    /// Whether the hit is on a moving triangle, whose point the first phase placed (then
+    /// the corners, barycentrics and plane above are stale).
+    pub(super) moved: Lanes<bool>,
+    pub(super) placed: PlacedPoints,
     pub(super) normal: Points,
     pub(super) dir: Points,
     /// The diffuse surface's albedo, or where `drawn` the sampled direction's weight.
@@ -79,6 +123,11 @@ pub(super) struct Gathered {
     pub(super) light_area: Lanes<f32>,
     pub(super) light_normal: Points,
     pub(super) light_plane: Points,
+    /// Whether the light picked is a moving triangle, whose point the first phase drew and
+    /// placed (then `corners` and `light_plane` are stale, and `light_area` and
+    /// `light_normal` are the placed triangle's).
+    pub(super) light_moved: Lanes<bool>,
+    pub(super) light_placed: PlacedPoints,
     /// What the light emits: a triangle's radiance, a point light's intensity, or what the
     /// environment sends.
     pub(super) emission: Points,
@@ -139,8 +188,9 @@ pub(super) struct Shaded {
 /// here. `DRAWN` where some surfaces' directions are drawn in the first phase (mirrors, glass,
 /// rough metals): their lanes take that direction, and the deltas among them no light sample.
 /// `GLOSSY` where some surfaces are rough metals, whose light samples the GGX lobe weighs;
-/// `POINT` where some lights are point lights. Each is compiled only for the worlds that have
-/// what it names (`Surfaces`, the parent module's dispatch).
+/// `POINT` where some lights are point lights; `MOVING` where some objects move, whose hits'
+/// points and lights' samples the first phase placed. Each is compiled only for the worlds that
+/// have what it names (`Surfaces`, the parent module's dispatch).
 #[inline(always)]
 pub(super) fn shade<
     const SKY: bool,
@@ -148,6 +198,7 @@ pub(super) fn shade<
     const DRAWN: bool,
     const GLOSSY: bool,
     const POINT: bool,
+    const MOVING: bool,
 >(
     g: &Gathered,
     beta: &Points,
@@ -156,12 +207,15 @@ pub(super) fn shade<
     for i in 0..LANES {
         let hit = [g.hit[0].get(i), g.hit[1].get(i), g.hit[2].get(i)];
         let plane = g.plane.get(i);
-        let at = SurfacePoint::on_triangle_with_normal(
+        let on_triangle = SurfacePoint::on_triangle_with_normal(
             &hit,
             g.barycentric[0][i],
             g.barycentric[1][i],
             plane,
         );
+        let moved = MOVING && g.moved[i];
+        let (placed, spawn) = g.placed.get(i);
+        let at = choose(moved, placed, on_triangle);
         let p = at.p;
         out.p.set(i, p);
         let frame = Frame::from_normal(g.normal.get(i));
@@ -207,7 +261,7 @@ pub(super) fn shade<
         };
         let wi = frame.to_world(scattered);
         out.next_dir.set(i, wi);
-        out.next_origin.set(i, offset(&at, wi));
+        out.next_origin.set(i, leave(&at, (moved, spawn), wi));
         // `triangle_sample`: a point uniform on the light's triangle, as seen from `p`; or
         // where a point light is (`SurfacePoint::exact`: no error, on no surface).
         let su = g.light[0][i].sqrt();
@@ -230,6 +284,9 @@ pub(super) fn shade<
             },
             spawn: None,
         };
+        let light_moved = MOVING && g.light_moved[i];
+        let (light_placed, light_spawn) = g.light_placed.get(i);
+        let light_at = choose(light_moved, light_placed, light_at);
         let to_light = light_at.p - p;
         let distance_squared = to_light.length_squared();
         let distance = distance_squared.sqrt();
@@ -311,16 +368,45 @@ pub(super) fn shade<
             & (light_pdf > 0.0);
         // `shadow_ray`: towards the sky (`spawn_ray`), or with both ends off their surfaces
         // (`spawn_ray_to`; a point light's end, on no surface, stays where it is).
-        let origin = offset(&at, if sky { sky_way } else { to_light });
+        let origin = leave(&at, (moved, spawn), if sky { sky_way } else { to_light });
         let widened = SurfacePoint {
             error: light_at.error + gamma(2) * (light_at.p - origin).abs(),
             ..light_at
         };
-        let target = offset(&widened, origin - light_at.p);
+        let target = leave(&widened, (light_moved, light_spawn), origin - light_at.p);
         out.origin.set(i, origin);
         out.reach
             .set(i, if sky { sky_way } else { target - origin });
     }
+}
+
+/// `placed` where `moved`, else `computed`: field by field, as selects.
+#[inline(always)]
+fn choose(moved: bool, placed: SurfacePoint, computed: SurfacePoint) -> SurfacePoint {
+    SurfacePoint {
+        p: if moved { placed.p } else { computed.p },
+        error: if moved { placed.error } else { computed.error },
+        normal: if moved {
+            placed.normal
+        } else {
+            computed.normal
+        },
+        spawn: None,
+    }
+}
+
+/// `offset_ray_origin` with the error-bound method: where `at` was placed on a moving
+/// triangle (`moved`), the origin worked out in its object's space for the side of its
+/// normal `toward` points to (`spawn`, above and below), else [`offset`]'s.
+#[inline(always)]
+fn leave(at: &SurfacePoint, (moved, [above, below]): (bool, [Vec3; 2]), toward: Vec3) -> Vec3 {
+    let offset = offset(at, toward);
+    let spawned = if at.normal.dot(toward) < 0.0 {
+        below
+    } else {
+        above
+    };
+    if moved { spawned } else { offset }
 }
 
 /// `offset_ray_origin` with the error-bound method, for a still surface: `at` moved off its
