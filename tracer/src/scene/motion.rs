@@ -147,14 +147,21 @@ impl TransformTrack {
     /// [`TransformTrack::at`], where the caller has `segment` (which is `self.segment(time)`)
     /// already: a path's start places every object of a few and keeps each one's segment too.
     pub fn at_in(&self, segment: usize, time: f64) -> Placement {
+        let mut placed = Placement::IDENTITY;
+        self.place_in(segment, time, &mut placed);
+        placed
+    }
+
+    /// [`TransformTrack::at_in`], written over `out` field by field: a path's start refills
+    /// its placements in place, where a placement (240 bytes) built aside and copied in took
+    /// 3 % of `cornell-blur`'s render in `memmove`.
+    #[inline]
+    pub fn place_in(&self, segment: usize, time: f64, out: &mut Placement) {
         let (a, b) = self.segment_keys(segment);
         let first = segment.saturating_sub(1).min(self.keys.len() - 1);
         if a.frame == b.frame {
-            return placement(
-                a.scale.as_dvec3(),
-                self.rotations[first],
-                a.translate.as_dvec3(),
-            );
+            let (scale, translate) = (a.scale.as_dvec3(), a.translate.as_dvec3());
+            return place(scale, self.rotations[first], translate, out);
         }
         let s = (time - f64::from(a.frame)) / (f64::from(b.frame) - f64::from(a.frame));
         let lerp = |x: Vec3, y: Vec3| x.as_dvec3() + s * (y.as_dvec3() - x.as_dvec3());
@@ -163,11 +170,12 @@ impl TransformTrack {
         } else {
             rotation(lerp(a.rotate_degrees, b.rotate_degrees))
         };
-        placement(
+        place(
             lerp(a.scale, b.scale),
             rotate,
             lerp(a.translate, b.translate),
-        )
+            out,
+        );
     }
 }
 
@@ -211,6 +219,14 @@ fn rotation(degrees: DVec3) -> DMat3 {
 
 /// Scale, then rotate by `rotate`, then translate; in f64.
 fn placement(scale: DVec3, rotate: DMat3, translation: DVec3) -> Placement {
+    let mut placed = Placement::IDENTITY;
+    place(scale, rotate, translation, &mut placed);
+    placed
+}
+
+/// [`placement`], written over `out` field by field.
+#[inline(always)]
+fn place(scale: DVec3, rotate: DMat3, translation: DVec3, out: &mut Placement) {
     // The inverse of a rotation is its transpose, and of a scale its reciprocal: composing
     // them, rather than inverting the product, keeps the inverse to the rounding of one
     // product. A diagonal factor scales columns (or rows), so no full product is needed.
@@ -218,17 +234,23 @@ fn placement(scale: DVec3, rotate: DMat3, translation: DVec3) -> Placement {
         |m: DMat3, s: DVec3| DMat3::from_cols(m.x_axis * s.x, m.y_axis * s.y, m.z_axis * s.z);
     // diag(1 / s) R^T is (R diag(1 / s))^T.
     let inverse_transposed = scaled(rotate, scale.recip());
-    Placement {
-        linear: scaled(rotate, scale),
-        inverse: inverse_transposed.transpose(),
-        // The transpose of the inverse the rays use, exactly: the normal of the plane that
-        // rays meet.
-        normal: inverse_transposed,
-        translation,
-    }
+    out.linear = scaled(rotate, scale);
+    out.inverse = inverse_transposed.transpose();
+    // The transpose of the inverse the rays use, exactly: the normal of the plane that rays
+    // meet.
+    out.normal = inverse_transposed;
+    out.translation = translation;
 }
 
 impl Placement {
+    /// The placement that moves nothing.
+    pub const IDENTITY: Placement = Placement {
+        linear: DMat3::IDENTITY,
+        inverse: DMat3::IDENTITY,
+        normal: DMat3::IDENTITY,
+        translation: DVec3::ZERO,
+    };
+
     /// `p` placed, in f64.
     pub fn point(&self, p: DVec3) -> DVec3 {
         self.linear * p + self.translation
