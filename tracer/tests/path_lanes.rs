@@ -436,14 +436,21 @@ fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
     let (mirrored, glass) = (box_as(&materials, MIRROR), box_as(&materials, GLASS));
     let metal = box_as(&materials, METAL);
     let text = std::fs::read_to_string(&path).expect("the room's scene file");
+    // The whole room moving (its textured floor with its shading normals, its box and its
+    // lamp turning and sliding while the shutter is open), as one object.
+    let moving = text.replace("vfov = 50\n", "vfov = 50\nshutter = [0, 1]\n")
+        + "[[object.keys]]\nframe = 0\n\
+           [[object.keys]]\nframe = 1\nrotate_y = 35\nrotate_z = 8\ntranslate = [0.4, 0.1, -0.3]\n";
+    assert!(moving.contains("shutter"), "the shutter opened");
     let variants = [
         ("a mirror", mirrored, text.clone()),
         ("glass", glass, text.clone()),
         (
             "a rough metal and a point light",
-            metal,
+            metal.clone(),
             format!("{text}{POINT_LIGHT}"),
         ),
+        ("moving, a rough metal", metal, moving),
     ];
     for (label, materials, text) in variants {
         std::fs::write(&mtl, materials).expect("the materials are written");
