@@ -190,8 +190,8 @@ impl Lights {
         self.bounds[index + 1] - self.bounds[index]
     }
 
-    /// Whether every light is one the paths in lanes sample (`integrator/lanes/`): a still
-    /// emissive triangle, a point light, or an environment without portals that is constant
+    /// Whether every light is one the paths in lanes sample (`integrator/lanes/`): an emissive
+    /// triangle, still or moving, a point light, or an environment without portals that is constant
     /// (sampled uniformly over the sphere) or a map sampled by its importance.
     pub(crate) fn lanes_sample_all(&self, scene: &Scene) -> bool {
         let sky_in_lanes = self.portals.is_empty()

@@ -323,6 +323,17 @@ fn lanes_render_the_same_bits_at_every_scale_distance_depth_and_sample_count() {
                     let fits = same_both_ways(&label, scene, CameraRays::Packets);
                     assert!(fits, "{label}: the lanes did not run");
                 }
+                // The motion shows: the box and the lamp moving change the picture.
+                if place == 0 && spp == 5 {
+                    let still = with_metal_and_a_point_light(scene.clone(), 0.3, true, false);
+                    let moving = with_moving(still.clone(), &["shortBox", "light"]);
+                    let image = |scene| common::render_world(&World::prepare(scene, None), 0);
+                    assert_ne!(
+                        image(still).pixels,
+                        image(moving).pixels,
+                        "the motion shows"
+                    );
+                }
                 // Every triangle of both boxes and the lamp its own moving object.
                 if spp == 5 {
                     let label = format!("{label}, many moving objects");
@@ -396,6 +407,17 @@ f 13 14 15 16
     dir.join("room.toml")
 }
 
+/// The textured room's scene file `text` with the whole room moving (its textured floor with
+/// its shading normals, its box and its lamp turning and sliding while the shutter is open), as
+/// one object.
+fn moving_room(text: &str) -> String {
+    let moving = text.replace("vfov = 50\n", "vfov = 50\nshutter = [0, 1]\n")
+        + "[[object.keys]]\nframe = 0\n\
+           [[object.keys]]\nframe = 1\nrotate_y = 35\nrotate_z = 8\ntranslate = [0.4, 0.1, -0.3]\n";
+    assert!(moving.contains("shutter"), "the shutter opened");
+    moving
+}
+
 /// The MTL lines of a tinted mirror, of glass (index 1.33) and of a rough metal (roughness
 /// 0.2), for [`box_as`].
 const MIRROR: &str = "illum 5\nKs 0.9 0.8 0.7";
@@ -436,12 +458,7 @@ fn lanes_render_the_same_bits_with_textures_shading_normals_and_a_sky() {
     let (mirrored, glass) = (box_as(&materials, MIRROR), box_as(&materials, GLASS));
     let metal = box_as(&materials, METAL);
     let text = std::fs::read_to_string(&path).expect("the room's scene file");
-    // The whole room moving (its textured floor with its shading normals, its box and its
-    // lamp turning and sliding while the shutter is open), as one object.
-    let moving = text.replace("vfov = 50\n", "vfov = 50\nshutter = [0, 1]\n")
-        + "[[object.keys]]\nframe = 0\n\
-           [[object.keys]]\nframe = 1\nrotate_y = 35\nrotate_z = 8\ntranslate = [0.4, 0.1, -0.3]\n";
-    assert!(moving.contains("shutter"), "the shutter opened");
+    let moving = moving_room(&text);
     let variants = [
         ("a mirror", mirrored, text.clone()),
         ("glass", glass, text.clone()),
@@ -482,6 +499,7 @@ fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without()
         "map = \"sky.exr\"\nrotate = 30\nscale = [1.0, 0.9, 0.8]",
     );
     assert_ne!(mapped, text, "the room's sky became the map");
+    let mapped_moving = moving_room(&mapped);
     let portal = mapped.replace(
         "scale = [1.0, 0.9, 0.8]",
         "scale = [1.0, 0.9, 0.8]\nportals = [[[-3, 3, -3], [3, 3, -3], [3, 3, 3], [-3, 3, 3]]]",
@@ -496,6 +514,7 @@ fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without()
     let with_point = format!("{mapped}{POINT_LIGHT}");
     let variants = [
         ("map and lamp", &mapped, &lit, true),
+        ("map and lamp, the room moving", &mapped_moving, &lit, true),
         ("map alone", &mapped, &dark, true),
         ("map alone, a mirror", &mapped, &mirrored, true),
         (

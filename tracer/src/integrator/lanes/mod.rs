@@ -45,7 +45,7 @@
 //! or reorders float arithmetic). Each path's result depends only on its own numbers, never on
 //! its lane or its neighbours, and the feed adds a pixel's samples in sample order, so an
 //! image is the same bits either way, and so are the counted work and the statistics, each
-//! path's counted apart and added to its own pixel's.
+//! lane's counted over its run of one block's paths and added to that block (integer sums).
 //! `tracer/tests/path_lanes.rs` holds the two to each other image by image.
 //!
 //! Why this pays where a lockstep loop of scalar kernels did not (docs/bench.md, issue 12,
@@ -118,7 +118,8 @@ impl World {
     }
 
     /// Renders every path `feed` hands out, up to eight at a time, and hands each one's
-    /// radiance and counted work back to `feed` as it ends: each path's, bit for bit, what
+    /// radiance back to `feed` as it ends (and each lane's counted work as `feed` asks for it,
+    /// [`PathFeed::next_path`]): each path's, bit for bit, what
     /// [`World::radiance_from`] finds for it. A lane whose path ends takes the feed's next
     /// one at once, so that the shading's vector instructions work on eight paths for as
     /// long as the feed has paths, not on a pixel's dwindling few (at a pixel's last bounces
@@ -192,7 +193,7 @@ impl World {
                 *shading = walked[i]
                     && loop {
                         let lane = (&mut gathered, &mut texels[i]);
-                        let moment = &moments[lane_moment::<MOVES>(i)];
+                        let moment = &moments[moment_index::<MOVES>(i)];
                         let phase = Self::surface_phase::<TEXTURED, MOVES>;
                         if phase(self, moment, &mut paths, i, lane, sky) {
                             break true;
@@ -204,6 +205,11 @@ impl World {
                     };
             }
             if !shading.iter().any(|&s| s) {
+                // Every lane's last call found the feed dry, which took its counted work.
+                debug_assert!(
+                    paths.counted_for.iter().all(|&c| c == NOT_COUNTED),
+                    "a lane's counted work was left behind"
+                );
                 return;
             }
             for (i, texel) in texels.iter_mut().enumerate().filter(|_| TEXTURED) {
@@ -223,7 +229,7 @@ impl World {
             // Third phase: shadow rays, then each path's next ray or its end.
             for (i, &shading) in shading.iter().enumerate() {
                 let lane = (&gathered, &shaded, &shadows);
-                let moment = &moments[lane_moment::<MOVES>(i)];
+                let moment = &moments[moment_index::<MOVES>(i)];
                 if shading && !self.third_phase(moment, &mut paths, i, lane) {
                     paths.end(i, feed);
                 }
@@ -254,7 +260,7 @@ impl World {
                     moments[i] = self.motion.moment(paths.time[i]);
                 }
             }
-            let moment = &moments[lane_moment::<MOVES>(i)];
+            let moment = &moments[moment_index::<MOVES>(i)];
             let stats = &mut paths.stats[i];
             stats.rays += 1;
             let ray = &paths.ray[i];
@@ -501,7 +507,7 @@ impl World {
 /// one moment of a still world (one address for every lane, which the walks then need not
 /// compute lane by lane).
 #[inline(always)]
-fn lane_moment<const MOVES: bool>(i: usize) -> usize {
+fn moment_index<const MOVES: bool>(i: usize) -> usize {
     if MOVES { i } else { 0 }
 }
 

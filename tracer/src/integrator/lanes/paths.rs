@@ -53,7 +53,8 @@ pub(crate) struct NewPath<'a> {
     /// 104 bytes of counts, stored in eight-byte steps and read back in wider ones, a stall
     /// the processor cannot forward).
     pub stats: &'a mut PathStats,
-    /// The feed's mark of whose `stats` are, [`NOT_COUNTED`] where they are none.
+    /// Which block of the feed's `stats` were counted for (the feed's own mark), or
+    /// [`NOT_COUNTED`] where the lane owes none.
     pub counted_for: &'a mut u32,
 }
 

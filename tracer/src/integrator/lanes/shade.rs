@@ -215,7 +215,7 @@ pub(super) fn shade<
         );
         let moved = MOVING && g.moved[i];
         let (placed, spawn) = g.placed.get(i);
-        let at = choose(moved, placed, on_triangle);
+        let at = point_where(moved, placed, on_triangle);
         let p = at.p;
         out.p.set(i, p);
         let frame = Frame::from_normal(g.normal.get(i));
@@ -261,7 +261,8 @@ pub(super) fn shade<
         };
         let wi = frame.to_world(scattered);
         out.next_dir.set(i, wi);
-        out.next_origin.set(i, leave(&at, (moved, spawn), wi));
+        out.next_origin
+            .set(i, origin_leaving(&at, (moved, spawn), wi));
         // `triangle_sample`: a point uniform on the light's triangle, as seen from `p`; or
         // where a point light is (`SurfacePoint::exact`: no error, on no surface).
         let su = g.light[0][i].sqrt();
@@ -274,19 +275,10 @@ pub(super) fn shade<
         let on_triangle =
             SurfacePoint::on_triangle_with_normal(&corners, b1, b2, g.light_plane.get(i));
         let point = POINT && g.point[i];
-        let light_at = SurfacePoint {
-            p: if point { corners[0] } else { on_triangle.p },
-            error: if point { Vec3::ZERO } else { on_triangle.error },
-            normal: if point {
-                Vec3::ZERO
-            } else {
-                on_triangle.normal
-            },
-            spawn: None,
-        };
+        let light_at = point_where(point, SurfacePoint::exact(corners[0]), on_triangle);
         let light_moved = MOVING && g.light_moved[i];
         let (light_placed, light_spawn) = g.light_placed.get(i);
-        let light_at = choose(light_moved, light_placed, light_at);
+        let light_at = point_where(light_moved, light_placed, light_at);
         let to_light = light_at.p - p;
         let distance_squared = to_light.length_squared();
         let distance = distance_squared.sqrt();
@@ -368,29 +360,27 @@ pub(super) fn shade<
             & (light_pdf > 0.0);
         // `shadow_ray`: towards the sky (`spawn_ray`), or with both ends off their surfaces
         // (`spawn_ray_to`; a point light's end, on no surface, stays where it is).
-        let origin = leave(&at, (moved, spawn), if sky { sky_way } else { to_light });
+        let origin = origin_leaving(&at, (moved, spawn), if sky { sky_way } else { to_light });
         let widened = SurfacePoint {
             error: light_at.error + gamma(2) * (light_at.p - origin).abs(),
             ..light_at
         };
-        let target = leave(&widened, (light_moved, light_spawn), origin - light_at.p);
+        let target = origin_leaving(&widened, (light_moved, light_spawn), origin - light_at.p);
         out.origin.set(i, origin);
         out.reach
             .set(i, if sky { sky_way } else { target - origin });
     }
 }
 
-/// `placed` where `moved`, else `computed`: field by field, as selects.
+/// `given` where `take` holds, else `otherwise`, field by field as selects (which the loop
+/// vectorises, where a choice of the whole point was a branch); neither's `spawn`, which the
+/// shading keeps apart.
 #[inline(always)]
-fn choose(moved: bool, placed: SurfacePoint, computed: SurfacePoint) -> SurfacePoint {
+fn point_where(take: bool, given: SurfacePoint, otherwise: SurfacePoint) -> SurfacePoint {
     SurfacePoint {
-        p: if moved { placed.p } else { computed.p },
-        error: if moved { placed.error } else { computed.error },
-        normal: if moved {
-            placed.normal
-        } else {
-            computed.normal
-        },
+        p: if take { given.p } else { otherwise.p },
+        error: if take { given.error } else { otherwise.error },
+        normal: if take { given.normal } else { otherwise.normal },
         spawn: None,
     }
 }
@@ -399,7 +389,11 @@ fn choose(moved: bool, placed: SurfacePoint, computed: SurfacePoint) -> SurfaceP
 /// triangle (`moved`), the origin worked out in its object's space for the side of its
 /// normal `toward` points to (`spawn`, above and below), else [`offset`]'s.
 #[inline(always)]
-fn leave(at: &SurfacePoint, (moved, [above, below]): (bool, [Vec3; 2]), toward: Vec3) -> Vec3 {
+fn origin_leaving(
+    at: &SurfacePoint,
+    (moved, [above, below]): (bool, [Vec3; 2]),
+    toward: Vec3,
+) -> Vec3 {
     let offset = offset(at, toward);
     let spawned = if at.normal.dot(toward) < 0.0 {
         below
