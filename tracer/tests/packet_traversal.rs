@@ -352,6 +352,12 @@ fn scenes_render_the_same_bits_with_camera_packets_and_without() {
         ("glass-cluster-pan/glass-cluster-pan.toml", 32, 8, pinhole),
         ("prism/prism.toml", 24, 3, pinhole),
         ("window-room/window-room.toml", 24, 5, pinhole),
+        // Moving objects, asked by each ray after its packet's walk of the still tree: a ball
+        // and a turning box under a moving camera; a swinging lamp; fog through a window
+        // with a moving object.
+        ("cornell-blur/cornell-blur.toml", 24, 5, pinhole),
+        ("swinging-lamp/swinging-lamp.toml", 24, 5, pinhole),
+        ("fog-window/fog-window.toml", 16, 3, pinhole),
     ] {
         let path = root.join(scene);
         let (packets, work) = render(&path, size, spp, CameraRays::Packets, adjust);

@@ -9,9 +9,10 @@
 //! path's time, with the error bound that spawning from it needs.
 //!
 //! A pixel's camera rays leave the same point (or the same lens) in nearly the same direction,
-//! so their first hits are found together, up to eight samples at a time
-//! ([`World::camera_hits`], `crate::geometry`'s packets): each ray is tested exactly as it
-//! would be alone, so the hits are the same bits. Packets are made of one pixel's samples, never
+//! so their first hits in the still tree are found together, up to eight samples at a time
+//! ([`World::camera_hits`], `crate::geometry`'s packets; each ray's moving objects are asked
+//! after, at its own time): each ray is tested exactly as it would be alone, so the hits are
+//! the same bits. Packets are made of one pixel's samples, never
 //! of neighbouring pixels, so that what a pixel counts as work depends on the pixel alone, not
 //! on the tile it falls in: the cost map stays the same for every partition.
 
@@ -108,24 +109,42 @@ impl World {
         self.accel.set_box_simd(simd)
     }
 
-    /// The closest hits of a pixel's camera rays `rays` (at most [`crate::geometry::PACKET`]),
-    /// found together into `hits`, their work counted in `stats`; `false`, with nothing done,
-    /// where this world traces them one by one instead (then [`World::radiance`] finds each).
+    /// The closest hits of a pixel's camera rays `rays` (at most [`crate::geometry::PACKET`])
+    /// in the still tree, found together into `hits`, their work counted in `stats`; `false`,
+    /// with nothing done, where this world traces them one by one instead (then
+    /// [`World::radiance`] finds each). Moving objects are not asked here: each ray's path asks
+    /// them after, at the ray's own time ([`World::first_hit`]).
     pub fn camera_hits(
         &self,
         rays: &[Ray],
         hits: &mut [Option<Hit>],
         stats: &mut TraversalStats,
     ) -> bool {
-        // Moving objects would be asked at each ray's own time after the tree: left to the
-        // single-ray path, as are the traversals kept for comparison.
-        let together = self.camera_rays == CameraRays::Packets
-            && self.traversal == Traversal::Robust
-            && self.motion.is_empty();
+        // The traversals kept for comparison walk one ray at a time.
+        let together =
+            self.camera_rays == CameraRays::Packets && self.traversal == Traversal::Robust;
         if together {
             self.accel.intersect_packet(rays, hits, stats);
         }
         together
+    }
+
+    /// The closest hit of the camera ray `ray` at `moment`, from its closest hit in the still
+    /// tree (`still`, found by [`World::camera_hits`]): the moving objects asked after it, as
+    /// [`World::closest`] asks them after its own walk of the still tree, so the hit is the same.
+    #[inline(always)]
+    pub(super) fn first_hit(
+        &self,
+        ray: &Ray,
+        still: Option<Hit>,
+        moment: &Moment,
+        stats: &mut TraversalStats,
+    ) -> Option<Hit> {
+        if self.motion.is_empty() {
+            return still;
+        }
+        self.motion
+            .closest::<false>(moment, ray, still, self.traversal, stats)
     }
 
     /// The closest hit of `ray` at `moment`.

@@ -178,8 +178,9 @@ impl World {
         self.radiance_from(&ray, None, time, sampler, stats)
     }
 
-    /// [`World::radiance`], with the closest hit of `ray` already found where `first` is
-    /// `Some` (by [`World::camera_hits`], which counted its work).
+    /// [`World::radiance`], with the closest hit of `ray` in the still tree already found where
+    /// `first` is `Some` (by [`World::camera_hits`], which counted its work; moving objects are
+    /// asked here).
     ///
     /// The ray is taken by reference: passed by value, the caller copied it into a temporary
     /// just before the call, in two overlapping 16-byte stores, and the path's first read of
@@ -277,7 +278,8 @@ impl World {
             segment += 1;
             stats.rays += 1;
             let found = match first.take() {
-                Some(found) => found,
+                Some(still) if PLAIN => still,
+                Some(still) => self.first_hit(&ray, still, moment, &mut stats.traversal),
                 None => self.closest(&ray, moment, &mut stats.traversal),
             };
             if media {

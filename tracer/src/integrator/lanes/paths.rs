@@ -40,7 +40,8 @@ impl PathLanes {
 pub(crate) struct NewPath<'a> {
     /// The camera ray.
     pub ray: &'a mut Ray,
-    /// The camera ray's closest hit, where the feed found it already (a camera packet).
+    /// The camera ray's closest hit in the still tree, where the feed found it already (a camera
+    /// packet; the lane asks its moving objects after).
     pub first: &'a mut Option<Option<Hit>>,
     /// The sample's numbers, the camera's already drawn.
     pub sampler: &'a mut PixelSampler,
