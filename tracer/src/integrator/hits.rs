@@ -113,7 +113,7 @@ impl World {
     /// in the still tree, found together into `hits`, their work counted in `stats`; `false`,
     /// with nothing done, where this world traces them one by one instead (then
     /// [`World::radiance`] finds each). Moving objects are not asked here: each ray's path asks
-    /// them after, at the ray's own time ([`World::first_hit`]).
+    /// them after, at the ray's own time (`World::first_hit`).
     pub fn camera_hits(
         &self,
         rays: &[Ray],
