@@ -113,7 +113,7 @@ impl World {
     /// in the still tree, found together into `hits`, their work counted in `stats`; `false`,
     /// with nothing done, where this world traces them one by one instead (then
     /// [`World::radiance`] finds each). Moving objects are not asked here: each ray's path asks
-    /// them after, at the ray's own time (`World::first_hit`).
+    /// them after, at the ray's own time (`World::with_moving`).
     pub fn camera_hits(
         &self,
         rays: &[Ray],
@@ -129,11 +129,13 @@ impl World {
         together
     }
 
-    /// The closest hit of the camera ray `ray` at `moment`, from its closest hit in the still
-    /// tree (`still`, found by [`World::camera_hits`]): the moving objects asked after it, as
-    /// [`World::closest`] asks them after its own walk of the still tree, so the hit is the same.
+    /// The closest hit of `ray` at `moment`, from `still`, its closest hit in the still tree:
+    /// the moving objects asked after it, with `CERTAIN` as [`World::closest_certain`] asks
+    /// them. Every closest-hit query finishes so, whoever walked the still tree: a single ray's
+    /// walk ([`World::closest_from`] with these steps written out), or a camera packet's
+    /// ([`World::camera_hits`]), so the hit is the same.
     #[inline(always)]
-    pub(super) fn first_hit(
+    pub(super) fn with_moving<const CERTAIN: bool>(
         &self,
         ray: &Ray,
         still: Option<Hit>,
@@ -144,7 +146,7 @@ impl World {
             return still;
         }
         self.motion
-            .closest::<false>(moment, ray, still, self.traversal, stats)
+            .closest::<CERTAIN>(moment, ray, still, self.traversal, stats)
     }
 
     /// The closest hit of `ray` at `moment`.
@@ -171,6 +173,8 @@ impl World {
         let hit = self
             .accel
             .intersect_from(ray, set_up, self.traversal, stats);
+        // `World::with_moving`'s steps written out: called here, in the lanes' and the scalar
+        // path's hottest query, it compiled to 0.15 % more instructions on the Cornell box.
         if self.motion.is_empty() {
             return hit;
         }
@@ -190,11 +194,7 @@ impl World {
         let hit = self
             .accel
             .intersect_certain_with(ray, self.traversal, stats);
-        if self.motion.is_empty() {
-            return hit;
-        }
-        self.motion
-            .closest::<true>(moment, ray, hit, self.traversal, stats)
+        self.with_moving::<true>(ray, hit, moment, stats)
     }
 
     /// Whether anything certainly blocks `ray` at `moment`.

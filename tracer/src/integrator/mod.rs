@@ -279,7 +279,7 @@ impl World {
             stats.rays += 1;
             let found = match first.take() {
                 Some(still) if PLAIN => still,
-                Some(still) => self.first_hit(&ray, still, moment, &mut stats.traversal),
+                Some(still) => self.with_moving::<false>(&ray, still, moment, &mut stats.traversal),
                 None => self.closest(&ray, moment, &mut stats.traversal),
             };
             if media {

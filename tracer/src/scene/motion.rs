@@ -141,20 +141,16 @@ impl TransformTrack {
 
     /// The placement at `time` (frames).
     pub fn at(&self, time: f64) -> Placement {
-        self.at_in(self.segment(time), time)
-    }
-
-    /// [`TransformTrack::at`], where the caller has `segment` (which is `self.segment(time)`)
-    /// already: a path's start places every object of a few and keeps each one's segment too.
-    pub fn at_in(&self, segment: usize, time: f64) -> Placement {
         let mut placed = Placement::IDENTITY;
-        self.place_in(segment, time, &mut placed);
+        self.place_in(self.segment(time), time, &mut placed);
         placed
     }
 
-    /// [`TransformTrack::at_in`], written over `out` field by field: a path's start refills
-    /// its placements in place, where a placement (240 bytes) built aside and copied in took
-    /// 3 % of `cornell-blur`'s render in `memmove`.
+    /// [`TransformTrack::at`], where the caller has `segment` (which is `self.segment(time)`)
+    /// already, written over `out` field by field: a path's start places every object of a
+    /// few, keeps each one's segment too, and refills its placements in place, where a
+    /// placement (240 bytes) built aside and copied in took 3 % of `cornell-blur`'s render in
+    /// `memmove`.
     #[inline]
     pub fn place_in(&self, segment: usize, time: f64, out: &mut Placement) {
         let (a, b) = self.segment_keys(segment);

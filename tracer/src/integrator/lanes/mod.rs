@@ -265,7 +265,9 @@ impl World {
             stats.rays += 1;
             let ray = &paths.ray[i];
             let found = match paths.first[i].take() {
-                Some(still) if MOVES => self.first_hit(ray, still, moment, &mut stats.traversal),
+                Some(still) if MOVES => {
+                    self.with_moving::<false>(ray, still, moment, &mut stats.traversal)
+                }
                 Some(hit) => hit,
                 None => {
                     let set_up = paths.set_up_ready[i].then_some((&paths.set_up, i));
