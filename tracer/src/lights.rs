@@ -191,17 +191,16 @@ impl Lights {
     }
 
     /// Whether every light is one the paths in lanes sample (`integrator/lanes/`): an emissive
-    /// triangle, still or moving, a point light, or an environment without portals that is constant
-    /// (sampled uniformly over the sphere) or a map sampled by its importance.
+    /// triangle, still or moving, a point light, or an environment that is constant (sampled
+    /// uniformly over the sphere) or a map sampled by its importance, with portals or without.
     pub(crate) fn lanes_sample_all(&self, scene: &Scene) -> bool {
-        let sky_in_lanes = self.portals.is_empty()
-            && match (&scene.environment, &self.map_sampler) {
-                (None | Some(Environment::Constant(_)), None) => true,
-                (Some(Environment::Map(_)), Some(_)) => true,
-                // A map sampled uniformly (a comparison knob) is read at every direction
-                // drawn, which the lanes' vector shading does not do.
-                _ => false,
-            };
+        let sky_in_lanes = match (&scene.environment, &self.map_sampler) {
+            (None | Some(Environment::Constant(_)), None) => true,
+            (Some(Environment::Map(_)), Some(_)) => true,
+            // A map sampled uniformly (a comparison knob) is read at every direction drawn,
+            // which the lanes' vector shading does not do.
+            _ => false,
+        };
         !self.lights.is_empty()
             && self.lights.iter().all(|light| match light {
                 Light::Triangle(_) | Light::Point { .. } => true,
@@ -377,28 +376,7 @@ impl Lights {
                     delta: true,
                 })
             }
-            Light::Environment => {
-                let environment = scene
-                    .environment
-                    .as_ref()
-                    .expect("the environment is listed only when the scene has one");
-                let (wi, radiance, pdf) = self.environment_sample(environment, u, choice)?;
-                // With portals, the same direction might have come through one.
-                let other_pdf = if self.portals.is_empty() {
-                    0.0
-                } else {
-                    choice * self.portals_pdf(p, wi)
-                };
-                Some(LightSample {
-                    wi,
-                    distance: f32::INFINITY,
-                    at: SurfacePoint::exact(Vec3::ZERO),
-                    radiance,
-                    pdf,
-                    other_pdf,
-                    delta: false,
-                })
-            }
+            Light::Environment => self.environment_light_sample(scene, p, u, choice),
         }
     }
 

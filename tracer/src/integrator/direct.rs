@@ -82,13 +82,28 @@ impl AreaLightSampling {
     ) -> f32 {
         if light.delta || (self == AreaLightSampling::Light && on_area_light(light)) {
             1.0
-        } else if light.other_pdf > 0.0 {
-            // Three strategies: see `LightSample::other_pdf`.
-            let (g, h) = (f64::from(scatter_pdf()), f64::from(light.other_pdf));
-            power_heuristic(light.pdf, (g * g + h * h).sqrt() as f32)
         } else {
-            power_heuristic(light.pdf, scatter_pdf())
+            power_heuristic(
+                light.pdf,
+                against_strategies(scatter_pdf(), light.other_pdf),
+            )
         }
+    }
+}
+
+/// The density a light sample's own is weighed against by the power heuristic: the
+/// scatterer's, `scatter_pdf`, where the light is sampled one way; where it is sampled two
+/// ways (the environment with portals: its `other_pdf` positive), the root of the sum of both
+/// other strategies' squared densities, which makes the two-strategy heuristic the one over
+/// three, `f^2 / (f^2 + g^2 + h^2)` (see `LightSample::other_pdf`). For the scalar paths and
+/// the lanes' vector shading alike (whose loop makes the branch a select).
+#[inline(always)]
+pub(super) fn against_strategies(scatter_pdf: f32, other_pdf: f32) -> f32 {
+    if other_pdf > 0.0 {
+        let (g, h) = (f64::from(scatter_pdf), f64::from(other_pdf));
+        (g * g + h * h).sqrt() as f32
+    } else {
+        scatter_pdf
     }
 }
 

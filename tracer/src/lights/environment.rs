@@ -61,6 +61,40 @@ impl Lights {
         })
     }
 
+    /// The environment's own light sample from `p` (chosen with probability `choice`) for the
+    /// numbers `u`: [`Lights::environment_sample`]'s, with the density by which the portals
+    /// would have produced the same direction where the scene has them. The scalar path's
+    /// next-event estimation and the lanes' (where the scene has portals) both take it here.
+    #[inline]
+    pub(crate) fn environment_light_sample(
+        &self,
+        scene: &Scene,
+        p: Vec3,
+        u: Vec2,
+        choice: f32,
+    ) -> Option<LightSample> {
+        let environment = scene
+            .environment
+            .as_ref()
+            .expect("the environment is listed only when the scene has one");
+        let (wi, radiance, pdf) = self.environment_sample(environment, u, choice)?;
+        // With portals, the same direction might have come through one.
+        let other_pdf = if self.portals.is_empty() {
+            0.0
+        } else {
+            choice * self.portals_pdf(p, wi)
+        };
+        Some(LightSample {
+            wi,
+            distance: f32::INFINITY,
+            at: SurfacePoint::exact(Vec3::ZERO),
+            radiance,
+            pdf,
+            other_pdf,
+            delta: false,
+        })
+    }
+
     /// The density with which `sample` would have produced the escaped direction `dir` from
     /// `p`.
     pub fn environment_pdf(&self, scene: &Scene, p: Vec3, dir: Vec3) -> f32 {

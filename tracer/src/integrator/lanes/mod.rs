@@ -1,14 +1,16 @@
 //! A tile's paths in lanes: eight paths advanced a bounce at a time, their shading computed
-//! together in vector instructions, for the worlds whose every path can be
-//! ([`World::lanes_fit`]): worlds without media or dispersion, of diffuse surfaces (textured
-//! or not, with shading normals or not), ideal mirrors, smooth glass and rough metals, still
-//! or moving, lit by emissive triangles (still or moving), point lights and a constant sky or
-//! an environment map. The Cornell scenes, Sponza, the README's scene and the shipped scenes
-//! of motion blur are such worlds. Where objects move, each lane holds its path's moment (its
-//! objects placed as the path starts), its walks ask the moving objects at it, and the first
-//! phase places the points of hits on moving triangles and of moving lights' samples, as the
-//! scalar path does, for the vector shading to take as they are (compiled apart, so that
-//! still worlds pay for none of it).
+//! together in vector instructions, for the worlds whose every path can be ([`World::lanes_fit`]):
+//! worlds without media or dispersion, of diffuse surfaces (textured or not, with shading normals
+//! or not), ideal mirrors, smooth glass and rough metals, still or moving, lit by emissive
+//! triangles (still or moving), point lights and a constant sky or an environment map, seen through
+//! portals or not. The Cornell scenes, Sponza, the README's scene and the shipped scenes of motion
+//! blur are such worlds. Where objects move, each lane holds its path's moment (its objects placed
+//! as the path starts), its walks ask the moving objects at it, and the first phase places the
+//! points of hits on moving triangles and of moving lights' samples, as the scalar path does, for
+//! the vector shading to take as they are (compiled apart, so that still worlds pay for none of
+//! it). Where the scene has portals, the first phase draws both of the environment's samples, its
+//! own and the one through the portals, and the vector shading weighs both over the three
+//! strategies, each with its shadow ray.
 //!
 //! The paths come from a feed ([`PathFeed`]; the tile's, `tile/lanes.rs`, hands out its
 //! pixels' samples in order, a camera packet at a time) and go back to it as they end, in any
@@ -56,7 +58,7 @@
 use super::scatter::{BounceNumbers, resolve};
 use super::{AreaLightSampling, UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
-use crate::geometry::{Moment, OffsetMethod, PACKET, Ray, SetUpRows, hit_point};
+use crate::geometry::{Moment, OffsetMethod, PACKET, Ray, SetUpRows, SurfacePoint, hit_point};
 use crate::lights::{LanesLight, placed_sample};
 use crate::material::{Bsdf, BsdfSample, Frame, Ggx};
 use crate::scene::Texture;
@@ -91,10 +93,9 @@ impl World {
     /// mirrors, smooth glass (a delta bounce: no light sample, the direction drawn by
     /// `Bsdf::sample`) or rough metals (the direction drawn by `Bsdf::sample`, the light sample
     /// weighed by the lobe), every light an emissive triangle (still or moving), a point light
-    /// or an environment without portals, constant or a map sampled by its importance
-    /// (`Lights::lanes_sample_all`),
-    /// lights found both ways and weighed (the default), the default offsets and RGB sampling,
-    /// and shadow rays on. Each condition names a step the lanes leave out; a world that fails
+    /// or an environment, constant or a map sampled by its importance, with portals or not
+    /// (`Lights::lanes_sample_all`), lights found both ways and weighed (the default), the
+    /// default offsets and RGB sampling, and shadow rays on. Each condition names a step the lanes leave out; a world that fails
     /// one renders one path at a time, as every world can. Russian roulette may be off: its
     /// game is then never played, in the lanes as in the scalar path.
     pub fn lanes_fit(&self) -> bool {
@@ -227,8 +228,9 @@ impl World {
             let shadows = SetUpRows::new(shaded.origin.rows(), shaded.reach.rows());
             paths.set_up = SetUpRows::new(shaded.next_origin.rows(), shaded.next_dir.rows());
             // Third phase: shadow rays, then each path's next ray or its end.
+            let portals = matches!(sky, SkyLight::Portals);
             for (i, &shading) in shading.iter().enumerate() {
-                let lane = (&gathered, &shaded, &shadows);
+                let lane = (&gathered, &shaded, &shadows, portals);
                 let moment = &moments[moment_index::<MOVES>(i)];
                 if shading && !self.third_phase(moment, &mut paths, i, lane) {
                     paths.end(i, feed);
@@ -411,6 +413,9 @@ impl World {
         }
         paths.stats[i].light_samples += 1;
         let (light, choice) = self.lights.lanes_choice(u.light_choice);
+        if matches!(sky, SkyLight::Portals) {
+            g.through[i] = false;
+        }
         (g.light[0][i], g.light[1][i]) = (u.light.x, u.light.y);
         g.choice[i] = choice;
         g.sky[i] = matches!(light, LanesLight::Environment);
@@ -433,6 +438,28 @@ impl World {
             } => {
                 g.corners[0].set(i, position);
                 g.emission.set(i, intensity);
+            }
+            // Where the scene has portals, both of the environment's samples are drawn here,
+            // lane by lane, as `World::sample_lights` draws them, from the point the vector
+            // shading will find (the same expressions: `SurfacePoint::on_triangle_with_normal`
+            // of the corners gathered above, or the placed point).
+            LanesLight::Environment if matches!(sky, SkyLight::Portals) => {
+                let p = match &placed {
+                    None => {
+                        SurfacePoint::on_triangle_with_normal(
+                            &triangle.p,
+                            hit.b1,
+                            hit.b2,
+                            self.accel.plane_normal(hit.triangle),
+                        )
+                        .p
+                    }
+                    Some(placed) => placed.at.p,
+                };
+                self.environment_through_portals(p, (u.light_choice, u.light), choice, g, i);
+                if g.through[i] {
+                    paths.stats[i].light_samples += 1;
+                }
             }
             // An environment map's sample is drawn here, lane by lane, where a constant
             // environment's is drawn in the vector shading.
@@ -464,6 +491,41 @@ impl World {
         true
     }
 
+    /// Both of the environment's samples from `p` where the scene has portals, into lane `i`
+    /// of `g`, as `World::sample_lights` draws them: its own (`Lights::
+    /// environment_light_sample`) and, where there is one, a second through the portals
+    /// (`Lights::portal_sample`). Out of line: inlined into the lanes' first phase, its code
+    /// cost every other world's lanes 0.7 % more instructions (the Cornell box).
+    #[inline(never)]
+    fn environment_through_portals(
+        &self,
+        p: Vec3,
+        (u_choice, u): (f32, glam::Vec2),
+        choice: f32,
+        g: &mut Gathered,
+        i: usize,
+    ) {
+        let own = self
+            .lights
+            .environment_light_sample(&self.scene, p, u, choice);
+        let (dir, arriving, pdf, other) =
+            own.as_ref().map_or((Vec3::Z, Vec3::ZERO, 0.0, 0.0), |own| {
+                (own.wi, own.radiance, own.pdf, own.other_pdf)
+            });
+        g.sky_dir.set(i, dir);
+        g.emission.set(i, arriving);
+        g.sky_pdf[i] = pdf;
+        g.sky_other[i] = other;
+        let through = own.and_then(|_| self.lights.portal_sample(&self.scene, p, u_choice, u));
+        g.through[i] = through.is_some();
+        if let Some(through) = through {
+            g.through_dir.set(i, through.wi);
+            g.through_emission.set(i, through.radiance);
+            g.through_pdf[i] = through.pdf;
+            g.through_other[i] = through.other_pdf;
+        }
+    }
+
     /// Lane `i`'s third phase: its shadow ray, then its next ray; `false` where its path
     /// ends.
     #[inline(always)]
@@ -472,9 +534,13 @@ impl World {
         moment: &Moment,
         paths: &mut Paths,
         i: usize,
-        (g, shaded, shadows): (&Gathered, &Shaded, &SetUpRows),
+        (g, shaded, shadows, portals): (&Gathered, &Shaded, &SetUpRows, bool),
     ) -> bool {
         let stats = &mut paths.stats[i];
+        // Where the environment took its sample through the portals too, both are summed
+        // before they are weighed by the throughput, as `World::direct_from` sums them.
+        let both = portals && g.through[i] && !g.delta[i];
+        let mut own = Vec3::ZERO;
         if shaded.lit[i] {
             stats.shadow_rays += 1;
             let shadow = Ray {
@@ -483,8 +549,27 @@ impl World {
                 t_max: if g.sky[i] { f32::INFINITY } else { 1.0 },
             };
             if !self.occluded_from(&shadow, Some((shadows, i)), moment, &mut stats.traversal) {
-                paths.radiance[i] += paths.beta.get(i) * shaded.value.get(i);
+                if both {
+                    own = shaded.value.get(i);
+                } else {
+                    paths.radiance[i] += paths.beta.get(i) * shaded.value.get(i);
+                }
             }
+        }
+        if both {
+            let mut through = Vec3::ZERO;
+            if shaded.through_lit[i] {
+                stats.shadow_rays += 1;
+                let shadow = Ray {
+                    origin: shaded.through_origin.get(i),
+                    dir: g.through_dir.get(i),
+                    t_max: f32::INFINITY,
+                };
+                if !self.occluded_from(&shadow, None, moment, &mut stats.traversal) {
+                    through = shaded.through_value.get(i);
+                }
+            }
+            paths.radiance[i] += paths.beta.get(i) * (own + through);
         }
         // Counted before the path may end here, where the scalar path counts it after: a path
         // that ends takes its depth with it, so no number changes.
@@ -553,6 +638,10 @@ fn shade_for(
 ) {
     let kinds = (surfaces, point, moves);
     match sky {
+        // A world with portals runs the shading compiled for every kind of surface and light
+        // (its portals' samples, lane by lane in the first phase, cost far more than the
+        // selects): one more instance.
+        SkyLight::Portals => shade::<true, true, true, true, true, true, true>(g, beta, out),
         SkyLight::Map => shade_with_sky::<true, true>(kinds, g, beta, out),
         SkyLight::Constant(_) => shade_with_sky::<true, false>(kinds, g, beta, out),
         SkyLight::Absent => shade_with_sky::<false, false>(kinds, g, beta, out),
@@ -561,7 +650,7 @@ fn shade_for(
 
 /// [`shade_for`], its sky chosen.
 #[inline(always)]
-fn shade_with_sky<const SKY: bool, const MAP: bool>(
+fn shade_with_sky<const SKY: bool, const SKY_DRAWN: bool>(
     (surfaces, point, moves): (Surfaces, bool, bool),
     g: &Gathered,
     beta: &Points,
@@ -571,25 +660,40 @@ fn shade_with_sky<const SKY: bool, const MAP: bool>(
         // A world whose objects move runs the shading compiled for every kind of surface and
         // light: one instance per sky rather than six more (its selects cost little beside
         // placing its objects).
-        return shade::<SKY, MAP, true, true, true, true>(g, beta, out);
+        return shade::<SKY, SKY_DRAWN, true, true, true, true, false>(g, beta, out);
     }
     match (surfaces, point) {
-        (Surfaces::Diffuse, false) => shade::<SKY, MAP, false, false, false, false>(g, beta, out),
-        (Surfaces::Diffuse, true) => shade::<SKY, MAP, false, false, true, false>(g, beta, out),
-        (Surfaces::Deltas, false) => shade::<SKY, MAP, true, false, false, false>(g, beta, out),
-        (Surfaces::Deltas, true) => shade::<SKY, MAP, true, false, true, false>(g, beta, out),
-        (Surfaces::Glossy, false) => shade::<SKY, MAP, true, true, false, false>(g, beta, out),
-        (Surfaces::Glossy, true) => shade::<SKY, MAP, true, true, true, false>(g, beta, out),
+        (Surfaces::Diffuse, false) => {
+            shade::<SKY, SKY_DRAWN, false, false, false, false, false>(g, beta, out)
+        }
+        (Surfaces::Diffuse, true) => {
+            shade::<SKY, SKY_DRAWN, false, false, true, false, false>(g, beta, out)
+        }
+        (Surfaces::Deltas, false) => {
+            shade::<SKY, SKY_DRAWN, true, false, false, false, false>(g, beta, out)
+        }
+        (Surfaces::Deltas, true) => {
+            shade::<SKY, SKY_DRAWN, true, false, true, false, false>(g, beta, out)
+        }
+        (Surfaces::Glossy, false) => {
+            shade::<SKY, SKY_DRAWN, true, true, false, false, false>(g, beta, out)
+        }
+        (Surfaces::Glossy, true) => {
+            shade::<SKY, SKY_DRAWN, true, true, true, false, false>(g, beta, out)
+        }
     }
 }
 
 /// The environment as the lanes sample it where it is one of the lights: a constant one (what
-/// it sends every way), drawn in the vector shading, or a map, drawn lane by lane before it.
+/// it sends every way), drawn in the vector shading, or a map, drawn lane by lane before it;
+/// or either where the scene has portals, whose samples, both the environment's own and the
+/// one through the portals, are drawn lane by lane before it.
 #[derive(Clone, Copy)]
 enum SkyLight {
     Absent,
     Constant(Vec3),
     Map,
+    Portals,
 }
 
 impl SkyLight {
@@ -597,6 +701,9 @@ impl SkyLight {
     fn of(world: &World) -> Self {
         if !world.lights.environment_is_light() {
             return SkyLight::Absent;
+        }
+        if world.lights.has_portals() {
+            return SkyLight::Portals;
         }
         match &world.scene.environment {
             Some(Environment::Constant(radiance)) => SkyLight::Constant(*radiance),
@@ -611,7 +718,7 @@ impl SkyLight {
     fn constant(self) -> Vec3 {
         match self {
             SkyLight::Constant(radiance) => radiance,
-            SkyLight::Absent | SkyLight::Map => Vec3::ZERO,
+            SkyLight::Absent | SkyLight::Map | SkyLight::Portals => Vec3::ZERO,
         }
     }
 }

@@ -4,7 +4,7 @@
 
 use super::LANES;
 use crate::geometry::{SurfacePoint, gamma};
-use crate::integrator::direct::power_heuristic;
+use crate::integrator::direct::{against_strategies, power_heuristic};
 use crate::integrator::survival;
 use crate::lights::uniform_sphere;
 use crate::material::{Frame, Ggx, sample_cosine_hemisphere};
@@ -138,10 +138,22 @@ pub(super) struct Gathered {
     /// Whether the light picked is the environment (then `emission` is what it sends, and
     /// the triangle's values are stale).
     pub(super) sky: Lanes<bool>,
-    /// An environment map's sample, drawn in the first phase: its direction and density (the
-    /// choice's included; 0 where the map gave no direction, whose `emission` is then zero).
+    /// The environment's own sample where the first phase drew it (a map's, or any sky's
+    /// where the scene has portals): its direction and density (the choice's included; 0
+    /// where the map gave no direction, whose `emission` is then zero), and where the scene
+    /// has portals, the density with which they would have given the same direction.
     pub(super) sky_dir: Points,
     pub(super) sky_pdf: Lanes<f32>,
+    pub(super) sky_other: Lanes<f32>,
+    /// Where the scene has portals and the environment was sampled, its second sample, through
+    /// them (`Lights::portal_sample`), drawn in the first phase: whether there is one, its
+    /// direction, what arrives along it, its density (the environment's choice included) and
+    /// the environment's own density of the same direction.
+    pub(super) through: Lanes<bool>,
+    pub(super) through_dir: Points,
+    pub(super) through_emission: Points,
+    pub(super) through_pdf: Lanes<f32>,
+    pub(super) through_other: Lanes<f32>,
     /// Russian roulette's number, and whether the game is played after this bounce.
     pub(super) roulette: Lanes<f32>,
     pub(super) playing: Lanes<bool>,
@@ -158,6 +170,11 @@ pub(super) struct Shaded {
     pub(super) value: Points,
     pub(super) origin: Points,
     pub(super) reach: Points,
+    /// Where the scene has portals, the same for the sample through them: whether it brings
+    /// anything, what, and where its shadow ray leaves from (along `Gathered::through_dir`).
+    pub(super) through_lit: Lanes<bool>,
+    pub(super) through_value: Points,
+    pub(super) through_origin: Points,
     /// Whether the path goes on: a direction was sampled, the throughput it leaves is neither
     /// zero nor more than finite, and Russian roulette let it survive. Then `beta` is that
     /// throughput (raised by the roulette where played), `pdf` the direction's density, and
@@ -183,8 +200,11 @@ pub(super) struct Shaded {
 /// lanes' depths differed (docs/bench.md, issue 12, thirty-ninth round).
 /// `tracer/tests/path_lanes.rs` holds every image to the scalar path's, bit for bit.
 ///
-/// `SKY` where the environment is a light, `MAP` where it is a map, whose sample the first
-/// phase drew (its inversions search tables, each lane its own way); a constant one's is drawn
+/// `SKY` where the environment is a light, `SKY_DRAWN` where the first phase drew its sample
+/// (a map's, whose inversions search tables, each lane its own way, or any sky's where the
+/// scene has portals); a constant one's is drawn here otherwise. `PORTALS` where the scene has
+/// portals: the environment's sample is weighed against them as well, and the second sample,
+/// through them, which the first phase drew, is weighed and given its shadow ray's origin
 /// here. `DRAWN` where some surfaces' directions are drawn in the first phase (mirrors, glass,
 /// rough metals): their lanes take that direction, and the deltas among them no light sample.
 /// `GLOSSY` where some surfaces are rough metals, whose light samples the GGX lobe weighs;
@@ -194,11 +214,12 @@ pub(super) struct Shaded {
 #[inline(always)]
 pub(super) fn shade<
     const SKY: bool,
-    const MAP: bool,
+    const SKY_DRAWN: bool,
     const DRAWN: bool,
     const GLOSSY: bool,
     const POINT: bool,
     const MOVING: bool,
+    const PORTALS: bool,
 >(
     g: &Gathered,
     beta: &Points,
@@ -284,10 +305,10 @@ pub(super) fn shade<
         let distance = distance_squared.sqrt();
         let cos_light = -(to_light / distance).dot(g.light_normal.get(i));
         let area = g.light_area[i];
-        // Or the environment's: a map's as drawn, a constant one's uniform over the sphere
+        // Or the environment's: as drawn, or a constant one's uniform over the sphere
         // (`Lights::environment_sample`).
         let sky = SKY && g.sky[i];
-        let sky_way = if MAP {
+        let sky_way = if SKY_DRAWN {
             g.sky_dir.get(i)
         } else {
             uniform_sphere(Vec2::new(g.light[0][i], g.light[1][i]))
@@ -295,7 +316,7 @@ pub(super) fn shade<
         let toward = if sky { sky_way } else { to_light / distance };
         // A point light's density is its choice's alone (a delta in direction).
         let light_pdf = if sky {
-            if MAP {
+            if SKY_DRAWN {
                 g.sky_pdf[i]
             } else {
                 g.choice[i] / (4.0 * PI)
@@ -312,45 +333,35 @@ pub(super) fn shade<
                 distance_squared != 0.0 && area != 0.0 && cos_light > 0.0
             };
         // `unshadowed`: the BSDF towards it, weighed against BSDF sampling.
-        let local = frame.to_local(toward);
-        let (wo_z, wi_z) = if flip {
-            (-wo.z, -local.z)
-        } else {
-            (wo.z, local.z)
+        let surface = Response {
+            frame,
+            wo,
+            flip,
+            glossy: GLOSSY && g.glossy[i],
+            lobe: Ggx {
+                f0: g.f0.get(i),
+                alpha: g.alpha[i],
+            },
+            albedo: g.albedo.get(i),
         };
-        let diffuse_density = if wo_z > 0.0 && wi_z > 0.0 {
-            wi_z * FRAC_1_PI
-        } else {
-            0.0
-        };
-        // A rough metal's: its lobe's value and density, both directions mirrored to the upper
-        // hemisphere as `Bsdf::eval` mirrors them (where they are not both above it, the
-        // lobe's own test gives zero, as the scalar path's `same_side_upper` does).
-        let glossy = GLOSSY && g.glossy[i];
-        let lobe = Ggx {
-            f0: g.f0.get(i),
-            alpha: g.alpha[i],
-        };
-        let (wo_upper, wi_upper) = (
-            Vec3::new(wo.x, wo.y, wo_z),
-            Vec3::new(local.x, local.y, wi_z),
-        );
-        let (f, density) = if glossy {
-            (lobe.eval(wo_upper, wi_upper), lobe.pdf(wo_upper, wi_upper))
-        } else {
-            (g.albedo.get(i) * diffuse_density, diffuse_density)
-        };
+        let (f, density) = surface.toward(toward);
         // A point light's intensity falls off with the squared distance.
         let emission = if point {
             g.emission.get(i) / distance_squared
         } else {
             g.emission.get(i)
         };
-        // A delta light takes all the weight (`AreaLightSampling::light_weight`).
+        // A delta light takes all the weight (`AreaLightSampling::light_weight`); the sky is
+        // weighed against the portals too where the scene has them.
+        let against = if PORTALS {
+            against_strategies(density, if sky { g.sky_other[i] } else { 0.0 })
+        } else {
+            density
+        };
         let weight = if point {
             1.0
         } else {
-            power_heuristic(light_pdf, density)
+            power_heuristic(light_pdf, against)
         };
         out.value.set(i, f * emission * (weight / light_pdf));
         out.lit[i] = sampled_light
@@ -369,6 +380,69 @@ pub(super) fn shade<
         out.origin.set(i, origin);
         out.reach
             .set(i, if sky { sky_way } else { target - origin });
+        if PORTALS {
+            // The sample through the portals, as `World::light_contribution` weighs it.
+            let (through_dir, through_pdf) = (g.through_dir.get(i), g.through_pdf[i]);
+            let (f, density) = surface.toward(through_dir);
+            let weight =
+                power_heuristic(through_pdf, against_strategies(density, g.through_other[i]));
+            let emission = g.through_emission.get(i);
+            out.through_value
+                .set(i, f * emission * (weight / through_pdf));
+            out.through_lit[i] = g.through[i]
+                & !delta
+                & (f != Vec3::ZERO)
+                & (emission != Vec3::ZERO)
+                & (through_pdf > 0.0);
+            out.through_origin
+                .set(i, origin_leaving(&at, (moved, spawn), through_dir));
+        }
+    }
+}
+
+/// A lane's surface as a light sample sees it: `Bsdf::eval` and `Bsdf::pdf` of a diffuse
+/// surface or a rough metal, written out for the vector shading.
+struct Response {
+    frame: Frame,
+    wo: Vec3,
+    /// Whether `wo` is below the shading frame's plane (both directions are then mirrored).
+    flip: bool,
+    glossy: bool,
+    lobe: Ggx,
+    albedo: Vec3,
+}
+
+impl Response {
+    /// The surface's value and density towards `toward` (world space, unit length).
+    #[inline(always)]
+    fn toward(&self, toward: Vec3) -> (Vec3, f32) {
+        let (frame, wo) = (&self.frame, self.wo);
+        let local = frame.to_local(toward);
+        let (wo_z, wi_z) = if self.flip {
+            (-wo.z, -local.z)
+        } else {
+            (wo.z, local.z)
+        };
+        let diffuse_density = if wo_z > 0.0 && wi_z > 0.0 {
+            wi_z * FRAC_1_PI
+        } else {
+            0.0
+        };
+        // A rough metal's: its lobe's value and density, both directions mirrored to the upper
+        // hemisphere as `Bsdf::eval` mirrors them (where they are not both above it, the
+        // lobe's own test gives zero, as the scalar path's `same_side_upper` does).
+        let (wo_upper, wi_upper) = (
+            Vec3::new(wo.x, wo.y, wo_z),
+            Vec3::new(local.x, local.y, wi_z),
+        );
+        if self.glossy {
+            (
+                self.lobe.eval(wo_upper, wi_upper),
+                self.lobe.pdf(wo_upper, wi_upper),
+            )
+        } else {
+            (self.albedo * diffuse_density, diffuse_density)
+        }
     }
 }
 
