@@ -13,6 +13,7 @@
 //! `portal`: the windows a scene may declare for its environment, and the sampling of the
 //! directions through them.
 
+pub(crate) use portal::PortalDraws;
 pub use portal::{MIN_SOLID_ANGLE, Portal, PortalSampler};
 
 use crate::distribution::Distribution2D;

@@ -9,6 +9,8 @@
 //! the tracer that decides a pixel goes through here; `tests/portable_math.rs` checks that no
 //! other call creeps in.
 
+pub(crate) mod branchless;
+
 /// `(sin x, cos x)`.
 pub fn sin_cos(x: f32) -> (f32, f32) {
     libm::sincosf(x)

@@ -19,7 +19,8 @@
 //! is not sampled at all: the density is zero there for sampling and evaluation alike, so the
 //! two always agree.
 
-use crate::math::{acos_f64, sin_cos_f64};
+use crate::geometry::PACKET;
+use crate::math::{acos_f64, branchless, sin_cos_f64};
 use glam::{DVec3, Vec3};
 use std::f64::consts::PI;
 
@@ -80,7 +81,8 @@ pub struct PortalSampler {
 
 /// The rectangle as seen from a point: its corners' coordinates in the portal's frame moved to
 /// the point (with `z0 <= 0`), the normals of the four planes through the point and an edge,
-/// and the solid angle.
+/// the solid angle, and whether the portal is sampled from there at all (where not, the rest
+/// is of no meaning).
 struct View {
     x0: f64,
     x1: f64,
@@ -94,6 +96,55 @@ struct View {
     /// `2 pi - g2 - g3` of Urena et al.
     k: f64,
     solid_angle: f64,
+    sampled: bool,
+}
+
+/// The arc cosine, sine and cosine a portal's sample takes: `libm`'s (the scalar paths'), or
+/// their transcriptions without branches (`math::branchless`, for lanes), which give the same
+/// bits.
+pub(crate) trait Angles {
+    fn acos(x: f64) -> f64;
+    fn sin_cos(x: f64) -> (f64, f64);
+}
+
+/// `libm`'s, through [`crate::math`].
+pub(crate) struct Libm;
+
+/// `libm`'s bits without branches (`math::branchless`), for the angles whose sine and cosine
+/// [`branchless::sin_cos_turn`] covers; [`PortalDraws::checked`] draws the others again
+/// with [`Libm`].
+pub(crate) struct Branchless;
+
+impl Angles for Branchless {
+    #[inline(always)]
+    fn acos(x: f64) -> f64 {
+        branchless::acos(x)
+    }
+    #[inline(always)]
+    fn sin_cos(x: f64) -> (f64, f64) {
+        branchless::sin_cos_turn(x)
+    }
+}
+
+impl Angles for Libm {
+    #[inline(always)]
+    fn acos(x: f64) -> f64 {
+        acos_f64(x)
+    }
+    #[inline(always)]
+    fn sin_cos(x: f64) -> (f64, f64) {
+        sin_cos_f64(x)
+    }
+}
+
+/// A direction drawn through a portal as [`PortalSampler::draw`] computes it, before the
+/// checks that it is one: the direction (unit length where it is one), the solid angle, the
+/// angle whose sine and cosine it took, and whether the portal is sampled from the point.
+pub(crate) struct Drawn {
+    pub(crate) dir: DVec3,
+    pub(crate) solid_angle: f64,
+    pub(crate) angle: f64,
+    pub(crate) sampled: bool,
 }
 
 impl PortalSampler {
@@ -111,29 +162,25 @@ impl PortalSampler {
         }
     }
 
-    fn view(&self, p: DVec3) -> Option<View> {
+    /// The portal as seen from `p`, with no branch a vectorising compiler cannot make a select:
+    /// every lane computes every step, and `sampled` says whether the result means anything.
+    #[inline(always)]
+    fn view<A: Angles>(&self, p: DVec3) -> View {
         let d = self.corner - p;
-        let (x0, y0, mut z0) = (d.dot(self.x), d.dot(self.y), d.dot(self.z));
-        let mut z = self.z;
-        if z0 == 0.0 {
-            return None;
-        }
-        if z0 > 0.0 {
-            z = -z;
-            z0 = -z0;
-        }
+        let (x0, y0, z0) = (d.dot(self.x), d.dot(self.y), d.dot(self.z));
+        let turned = z0 > 0.0;
+        let z = if turned { -self.z } else { self.z };
+        let z0_facing = if turned { -z0 } else { z0 };
         let (x1, y1) = (x0 + self.width, y0 + self.height);
+        let z0 = z0_facing;
         let n0 = DVec3::new(0.0, z0, -y0).normalize();
         let n1 = DVec3::new(-z0, 0.0, x1).normalize();
         let n2 = DVec3::new(0.0, -z0, y1).normalize();
         let n3 = DVec3::new(z0, 0.0, -x0).normalize();
-        let angle = |a: DVec3, b: DVec3| acos_f64((-a.dot(b)).clamp(-1.0, 1.0));
+        let angle = |a: DVec3, b: DVec3| A::acos(clamp(-a.dot(b), -1.0, 1.0));
         let (g0, g1, g2, g3) = (angle(n0, n1), angle(n1, n2), angle(n2, n3), angle(n3, n0));
         let solid_angle = g0 + g1 + g2 + g3 - 2.0 * PI;
-        if solid_angle.is_nan() || solid_angle < MIN_SOLID_ANGLE {
-            return None;
-        }
-        Some(View {
+        View {
             x0,
             x1,
             y0,
@@ -144,16 +191,17 @@ impl PortalSampler {
             b1: n2.z,
             k: 2.0 * PI - g2 - g3,
             solid_angle,
-        })
+            // A point in the portal's plane sees it edge-on.
+            sampled: z0 != 0.0 && !solid_angle.is_nan() && solid_angle >= MIN_SOLID_ANGLE,
+        }
     }
 
-    /// A direction from `p` through the portal for `u` in [0, 1)^2, uniform in solid angle,
-    /// with its density; `None` where the portal is not sampled from `p`, or where rounding put
-    /// the direction off the rectangle (a set of no measure, left out so that the density
-    /// [`PortalSampler::pdf`] gives is always the one the sample was drawn with).
-    pub fn sample(&self, p: Vec3, u: (f64, f64)) -> Option<(Vec3, f32)> {
-        let p64 = p.as_dvec3();
-        let view = self.view(p64)?;
+    /// The direction from `p` through the portal for `u` in [0, 1)^2, uniform in solid angle,
+    /// before [`PortalSampler::sample`]'s checks: the same steps for the scalar paths and the
+    /// lanes, which differ only in `A`, whose functions give the same bits.
+    #[inline(always)]
+    pub(crate) fn draw<A: Angles>(&self, p: DVec3, u: (f64, f64)) -> Drawn {
+        let view = self.view::<A>(p);
         let View {
             x0,
             x1,
@@ -165,27 +213,55 @@ impl PortalSampler {
             ..
         } = view;
         let au = u.0 * view.solid_angle + view.k;
-        let (sin_au, cos_au) = sin_cos_f64(au);
+        let (sin_au, cos_au) = A::sin_cos(au);
         let fu = (cos_au * b0 - b1) / sin_au;
-        let cu = (1.0 / (fu * fu + b0 * b0).sqrt())
-            .copysign(fu)
-            .clamp(-1.0 + f64::EPSILON, 1.0 - f64::EPSILON);
-        let xu = (-(cu * z0) / (1.0 - cu * cu).sqrt()).clamp(x0, x1);
+        let cu = clamp(
+            (1.0 / (fu * fu + b0 * b0).sqrt()).copysign(fu),
+            -1.0 + f64::EPSILON,
+            1.0 - f64::EPSILON,
+        );
+        let xu = clamp(-(cu * z0) / (1.0 - cu * cu).sqrt(), x0, x1);
         let dd = (xu * xu + z0 * z0).sqrt();
         let h0 = y0 / (dd * dd + y0 * y0).sqrt();
         let h1 = y1 / (dd * dd + y1 * y1).sqrt();
         let hv = h0 + u.1 * (h1 - h0);
         let yv = if hv * hv < 1.0 - 1e-12 {
-            (hv * dd / (1.0 - hv * hv).sqrt()).clamp(y0, y1)
+            clamp(hv * dd / (1.0 - hv * hv).sqrt(), y0, y1)
         } else {
             y1
         };
-        let dir = (self.x * xu + self.y * yv + view.z * z0).normalize();
-        let wi = dir.as_vec3();
-        if !wi.is_finite() || wi == Vec3::ZERO || !self.crosses(p64, wi.as_dvec3()) {
-            return None;
+        Drawn {
+            dir: (self.x * xu + self.y * yv + view.z * z0).normalize(),
+            solid_angle: view.solid_angle,
+            angle: au,
+            sampled: view.sampled,
         }
-        Some((wi, (1.0 / view.solid_angle) as f32))
+    }
+
+    /// `drawn` from `p` as [`PortalSampler::sample`] gives it: `None` where the portal is not
+    /// sampled from `p` or where rounding put the direction off the rectangle.
+    #[inline(always)]
+    pub(crate) fn checked(&self, p: DVec3, drawn: &Drawn) -> Option<(Vec3, f32)> {
+        self.accepts(p, drawn)
+            .then(|| (drawn.dir.as_vec3(), density(true, drawn.solid_angle)))
+    }
+
+    /// Whether [`PortalSampler::checked`] takes `drawn`: the portal is sampled from `p`, and
+    /// the direction, rounded to `f32`, is one and crosses the rectangle. Without a branch, for
+    /// the lanes' loop too.
+    #[inline(always)]
+    fn accepts(&self, p: DVec3, drawn: &Drawn) -> bool {
+        let wi = drawn.dir.as_vec3();
+        drawn.sampled & wi.is_finite() & (wi != Vec3::ZERO) & self.crosses(p, wi.as_dvec3())
+    }
+
+    /// A direction from `p` through the portal for `u` in [0, 1)^2, uniform in solid angle,
+    /// with its density; `None` where the portal is not sampled from `p`, or where rounding put
+    /// the direction off the rectangle (a set of no measure, left out so that the density
+    /// [`PortalSampler::pdf`] gives is always the one the sample was drawn with).
+    pub fn sample(&self, p: Vec3, u: (f64, f64)) -> Option<(Vec3, f32)> {
+        let p64 = p.as_dvec3();
+        self.checked(p64, &self.draw::<Libm>(p64, u))
     }
 
     /// The density in solid angle with which [`PortalSampler::sample`] produces `wi` from `p`:
@@ -196,23 +272,265 @@ impl PortalSampler {
         if !self.crosses(p64, wi.as_dvec3()) {
             return 0.0;
         }
-        self.view(p64)
-            .map_or(0.0, |view| (1.0 / view.solid_angle) as f32)
+        let view = self.view::<Libm>(p64);
+        density(view.sampled, view.solid_angle)
     }
 
     /// Whether the ray from `p` along `w` meets the rectangle (its edges included).
+    #[inline(always)]
     fn crosses(&self, p: DVec3, w: DVec3) -> bool {
         let t = (self.corner - p).dot(self.z) / w.dot(self.z);
-        if !(t > 0.0 && t.is_finite()) {
-            return false;
-        }
         let at = p + w * t - self.corner;
         let (s, r) = (at.dot(self.x), at.dot(self.y));
-        (0.0..=self.width).contains(&s) && (0.0..=self.height).contains(&r)
+        // Every test evaluated and combined without a branch (where `t` is not a positive
+        // finite distance, `s` and `r` are of no meaning, and the first test fails).
+        (t > 0.0 && t.is_finite())
+            & (0.0 <= s)
+            & (s <= self.width)
+            & (0.0 <= r)
+            & (r <= self.height)
     }
 
     /// The solid angle the portal subtends from `p`, zero where it is not sampled from there.
     pub fn solid_angle(&self, p: Vec3) -> f64 {
-        self.view(p.as_dvec3()).map_or(0.0, |v| v.solid_angle)
+        let view = self.view::<Libm>(p.as_dvec3());
+        if view.sampled { view.solid_angle } else { 0.0 }
     }
+}
+
+/// The density in solid angle of a direction through a portal that subtends `solid_angle`
+/// from where it is seen, where it is `sampled` from there.
+#[inline(always)]
+fn density(sampled: bool, solid_angle: f64) -> f32 {
+    if sampled {
+        (1.0 / solid_angle) as f32
+    } else {
+        0.0
+    }
+}
+
+/// `v` held to `[low, high]` as `f64::clamp` holds it, without its check that `low <= high`
+/// (a branch to a panic, which would keep a loop of lanes from vectorising; the callers' bounds
+/// are ordered wherever the result is used).
+#[inline(always)]
+fn clamp(v: f64, low: f64, high: f64) -> f64 {
+    let v = if v < low { low } else { v };
+    if v > high { high } else { v }
+}
+
+/// The lanes' draws through portals (`integrator/lanes/`): each lane's portal, point and
+/// numbers, set lane by lane, then drawn all together in one loop that vectorises (with AVX
+/// where the processor has it), then checked lane by lane: each lane's direction what
+/// [`PortalSampler::sample`] gives, bit for bit, as [`Branchless`] gives `libm`'s bits and
+/// the angles it does not cover are drawn again with `libm`. Why: drawn one lane at a time,
+/// the chain of square roots, divisions and arc cosines of a draw was two fifths of a render
+/// of a room lit through its window (docs/bench.md, issue 16).
+#[derive(Clone, Copy, Default)]
+pub(crate) struct PortalDraws {
+    /// Which lanes have a draw set and not yet checked, and through which portal (its index
+    /// among the scene's).
+    pub(crate) pending: [bool; PACKET],
+    pub(crate) portal: [usize; PACKET],
+    /// Each lane's portal's frame: its corner, its axes and its sides' lengths, a coordinate
+    /// at a time.
+    corner: [[f64; PACKET]; 3],
+    x: [[f64; PACKET]; 3],
+    y: [[f64; PACKET]; 3],
+    z: [[f64; PACKET]; 3],
+    width: [f64; PACKET],
+    height: [f64; PACKET],
+    p: [[f64; PACKET]; 3],
+    u: [[f64; PACKET]; 2],
+    dir: [[f64; PACKET]; 3],
+    solid_angle: [f64; PACKET],
+    angle: [f64; PACKET],
+    sampled: [bool; PACKET],
+    accepted: [bool; PACKET],
+    /// Each lane's other direction (the environment's own sample) and, once drawn, the
+    /// portal's density of it, [`PortalSampler::pdf`]'s bits: the lane's point sees the
+    /// portal as its draw does.
+    other: [[f64; PACKET]; 3],
+    other_density: [f32; PACKET],
+}
+
+impl PortalDraws {
+    /// Sets lane `i`'s draw through `portal`, the scene's `k`th, from `p` for `u`, and the
+    /// direction `other` whose density through the portal the draw finds too.
+    #[inline(always)]
+    pub(crate) fn set(
+        &mut self,
+        i: usize,
+        (k, portal): (usize, &PortalSampler),
+        (p, other): (Vec3, Vec3),
+        u: (f64, f64),
+    ) {
+        self.portal[i] = k;
+        (self.other[0][i], self.other[1][i], self.other[2][i]) =
+            (f64::from(other.x), f64::from(other.y), f64::from(other.z));
+        let rows = |rows: &mut [[f64; PACKET]; 3], v: DVec3| {
+            (rows[0][i], rows[1][i], rows[2][i]) = (v.x, v.y, v.z);
+        };
+        rows(&mut self.corner, portal.corner);
+        rows(&mut self.x, portal.x);
+        rows(&mut self.y, portal.y);
+        rows(&mut self.z, portal.z);
+        (self.width[i], self.height[i]) = (portal.width, portal.height);
+        rows(&mut self.p, p.as_dvec3());
+        (self.u[0][i], self.u[1][i]) = u;
+        self.pending[i] = true;
+    }
+
+    /// Draws every lane's direction at once (the lanes not pending too, on what they hold).
+    pub(crate) fn draw(&mut self) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx") {
+            // SAFETY: the processor has AVX, just checked.
+            return unsafe { self.draw_avx() };
+        }
+        self.draw_lanes();
+    }
+
+    /// [`PortalDraws::draw_lanes`] compiled with AVX: four lanes of `f64` a step.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn draw_avx(&mut self) {
+        self.draw_lanes();
+    }
+
+    #[inline(always)]
+    fn draw_lanes(&mut self) {
+        let at =
+            |rows: &[[f64; PACKET]; 3], i: usize| DVec3::new(rows[0][i], rows[1][i], rows[2][i]);
+        for i in 0..PACKET {
+            let portal = PortalSampler {
+                corner: at(&self.corner, i),
+                x: at(&self.x, i),
+                y: at(&self.y, i),
+                z: at(&self.z, i),
+                width: self.width[i],
+                height: self.height[i],
+            };
+            let p = at(&self.p, i);
+            let drawn = portal.draw::<Branchless>(p, (self.u[0][i], self.u[1][i]));
+            self.accepted[i] = portal.accepts(p, &drawn);
+            // `PortalSampler::pdf`, the view at `p` the draw's.
+            let crossed = portal.crosses(p, at(&self.other, i));
+            self.other_density[i] = if crossed {
+                density(drawn.sampled, drawn.solid_angle)
+            } else {
+                0.0
+            };
+            (self.dir[0][i], self.dir[1][i], self.dir[2][i]) =
+                (drawn.dir.x, drawn.dir.y, drawn.dir.z);
+            self.solid_angle[i] = drawn.solid_angle;
+            self.angle[i] = drawn.angle;
+            self.sampled[i] = drawn.sampled;
+        }
+    }
+
+    /// The portal's density of lane `i`'s other direction, as [`PortalSampler::pdf`] gives
+    /// it (drawn by [`PortalDraws::draw`]).
+    #[inline(always)]
+    pub(crate) fn other_density(&self, i: usize) -> f32 {
+        self.other_density[i]
+    }
+
+    /// The point lane `i` draws from.
+    #[inline(always)]
+    pub(crate) fn point(&self, i: usize) -> Vec3 {
+        DVec3::new(self.p[0][i], self.p[1][i], self.p[2][i]).as_vec3()
+    }
+
+    /// Lane `i`'s draw, drawn, as [`PortalSampler::sample`] gives it through `portal`, the
+    /// lane's; the lane is no longer pending.
+    #[inline(always)]
+    pub(crate) fn checked(&mut self, i: usize, portal: &PortalSampler) -> Option<(Vec3, f32)> {
+        self.pending[i] = false;
+        let p = DVec3::new(self.p[0][i], self.p[1][i], self.p[2][i]);
+        if !branchless::sin_cos_turn_covers(self.angle[i]) {
+            return portal.checked(p, &portal.draw::<Libm>(p, (self.u[0][i], self.u[1][i])));
+        }
+        let dir = DVec3::new(self.dir[0][i], self.dir[1][i], self.dir[2][i]);
+        self.accepted[i].then(|| (dir.as_vec3(), density(true, self.solid_angle[i])))
+    }
+}
+
+/// The lanes' draws give what the scalar sample gives, bit for bit, from points all about a
+/// portal, near its plane (where it is seen edge-on, and the angles its draw turns through
+/// reach the ones `math::branchless` leaves to `libm`) and far from it, at every scale; and
+/// the portal's density of another direction what `PortalSampler::pdf` gives.
+#[cfg(test)]
+#[test]
+fn lanes_draw_what_the_scalar_sample_draws() {
+    let mut state = 7u64;
+    let mut next = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let (mut compared, mut drawn_again, mut sampled, mut crossing) = (0, 0, 0, 0);
+    for scale in [1e-3f32, 1.0, 40.0, 1e4] {
+        let portal = Portal::from_corners([
+            Vec3::new(0.0, 0.9, 2.0) * scale,
+            Vec3::new(0.0, 2.6, 2.0) * scale,
+            Vec3::new(0.0, 2.6, 4.2) * scale,
+            Vec3::new(0.0, 0.9, 4.2) * scale,
+        ])
+        .expect("a rectangle");
+        let sampler = PortalSampler::new(&portal);
+        let mut draws = PortalDraws::default();
+        for round in 0..4000 {
+            let mut set = Vec::new();
+            for i in 0..PACKET {
+                // Half the points within a thousandth of the plane, some beyond the edges.
+                let off = if round % 2 == 0 { 1e-3 } else { 3.0 };
+                let p =
+                    Vec3::new((next() - 0.5) * off, next() * 4.0 - 0.5, next() * 7.0 - 0.5) * scale;
+                let u = (f64::from(next()), f64::from(next()));
+                // The other direction: towards a point of the portal for half the lanes
+                // (its edges too), anywhere for the rest.
+                let other = if i % 2 == 0 {
+                    let (a, b) = (next() * 1.02 - 0.01, next() * 1.02 - 0.01);
+                    portal.corner + portal.edge_u * a + portal.edge_v * b - p
+                } else {
+                    Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5)
+                }
+                .normalize();
+                draws.set(i, (0, &sampler), (p, other), u);
+                set.push((p, u, other));
+            }
+            draws.draw();
+            for (i, &(p, u, other)) in set.iter().enumerate() {
+                let density = sampler.pdf(p, other);
+                assert_eq!(
+                    draws.other_density(i).to_bits(),
+                    density.to_bits(),
+                    "from {p} along {other}"
+                );
+                crossing += usize::from(density > 0.0);
+                if !branchless::sin_cos_turn_covers(draws.angle[i]) {
+                    drawn_again += 1;
+                }
+                let (lanes, scalar) = (draws.checked(i, &sampler), sampler.sample(p, u));
+                let bits = |s: Option<(Vec3, f32)>| {
+                    s.map(|(w, pdf)| (w.to_array().map(f32::to_bits), pdf.to_bits()))
+                };
+                assert_eq!(bits(lanes), bits(scalar), "from {p} for {u:?}");
+                assert!(!draws.pending[i], "a checked lane is no longer pending");
+                compared += 1;
+                sampled += usize::from(scalar.is_some());
+            }
+        }
+    }
+    assert!(
+        sampled > compared / 2,
+        "{sampled} of {compared} drew a direction"
+    );
+    assert!(drawn_again > 0, "no angle was left to libm");
+    assert!(
+        crossing > compared / 5,
+        "{crossing} of {compared} other directions crossed"
+    );
+    eprintln!("{compared} draws, {sampled} directions, {drawn_again} drawn again by libm");
 }

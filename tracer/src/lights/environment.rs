@@ -3,7 +3,7 @@
 //! ([`crate::environment::PortalSampler`] says why).
 
 use super::{LightSample, Lights};
-use crate::environment::Environment;
+use crate::environment::{Environment, PortalSampler};
 use crate::geometry::SurfacePoint;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
@@ -31,20 +31,59 @@ impl Lights {
         u_choice: f32,
         u: Vec2,
     ) -> Option<LightSample> {
-        let environment = scene.environment.as_ref()?;
+        let (k, u) = self.portal_pick(scene, u_choice, u)?;
+        let drawn = self.portals[k].sample(p, u)?;
+        self.through_portals(scene, p, drawn)
+    }
+
+    /// [`Lights::portal_sample`]'s portal (its index, [`Lights::portal`]) for the light
+    /// choice's number `u_choice`, and the numbers its direction is drawn for; `None` where no
+    /// sample is taken through portals.
+    #[inline(always)]
+    pub(crate) fn portal_pick(
+        &self,
+        scene: &Scene,
+        u_choice: f32,
+        u: Vec2,
+    ) -> Option<(usize, (f64, f64))> {
         let choice = self.environment_choice;
-        if self.portals.is_empty() || choice <= 0.0 {
+        if scene.environment.is_none() || self.portals.is_empty() || choice <= 0.0 {
             return None;
         }
         let below = self.cdf_below(self.environment_index);
         let rest = ((u_choice - below) / choice).clamp(0.0, 1.0);
         let n = self.portals.len();
         let k = ((rest * n as f32) as usize).min(n - 1);
-        let (wi, sampled) = self.portals[k].sample(p, (f64::from(u.y), f64::from(u.x)))?;
+        Some((k, (f64::from(u.y), f64::from(u.x))))
+    }
+
+    /// How many portals the environment is sampled through.
+    #[inline(always)]
+    pub(crate) fn portal_count(&self) -> usize {
+        self.portals.len()
+    }
+
+    /// Portal `k`, as [`Lights::portal_pick`] names it.
+    #[inline(always)]
+    pub(crate) fn portal(&self, k: usize) -> &PortalSampler {
+        &self.portals[k]
+    }
+
+    /// [`Lights::portal_sample`]'s light sample for the direction `wi` its portal drew from
+    /// `p`, with that portal's density `sampled`.
+    #[inline(always)]
+    pub(crate) fn through_portals(
+        &self,
+        scene: &Scene,
+        p: Vec3,
+        (wi, sampled): (Vec3, f32),
+    ) -> Option<LightSample> {
+        let environment = scene.environment.as_ref()?;
+        let choice = self.environment_choice;
         // With one portal its own density is the portals' mean, the same bits (`x / 1` is `x`),
         // without its solid angle worked out a second time; with more, every portal the
         // direction crosses counts.
-        let portals = if n == 1 {
+        let portals = if self.portals.len() == 1 {
             sampled
         } else {
             self.portals_pdf(p, wi)
@@ -130,7 +169,7 @@ impl Lights {
 
     /// The solid-angle density of a sample through the portals from `p` (one picked uniformly):
     /// their densities' mean.
-    pub(super) fn portals_pdf(&self, p: Vec3, wi: Vec3) -> f32 {
+    pub(crate) fn portals_pdf(&self, p: Vec3, wi: Vec3) -> f32 {
         let sum: f32 = self.portals.iter().map(|portal| portal.pdf(p, wi)).sum();
         sum / self.portals.len() as f32
     }

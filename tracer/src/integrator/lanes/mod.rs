@@ -213,6 +213,9 @@ impl World {
                 );
                 return;
             }
+            if matches!(sky, SkyLight::Portals) && gathered.portal_draws.pending.contains(&true) {
+                self.through_portals(&mut gathered, &mut paths);
+            }
             for (i, texel) in texels.iter_mut().enumerate().filter(|_| TEXTURED) {
                 if let Some((bsdf, texel)) = texel.take() {
                     let Bsdf::Diffuse { albedo, .. } = resolve(bsdf, texel) else {
@@ -456,10 +459,7 @@ impl World {
                     }
                     Some(placed) => placed.at.p,
                 };
-                self.environment_through_portals(p, (u.light_choice, u.light), choice, g, i);
-                if g.through[i] {
-                    paths.stats[i].light_samples += 1;
-                }
+                self.environment_with_portals(p, (u.light_choice, u.light), choice, g, i);
             }
             // An environment map's sample is drawn here, lane by lane, where a constant
             // environment's is drawn in the vector shading.
@@ -491,13 +491,16 @@ impl World {
         true
     }
 
-    /// Both of the environment's samples from `p` where the scene has portals, into lane `i`
-    /// of `g`, as `World::sample_lights` draws them: its own (`Lights::
-    /// environment_light_sample`) and, where there is one, a second through the portals
-    /// (`Lights::portal_sample`). Out of line: inlined into the lanes' first phase, its code
-    /// cost every other world's lanes 0.7 % more instructions (the Cornell box).
+    /// The environment's own sample from `p` where the scene has portals, into lane `i` of
+    /// `g`, as `World::sample_lights` draws it (`Lights::environment_light_sample`), and
+    /// where it takes one, the second sample's draw through a portal (`Lights::portal_pick`)
+    /// set in the lane, for every lane's to be drawn together after the first phase
+    /// ([`World::through_portals`]). With one portal, the own sample's density through it is
+    /// found with that draw, from the same view of the portal. Out of line: inlined into the
+    /// lanes' first phase, its code cost every other world's lanes 0.7 % more instructions
+    /// (the Cornell box).
     #[inline(never)]
-    fn environment_through_portals(
+    fn environment_with_portals(
         &self,
         p: Vec3,
         (u_choice, u): (f32, glam::Vec2),
@@ -505,24 +508,58 @@ impl World {
         g: &mut Gathered,
         i: usize,
     ) {
-        let own = self
-            .lights
-            .environment_light_sample(&self.scene, p, u, choice);
-        let (dir, arriving, pdf, other) =
-            own.as_ref().map_or((Vec3::Z, Vec3::ZERO, 0.0, 0.0), |own| {
-                (own.wi, own.radiance, own.pdf, own.other_pdf)
-            });
+        let environment = (self.scene.environment.as_ref())
+            .expect("the environment is a light only where the scene has one");
+        let own = self.lights.environment_sample(environment, u, choice);
+        let (dir, arriving, pdf) = own.unwrap_or((Vec3::Z, Vec3::ZERO, 0.0));
         g.sky_dir.set(i, dir);
         g.emission.set(i, arriving);
         g.sky_pdf[i] = pdf;
-        g.sky_other[i] = other;
-        let through = own.and_then(|_| self.lights.portal_sample(&self.scene, p, u_choice, u));
-        g.through[i] = through.is_some();
-        if let Some(through) = through {
-            g.through_dir.set(i, through.wi);
-            g.through_emission.set(i, through.radiance);
-            g.through_pdf[i] = through.pdf;
-            g.through_other[i] = through.other_pdf;
+        // `Lights::environment_light_sample`'s other density, here where there are several
+        // portals; with one, [`World::through_portals`] sets it.
+        g.sky_other[i] = if own.is_some() && self.lights.portal_count() > 1 {
+            choice * self.lights.portals_pdf(p, dir)
+        } else {
+            0.0
+        };
+        if own.is_some()
+            && let Some((k, u)) = self.lights.portal_pick(&self.scene, u_choice, u)
+        {
+            g.portal_draws
+                .set(i, (k, self.lights.portal(k)), (p, dir), u);
+        }
+    }
+
+    /// Every lane's draw through the portals that its first phase set, drawn together
+    /// (`PortalDraws`), then each lane's second light sample made of it, as
+    /// `Lights::portal_sample` makes it, into `g`; counted in the lane's statistics. Out of
+    /// line, for the reason [`World::environment_with_portals`] is.
+    #[inline(never)]
+    fn through_portals(&self, g: &mut Gathered, paths: &mut Paths) {
+        g.portal_draws.draw();
+        for i in 0..LANES {
+            if !g.portal_draws.pending[i] {
+                continue;
+            }
+            if self.lights.portal_count() == 1 {
+                // The portals' mean density of the own sample's direction is the one portal's
+                // (`x / 1` is `x`), drawn with its view.
+                g.sky_other[i] = g.choice[i] * g.portal_draws.other_density(i);
+            }
+            let k = g.portal_draws.portal[i];
+            let p = g.portal_draws.point(i);
+            let through = g
+                .portal_draws
+                .checked(i, self.lights.portal(k))
+                .and_then(|drawn| self.lights.through_portals(&self.scene, p, drawn));
+            g.through[i] = through.is_some();
+            if let Some(through) = through {
+                paths.stats[i].light_samples += 1;
+                g.through_dir.set(i, through.wi);
+                g.through_emission.set(i, through.radiance);
+                g.through_pdf[i] = through.pdf;
+                g.through_other[i] = through.other_pdf;
+            }
         }
     }
 

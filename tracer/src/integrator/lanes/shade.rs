@@ -3,6 +3,7 @@
 //! exact).
 
 use super::LANES;
+use crate::environment::PortalDraws;
 use crate::geometry::{SurfacePoint, gamma};
 use crate::integrator::direct::{against_strategies, power_heuristic};
 use crate::integrator::survival;
@@ -150,6 +151,9 @@ pub(super) struct Gathered {
     /// direction, what arrives along it, its density (the environment's choice included) and
     /// the environment's own density of the same direction.
     pub(super) through: Lanes<bool>,
+    /// The draws through the portals, set lane by lane in the first phase and drawn together
+    /// after it, before the values above are set from them.
+    pub(super) portal_draws: PortalDraws,
     pub(super) through_dir: Points,
     pub(super) through_emission: Points,
     pub(super) through_pdf: Lanes<f32>,
