@@ -510,6 +510,12 @@ fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without()
         "scale = [1.0, 0.9, 0.8]",
         "scale = [1.0, 0.9, 0.8]\nportals = [[[-3, 3, -3], [3, 3, -3], [3, 3, 3], [-3, 3, 3]]]",
     );
+    let two_portals = mapped.replace(
+        "scale = [1.0, 0.9, 0.8]",
+        "scale = [1.0, 0.9, 0.8]\nportals = [[[-3, 3, -3], [0, 3, -3], [0, 3, 3], [-3, 3, 3]], \
+         [[0, 3, -3], [3, 3, -3], [3, 3, 3], [0, 3, 3]]]",
+    );
+    let two_portals_moving = moving_room(&two_portals);
     let mtl = dir.path().join("room.mtl");
     let lit = std::fs::read_to_string(&mtl).expect("the room's materials");
     // The lamp's emission is in the materials: left out, the map is the one light.
@@ -530,6 +536,13 @@ fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without()
             true,
         ),
         ("map through a portal", &portal, &lit, true),
+        ("map through two portals", &two_portals, &lit, true),
+        (
+            "map through two portals, the room moving",
+            &two_portals_moving,
+            &lit,
+            true,
+        ),
     ];
     for (label, text, materials, in_lanes) in variants {
         std::fs::write(&path, text).expect("the scene file is written");
@@ -542,6 +555,12 @@ fn lanes_render_the_same_bits_under_an_environment_map_with_a_lamp_and_without()
             ),
             "{label}: a map"
         );
+        let portals = ["two portals", "a portal"]
+            .iter()
+            .zip([2, 1])
+            .find_map(|(name, n)| label.contains(name).then_some(n))
+            .unwrap_or(0);
+        assert_eq!(scene.portals.len(), portals, "{label}: its portals");
         for spp in [5, 16] {
             let mut scene = scene.clone();
             scene.settings.samples_per_pixel = spp;

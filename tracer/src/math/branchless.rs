@@ -1,16 +1,18 @@
 //! `libm`'s `acos` and `sincos` written without branches, so that a loop over lanes of them
-//! vectorises: the environment portals' samples in the lanes (`integrator/lanes/portals.rs`).
-//! Each computes the arithmetic of every case `libm` (musl's `e_acos.c`, `__sin`, `__cos` and
-//! `__rem_pio2`) might take, operation for operation, and selects the case `libm` would have
-//! taken, so a lane's result is `libm`'s bit for bit: the tests below hold them to it over
-//! every range and boundary. The tests on `libm`'s high words become comparisons of the
-//! floats themselves (for non-negative numbers the orders agree), which vector instructions
-//! make without integer lanes.
+//! vectorises: the environment portals' draws in the lanes (`environment/portal.rs`,
+//! `PortalDraws`). Each computes the arithmetic of every case `libm` (musl's `e_acos.c`, `__sin`,
+//! `__cos` and `__rem_pio2`) might take, operation for operation, and selects the case `libm` would
+//! have taken, so a lane's result is `libm`'s bit for bit: the tests below hold them to it over
+//! every range and boundary. The tests on `libm`'s high words become comparisons of the floats
+//! themselves (for non-negative numbers the orders agree), which vector instructions make without
+//! integer lanes.
 //!
-//! [`sin_cos_turn`] covers the angles of one turn that `__rem_pio2` reduces by its short
-//! path, a multiple of `pi / 2` from one to four: `(pi / 4, 9 pi / 4]` but for the four
-//! narrow bands about `pi / 2`, `pi`, `3 pi / 2` and `2 pi` where it takes its longer one. It
-//! says which angles those are; the caller computes them with [`super::sin_cos_f64`].
+//! [`sin_cos_turn`] covers the angles of one turn and a little more, from zero to about
+//! `9pi/4`: those up to about `pi/4`, which `sincos` takes as they are, and those `__rem_pio2`
+//! reduces by its short path, a multiple of `pi/2` from one to four, but for the four narrow
+//! bands about `pi/2`, `pi`, `3pi/2` and `2pi` where it takes its longer one. It says which
+//! angles those are ([`sin_cos_turn_covers`]); the caller computes the others with
+//! [`super::sin_cos_f64`].
 
 // The constants are musl's decimal literals verbatim, so that a reader can hold them to the
 // source; they parse to the same doubles as the hexadecimal forms beside them there.
@@ -97,24 +99,27 @@ const fn at_high(high: u64) -> f64 {
     f64::from_bits(high << 32)
 }
 
-/// Whether [`sin_cos_turn`] gives `libm`'s `sincos` of `x`: `x` in `(pi / 4, 9 pi / 4]`,
-/// that is a high word above `0x3fe921fb` and at most `0x401c463b`, but for the four words
-/// where `__rem_pio2` takes its longer reduction (`0x3ff921fb`, `0x400921fb`, `0x4012d97c`,
-/// `0x401921fb`).
+/// Whether [`sin_cos_turn`] gives `libm`'s `sincos` of `x`: `x` from zero (either) to about
+/// `9 pi / 4`, a high word at most `0x401c463b`, but for the four words where
+/// `__rem_pio2` takes its longer reduction (`0x3ff921fb`, `0x400921fb`, `0x4012d97c`,
+/// `0x401921fb`). Not NaN, nor negative.
 #[inline(always)]
 pub fn sin_cos_turn_covers(x: f64) -> bool {
     let band = |high: u64| x >= at_high(high) && x < at_high(high + 1);
     let near_multiple =
         band(0x3ff9_21fb) | band(0x4009_21fb) | band(0x4012_d97c) | band(0x4019_21fb);
-    (x >= at_high(0x3fe9_21fc)) & (x < at_high(0x401c_463c)) & !near_multiple
+    (x >= 0.0) & (x < at_high(0x401c_463c)) & !near_multiple
 }
 
 /// `(sin x, cos x)`, `libm`'s `sincos` bit for bit where [`sin_cos_turn_covers`] `x`
-/// (elsewhere a number of no meaning): `__rem_pio2`'s short reduction by `n` times `pi / 2`,
-/// `n` from one to four as its bands decide, then `__sin` and `__cos` of the remainder and the
-/// quadrant's signs.
+/// (elsewhere a number of no meaning): up to `pi / 4`, `__sin(x, 0, 0)` and `__cos(x, 0)`
+/// (below `2^-27 sqrt 2`, `x` and one); beyond, `__rem_pio2`'s short reduction by `n` times
+/// `pi / 2`, `n` from one to four as its bands decide, then `__sin` and `__cos` of the
+/// remainder and the quadrant's signs.
 #[inline(always)]
 pub fn sin_cos_turn(x: f64) -> (f64, f64) {
+    let reduced = x >= at_high(0x3fe9_21fc);
+    let tiny = x < at_high(0x3e46_a09e);
     // n: 1 up to 3 pi / 4, 2 up to 5 pi / 4, 3 up to 7 pi / 4, 4 beyond.
     let two = x >= at_high(0x4002_d97d);
     let three = x >= at_high(0x400f_6a7b);
@@ -129,21 +134,31 @@ pub fn sin_cos_turn(x: f64) -> (f64, f64) {
         1.0
     };
     let z = x - n * PIO2_1;
-    let y0 = z - n * PIO2_1T;
-    let y1 = (z - y0) - n * PIO2_1T;
+    let (y0, y1) = if reduced {
+        let y0 = z - n * PIO2_1T;
+        (y0, (z - y0) - n * PIO2_1T)
+    } else {
+        (x, 0.0)
+    };
     // `__sin(y0, y1, 1)`.
     let zz = y0 * y0;
     let w = zz * zz;
     let r = S2 + zz * (S3 + zz * S4) + zz * w * (S5 + zz * S6);
     let v = zz * y0;
     let sin = y0 - ((zz * (0.5 * y1 - v * r) - y1) - v * S1);
+    // `__sin(x, 0, 0)`, unreduced.
+    let sin_small = y0 + v * (S1 + zz * r);
     // `__cos(y0, y1)`.
     let r = zz * (C1 + zz * (C2 + zz * C3)) + w * w * (C4 + zz * (C5 + zz * C6));
     let hz = 0.5 * zz;
     let w = 1.0 - hz;
     let cos = w + (((1.0 - w) - hz) + (zz * r - y0 * y1));
     // The quadrant, `n & 3`: 1 (c, -s), 2 (-s, -c), 3 (-c, s), 0 (s, c).
-    if four {
+    if tiny {
+        (x, 1.0)
+    } else if !reduced {
+        (sin_small, cos)
+    } else if four {
         (sin, cos)
     } else if three {
         (-cos, sin)
@@ -216,8 +231,23 @@ mod tests {
     fn sin_cos_turn_is_libms_wherever_it_covers_and_says_where_it_does_not() {
         use std::f64::consts::PI;
         let mut inputs: Vec<f64> = numbers(4, 300_000).map(|u| u * 2.5 * PI).collect();
+        inputs.extend(numbers(5, 50_000).map(|u| u * PI / 4.0));
+        inputs.extend(numbers(6, 20_000).map(|u| u * 1e-7));
+        inputs.extend([
+            0.0,
+            -0.0,
+            -1e-9,
+            -1.0,
+            f64::NAN,
+            1e-300,
+            f64::MIN_POSITIVE * 0.5,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ]);
         // Each band's ends and the four longer reductions' bands, at their high words.
-        let highs: [u64; 12] = [
+        let highs: [u64; 14] = [
+            0x3e46_a09e,
+            0x3e46_a09d,
             0x3fe9_21fb,
             0x3fe9_21fc,
             0x3ff9_21fb,
@@ -258,10 +288,11 @@ mod tests {
                     "sincos({x:e}): {ours:?}, libm {theirs:?}"
                 );
             } else {
-                // Outside: below pi / 4 and above 9 pi / 4, or in the four narrow bands.
+                // Outside: negative or NaN, above 9 pi / 4, or in the four narrow bands.
                 let high = x.to_bits() >> 32;
                 assert!(
-                    high <= 0x3fe9_21fb
+                    x.is_nan()
+                        || x < 0.0
                         || high > 0x401c_463b
                         || [0x3ff9_21fb, 0x4009_21fb, 0x4012_d97c, 0x4019_21fb].contains(&high),
                     "{x:e} (high word {high:x}) is left out"

@@ -63,7 +63,7 @@ use crate::lights::{LanesLight, placed_sample};
 use crate::material::{Bsdf, BsdfSample, Frame, Ggx};
 use crate::scene::Texture;
 use crate::spectrum::SpectralSampling;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// The lanes: as many paths as a camera packet holds rays, eight f32 lanes of AVX.
 const LANES: usize = PACKET;
@@ -95,9 +95,10 @@ impl World {
     /// weighed by the lobe), every light an emissive triangle (still or moving), a point light
     /// or an environment, constant or a map sampled by its importance, with portals or not
     /// (`Lights::lanes_sample_all`), lights found both ways and weighed (the default), the
-    /// default offsets and RGB sampling, and shadow rays on. Each condition names a step the lanes leave out; a world that fails
-    /// one renders one path at a time, as every world can. Russian roulette may be off: its
-    /// game is then never played, in the lanes as in the scalar path.
+    /// default offsets and RGB sampling, and shadow rays on. Each condition names a step the
+    /// lanes leave out; a world that fails one renders one path at a time, as every world can.
+    /// Russian roulette may be off: its game is then never played, in the lanes as in the
+    /// scalar path.
     pub fn lanes_fit(&self) -> bool {
         self.paths == PathLanes::Lanes
             && !self.effects.media
@@ -214,7 +215,7 @@ impl World {
                 return;
             }
             if matches!(sky, SkyLight::Portals) && gathered.portal_draws.pending.contains(&true) {
-                self.through_portals(&mut gathered, &mut paths);
+                self.draw_through_portals(&mut gathered, &mut paths);
             }
             for (i, texel) in texels.iter_mut().enumerate().filter(|_| TEXTURED) {
                 if let Some((bsdf, texel)) = texel.take() {
@@ -495,15 +496,15 @@ impl World {
     /// `g`, as `World::sample_lights` draws it (`Lights::environment_light_sample`), and
     /// where it takes one, the second sample's draw through a portal (`Lights::portal_pick`)
     /// set in the lane, for every lane's to be drawn together after the first phase
-    /// ([`World::through_portals`]). With one portal, the own sample's density through it is
-    /// found with that draw, from the same view of the portal. Out of line: inlined into the
-    /// lanes' first phase, its code cost every other world's lanes 0.7 % more instructions
+    /// ([`World::draw_through_portals`]). With one portal, the own sample's density through it
+    /// is found with that draw, from the same view of the portal. Out of line: inlined into
+    /// the lanes' first phase, its code cost every other world's lanes 0.7 % more instructions
     /// (the Cornell box).
     #[inline(never)]
     fn environment_with_portals(
         &self,
         p: Vec3,
-        (u_choice, u): (f32, glam::Vec2),
+        (u_choice, u): (f32, Vec2),
         choice: f32,
         g: &mut Gathered,
         i: usize,
@@ -516,7 +517,7 @@ impl World {
         g.emission.set(i, arriving);
         g.sky_pdf[i] = pdf;
         // `Lights::environment_light_sample`'s other density, here where there are several
-        // portals; with one, [`World::through_portals`] sets it.
+        // portals; with one, [`World::draw_through_portals`] sets it.
         g.sky_other[i] = if own.is_some() && self.lights.portal_count() > 1 {
             choice * self.lights.portals_pdf(p, dir)
         } else {
@@ -535,7 +536,7 @@ impl World {
     /// `Lights::portal_sample` makes it, into `g`; counted in the lane's statistics. Out of
     /// line, for the reason [`World::environment_with_portals`] is.
     #[inline(never)]
-    fn through_portals(&self, g: &mut Gathered, paths: &mut Paths) {
+    fn draw_through_portals(&self, g: &mut Gathered, paths: &mut Paths) {
         g.portal_draws.draw();
         for i in 0..LANES {
             if !g.portal_draws.pending[i] {

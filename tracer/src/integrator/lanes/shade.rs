@@ -151,13 +151,13 @@ pub(super) struct Gathered {
     /// direction, what arrives along it, its density (the environment's choice included) and
     /// the environment's own density of the same direction.
     pub(super) through: Lanes<bool>,
-    /// The draws through the portals, set lane by lane in the first phase and drawn together
-    /// after it, before the values above are set from them.
-    pub(super) portal_draws: PortalDraws,
     pub(super) through_dir: Points,
     pub(super) through_emission: Points,
     pub(super) through_pdf: Lanes<f32>,
     pub(super) through_other: Lanes<f32>,
+    /// The draws through the portals, set lane by lane in the first phase and drawn together
+    /// after it, before the `through` values above are set from them.
+    pub(super) portal_draws: PortalDraws,
     /// Russian roulette's number, and whether the game is played after this bounce.
     pub(super) roulette: Lanes<f32>,
     pub(super) playing: Lanes<bool>,
