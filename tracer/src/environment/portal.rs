@@ -102,7 +102,7 @@ struct View {
 /// The arc cosine, sine and cosine a portal's sample takes: `libm`'s (the scalar paths'), or
 /// their transcriptions without branches (`math::branchless`, for lanes), which give the same
 /// bits wherever they cover the angle (every arc cosine; the sines and cosines of the angles
-/// `branchless::sin_cos_turn_covers`): [`PortalDraws::checked`] draws the others again with
+/// `branchless::sin_cos_covers`): [`PortalDraws::checked`] draws the others again with
 /// libm.
 pub(crate) trait Angles {
     fn acos(x: f64) -> f64;
@@ -113,7 +113,7 @@ pub(crate) trait Angles {
 pub(crate) struct Libm;
 
 /// `libm`'s bits without branches (`math::branchless`), for the angles whose sine and cosine
-/// [`branchless::sin_cos_turn`] covers; [`PortalDraws::checked`] draws the others again
+/// [`branchless::sin_cos`] covers; [`PortalDraws::checked`] draws the others again
 /// with [`Libm`].
 pub(crate) struct Branchless;
 
@@ -124,7 +124,7 @@ impl Angles for Branchless {
     }
     #[inline(always)]
     fn sin_cos(x: f64) -> (f64, f64) {
-        branchless::sin_cos_turn(x)
+        branchless::sin_cos(x)
     }
 }
 
@@ -452,7 +452,13 @@ impl PortalDraws {
     pub(crate) fn checked(&mut self, i: usize, portal: &PortalSampler) -> Option<(Vec3, f32)> {
         self.pending[i] = false;
         let p = DVec3::new(self.p[0][i], self.p[1][i], self.p[2][i]);
-        if !branchless::sin_cos_turn_covers(self.angle[i]) {
+        // The view, its arc cosines libm's bits everywhere, says exactly where the portal is
+        // not sampled (a point in its plane, a wall around the window, sees it edge-on): no
+        // direction there, and nothing to draw again.
+        if !self.sampled[i] {
+            return None;
+        }
+        if !branchless::sin_cos_covers(self.angle[i]) {
             return portal.checked(p, &portal.draw::<Libm>(p, (self.u[0][i], self.u[1][i])));
         }
         let dir = DVec3::new(self.dir[0][i], self.dir[1][i], self.dir[2][i]);
@@ -558,7 +564,7 @@ fn lanes_draw_what_the_scalar_sample_draws() {
                     "from {p} along {other}"
                 );
                 crossing += usize::from(density > 0.0);
-                if !branchless::sin_cos_turn_covers(draws.angle[i]) {
+                if !branchless::sin_cos_covers(draws.angle[i]) {
                     drawn_again += 1;
                 }
                 let (lanes, scalar) = (draws.checked(i, sampler), sampler.sample(p, u));

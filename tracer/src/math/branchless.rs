@@ -7,11 +7,11 @@
 //! themselves (for non-negative numbers the orders agree), which vector instructions make without
 //! integer lanes.
 //!
-//! [`sin_cos_turn`] covers the angles of one turn and a little more, from zero to about
+//! [`sin_cos`] covers the angles of one turn and a little more, from zero to about
 //! `9pi/4`: those up to about `pi/4`, which `sincos` takes as they are, and those `__rem_pio2`
 //! reduces by its short path, a multiple of `pi/2` from one to four, but for the four narrow
 //! bands about `pi/2`, `pi`, `3pi/2` and `2pi` where it takes its longer one. It says which
-//! angles those are ([`sin_cos_turn_covers`]); the caller computes the others with
+//! angles those are ([`sin_cos_covers`]); the caller computes the others with
 //! [`super::sin_cos_f64`].
 
 // The constants are musl's decimal literals verbatim, so that a reader can hold them to the
@@ -99,25 +99,25 @@ const fn at_high(high: u64) -> f64 {
     f64::from_bits(high << 32)
 }
 
-/// Whether [`sin_cos_turn`] gives `libm`'s `sincos` of `x`: `x` from zero (either) to about
+/// Whether [`sin_cos`] gives `libm`'s `sincos` of `x`: `x` from zero (either) to about
 /// `9 pi / 4`, a high word at most `0x401c463b`, but for the four words where
 /// `__rem_pio2` takes its longer reduction (`0x3ff921fb`, `0x400921fb`, `0x4012d97c`,
 /// `0x401921fb`). Not NaN, nor negative.
 #[inline(always)]
-pub fn sin_cos_turn_covers(x: f64) -> bool {
+pub fn sin_cos_covers(x: f64) -> bool {
     let band = |high: u64| x >= at_high(high) && x < at_high(high + 1);
     let near_multiple =
         band(0x3ff9_21fb) | band(0x4009_21fb) | band(0x4012_d97c) | band(0x4019_21fb);
     (x >= 0.0) & (x < at_high(0x401c_463c)) & !near_multiple
 }
 
-/// `(sin x, cos x)`, `libm`'s `sincos` bit for bit where [`sin_cos_turn_covers`] `x`
+/// `(sin x, cos x)`, `libm`'s `sincos` bit for bit where [`sin_cos_covers`] `x`
 /// (elsewhere a number of no meaning): up to `pi / 4`, `__sin(x, 0, 0)` and `__cos(x, 0)`
 /// (below `2^-27 sqrt 2`, `x` and one); beyond, `__rem_pio2`'s short reduction by `n` times
 /// `pi / 2`, `n` from one to four as its bands decide, then `__sin` and `__cos` of the
 /// remainder and the quadrant's signs.
 #[inline(always)]
-pub fn sin_cos_turn(x: f64) -> (f64, f64) {
+pub fn sin_cos(x: f64) -> (f64, f64) {
     let reduced = x >= at_high(0x3fe9_21fc);
     let tiny = x < at_high(0x3e46_a09e);
     // n: 1 up to 3 pi / 4, 2 up to 5 pi / 4, 3 up to 7 pi / 4, 4 beyond.
@@ -228,7 +228,7 @@ mod tests {
     }
 
     #[test]
-    fn sin_cos_turn_is_libms_wherever_it_covers_and_says_where_it_does_not() {
+    fn sin_cos_is_libms_wherever_it_covers_and_says_where_it_does_not() {
         use std::f64::consts::PI;
         let mut inputs: Vec<f64> = numbers(4, 300_000).map(|u| u * 2.5 * PI).collect();
         inputs.extend(numbers(5, 50_000).map(|u| u * PI / 4.0));
@@ -280,9 +280,9 @@ mod tests {
         let mut covered = 0;
         for x in inputs {
             let theirs = libm::sincos(x);
-            if sin_cos_turn_covers(x) {
+            if sin_cos_covers(x) {
                 covered += 1;
-                let ours = sin_cos_turn(x);
+                let ours = sin_cos(x);
                 assert!(
                     same(ours.0, theirs.0) && same(ours.1, theirs.1),
                     "sincos({x:e}): {ours:?}, libm {theirs:?}"
