@@ -228,18 +228,22 @@ impl Lights {
         u: Vec2,
         choice: f32,
     ) -> Option<(Vec3, Vec3, f32)> {
-        // The uniform density is written as before maps existed, `choice / 4 pi`, so that
-        // constant environments keep their bits.
-        match (&self.map_sampler, environment) {
-            (Some(sampler), Environment::Map(map)) => {
-                let sample = sampler.sample(map, u)?;
-                Some((sample.wi, sample.radiance, choice * sample.pdf))
-            }
-            _ => {
-                let wi = uniform_sphere(u);
-                Some((wi, environment.radiance(wi), choice / (4.0 * PI)))
-            }
+        if let (Some(sampler), Environment::Map(map)) = (&self.map_sampler, environment) {
+            let sample = sampler.sample(map, u)?;
+            return Some((sample.wi, sample.radiance, choice * sample.pdf));
         }
+        let wi = uniform_sphere(u);
+        Some((wi, environment.radiance(wi), uniform_density(choice)))
+    }
+
+    /// Whether [`Lights::environment_sample`] draws `environment`'s directions uniformly over
+    /// the sphere ([`uniform_sphere`], with density [`uniform_density`]): a constant one, or a
+    /// map where the comparison knob samples it so.
+    pub(crate) fn samples_sky_uniformly(&self, environment: &Environment) -> bool {
+        !matches!(
+            (&self.map_sampler, environment),
+            (Some(_), Environment::Map(_))
+        )
     }
 
     /// Whether the environment is one of the lights sampled.
@@ -470,4 +474,12 @@ pub fn uniform_sphere(u: Vec2) -> Vec3 {
     let r = (1.0 - z * z).max(0.0).sqrt();
     let (sin, cos) = crate::math::sin_cos_turn(u.y);
     Vec3::new(r * cos, r * sin, z)
+}
+
+/// The density of a direction [`uniform_sphere`] draws, with the light's choice `choice`:
+/// written `choice / 4 pi`, as before maps existed, so that constant environments keep their
+/// bits. For the scalar paths and the lanes alike.
+#[inline(always)]
+pub(crate) fn uniform_density(choice: f32) -> f32 {
+    choice / (4.0 * PI)
 }

@@ -433,6 +433,13 @@ impl PortalDraws {
         }
     }
 
+    /// Sets lane `i`'s other direction, where it was not known as the lane's draw was set.
+    #[inline(always)]
+    pub(crate) fn set_other(&mut self, i: usize, other: Vec3) {
+        (self.other[0][i], self.other[1][i], self.other[2][i]) =
+            (f64::from(other.x), f64::from(other.y), f64::from(other.z));
+    }
+
     /// The portal's density of lane `i`'s other direction, as [`PortalSampler::pdf`] gives
     /// it (drawn by [`PortalDraws::draw`]).
     #[inline(always)]

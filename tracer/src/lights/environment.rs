@@ -154,7 +154,7 @@ impl Lights {
             (Some(sampler), Some(Environment::Map(map))) => {
                 self.environment_choice * sampler.pdf(map, dir)
             }
-            _ => self.environment_choice / (4.0 * PI),
+            _ => super::uniform_density(self.environment_choice),
         }
     }
 

@@ -59,7 +59,7 @@ use super::scatter::{BounceNumbers, resolve};
 use super::{AreaLightSampling, UNLIMITED_DEPTH, World};
 use crate::environment::Environment;
 use crate::geometry::{Moment, OffsetMethod, PACKET, Ray, SetUpRows, SurfacePoint, hit_point};
-use crate::lights::{LanesLight, placed_sample};
+use crate::lights::{LanesLight, placed_sample, uniform_density, uniform_sphere};
 use crate::material::{Bsdf, BsdfSample, Frame, Ggx};
 use crate::scene::Texture;
 use crate::spectrum::SpectralSampling;
@@ -511,6 +511,14 @@ impl World {
     ) {
         let environment = (self.scene.environment.as_ref())
             .expect("the environment is a light only where the scene has one");
+        let pick = self.lights.portal_pick(&self.scene, u_choice, u);
+        if let Some((k, u)) = pick.filter(|_| self.lights.samples_sky_uniformly(environment)) {
+            // A sky sampled uniformly over the sphere: its own sample is drawn with the draws
+            // through the portals, every lane's together ([`World::draw_through_portals`]).
+            g.portal_draws
+                .set(i, (k, self.lights.portal(k)), (p, Vec3::Z), u);
+            return;
+        }
         let own = self.lights.environment_sample(environment, u, choice);
         let (dir, arriving, pdf) = own.unwrap_or((Vec3::Z, Vec3::ZERO, 0.0));
         g.sky_dir.set(i, dir);
@@ -524,7 +532,7 @@ impl World {
             0.0
         };
         if own.is_some()
-            && let Some((k, u)) = self.lights.portal_pick(&self.scene, u_choice, u)
+            && let Some((k, u)) = pick
         {
             g.portal_draws
                 .set(i, (k, self.lights.portal(k)), (p, dir), u);
@@ -537,6 +545,29 @@ impl World {
     /// line, for the reason [`World::environment_with_portals`] is.
     #[inline(never)]
     fn draw_through_portals(&self, g: &mut Gathered, paths: &mut Paths) {
+        let environment = (self.scene.environment.as_ref())
+            .expect("the environment is a light only where the scene has one");
+        if self.lights.samples_sky_uniformly(environment) {
+            // The sky's own samples, as `Lights::environment_sample` draws them, uniform over
+            // the sphere for the lanes' light numbers: every lane's at once, in a loop that
+            // vectorises, then set lane by lane.
+            let mut own = Points::default();
+            for i in 0..LANES {
+                own.set(i, uniform_sphere(Vec2::new(g.light[0][i], g.light[1][i])));
+            }
+            let pending = g.portal_draws.pending;
+            for i in (0..LANES).filter(|&i| pending[i]) {
+                let (wi, choice) = (own.get(i), g.choice[i]);
+                g.portal_draws.set_other(i, wi);
+                g.sky_dir.set(i, wi);
+                g.emission.set(i, environment.radiance(wi));
+                g.sky_pdf[i] = uniform_density(choice);
+                if self.lights.portal_count() > 1 {
+                    let p = g.portal_draws.point(i);
+                    g.sky_other[i] = choice * self.lights.portals_pdf(p, wi);
+                }
+            }
+        }
         g.portal_draws.draw();
         for i in 0..LANES {
             if !g.portal_draws.pending[i] {

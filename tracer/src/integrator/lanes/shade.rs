@@ -7,10 +7,10 @@ use crate::environment::PortalDraws;
 use crate::geometry::{SurfacePoint, gamma};
 use crate::integrator::direct::{against_strategies, power_heuristic};
 use crate::integrator::survival;
-use crate::lights::uniform_sphere;
+use crate::lights::{uniform_density, uniform_sphere};
 use crate::material::{Frame, Ggx, sample_cosine_hemisphere};
 use glam::{Vec2, Vec3};
-use std::f32::consts::{FRAC_1_PI, PI};
+use std::f32::consts::FRAC_1_PI;
 
 /// Lane values: one per path.
 pub(super) type Lanes<T> = [T; LANES];
@@ -323,7 +323,7 @@ pub(super) fn shade<
             if SKY_DRAWN {
                 g.sky_pdf[i]
             } else {
-                g.choice[i] / (4.0 * PI)
+                uniform_density(g.choice[i])
             }
         } else if point {
             g.choice[i]
