@@ -8,9 +8,10 @@
 //! as the path starts), its walks ask the moving objects at it, and the first phase places the
 //! points of hits on moving triangles and of moving lights' samples, as the scalar path does, for
 //! the vector shading to take as they are (compiled apart, so that still worlds pay for none of
-//! it). Where the scene has portals, the first phase draws both of the environment's samples, its
-//! own and the one through the portals, and the vector shading weighs both over the three
-//! strategies, each with its shadow ray.
+//! it). Where the scene has portals, both of the environment's samples, its own and the one
+//! through a portal, are drawn after the first phase, every lane's draw through the portals at
+//! once in vector instructions (`environment::PortalDraws`), and the vector shading weighs
+//! both over the three strategies, each with its shadow ray.
 //!
 //! The paths come from a feed ([`PathFeed`]; the tile's, `tile/lanes.rs`, hands out its
 //! pixels' samples in order, a camera packet at a time) and go back to it as they end, in any
@@ -708,8 +709,7 @@ fn shade_for(
     let kinds = (surfaces, point, moves);
     match sky {
         // A world with portals runs the shading compiled for every kind of surface and light
-        // (its portals' samples, lane by lane in the first phase, cost far more than the
-        // selects): one more instance.
+        // (its portals' samples cost far more than the selects): one more instance.
         SkyLight::Portals => shade::<true, true, true, true, true, true, true>(g, beta, out),
         SkyLight::Map => shade_with_sky::<true, true>(kinds, g, beta, out),
         SkyLight::Constant(_) => shade_with_sky::<true, false>(kinds, g, beta, out),
@@ -755,8 +755,10 @@ fn shade_with_sky<const SKY: bool, const SKY_DRAWN: bool>(
 
 /// The environment as the lanes sample it where it is one of the lights: a constant one (what
 /// it sends every way), drawn in the vector shading, or a map, drawn lane by lane before it;
-/// or either where the scene has portals, whose samples, both the environment's own and the
-/// one through the portals, are drawn lane by lane before it.
+/// or either where the scene has portals, whose samples, the environment's own and the one
+/// through the portals, are drawn before it: every lane's draw through the portals (and a
+/// uniform sky's own sample) together, in vector instructions, a map's own sample lane by
+/// lane.
 #[derive(Clone, Copy)]
 enum SkyLight {
     Absent,
