@@ -102,8 +102,9 @@ impl Lights {
 
     /// The environment's own light sample from `p` (chosen with probability `choice`) for the
     /// numbers `u`: [`Lights::environment_sample`]'s, with the density by which the portals
-    /// would have produced the same direction where the scene has them. The scalar path's
-    /// next-event estimation and the lanes' (where the scene has portals) both take it here.
+    /// would have produced the same direction where the scene has them: the scalar path's
+    /// (the lanes, where the scene has portals, take its two parts apart, the direction
+    /// before the portals' density of it, which they find with their draws through them).
     #[inline]
     pub(crate) fn environment_light_sample(
         &self,
