@@ -357,19 +357,18 @@ pub(crate) struct PortalDraws {
 }
 
 impl PortalDraws {
-    /// Sets lane `i`'s draw through `portal`, the scene's `k`th, from `p` for `u`, and the
-    /// direction `other` whose density through the portal the draw finds too.
+    /// Sets lane `i`'s draw through `portal`, the scene's `k`th, from `p` for `u`; the
+    /// direction whose density through the portal the draw finds too is set apart
+    /// ([`PortalDraws::set_other`]).
     #[inline(always)]
     pub(crate) fn set(
         &mut self,
         i: usize,
         (k, portal): (usize, &PortalSampler),
-        (p, other): (Vec3, Vec3),
+        p: Vec3,
         u: (f64, f64),
     ) {
         self.portal[i] = k;
-        (self.other[0][i], self.other[1][i], self.other[2][i]) =
-            (f64::from(other.x), f64::from(other.y), f64::from(other.z));
         let rows = |rows: &mut [[f64; PACKET]; 3], v: DVec3| {
             (rows[0][i], rows[1][i], rows[2][i]) = (v.x, v.y, v.z);
         };
@@ -433,7 +432,8 @@ impl PortalDraws {
         }
     }
 
-    /// Sets lane `i`'s other direction, where it was not known as the lane's draw was set.
+    /// Sets lane `i`'s other direction: the environment's own sample, whose density through
+    /// the portal the draw finds.
     #[inline(always)]
     pub(crate) fn set_other(&mut self, i: usize, other: Vec3) {
         (self.other[0][i], self.other[1][i], self.other[2][i]) =
@@ -537,7 +537,8 @@ fn lanes_draw_what_the_scalar_sample_draws() {
                     Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5)
                 }
                 .normalize();
-                draws.set(i, (k, sampler), (p, other), u);
+                draws.set(i, (k, sampler), p, u);
+                draws.set_other(i, other);
                 set.push((i, k, p, u, other));
             }
             // The plain loop's results, then the one `draw` picks (AVX where the processor

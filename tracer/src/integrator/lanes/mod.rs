@@ -215,7 +215,8 @@ impl World {
                 );
                 return;
             }
-            if matches!(sky, SkyLight::Portals) && gathered.portal_draws.pending.contains(&true) {
+            let portals = matches!(sky, SkyLight::Portals);
+            if portals && gathered.portal_draws.pending.contains(&true) {
                 self.draw_through_portals(&mut gathered, &mut paths);
             }
             for (i, texel) in texels.iter_mut().enumerate().filter(|_| TEXTURED) {
@@ -233,7 +234,6 @@ impl World {
             let shadows = SetUpRows::new(shaded.origin.rows(), shaded.reach.rows());
             paths.set_up = SetUpRows::new(shaded.next_origin.rows(), shaded.next_dir.rows());
             // Third phase: shadow rays, then each path's next ray or its end.
-            let portals = matches!(sky, SkyLight::Portals);
             for (i, &shading) in shading.iter().enumerate() {
                 let lane = (&gathered, &shaded, &shadows, portals);
                 let moment = &moments[moment_index::<MOVES>(i)];
@@ -513,11 +513,13 @@ impl World {
         let environment = (self.scene.environment.as_ref())
             .expect("the environment is a light only where the scene has one");
         let pick = self.lights.portal_pick(&self.scene, u_choice, u);
+        // The own sample's density through the portals is set with the draw through them
+        // ([`World::draw_through_portals`]), where the lane takes one.
+        g.sky_other[i] = 0.0;
         if let Some((k, u)) = pick.filter(|_| self.lights.samples_sky_uniformly(environment)) {
             // A sky sampled uniformly over the sphere: its own sample is drawn with the draws
-            // through the portals, every lane's together ([`World::draw_through_portals`]).
-            g.portal_draws
-                .set(i, (k, self.lights.portal(k)), (p, Vec3::Z), u);
+            // through the portals, every lane's together.
+            g.portal_draws.set(i, (k, self.lights.portal(k)), p, u);
             return;
         }
         let own = self.lights.environment_sample(environment, u, choice);
@@ -525,18 +527,11 @@ impl World {
         g.sky_dir.set(i, dir);
         g.emission.set(i, arriving);
         g.sky_pdf[i] = pdf;
-        // `Lights::environment_light_sample`'s other density, here where there are several
-        // portals; with one, [`World::draw_through_portals`] sets it.
-        g.sky_other[i] = if own.is_some() && self.lights.portal_count() > 1 {
-            choice * self.lights.portals_pdf(p, dir)
-        } else {
-            0.0
-        };
         if own.is_some()
             && let Some((k, u)) = pick
         {
-            g.portal_draws
-                .set(i, (k, self.lights.portal(k)), (p, dir), u);
+            g.portal_draws.set(i, (k, self.lights.portal(k)), p, u);
+            g.portal_draws.set_other(i, dir);
         }
     }
 
@@ -558,15 +553,11 @@ impl World {
             }
             let pending = g.portal_draws.pending;
             for i in (0..LANES).filter(|&i| pending[i]) {
-                let (wi, choice) = (own.get(i), g.choice[i]);
+                let wi = own.get(i);
                 g.portal_draws.set_other(i, wi);
                 g.sky_dir.set(i, wi);
                 g.emission.set(i, environment.radiance(wi));
-                g.sky_pdf[i] = uniform_density(choice);
-                if self.lights.portal_count() > 1 {
-                    let p = g.portal_draws.point(i);
-                    g.sky_other[i] = choice * self.lights.portals_pdf(p, wi);
-                }
+                g.sky_pdf[i] = uniform_density(g.choice[i]);
             }
         }
         g.portal_draws.draw();
@@ -574,13 +565,17 @@ impl World {
             if !g.portal_draws.pending[i] {
                 continue;
             }
-            if self.lights.portal_count() == 1 {
-                // The portals' mean density of the own sample's direction is the one portal's
-                // (`x / 1` is `x`), drawn with its view.
-                g.sky_other[i] = g.choice[i] * g.portal_draws.other_density(i);
-            }
             let k = g.portal_draws.portal[i];
             let p = g.portal_draws.point(i);
+            // `Lights::environment_light_sample`'s other density: the portals' mean density of
+            // the own sample's direction; with one portal that portal's (`x / 1` is `x`),
+            // found by the draw from its view.
+            let portals = if self.lights.portal_count() == 1 {
+                g.portal_draws.other_density(i)
+            } else {
+                self.lights.portals_pdf(p, g.sky_dir.get(i))
+            };
+            g.sky_other[i] = g.choice[i] * portals;
             let through = g
                 .portal_draws
                 .checked(i, self.lights.portal(k))

@@ -367,12 +367,9 @@ pub(super) fn shade<
         } else {
             power_heuristic(light_pdf, against)
         };
-        out.value.set(i, f * emission * (weight / light_pdf));
-        out.lit[i] = sampled_light
-            & !delta
-            & (f != Vec3::ZERO)
-            & (emission != Vec3::ZERO)
-            & (light_pdf > 0.0);
+        let (value, brings) = light_value(f, emission, weight, light_pdf);
+        out.value.set(i, value);
+        out.lit[i] = sampled_light & !delta & brings;
         // `shadow_ray`: towards the sky (`spawn_ray`), or with both ends off their surfaces
         // (`spawn_ray_to`; a point light's end, on no surface, stays where it is).
         let origin = origin_leaving(&at, (moved, spawn), if sky { sky_way } else { to_light });
@@ -390,18 +387,23 @@ pub(super) fn shade<
             let (f, density) = surface.toward(through_dir);
             let weight =
                 power_heuristic(through_pdf, against_strategies(density, g.through_other[i]));
-            let emission = g.through_emission.get(i);
-            out.through_value
-                .set(i, f * emission * (weight / through_pdf));
-            out.through_lit[i] = g.through[i]
-                & !delta
-                & (f != Vec3::ZERO)
-                & (emission != Vec3::ZERO)
-                & (through_pdf > 0.0);
+            let (value, brings) = light_value(f, g.through_emission.get(i), weight, through_pdf);
+            out.through_value.set(i, value);
+            out.through_lit[i] = g.through[i] & !delta & brings;
             out.through_origin
                 .set(i, origin_leaving(&at, (moved, spawn), through_dir));
         }
     }
+}
+
+/// What a light sample brings through a surface whose value towards it is `f`: `World::
+/// light_contribution`'s weighed value (in a world without media, whose transmittance of one
+/// changes no bit), and whether it brings anything, that function's test before its shadow
+/// ray; for the lanes' own samples and their samples through portals alike.
+#[inline(always)]
+fn light_value(f: Vec3, emission: Vec3, weight: f32, pdf: f32) -> (Vec3, bool) {
+    let brings = (f != Vec3::ZERO) & (emission != Vec3::ZERO) & (pdf > 0.0);
+    (f * emission * (weight / pdf), brings)
 }
 
 /// A lane's surface as a light sample sees it: `Bsdf::eval` and `Bsdf::pdf` of a diffuse
