@@ -252,15 +252,15 @@ impl World {
         if !self.effects.environment {
             return None;
         }
-        let environment = self.scene.environment.as_ref()?;
+        let look = self.scene.environment.as_ref()?.look(dir);
         stats.environment_lookups += 1;
         let weight = if last_delta {
             1.0
         } else {
-            let light_pdf = self.lights.environment_pdf(&self.scene, last_point, dir);
+            let light_pdf = self.lights.environment_pdf(last_point, dir, &look);
             power_heuristic(last_pdf, light_pdf)
         };
-        Some((environment.radiance(dir), weight))
+        Some((look.radiance, weight))
     }
 
     /// The weight of an emitter that a path's ray found at `at` (on triangle `triangle`),

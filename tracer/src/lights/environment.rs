@@ -3,7 +3,7 @@
 //! ([`crate::environment::PortalSampler`] says why).
 
 use super::{LightSample, Lights};
-use crate::environment::{Environment, PortalSampler};
+use crate::environment::{PortalSampler, SkyLook};
 use crate::geometry::SurfacePoint;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
@@ -78,7 +78,7 @@ impl Lights {
         p: Vec3,
         (wi, sampled): (Vec3, f32),
     ) -> Option<LightSample> {
-        let environment = scene.environment.as_ref()?;
+        let look = scene.environment.as_ref()?.look(wi);
         let choice = self.environment_choice;
         // With one portal its own density is the portals' mean, the same bits (`x / 1` is `x`),
         // without its solid angle worked out a second time; with more, every portal the
@@ -93,9 +93,9 @@ impl Lights {
             wi,
             distance: f32::INFINITY,
             at: SurfacePoint::exact(Vec3::ZERO),
-            radiance: environment.radiance(wi),
+            radiance: look.radiance,
             pdf,
-            other_pdf: choice * self.own_environment_pdf(environment, wi),
+            other_pdf: choice * self.own_environment_pdf(&look),
             delta: false,
         })
     }
@@ -136,36 +136,38 @@ impl Lights {
     }
 
     /// The density with which `sample` would have produced the escaped direction `dir` from
-    /// `p`.
-    pub fn environment_pdf(&self, scene: &Scene, p: Vec3, dir: Vec3) -> f32 {
+    /// `p`, `look` being the environment's look along `dir` ([`Environment::look`]), which the
+    /// caller has for its radiance.
+    ///
+    /// [`Environment::look`]: crate::environment::Environment::look
+    pub fn environment_pdf(&self, p: Vec3, dir: Vec3, look: &SkyLook) -> f32 {
         if self.environment_choice == 0.0 {
             return 0.0;
         }
-        if !self.portals.is_empty()
-            && let Some(environment) = &scene.environment
-        {
+        if !self.portals.is_empty() {
             // Two light strategies: the power heuristic weighs BSDF sampling against the root
             // of the sum of their squared densities (see `LightSample::other_pdf`).
-            let own =
-                f64::from(self.environment_choice * self.own_environment_pdf(environment, dir));
+            let own = f64::from(self.environment_choice * self.own_environment_pdf(look));
             let portals = f64::from(self.environment_choice * self.portals_pdf(p, dir));
             return (own * own + portals * portals).sqrt() as f32;
         }
-        match (&self.map_sampler, &scene.environment) {
-            (Some(sampler), Some(Environment::Map(map))) => {
-                self.environment_choice * sampler.pdf(map, dir)
-            }
-            _ => super::uniform_density(self.environment_choice),
+        match self.map_density(look) {
+            Some(pdf) => self.environment_choice * pdf,
+            None => super::uniform_density(self.environment_choice),
         }
     }
 
     /// The solid-angle density of the environment's own sampling (its map by importance, or the
-    /// sphere uniformly), without the choice of the environment among lights.
-    pub(super) fn own_environment_pdf(&self, environment: &Environment, wi: Vec3) -> f32 {
-        match (&self.map_sampler, environment) {
-            (Some(sampler), Environment::Map(map)) => sampler.pdf(map, wi),
-            _ => 1.0 / (4.0 * PI),
-        }
+    /// sphere uniformly) of the direction `look` was made for, without the choice of the
+    /// environment among lights.
+    pub(super) fn own_environment_pdf(&self, look: &SkyLook) -> f32 {
+        self.map_density(look).unwrap_or(1.0 / (4.0 * PI))
+    }
+
+    /// The map's density of the direction `look` was made for, where the environment is a map
+    /// sampled by its importance.
+    fn map_density(&self, look: &SkyLook) -> Option<f32> {
+        self.map_sampler.as_ref()?.pdf_of(look)
     }
 
     /// The solid-angle density of a sample through the portals from `p` (one picked uniformly):
