@@ -38,8 +38,9 @@ const _: () = assert!(
 /// scenes are far shallower (the 871k-triangle dragon is under 40 levels).
 const INLINE_STACK: usize = 64;
 
-/// A ray prepared for slab tests.
-struct SlabRay {
+/// A ray prepared for slab tests: the binary tree's walk, and the moving objects' swept boxes
+/// (`motion/bounds.rs`), test their boxes through it.
+pub(super) struct SlabRay {
     origin: Vec3A,
     inv_dir: Vec3A,
     /// Lanes whose direction is negative (including -0.0), whose near plane is the box's max.
@@ -47,7 +48,7 @@ struct SlabRay {
 }
 
 impl SlabRay {
-    fn new(ray: &Ray) -> Self {
+    pub(super) fn new(ray: &Ray) -> Self {
         let inv_dir = Vec3A::ONE / Vec3A::from(ray.dir);
         SlabRay {
             origin: ray.origin.into(),
@@ -59,8 +60,14 @@ impl SlabRay {
     /// The entry distance into `aabb` if the ray passes through it within `(0, t_max]`.
     #[inline(always)]
     fn enter(&self, aabb: &Aabb, t_max: f32) -> Option<f32> {
-        let near_plane = Vec3A::select(self.negative, aabb.max, aabb.min);
-        let far_plane = Vec3A::select(self.negative, aabb.min, aabb.max);
+        self.enter_box(aabb.min, aabb.max, t_max)
+    }
+
+    /// [`SlabRay::enter`] for the box from `min` to `max`.
+    #[inline(always)]
+    pub(super) fn enter_box(&self, min: Vec3A, max: Vec3A, t_max: f32) -> Option<f32> {
+        let near_plane = Vec3A::select(self.negative, max, min);
+        let far_plane = Vec3A::select(self.negative, min, max);
         let near = (near_plane - self.origin) * self.inv_dir;
         let far = (far_plane - self.origin) * self.inv_dir * FAR_SCALE;
         // `a > b ? a : b` keeps b when a is NaN; likewise for the minimum.

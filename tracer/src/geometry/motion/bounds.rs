@@ -4,6 +4,7 @@
 
 use crate::geometry::Ray;
 use crate::geometry::offset::{OffsetMethod, SurfacePoint, offset_ray_origin};
+use crate::geometry::traverse::SlabRay;
 use crate::geometry::triangle::gamma;
 use crate::scene::{Placement, TransformTrack};
 use glam::{DMat3, DVec3, Vec3};
@@ -140,6 +141,18 @@ pub(super) fn swept_bounds(track: &TransformTrack, v: &[[Vec3; 3]]) -> Vec<Swept
 }
 
 impl SweptBox {
+    /// The box from `min` to `max` with no padding (no rotation or scale to round through):
+    /// its test is the slab test alone.
+    #[cfg(test)]
+    pub(super) fn unpadded(min: Vec3, max: Vec3) -> Self {
+        SweptBox {
+            min,
+            max,
+            condition: 0.0,
+            reach: 0.0,
+        }
+    }
+
     /// Half the box's surface area: what the tree's build weighs the chance of entering it by.
     pub(super) fn area(&self) -> f32 {
         let d = self.max - self.min;
@@ -160,34 +173,39 @@ impl SweptBox {
     /// Whether `ray` may meet, in `(0, t_max)`, something this box holds, once the ray is taken
     /// into object space with its rounding. The rounding moves the object-space ray by a few
     /// ULPs of its origin and of the distance it travels, which the world sees multiplied by
-    /// the placement's condition number; the box is widened by that before a slab test whose
-    /// far distances are widened by `1 + 2 gamma(3)` (pbrt-v4's conservative test).
+    /// the placement's condition number; the box is widened by that before the still trees'
+    /// robust slab test (`SlabRay`: far distances widened by `1 + 2 gamma(3)`, pbrt-v4's
+    /// conservative test, Ize's argument).
     #[inline]
-    pub(super) fn may_hit(&self, ray: &Ray, t_max: f32) -> bool {
-        let origin = ray.origin.abs().max_element();
-        let pad = gamma(4) * self.condition * (2.0 * origin + self.reach);
+    pub(super) fn may_hit(&self, ray: &SweptRay, t_max: f32) -> bool {
+        let pad = gamma(4) * self.condition * (2.0 * ray.origin_size + self.reach);
         let (min, max) = (self.min - Vec3::splat(pad), self.max + Vec3::splat(pad));
-        let (mut t0, mut t1) = (0.0f32, t_max);
-        for axis in 0..3 {
-            let (o, d) = (ray.origin[axis], ray.dir[axis]);
-            if d == 0.0 {
-                if o < min[axis] || o > max[axis] {
-                    return false;
-                }
-                continue;
-            }
-            let (mut near, mut far) = ((min[axis] - o) / d, (max[axis] - o) / d);
-            if near > far {
-                std::mem::swap(&mut near, &mut far);
-            }
-            far *= 1.0 + 2.0 * gamma(3);
-            t0 = t0.max(near);
-            t1 = t1.min(far);
-            if t0 > t1 {
-                return false;
-            }
+        ray.slab.enter_box(min.into(), max.into(), t_max).is_some()
+    }
+}
+
+/// A world ray made ready for the swept boxes' tests, once for every box a query tests: its
+/// slab test's reciprocal direction (one vector division, where each box's test divided six
+/// times) and the size of its origin, which each box's padding takes.
+pub(super) struct SweptRay {
+    slab: SlabRay,
+    /// The largest coordinate of the ray's origin, in magnitude.
+    origin_size: f32,
+    dir: Vec3,
+}
+
+impl SweptRay {
+    pub(super) fn new(ray: &Ray) -> Self {
+        SweptRay {
+            slab: SlabRay::new(ray),
+            origin_size: ray.origin.abs().max_element(),
+            dir: ray.dir,
         }
-        true
+    }
+
+    /// Whether the ray goes down `axis` (its direction below zero there: not at `-0.0`).
+    pub(super) fn goes_down(&self, axis: usize) -> bool {
+        self.dir[axis] < 0.0
     }
 }
 

@@ -32,7 +32,7 @@ use super::offset::SurfacePoint;
 use super::{Accel, BuildQuality, Hit, Ray, Traversal, TraversalStats};
 use crate::scene::{MovingObject, Placement, TransformTrack};
 pub use bounds::placed_point;
-use bounds::{SweptBox, swept_bounds};
+use bounds::{SweptBox, SweptRay, swept_bounds};
 use elsa::FrozenMap;
 use glam::Vec3;
 use std::cell::Cell;
@@ -238,7 +238,13 @@ impl MotionAccel {
 
     /// The objects whose box of their segment at `moment` `ray` may meet before `t_max`, with
     /// that segment, in object order: the order a flat list of their boxes would try them in.
-    fn candidates(&self, moment: &Moment, ray: &Ray, t_max: f32, tested: &mut u64) -> Candidates {
+    fn candidates(
+        &self,
+        moment: &Moment,
+        ray: &SweptRay,
+        t_max: f32,
+        tested: &mut u64,
+    ) -> Candidates {
         let mut found = Candidates::new();
         let segment_of = |object| moment.segment(self, object);
         let gather = |object, segment| {
@@ -288,19 +294,21 @@ impl MotionAccel {
     ) -> Option<Hit> {
         let mut tested = 0;
         if self.tree.is_flat() {
+            let swept = SweptRay::new(ray);
             for (mover, (segment, placement)) in self.objects.iter().zip(moment.all()) {
                 let at = (mover, *segment, || placement);
-                self.try_in_order::<CERTAIN>(ray, at, &mut best, traversal, stats);
+                self.try_in_order::<CERTAIN>((ray, &swept), at, &mut best, traversal, stats);
             }
         } else if CERTAIN || traversal == Traversal::Obvhs {
             // obvhs's traversal (a comparison knob) culls a box whose entry is not strictly
             // before `t_max`, unpadded: searched up to just past the best distance, an object
             // may lose a tie it wins in order, so it too is tried in order.
             let limit = best.map_or(ray.t_max, |h| h.t);
-            for (object, segment) in self.candidates(moment, ray, limit, &mut tested) {
+            let swept = SweptRay::new(ray);
+            for (object, segment) in self.candidates(moment, &swept, limit, &mut tested) {
                 let (object, segment) = (object as usize, segment as usize);
                 let at = (&self.objects[object], segment, || moment.placement(object));
-                self.try_in_order::<CERTAIN>(ray, at, &mut best, traversal, stats);
+                self.try_in_order::<CERTAIN>((ray, &swept), at, &mut best, traversal, stats);
             }
         } else {
             // The box test passes a box whose near side is at `t_max` itself, so testing at
@@ -323,8 +331,8 @@ impl MotionAccel {
                 best = nearest(best, self.hit_on(at, ray, t_max, query, stats));
                 bound(&best)
             };
-            self.tree
-                .walk(ray, start, moment.time, segment_of, visit, &mut tested);
+            let swept = SweptRay::new(ray);
+            (self.tree).walk(&swept, start, moment.time, segment_of, visit, &mut tested);
         }
         stats.nodes += tested;
         best
@@ -337,7 +345,7 @@ impl MotionAccel {
     #[inline(always)]
     fn try_in_order<'p, const CERTAIN: bool>(
         &self,
-        ray: &Ray,
+        (ray, swept): (&Ray, &SweptRay),
         (mover, segment, placement): (&Mover, usize, impl FnOnce() -> &'p Placement),
         best: &mut Option<Hit>,
         traversal: Traversal,
@@ -346,7 +354,7 @@ impl MotionAccel {
         // An object that cannot hold a closer hit is not transformed into.
         let t_max = best.map_or(ray.t_max, |h| h.t);
         stats.nodes += 1;
-        if !mover.bounds[segment].may_hit(ray, t_max) {
+        if !mover.bounds[segment].may_hit(swept, t_max) {
             return;
         }
         let first = CERTAIN && best.is_none();
@@ -396,10 +404,11 @@ impl MotionAccel {
         // one is found a bound below zero ends the walk.
         let mut blocked = false;
         let mut tested = 0;
+        let swept = SweptRay::new(ray);
         if self.tree.is_flat() {
             for (mover, (segment, placement)) in self.objects.iter().zip(moment.all()) {
                 stats.nodes += 1;
-                if mover.bounds[*segment].may_hit(ray, ray.t_max)
+                if mover.bounds[*segment].may_hit(&swept, ray.t_max)
                     && mover
                         .accel
                         .occluded_with(&to_object(placement, ray), traversal, stats)
@@ -421,8 +430,14 @@ impl MotionAccel {
                 ray.t_max
             }
         };
-        self.tree
-            .walk(ray, ray.t_max, moment.time, segment_of, visit, &mut tested);
+        (self.tree).walk(
+            &swept,
+            ray.t_max,
+            moment.time,
+            segment_of,
+            visit,
+            &mut tested,
+        );
         stats.nodes += tested;
         blocked
     }

@@ -273,3 +273,93 @@ fn the_tree_answers_every_query_as_the_objects_tried_in_turn() {
         }
     }
 }
+
+/// The swept boxes' test is conservative at their very faces, edges and corners, at every
+/// scale and distance: a ray whose segment ends exactly on a box (its origin and target on a
+/// grid of one power of two, so that the direction between them is exact and the target is
+/// reached at `t = 1` exactly) passes the test with `t_max = 1`, whether it comes from far away,
+/// from inside, along a face (directions with zero components, `+0.0` and `-0.0`), or toward a
+/// corner; and a box wholly behind the origin never does.
+#[test]
+fn the_swept_box_test_passes_every_ray_that_ends_on_a_box_at_every_scale() {
+    let mut s = Stream(23);
+    let grid = |s: &mut Stream, reach: f32| (s.range(-reach, reach)).round();
+    let (mut passed, mut behind) = (0, 0);
+    for exponent in [-40, -20, -7, 0, 9, 20, 40] {
+        let unit = 2f32.powi(exponent);
+        for _ in 0..400 {
+            let (a, b) = (
+                Vec3::new(
+                    grid(&mut s, 1000.0),
+                    grid(&mut s, 1000.0),
+                    grid(&mut s, 1000.0),
+                ),
+                Vec3::new(
+                    grid(&mut s, 1000.0),
+                    grid(&mut s, 1000.0),
+                    grid(&mut s, 1000.0),
+                ),
+            );
+            let (min, max) = (a.min(b), a.max(b));
+            let swept = SweptBox::unpadded(min * unit, max * unit);
+            // A target on the box's boundary: each coordinate at a face or between, at least
+            // one at a face.
+            let mut target = Vec3::ZERO;
+            for axis in 0..3 {
+                target[axis] = match (s.unit() * 3.0) as u32 {
+                    0 => min[axis],
+                    1 => max[axis],
+                    _ => min[axis] + (s.unit() * (max[axis] - min[axis])).floor(),
+                };
+            }
+            let face = (s.unit() * 3.0) as usize % 3;
+            target[face] = if s.unit() < 0.5 { min[face] } else { max[face] };
+            // Origins near and far (up to 2^22 units away), some sharing coordinates with
+            // the target (the ray then lies along the face's plane on that axis).
+            let far = [10.0, 1e4, 4e6][(s.unit() * 3.0) as usize % 3];
+            let mut origin = Vec3::new(grid(&mut s, far), grid(&mut s, far), grid(&mut s, far));
+            for axis in 0..3 {
+                if s.unit() < 0.2 {
+                    origin[axis] = target[axis];
+                }
+            }
+            let mut dir = (target - origin) * unit;
+            if dir == Vec3::ZERO {
+                continue;
+            }
+            for axis in 0..3 {
+                if dir[axis] == 0.0 && s.unit() < 0.5 {
+                    dir[axis] = -0.0;
+                }
+            }
+            let ray = Ray {
+                origin: origin * unit,
+                dir,
+                t_max: 1.0,
+            };
+            assert_eq!(
+                ray.origin + ray.dir,
+                target * unit,
+                "the grid keeps the sums exact"
+            );
+            let test = SweptRay::new(&ray);
+            assert!(
+                swept.may_hit(&test, 1.0) && swept.may_hit(&test, f32::INFINITY),
+                "2^{exponent}: {ray:?} ends on {swept:?}"
+            );
+            passed += 1;
+            // The same box seen from beyond its far side along x, going away from it.
+            let away = Ray {
+                origin: Vec3::new(max.x + 1.0 + far, origin.y, origin.z) * unit,
+                dir: Vec3::new(unit, dir.y, dir.z),
+                t_max: f32::INFINITY,
+            };
+            assert!(
+                !swept.may_hit(&SweptRay::new(&away), f32::INFINITY),
+                "2^{exponent}: {away:?} leaves {swept:?} behind"
+            );
+            behind += 1;
+        }
+    }
+    assert!(passed > 2500 && behind > 2500, "{passed} {behind}");
+}

@@ -6,8 +6,8 @@
 //! children's boxes with the largest of their padding terms, and the span of their times. The
 //! test of a ray against a node is then never stricter than against any leaf below it: the
 //! padded box contains theirs, and every step of [`SweptBox::may_hit`] (the subtractions,
-//! divisions and comparisons of the slab test, each rounded) is monotone in the box's planes
-//! and padding. So the tree finds every object whose own box the ray passes at its time, and
+//! the products with the ray's reciprocal direction and the comparisons of the slab test, each
+//! rounded) is monotone in the box's planes and padding. So the tree finds every object whose own box the ray passes at its time, and
 //! no other; it only spares the tests of the boxes it does not pass.
 //!
 //! The walk ([`ObjectTree::walk`]) hands the objects it finds to a visitor as it goes, nearer
@@ -22,8 +22,7 @@
 //! tens or thousands of objects, not millions, and each node must carry the padding and the
 //! time span that a general-purpose builder (obvhs's) has no place for.
 
-use super::bounds::SweptBox;
-use crate::geometry::Ray;
+use super::bounds::{SweptBox, SweptRay};
 use crate::scene::TransformTrack;
 use smallvec::SmallVec;
 
@@ -134,7 +133,7 @@ impl ObjectTree {
     /// walk. `tested` counts the boxes tested.
     pub(super) fn walk(
         &self,
-        ray: &Ray,
+        ray: &SweptRay,
         mut t_max: f32,
         time: f64,
         segment_of: impl Fn(usize) -> usize,
@@ -158,7 +157,7 @@ impl ObjectTree {
                     // The half of lower centres along a split axis of space is nearer to a ray
                     // going up that axis: it goes on top. (Split in time, one half is
                     // usually passed over at once.)
-                    let (near, far) = if axis < 3 && ray.dir[axis as usize] < 0.0 {
+                    let (near, far) = if axis < 3 && ray.goes_down(axis as usize) {
                         (second, index + 1)
                     } else {
                         (index + 1, second)
