@@ -261,10 +261,9 @@ impl World {
                     return false;
                 }
                 if MOVES {
-                    // The last path's placements go back to the thread's spare buffer first,
-                    // for the new one to take: no allocation per path.
-                    moments[i] = Moment::default();
-                    moments[i] = self.motion.moment(paths.time[i]);
+                    // The last path's placements written over in place: no allocation per
+                    // path.
+                    self.motion.move_to(&mut moments[i], paths.time[i]);
                 }
             }
             let moment = &moments[moment_index::<MOVES>(i)];
