@@ -74,6 +74,78 @@ impl CameraTrack {
         self.keys.windows(2).any(|w| w[0].camera != w[1].camera)
     }
 
+    /// The pinhole rays through the image positions (`x[k]`, `y[k]`) of an image of `width` x
+    /// `height` pixels, each from the camera at its own time `times[k]`: each lane, to the
+    /// bit, `self.at_time(times[k]).rays(width, height).ray(x[k], y[k])`, made together. For a
+    /// moving camera's samples under motion blur, whose poses differ sample by sample: made one
+    /// by one, each pose's set-up (its axes' two normalisations, the ray's third) was a chain
+    /// of divisions and square roots that its ray waited on. Each pose is found lane by lane
+    /// ([`CameraTrack::at_time`]) and its half-height's tangent too (once for a run of lanes
+    /// with the same field of view, the common case); the axes and the rays are made a
+    /// coordinate at a time in eight lanes, each operation as [`Camera::rays`]'s and
+    /// [`CameraRays::ray`]'s (glam's `normalize`, `cross`), in their order. Only for pinholes:
+    /// a lens draws its own numbers.
+    pub fn pinhole_rays_into(
+        &self,
+        times: &[f64; PACKET],
+        (width, height): (u32, u32),
+        (x, y): (&[f32; PACKET], &[f32; PACKET]),
+        rays: &mut [Ray; PACKET],
+    ) {
+        let mut poses = [[[0.0f32; PACKET]; 3]; 3];
+        let mut half_height = [0.0f32; PACKET];
+        let mut last_fov: Option<(u32, f32)> = None;
+        for (k, &time) in times.iter().enumerate() {
+            let camera = self.at_time(time);
+            for (pose, v) in poses
+                .iter_mut()
+                .zip([camera.position, camera.look_at, camera.up])
+            {
+                (pose[0][k], pose[1][k], pose[2][k]) = (v.x, v.y, v.z);
+            }
+            let fov = camera.vfov_degrees.to_bits();
+            half_height[k] = match last_fov {
+                Some((bits, tangent)) if bits == fov => tangent,
+                _ => crate::math::tan(0.5 * camera.vfov_degrees.to_radians()),
+            };
+            last_fov = Some((fov, half_height[k]));
+        }
+        let lanes = |v: &[[f32; PACKET]; 3]| v.map(f32x8::from);
+        let ([px, py, pz], [lx, ly, lz], up) =
+            (lanes(&poses[0]), lanes(&poses[1]), lanes(&poses[2]));
+        let half_height = f32x8::from(half_height);
+        // glam's `normalize`: `v * (1 / sqrt(v . v))`, the dot product summed left to right.
+        let normalize = |[x, y, z]: [f32x8; 3]| {
+            let recip = f32x8::splat(1.0) / (x * x + y * y + z * z).sqrt();
+            [x * recip, y * recip, z * recip]
+        };
+        // glam's `cross`.
+        let cross = |[ax, ay, az]: [f32x8; 3], [bx, by, bz]: [f32x8; 3]| {
+            [ay * bz - by * az, az * bx - bz * ax, ax * by - bx * ay]
+        };
+        // `Camera::rays`.
+        let forward = normalize([lx - px, ly - py, lz - pz]);
+        let right = normalize(cross(forward, up));
+        let up = cross(right, forward);
+        let half_width = half_height * f32x8::splat(width as f32) / f32x8::splat(height as f32);
+        let right = right.map(|r| r * half_width);
+        let down = up.map(|u| -u * half_height);
+        // `CameraRays::ray`: `towards`, then `normalize`.
+        let sx =
+            f32x8::splat(2.0) * f32x8::from(*x) / f32x8::splat(width as f32) - f32x8::splat(1.0);
+        let sy =
+            f32x8::splat(2.0) * f32x8::from(*y) / f32x8::splat(height as f32) - f32x8::splat(1.0);
+        let towards = |axis: usize| forward[axis] + sx * right[axis] + sy * down[axis];
+        let dir = normalize([towards(0), towards(1), towards(2)]).map(|d| d.to_array());
+        for (k, ray) in rays.iter_mut().enumerate() {
+            *ray = Ray {
+                origin: Vec3::new(poses[0][0][k], poses[0][1][k], poses[0][2][k]),
+                dir: Vec3::new(dir[0][k], dir[1][k], dir[2][k]),
+                t_max: f32::INFINITY,
+            };
+        }
+    }
+
     /// The camera at `frame`.
     pub fn at(&self, frame: u32) -> Camera {
         self.at_time(f64::from(frame))
@@ -387,5 +459,113 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A moving pinhole's eight rays, each from its own pose, are the rays its pose makes
+    /// alone, to the bit: tracks that dolly far from the origin and near it, roll (`up`
+    /// turning, so every coordinate's sums matter), narrow and widen the field of view or
+    /// keep it (the tangent then shared), at times before the first key, between keys, on
+    /// them and after the last, and positions in and out of the image.
+    #[test]
+    fn a_moving_pinholes_rays_made_eight_at_a_time_are_each_poses_rays() {
+        let key = |frame, position, look_at, up, vfov_degrees| CameraKey {
+            frame,
+            camera: Camera {
+                position,
+                look_at,
+                up,
+                vfov_degrees,
+                aperture_radius: 0.0,
+                focus_distance: 1.0,
+            },
+        };
+        let tracks = [
+            vec![
+                key(
+                    0,
+                    Vec3::new(2.5, 2.73, -8.0),
+                    Vec3::new(2.5, 2.73, 0.0),
+                    Vec3::Y,
+                    39.3,
+                ),
+                key(
+                    23,
+                    Vec3::new(3.06, 2.73, -8.0),
+                    Vec3::new(3.06, 2.73, 0.0),
+                    Vec3::Y,
+                    39.3,
+                ),
+            ],
+            vec![
+                key(
+                    2,
+                    Vec3::new(3e5, -2e4, 7e3),
+                    Vec3::new(3e5 + 1.0, -2e4, 7e3),
+                    Vec3::Y,
+                    90.0,
+                ),
+                key(
+                    3,
+                    Vec3::new(3e5, -2e4 + 5.0, 7e3),
+                    Vec3::ZERO,
+                    Vec3::new(0.3, 1.0, -0.2),
+                    20.0,
+                ),
+                key(
+                    9,
+                    Vec3::new(1e-3, 2e-3, -5e-4),
+                    Vec3::X,
+                    Vec3::new(-0.7, 0.1, 1.0),
+                    5.0,
+                ),
+            ],
+        ];
+        let mut state = 0x2545_f491_u32;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state as f32 / u32::MAX as f32
+        };
+        let bits = |r: &Ray| {
+            let [a, b, c] = r.origin.to_array();
+            let [d, e, f] = r.dir.to_array();
+            [a, b, c, d, e, f, r.t_max].map(f32::to_bits)
+        };
+        let mut compared = 0;
+        for keys in tracks {
+            let track = CameraTrack::new(keys).expect("keys at distinct frames");
+            let last = f64::from(track.keys().last().expect("a key").frame);
+            for (w, h) in [(256, 256), (640, 90), (17, 4093)] {
+                for round in 0..60 {
+                    let times: [f64; PACKET] = std::array::from_fn(|k| match (round + k) % 5 {
+                        0 => f64::from((next() * (last as f32 + 1.0)) as u32),
+                        1 => -0.5,
+                        2 => last + 0.25,
+                        _ => f64::from(next()) * (last + 1.0) - 0.5,
+                    });
+                    let (wf, hf) = (w as f32, h as f32);
+                    let x: [f32; PACKET] = std::array::from_fn(|k| match k {
+                        0 => 0.0,
+                        1 => wf * 3.0,
+                        _ => next() * wf,
+                    });
+                    let y: [f32; PACKET] = std::array::from_fn(|k| match k {
+                        0 => hf,
+                        1 => -7.5,
+                        _ => next() * hf,
+                    });
+                    let mut together = [crate::geometry::UNUSED_RAY; PACKET];
+                    track.pinhole_rays_into(&times, (w, h), (&x, &y), &mut together);
+                    for k in 0..PACKET {
+                        let alone = track.at_time(times[k]).rays(w, h).ray(x[k], y[k]);
+                        let at = (times[k], x[k], y[k]);
+                        assert_eq!(bits(&together[k]), bits(&alone), "{w}x{h} at {at:?}");
+                        compared += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(compared, 2 * 3 * 60 * PACKET);
     }
 }

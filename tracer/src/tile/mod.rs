@@ -224,6 +224,16 @@ impl<'w> Cameras<'w> {
         let lens = world.effects.depth_of_field && self.still.has_lens();
         if !self.blur && !lens {
             self.still.rays_into(&px, &py, &mut packet.rays);
+        } else if self.camera_moves && !world.effects.depth_of_field {
+            // A moving pinhole under motion blur (no lens at any time: the effect is off):
+            // each sample's time, then the eight rays, each from its own pose, at once
+            // (`CameraTrack::pinhole_rays_into`).
+            for (time, sampler) in packet.times.iter_mut().zip(&mut packet.samplers).take(n) {
+                *time = world.scene.shutter.time(self.frame, sampler.time());
+            }
+            let size = (settings.width, settings.height);
+            let track = &world.scene.camera;
+            track.pinhole_rays_into(&packet.times, size, (&px, &py), &mut packet.rays);
         } else {
             for k in 0..n {
                 let sampler = &mut packet.samplers[k];
