@@ -1,6 +1,8 @@
 //! The numerics of moving objects: where a ray leaving one starts (the hit placed in the world,
-//! its origins offset in the object's space: [`placed_point`]), and the world boxes that hold an
-//! object over each keyframe segment, with the conservative test of a ray against them.
+//! its origins offset in the object's space: [`placed_point`]), a world ray taken into an
+//! object's space ([`to_object`]), and the world boxes that hold an object over each keyframe
+//! segment, with the conservative test of a ray against them (the still trees' slab test,
+//! through [`SweptRay`]).
 
 use crate::geometry::Ray;
 use crate::geometry::offset::{OffsetMethod, SurfacePoint, offset_ray_origin};
@@ -241,4 +243,14 @@ fn round_down(v: DVec3) -> Vec3 {
         if f64::from(f) > x { f.next_down() } else { f }
     };
     Vec3::new(down(v.x), down(v.y), down(v.z))
+}
+
+/// `ray` in the object space of `placement`: its origin and direction taken through the
+/// inverse in f64 and rounded once to f32. Its parameter is the world ray's.
+pub(super) fn to_object(placement: &Placement, ray: &Ray) -> Ray {
+    Ray {
+        origin: placement.unplace_point(ray.origin.as_dvec3()).as_vec3(),
+        dir: (placement.inverse * ray.dir.as_dvec3()).as_vec3(),
+        t_max: ray.t_max,
+    }
 }

@@ -32,7 +32,7 @@ use super::offset::SurfacePoint;
 use super::{Accel, BuildQuality, Hit, Ray, Traversal, TraversalStats};
 use crate::scene::{MovingObject, Placement, TransformTrack};
 pub use bounds::placed_point;
-use bounds::{SweptBox, SweptRay, swept_bounds};
+use bounds::{SweptBox, SweptRay, swept_bounds, to_object};
 use elsa::FrozenMap;
 use glam::Vec3;
 use std::cell::Cell;
@@ -491,15 +491,5 @@ fn nearest(best: Option<Hit>, hit: Option<Hit>) -> Option<Hit> {
         (Some(b), Some(h)) if (h.t, h.triangle) < (b.t, b.triangle) => Some(h),
         (Some(b), _) => Some(b),
         (None, h) => h,
-    }
-}
-
-/// `ray` in the object space of `placement`: its origin and direction taken through the
-/// inverse in f64 and rounded once to f32. Its parameter is the world ray's.
-pub(super) fn to_object(placement: &Placement, ray: &Ray) -> Ray {
-    Ray {
-        origin: placement.unplace_point(ray.origin.as_dvec3()).as_vec3(),
-        dir: (placement.inverse * ray.dir.as_dvec3()).as_vec3(),
-        t_max: ray.t_max,
     }
 }
