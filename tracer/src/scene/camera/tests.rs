@@ -119,23 +119,9 @@ fn rays_made_eight_at_a_time_are_the_rays_made_alone() {
             (512, 512),
         ),
     ];
-    let mut state = 0x9e37_79b9_u32;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        state as f32 / u32::MAX as f32
-    };
+    let mut next = uniform_stream(0x9e37_79b9);
     for (position, look_at, up, vfov_degrees, (w, h)) in cameras {
-        let camera = Camera {
-            position,
-            look_at,
-            up,
-            vfov_degrees,
-            aperture_radius: 0.0,
-            focus_distance: 1.0,
-        };
-        let rays = camera.rays(w, h);
+        let rays = pinhole(position, look_at, up, vfov_degrees).rays(w, h);
         let (w, h) = (w as f32, h as f32);
         let mut positions = vec![
             [0.0, 0.0],
@@ -153,14 +139,15 @@ fn rays_made_eight_at_a_time_are_the_rays_made_alone() {
             let y: [f32; PACKET] = std::array::from_fn(|k| eight[k][1]);
             let mut together = [crate::geometry::UNUSED_RAY; PACKET];
             rays.rays_into(&x, &y, &mut together);
-            let bits = |r: &Ray| {
-                let [a, b, c] = r.origin.to_array();
-                let [d, e, f] = r.dir.to_array();
-                [a, b, c, d, e, f, r.t_max].map(f32::to_bits)
-            };
             for k in 0..PACKET {
                 let alone = rays.ray(x[k], y[k]);
-                assert_eq!(bits(&together[k]), bits(&alone), "({}, {})", x[k], y[k]);
+                assert_eq!(
+                    ray_bits(&together[k]),
+                    ray_bits(&alone),
+                    "({}, {})",
+                    x[k],
+                    y[k]
+                );
             }
         }
     }
@@ -175,14 +162,7 @@ fn rays_made_eight_at_a_time_are_the_rays_made_alone() {
 fn a_moving_pinholes_rays_made_eight_at_a_time_are_each_poses_rays() {
     let key = |frame, position, look_at, up, vfov_degrees| CameraKey {
         frame,
-        camera: Camera {
-            position,
-            look_at,
-            up,
-            vfov_degrees,
-            aperture_radius: 0.0,
-            focus_distance: 1.0,
-        },
+        camera: pinhole(position, look_at, up, vfov_degrees),
     };
     let tracks = [
         vec![
@@ -225,18 +205,7 @@ fn a_moving_pinholes_rays_made_eight_at_a_time_are_each_poses_rays() {
             ),
         ],
     ];
-    let mut state = 0x2545_f491_u32;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        state as f32 / u32::MAX as f32
-    };
-    let bits = |r: &Ray| {
-        let [a, b, c] = r.origin.to_array();
-        let [d, e, f] = r.dir.to_array();
-        [a, b, c, d, e, f, r.t_max].map(f32::to_bits)
-    };
+    let mut next = uniform_stream(0x2545_f491);
     let mut compared = 0;
     for keys in tracks {
         let track = CameraTrack::new(keys).expect("keys at distinct frames");
@@ -265,11 +234,44 @@ fn a_moving_pinholes_rays_made_eight_at_a_time_are_each_poses_rays() {
                 for k in 0..PACKET {
                     let alone = track.at_time(times[k]).rays(w, h).ray(x[k], y[k]);
                     let at = (times[k], x[k], y[k]);
-                    assert_eq!(bits(&together[k]), bits(&alone), "{w}x{h} at {at:?}");
+                    assert_eq!(
+                        ray_bits(&together[k]),
+                        ray_bits(&alone),
+                        "{w}x{h} at {at:?}"
+                    );
                     compared += 1;
                 }
             }
         }
     }
     assert_eq!(compared, 2 * 3 * 60 * PACKET);
+}
+
+/// Numbers in [0, 1] from a xorshift stream, so that every run checks the same cases.
+fn uniform_stream(mut state: u32) -> impl FnMut() -> f32 {
+    move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as f32 / u32::MAX as f32
+    }
+}
+
+/// A ray's every bit: origin, direction and end.
+fn ray_bits(r: &Ray) -> [u32; 7] {
+    let [a, b, c] = r.origin.to_array();
+    let [d, e, f] = r.dir.to_array();
+    [a, b, c, d, e, f, r.t_max].map(f32::to_bits)
+}
+
+/// A pinhole camera (no lens).
+fn pinhole(position: Vec3, look_at: Vec3, up: Vec3, vfov_degrees: f32) -> Camera {
+    Camera {
+        position,
+        look_at,
+        up,
+        vfov_degrees,
+        aperture_radius: 0.0,
+        focus_distance: 1.0,
+    }
 }
