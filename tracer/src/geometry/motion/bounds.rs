@@ -172,7 +172,7 @@ impl SweptBox {
         }
     }
 
-    /// Whether `ray` may meet, in `(0, t_max)`, something this box holds, once the ray is taken
+    /// Whether `ray` may meet, in `(0, t_max]`, something this box holds, once the ray is taken
     /// into object space with its rounding. The rounding moves the object-space ray by a few
     /// ULPs of its origin and of the distance it travels, which the world sees multiplied by
     /// the placement's condition number; the box is widened by that before the still trees'

@@ -279,7 +279,7 @@ fn the_tree_answers_every_query_as_the_objects_tried_in_turn() {
 /// grid of one power of two, so that the direction between them is exact and the target is
 /// reached at `t = 1` exactly) passes the test with `t_max = 1`, whether it comes from far away,
 /// from inside, along a face (directions with zero components, `+0.0` and `-0.0`), or toward a
-/// corner; and a box wholly behind the origin never does.
+/// corner; and a box wholly behind the origin, or beyond a segment's end, never does.
 #[test]
 fn the_swept_box_test_passes_every_ray_that_ends_on_a_box_at_every_scale() {
     let mut s = Stream(23);
@@ -348,16 +348,26 @@ fn the_swept_box_test_passes_every_ray_that_ends_on_a_box_at_every_scale() {
                 "2^{exponent}: {ray:?} ends on {swept:?}"
             );
             passed += 1;
-            // The same box seen from beyond its far side along x, going away from it.
+            // The same box seen from beyond its far side along x, going away from it; and
+            // from before its near side, the segment stopping half way there (its near
+            // distance about two, far above any rounding): neither may pass.
             let away = Ray {
                 origin: Vec3::new(max.x + 1.0 + far, origin.y, origin.z) * unit,
                 dir: Vec3::new(unit, dir.y, dir.z),
                 t_max: f32::INFINITY,
             };
-            assert!(
-                !swept.may_hit(&SweptRay::new(&away), f32::INFINITY),
-                "2^{exponent}: {away:?} leaves {swept:?} behind"
-            );
+            let gap = 2.0 + (s.unit() * far).floor();
+            let short = Ray {
+                origin: Vec3::new(min.x - gap, origin.y, origin.z) * unit,
+                dir: Vec3::new((gap / 2.0).floor(), dir.y / unit, dir.z / unit) * unit,
+                t_max: 1.0,
+            };
+            for (missing, t_max) in [(away, f32::INFINITY), (short, 1.0)] {
+                assert!(
+                    !swept.may_hit(&SweptRay::new(&missing), t_max),
+                    "2^{exponent}: {missing:?} never reaches {swept:?}"
+                );
+            }
             behind += 1;
         }
     }

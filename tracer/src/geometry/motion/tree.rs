@@ -7,8 +7,9 @@
 //! test of a ray against a node is then never stricter than against any leaf below it: the
 //! padded box contains theirs, and every step of [`SweptBox::may_hit`] (the subtractions,
 //! the products with the ray's reciprocal direction and the comparisons of the slab test, each
-//! rounded) is monotone in the box's planes and padding. So the tree finds every object whose own box the ray passes at its time, and
-//! no other; it only spares the tests of the boxes it does not pass.
+//! rounded) is monotone in the box's planes and padding. So the tree finds every object whose
+//! own box the ray passes at its time, and no other; it only spares the tests of the boxes it
+//! does not pass.
 //!
 //! The walk ([`ObjectTree::walk`]) hands the objects it finds to a visitor as it goes, nearer
 //! half first by the ray's direction, and the visitor answers with the distance still worth

@@ -84,7 +84,8 @@ impl CameraTrack {
     /// with the same field of view, the common case); the axes and the rays are made a
     /// coordinate at a time in eight lanes, each operation as [`Camera::rays`]'s and
     /// [`CameraRays::ray`]'s (glam's `normalize`, `cross`), in their order. Only for pinholes:
-    /// a lens draws its own numbers.
+    /// the poses' apertures are not looked at (a lens draws its own numbers, and its rays are
+    /// made one by one).
     pub fn pinhole_rays_into(
         &self,
         times: &[f64; PACKET],
@@ -129,7 +130,9 @@ impl CameraTrack {
         let up = cross(right, forward);
         let half_width = half_height * f32x8::splat(width as f32) / f32x8::splat(height as f32);
         let right = right.map(|r| r * half_width);
-        let down = up.map(|u| -u * half_height);
+        // `-up` times one less than zero, not `wide`'s negation, which subtracts from zero and
+        // so turns `-0.0` into `+0.0` where glam's flips the sign (an exact product either way).
+        let down = up.map(|u| u * f32x8::splat(-1.0) * half_height);
         // `CameraRays::ray`: `towards`, then `normalize`.
         let sx =
             f32x8::splat(2.0) * f32x8::from(*x) / f32x8::splat(width as f32) - f32x8::splat(1.0);

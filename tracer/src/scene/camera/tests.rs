@@ -165,6 +165,19 @@ fn a_moving_pinholes_rays_made_eight_at_a_time_are_each_poses_rays() {
         camera: pinhole(position, look_at, up, vfov_degrees),
     };
     let tracks = [
+        // Looking straight along +z with a target's x of -0.0: the forward axis's x is then
+        // -0.0 and the up axis's +0.0, whose signs reach the ray through the image's middle
+        // column (its x offset exactly zero).
+        vec![
+            key(0, Vec3::ZERO, Vec3::new(-0.0, 0.0, 5.0), Vec3::Y, 45.0),
+            key(
+                4,
+                Vec3::new(0.0, 2.0, 0.0),
+                Vec3::new(-0.0, 2.0, 5.0),
+                Vec3::Y,
+                45.0,
+            ),
+        ],
         vec![
             key(
                 0,
@@ -222,6 +235,7 @@ fn a_moving_pinholes_rays_made_eight_at_a_time_are_each_poses_rays() {
                 let x: [f32; PACKET] = std::array::from_fn(|k| match k {
                     0 => 0.0,
                     1 => wf * 3.0,
+                    2 => wf * 0.5,
                     _ => next() * wf,
                 });
                 let y: [f32; PACKET] = std::array::from_fn(|k| match k {
@@ -244,7 +258,7 @@ fn a_moving_pinholes_rays_made_eight_at_a_time_are_each_poses_rays() {
             }
         }
     }
-    assert_eq!(compared, 2 * 3 * 60 * PACKET);
+    assert_eq!(compared, 3 * 3 * 60 * PACKET);
 }
 
 /// Numbers in [0, 1] from a xorshift stream, so that every run checks the same cases.
