@@ -2,7 +2,8 @@
 //! code calls goes through `tracer::math` (pure-software libm), never through `f32`/`f64`
 //! methods that call the platform's, whose implementation glibc picks by processor at run time.
 //! A source check, because two machines that round differently are not both on hand: it reads
-//! every file of `tracer/src` outside `math.rs` and its test modules.
+//! every file of `tracer/src` outside `math.rs` and its test modules (a module's `tests.rs` and
+//! `tests` folder, and what follows a file's `#[cfg(test)]`).
 
 use std::path::{Path, PathBuf};
 
@@ -20,7 +21,10 @@ fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
             if path.file_name().is_some_and(|n| n != "tests") {
                 sources(&path, out);
             }
-        } else if path.extension().is_some_and(|e| e == "rs") {
+        } else if path.extension().is_some_and(|e| e == "rs")
+            && path.file_name().is_some_and(|n| n != "tests.rs")
+        {
+            // A module's `tests.rs` is its unit tests' file (`#[cfg(test)] mod tests;`).
             out.push(path);
         }
     }
