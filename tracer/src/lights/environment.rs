@@ -57,12 +57,6 @@ impl Lights {
         Some((k, (f64::from(u.y), f64::from(u.x))))
     }
 
-    /// How many portals the environment is sampled through.
-    #[inline(always)]
-    pub(crate) fn portal_count(&self) -> usize {
-        self.portals.len()
-    }
-
     /// Portal `k`, as [`Lights::portal_pick`] names it.
     #[inline(always)]
     pub(crate) fn portal(&self, k: usize) -> &PortalSampler {
@@ -80,15 +74,7 @@ impl Lights {
     ) -> Option<LightSample> {
         let look = scene.environment.as_ref()?.look(wi);
         let choice = self.environment_choice;
-        // With one portal its own density is the portals' mean, the same bits (`x / 1` is `x`),
-        // without its solid angle worked out a second time; with more, every portal the
-        // direction crosses counts.
-        let portals = if self.portals.len() == 1 {
-            sampled
-        } else {
-            self.portals_pdf(p, wi)
-        };
-        let pdf = choice * portals;
+        let pdf = choice * self.portals_density(p, wi, || sampled);
         (pdf > 0.0).then(|| LightSample {
             wi,
             distance: f32::INFINITY,
@@ -168,6 +154,20 @@ impl Lights {
     /// sampled by its importance.
     fn map_density(&self, look: &SkyLook) -> Option<f32> {
         self.map_sampler.as_ref()?.pdf_of(look)
+    }
+
+    /// [`Lights::portals_pdf`] of `wi` from `p`, where the caller may have the one portal's own
+    /// density of it already (`one`): with one portal, that density is the portals' mean, the
+    /// same bits (`x / 1` is `x`), without its solid angle worked out a second time; with
+    /// more, every portal the direction crosses counts. For the scalar path's sample through
+    /// the portals and the lanes', which find the own sample's density with their draws.
+    #[inline(always)]
+    pub(crate) fn portals_density(&self, p: Vec3, wi: Vec3, one: impl FnOnce() -> f32) -> f32 {
+        if self.portals.len() == 1 {
+            one()
+        } else {
+            self.portals_pdf(p, wi)
+        }
     }
 
     /// The solid-angle density of a sample through the portals from `p` (one picked uniformly):

@@ -320,8 +320,9 @@ impl MotionAccel {
         stats: &mut TraversalStats,
     ) -> Option<Hit> {
         let mut tested = 0;
+        // The ray's set-up for the boxes' tests, once for all of them.
+        let swept = SweptRay::new(ray);
         if self.tree.is_flat() {
-            let swept = SweptRay::new(ray);
             for (mover, (segment, placement)) in self.objects.iter().zip(moment.all()) {
                 let at = (mover, *segment, || placement);
                 self.try_in_order::<CERTAIN>((ray, &swept), at, &mut best, traversal, stats);
@@ -331,7 +332,6 @@ impl MotionAccel {
             // before `t_max`, unpadded: searched up to just past the best distance, an object
             // may lose a tie it wins in order, so it too is tried in order.
             let limit = best.map_or(ray.t_max, |h| h.t);
-            let swept = SweptRay::new(ray);
             for (object, segment) in self.candidates(moment, &swept, limit, &mut tested) {
                 let (object, segment) = (object as usize, segment as usize);
                 let at = (&self.objects[object], segment, || moment.placement(object));
@@ -358,8 +358,8 @@ impl MotionAccel {
                 best = nearest(best, self.hit_on(at, ray, t_max, query, stats));
                 bound(&best)
             };
-            let swept = SweptRay::new(ray);
-            (self.tree).walk(&swept, start, moment.time, segment_of, visit, &mut tested);
+            self.tree
+                .walk(&swept, start, moment.time, segment_of, visit, &mut tested);
         }
         stats.nodes += tested;
         best
@@ -457,7 +457,7 @@ impl MotionAccel {
                 ray.t_max
             }
         };
-        (self.tree).walk(
+        self.tree.walk(
             &swept,
             ray.t_max,
             moment.time,

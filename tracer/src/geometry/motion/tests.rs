@@ -284,22 +284,13 @@ fn the_tree_answers_every_query_as_the_objects_tried_in_turn() {
 fn the_swept_box_test_passes_every_ray_that_ends_on_a_box_at_every_scale() {
     let mut s = Stream(23);
     let grid = |s: &mut Stream, reach: f32| (s.range(-reach, reach)).round();
+    let grid_point =
+        |s: &mut Stream, reach: f32| Vec3::new(grid(s, reach), grid(s, reach), grid(s, reach));
     let (mut passed, mut behind) = (0, 0);
     for exponent in [-40, -20, -7, 0, 9, 20, 40] {
         let unit = 2f32.powi(exponent);
         for _ in 0..400 {
-            let (a, b) = (
-                Vec3::new(
-                    grid(&mut s, 1000.0),
-                    grid(&mut s, 1000.0),
-                    grid(&mut s, 1000.0),
-                ),
-                Vec3::new(
-                    grid(&mut s, 1000.0),
-                    grid(&mut s, 1000.0),
-                    grid(&mut s, 1000.0),
-                ),
-            );
+            let (a, b) = (grid_point(&mut s, 1000.0), grid_point(&mut s, 1000.0));
             let (min, max) = (a.min(b), a.max(b));
             let swept = SweptBox::unpadded(min * unit, max * unit);
             // A target on the box's boundary: each coordinate at a face or between, at least
@@ -317,7 +308,7 @@ fn the_swept_box_test_passes_every_ray_that_ends_on_a_box_at_every_scale() {
             // Origins near and far (up to 2^22 units away), some sharing coordinates with
             // the target (the ray then lies along the face's plane on that axis).
             let far = [10.0, 1e4, 4e6][(s.unit() * 3.0) as usize % 3];
-            let mut origin = Vec3::new(grid(&mut s, far), grid(&mut s, far), grid(&mut s, far));
+            let mut origin = grid_point(&mut s, far);
             for axis in 0..3 {
                 if s.unit() < 0.2 {
                     origin[axis] = target[axis];

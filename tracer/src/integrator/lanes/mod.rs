@@ -567,13 +567,11 @@ impl World {
             let k = g.portal_draws.portal[i];
             let p = g.portal_draws.point(i);
             // `Lights::environment_light_sample`'s other density: the portals' mean density of
-            // the own sample's direction; with one portal that portal's (`x / 1` is `x`),
-            // found by the draw from its view.
-            let portals = if self.lights.portal_count() == 1 {
-                g.portal_draws.other_density(i)
-            } else {
-                self.lights.portals_pdf(p, g.sky_dir.get(i))
-            };
+            // the own sample's direction; with one portal that portal's, found by the draw
+            // from its view.
+            let own = g.sky_dir.get(i);
+            let drawn = || g.portal_draws.other_density(i);
+            let portals = self.lights.portals_density(p, own, drawn);
             g.sky_other[i] = g.choice[i] * portals;
             let through = g
                 .portal_draws

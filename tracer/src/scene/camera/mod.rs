@@ -115,38 +115,22 @@ impl CameraTrack {
         let ([px, py, pz], [lx, ly, lz], up) =
             (lanes(&poses[0]), lanes(&poses[1]), lanes(&poses[2]));
         let half_height = f32x8::from(half_height);
-        // glam's `normalize`: `v * (1 / sqrt(v . v))`, the dot product summed left to right.
-        let normalize = |[x, y, z]: [f32x8; 3]| {
-            let recip = f32x8::splat(1.0) / (x * x + y * y + z * z).sqrt();
-            [x * recip, y * recip, z * recip]
-        };
         // glam's `cross`.
         let cross = |[ax, ay, az]: [f32x8; 3], [bx, by, bz]: [f32x8; 3]| {
             [ay * bz - by * az, az * bx - bz * ax, ax * by - bx * ay]
         };
         // `Camera::rays`.
-        let forward = normalize([lx - px, ly - py, lz - pz]);
-        let right = normalize(cross(forward, up));
+        let forward = normalize_lanes([lx - px, ly - py, lz - pz]);
+        let right = normalize_lanes(cross(forward, up));
         let up = cross(right, forward);
         let half_width = half_height * f32x8::splat(width as f32) / f32x8::splat(height as f32);
         let right = right.map(|r| r * half_width);
         // `-up` times one less than zero, not `wide`'s negation, which subtracts from zero and
         // so turns `-0.0` into `+0.0` where glam's flips the sign (an exact product either way).
         let down = up.map(|u| u * f32x8::splat(-1.0) * half_height);
-        // `CameraRays::ray`: `towards`, then `normalize`.
-        let sx =
-            f32x8::splat(2.0) * f32x8::from(*x) / f32x8::splat(width as f32) - f32x8::splat(1.0);
-        let sy =
-            f32x8::splat(2.0) * f32x8::from(*y) / f32x8::splat(height as f32) - f32x8::splat(1.0);
-        let towards = |axis: usize| forward[axis] + sx * right[axis] + sy * down[axis];
-        let dir = normalize([towards(0), towards(1), towards(2)]).map(|d| d.to_array());
-        for (k, ray) in rays.iter_mut().enumerate() {
-            *ray = Ray {
-                origin: Vec3::new(poses[0][0][k], poses[0][1][k], poses[0][2][k]),
-                dir: Vec3::new(dir[0][k], dir[1][k], dir[2][k]),
-                t_max: f32::INFINITY,
-            };
-        }
+        let size = (width as f32, height as f32);
+        let origin = |k: usize| Vec3::new(poses[0][0][k], poses[0][1][k], poses[0][2][k]);
+        lane_rays([forward, right, down], size, (x, y), origin, rays);
     }
 
     /// The camera at `frame`.
@@ -180,6 +164,43 @@ impl CameraTrack {
             focus_distance: lerp(a.camera.focus_distance, b.camera.focus_distance, s),
         }
     }
+}
+
+/// [`CameraRays::ray`] for eight image positions from eight sets of the view's axes (forward,
+/// right scaled to the image's half width, down to its half height; one coordinate of all
+/// eight in each vector) in an image of `width` x `height` pixels, lane `k`'s ray from
+/// `origin(k)`: `towards`, then glam's `normalize`, a coordinate at a time, each operation as
+/// theirs in their order (`wide`'s lanes round as scalar instructions do, and contract
+/// nothing), so that the divisions and square roots of eight rays overlap where one ray's
+/// waited on the last. The still pinhole's rays and the moving one's both end here.
+#[inline(always)]
+fn lane_rays(
+    [forward, right, down]: [[f32x8; 3]; 3],
+    (width, height): (f32, f32),
+    (x, y): (&[f32; PACKET], &[f32; PACKET]),
+    origin: impl Fn(usize) -> Vec3,
+    rays: &mut [Ray; PACKET],
+) {
+    let splat = f32x8::splat;
+    let sx = splat(2.0) * f32x8::from(*x) / splat(width) - splat(1.0);
+    let sy = splat(2.0) * f32x8::from(*y) / splat(height) - splat(1.0);
+    let towards = |axis: usize| forward[axis] + sx * right[axis] + sy * down[axis];
+    let dir = normalize_lanes([towards(0), towards(1), towards(2)]).map(|d| d.to_array());
+    for (k, ray) in rays.iter_mut().enumerate() {
+        *ray = Ray {
+            origin: origin(k),
+            dir: Vec3::new(dir[0][k], dir[1][k], dir[2][k]),
+            t_max: f32::INFINITY,
+        };
+    }
+}
+
+/// glam's `normalize` of eight vectors, a coordinate at a time: `v * (1 / sqrt(v . v))`, the
+/// dot product summed left to right.
+#[inline(always)]
+fn normalize_lanes([x, y, z]: [f32x8; 3]) -> [f32x8; 3] {
+    let recip = f32x8::splat(1.0) / (x * x + y * y + z * z).sqrt();
+    [x * recip, y * recip, z * recip]
 }
 
 /// `a` moved a fraction `s` towards `b`; `a` itself at `s` = 0, so a key's own frame shows the
@@ -241,25 +262,9 @@ impl CameraRays {
     /// divisions and square roots of eight rays overlap where one ray's waited on the last.
     #[inline]
     pub fn rays_into(&self, x: &[f32; PACKET], y: &[f32; PACKET], rays: &mut [Ray; PACKET]) {
-        // `towards` and glam's `normalize` (`d * (1 / sqrt(d . d))`), eight rays a coordinate
-        // at a time, each operation as theirs in their order (`wide`'s lanes round as scalar
-        // instructions do, and contract nothing).
-        let splat = f32x8::splat;
-        let (f, r, w) = (self.forward, self.right, self.down);
-        let sx = splat(2.0) * f32x8::from(*x) / splat(self.width) - splat(1.0);
-        let sy = splat(2.0) * f32x8::from(*y) / splat(self.height) - splat(1.0);
-        let dx = splat(f.x) + sx * splat(r.x) + sy * splat(w.x);
-        let dy = splat(f.y) + sx * splat(r.y) + sy * splat(w.y);
-        let dz = splat(f.z) + sx * splat(r.z) + sy * splat(w.z);
-        let recip = splat(1.0) / (dx * dx + dy * dy + dz * dz).sqrt();
-        let dir = [dx * recip, dy * recip, dz * recip].map(|d| d.to_array());
-        for (k, ray) in rays.iter_mut().enumerate() {
-            *ray = Ray {
-                origin: self.origin,
-                dir: Vec3::new(dir[0][k], dir[1][k], dir[2][k]),
-                t_max: f32::INFINITY,
-            };
-        }
+        let axes = [self.forward, self.right, self.down].map(|a| a.to_array().map(f32x8::splat));
+        let size = (self.width, self.height);
+        lane_rays(axes, size, (x, y), |_| self.origin, rays);
     }
 
     /// Whether rays start across a lens rather than at one point.
