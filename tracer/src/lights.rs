@@ -24,7 +24,7 @@ use crate::geometry::{Moment, SurfacePoint};
 use crate::scene::Scene;
 pub(crate) use build::TriangleShape;
 use glam::{Vec2, Vec3};
-use moving::placed_shape;
+use moving::{object_triangle, placed_shape};
 use std::f32::consts::PI;
 
 mod build;
@@ -387,14 +387,7 @@ impl Lights {
     /// The density with which `sample` would have produced the hit of emissive triangle `t` (a
     /// global index, as hits report it) from `p` at `moment`, for multiple importance sampling;
     /// zero if the triangle is not a sampled light.
-    pub fn triangle_pdf(
-        &self,
-        scene: &Scene,
-        moment: &Moment,
-        t: u32,
-        p: Vec3,
-        hit_point: Vec3,
-    ) -> f32 {
+    pub fn triangle_pdf(&self, moment: &Moment, t: u32, p: Vec3, hit_point: Vec3) -> f32 {
         let Some(&index) = self.triangle_light.get(t as usize) else {
             return 0.0;
         };
@@ -405,8 +398,8 @@ impl Lights {
         // `moving::sample` computed them for the same point.
         let (area, normal) = match self.lights[index as usize] {
             Light::Moving { object, triangle } => {
-                let v = &scene.moving[object as usize].triangles[triangle as usize].p;
-                placed_shape(moment.placement(object as usize), v)
+                let (v, normal) = object_triangle(moment, (object, triangle));
+                placed_shape(moment.placement(object as usize), v, normal)
             }
             _ => {
                 let shape = &self.shapes[index as usize];

@@ -258,9 +258,7 @@ fn light_sampling_alone_and_bsdf_sampling_alone_give_the_same_mean_with_consiste
                 (nee, nee_sq) = (nee + e, nee_sq + e * e);
                 // What a BSDF-sampled ray finding the same point would be weighed with. The
                 // square's two triangles share their area and normal, so either names it.
-                let pdf = world
-                    .lights
-                    .triangle_pdf(&world.scene, &moment, first, x, light.at.p);
+                let pdf = world.lights.triangle_pdf(&moment, first, x, light.at.p);
                 let relative = (pdf - light.pdf).abs() / light.pdf;
                 assert!(relative < 1e-4, "{what}: pdf {pdf} vs {}", light.pdf);
             }

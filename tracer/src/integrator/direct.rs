@@ -279,8 +279,7 @@ impl World {
             1.0
         } else {
             self.area_lights.bsdf_hit_weight(last_pdf, || {
-                self.lights
-                    .triangle_pdf(&self.scene, moment, triangle, last_point, at)
+                self.lights.triangle_pdf(moment, triangle, last_point, at)
             })
         }
     }

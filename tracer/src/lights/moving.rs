@@ -15,7 +15,7 @@
 //! weights are the same code (`lights.rs`).
 
 use super::LightSample;
-use crate::geometry::{Moment, SurfacePoint, placed_point};
+use crate::geometry::{Moment, MovingTriangle, SurfacePoint, placed_point_with_normal};
 use crate::scene::{Placement, Scene};
 use glam::{DVec3, Vec2, Vec3};
 
@@ -43,15 +43,30 @@ pub(crate) fn placed_sample(
     (object, triangle): (u32, u32),
     u: Vec2,
 ) -> (SurfacePoint, f32, Vec3) {
-    let triangle = &scene.moving[object as usize].triangles[triangle as usize];
+    let (v, normal) = object_triangle(moment, (object, triangle));
+    let material = scene.moving[object as usize].triangles[triangle as usize].material;
     let placement = moment.placement(object as usize);
     let su = u.x.sqrt();
     let (b1, b2) = (su * (1.0 - u.y), su * u.y);
     // The point and its normal exactly as a hit there is placed (`hits.rs`).
-    let at = placed_point(placement, &triangle.p, b1, b2);
-    let (area, _) = placed_shape(placement, &triangle.p);
-    let radiance = scene.materials[triangle.material as usize].emission;
-    (at, area, radiance)
+    let at = placed_point_with_normal(placement, v, normal, b1, b2);
+    let radiance = scene.materials[material as usize].emission;
+    (at, placed_area(placement, v), radiance)
+}
+
+/// Moving triangle `triangle` of object `object`: its object-space corners and unit normal,
+/// as the moving objects' accelerator keeps them.
+pub(super) fn object_triangle<'a>(
+    moment: &Moment<'a>,
+    (object, triangle): (u32, u32),
+) -> (&'a [Vec3; 3], DVec3) {
+    let motion = moment
+        .motion()
+        .expect("a moment at which moving emitters are sampled places the scene's moving objects");
+    motion.triangle(MovingTriangle {
+        object: object as usize,
+        triangle: triangle as usize,
+    })
 }
 
 /// The area of the object-space triangle `v` of object `object` placed by each of its keys,
@@ -59,23 +74,31 @@ pub(crate) fn placed_sample(
 pub(super) fn mean_area(scene: &Scene, object: u32, v: &[Vec3; 3]) -> f32 {
     let keys = scene.moving[object as usize].track.keys();
     keys.iter()
-        .map(|k| placed_shape(&k.placement(), v).0)
+        .map(|k| placed_area(&k.placement(), v))
         .sum::<f32>()
         / keys.len() as f32
 }
 
 /// The area of the object-space triangle `v` placed by `placement`, and its unit normal in the
-/// world as [`placed_point`] gives it (the side it emits to). The area is taken from the
-/// placed edges in f64: a scale changes it, a rotation or translation does not.
-pub(super) fn placed_shape(placement: &Placement, v: &[Vec3; 3]) -> (f32, Vec3) {
-    let [a, b, c] = v.map(|p| p.as_dvec3());
-    let (e1, e2) = (b - a, c - a);
-    let object_normal: DVec3 = e1.cross(e2).normalize_or_zero();
-    let placed = (placement.linear * e1).cross(placement.linear * e2);
+/// world as [`placed_point_with_normal`] gives it for the same `object_normal` (the side it
+/// emits to).
+pub(super) fn placed_shape(
+    placement: &Placement,
+    v: &[Vec3; 3],
+    object_normal: DVec3,
+) -> (f32, Vec3) {
     let normal = (placement.normal * object_normal)
         .normalize_or_zero()
         .as_vec3();
-    ((0.5 * placed.length()) as f32, normal)
+    (placed_area(placement, v), normal)
+}
+
+/// The area of the object-space triangle `v` placed by `placement`, taken from the placed
+/// edges in f64: a scale changes it, a rotation or translation does not.
+fn placed_area(placement: &Placement, v: &[Vec3; 3]) -> f32 {
+    let [a, b, c] = v.map(|p| p.as_dvec3());
+    let placed = (placement.linear * (b - a)).cross(placement.linear * (c - a));
+    (0.5 * placed.length()) as f32
 }
 
 /// For each moving object, the global index of its first triangle: they follow the still

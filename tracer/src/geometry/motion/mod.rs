@@ -31,10 +31,10 @@
 use super::offset::SurfacePoint;
 use super::{Accel, BuildQuality, Hit, Ray, Traversal, TraversalStats};
 use crate::scene::{MovingObject, Placement, TransformTrack};
-pub use bounds::placed_point;
 use bounds::{SweptBox, SweptRay, swept_bounds, to_object};
+pub use bounds::{object_normal, placed_point, placed_point_with_normal};
 use elsa::FrozenMap;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use std::cell::Cell;
 use std::collections::hash_map::DefaultHasher;
 use std::hash::BuildHasherDefault;
@@ -63,6 +63,8 @@ struct Mover {
     track: TransformTrack,
     /// Object-space vertices, by the object's own triangle index.
     vertices: Vec<[Vec3; 3]>,
+    /// Their unit plane normals ([`object_normal`]), by the same index.
+    normals: Vec<DVec3>,
     /// Per keyframe segment: the world box holding the object anywhere in the segment.
     bounds: Vec<SweptBox>,
     /// This object's first triangle among all moving triangles.
@@ -143,7 +145,7 @@ pub struct MovingTriangle {
     pub triangle: usize,
 }
 
-impl Moment<'_> {
+impl<'a> Moment<'a> {
     /// The placement of moving object `object` (its index in `Scene::moving`) at this moment:
     /// where light sampling finds a moving emitter ([`crate::lights`]).
     pub fn placement(&self, object: usize) -> &Placement {
@@ -162,6 +164,11 @@ impl Moment<'_> {
                 }
             }
         }
+    }
+
+    /// The accelerator this moment places the objects of, where it has moving objects.
+    pub fn motion(&self) -> Option<&'a MotionAccel> {
+        self.motion
     }
 
     /// Every object's segment and placement, where the path placed them all as it started:
@@ -194,6 +201,7 @@ impl MotionAccel {
                     accel: Accel::build(&object.triangles, quality),
                     bounds: swept_bounds(&object.track, &vertices),
                     track: object.track.clone(),
+                    normals: vertices.iter().map(object_normal).collect(),
                     vertices,
                     offset,
                 };
@@ -474,9 +482,14 @@ impl MotionAccel {
     /// unit winding normal in the world (the side it faces, as [`Accel::unit_normal`] gives for
     /// still triangles).
     pub fn surface(&self, moment: &Moment, at: MovingTriangle, hit: &Hit) -> SurfacePoint {
+        let (v, normal) = self.triangle(at);
+        placed_point_with_normal(moment.placement(at.object), v, normal, hit.b1, hit.b2)
+    }
+
+    /// Moving triangle `at`'s object-space corners and unit plane normal ([`object_normal`]).
+    pub fn triangle(&self, at: MovingTriangle) -> (&[Vec3; 3], DVec3) {
         let mover = &self.objects[at.object];
-        let placement = moment.placement(at.object);
-        placed_point(placement, &mover.vertices[at.triangle], hit.b1, hit.b2)
+        (&mover.vertices[at.triangle], mover.normals[at.triangle])
     }
 
     /// The placement of object `object` at `moment`: for shading normals.

@@ -188,6 +188,17 @@ fn moving_objects_are_hit_as_brute_force_over_their_triangles_in_object_space() 
                     let occluded = motion.occluded(&moment, &ray, Traversal::Robust, &mut stats);
                     assert_eq!(occluded, expected.is_some());
                     if let Some(e) = expected {
+                        // The hit's point, placed with the normal the accelerator keeps for its
+                        // triangle, is the one placed from the triangle alone, bit for bit.
+                        let at = motion.locate(e.triangle).expect("a moving triangle's hit");
+                        let object = &objects[at.object];
+                        let alone = placed_point(
+                            &object.track.at(time),
+                            &object.triangles[at.triangle].p,
+                            e.b1,
+                            e.b2,
+                        );
+                        assert_eq!(motion.surface(&moment, at, &e), alone);
                         // Numbered below every moving triangle: level, the still hit stays.
                         let t = [e.t, 0.5 * e.t, 2.0 * e.t][(s.unit() * 3.0) as usize % 3];
                         let still = Hit {
