@@ -263,10 +263,11 @@ impl MotionAccel {
 
     /// Every object's segment and placement at `time` into `all`, a slot per object: every
     /// slot written over, in place (`TransformTrack::place_in`), where collected afresh, each
-    /// placement (240 bytes) was built aside and copied in.
+    /// placement (240 bytes) was built aside and copied in. Each slot's segment is looked for
+    /// first where the slot's last placement was (`TransformTrack::segment_near`).
     fn place_all(&self, all: &mut [(usize, Placement)], time: f64) {
         for ((segment, placed), o) in all.iter_mut().zip(&self.objects) {
-            *segment = o.track.segment(time);
+            *segment = o.track.segment_near(*segment, time);
             o.track.place_in(*segment, time, placed);
         }
     }
