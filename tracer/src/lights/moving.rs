@@ -3,8 +3,8 @@
 //! A triangle of a moving object is a light like any other, sampled where the
 //! path's [`Moment`] places it: its barycentrics are drawn on the object-space triangle (an
 //! affine map keeps a uniform density uniform) and the point is placed in the world by
-//! [`placed_point`], exactly as a hit there is, so the shadow ray meets the same surface the
-//! camera would. Its area density is one over the *placed* area at that time, which a scale
+//! [`placed_point_with_normal`] with the triangle's kept normal, exactly as a hit there is, so
+//! the shadow ray meets the same surface the camera would. Its area density is one over the *placed* area at that time, which a scale
 //! changes (rotations and translations keep it), and [`super::Lights::triangle_pdf`] computes the same
 //! area and normal at the same moment when a BSDF-sampled ray hits it, so multiple importance
 //! sampling weighs the two strategies consistently. Its choice probability is fixed, from its
