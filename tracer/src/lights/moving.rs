@@ -4,10 +4,11 @@
 //! path's [`Moment`] places it: its barycentrics are drawn on the object-space triangle (an
 //! affine map keeps a uniform density uniform) and the point is placed in the world by
 //! [`placed_point_with_normal`] with the triangle's kept normal, exactly as a hit there is, so
-//! the shadow ray meets the same surface the camera would. Its area density is one over the *placed* area at that time, which a scale
-//! changes (rotations and translations keep it), and [`super::Lights::triangle_pdf`] computes the same
-//! area and normal at the same moment when a BSDF-sampled ray hits it, so multiple importance
-//! sampling weighs the two strategies consistently. Its choice probability is fixed, from its
+//! the shadow ray meets the same surface the camera would. Its area density is one over the
+//! *placed* area at that time, which a scale changes (rotations and translations keep it), and
+//! [`super::Lights::triangle_pdf`] computes the same area and normal at the same moment when a
+//! BSDF-sampled ray hits it, so multiple importance sampling weighs the two strategies
+//! consistently. Its choice probability is fixed, from its
 //! power at the mean of its keys' areas: any fixed choice is unbiased, and one that depended on
 //! the time would make the choice distribution differ per path for no gain with a few movers.
 //!
