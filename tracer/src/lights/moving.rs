@@ -8,9 +8,9 @@
 //! *placed* area at that time, which a scale changes (rotations and translations keep it), and
 //! [`super::Lights::triangle_pdf`] computes the same area and normal at the same moment when a
 //! BSDF-sampled ray hits it, so multiple importance sampling weighs the two strategies
-//! consistently. Its choice probability is fixed, from its
-//! power at the mean of its keys' areas: any fixed choice is unbiased, and one that depended on
-//! the time would make the choice distribution differ per path for no gain with a few movers.
+//! consistently. Its choice probability is fixed, from its power at the mean of its keys'
+//! areas: any fixed choice is unbiased, and one that depended on the time would make the choice
+//! distribution differ per path for no gain with a few movers.
 //!
 //! Only the placement differs from a still triangle: the choice of light, the shadow ray and the
 //! weights are the same code (`lights.rs`).

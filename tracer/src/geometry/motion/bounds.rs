@@ -50,7 +50,8 @@ pub fn object_normal(v: &[Vec3; 3]) -> DVec3 {
 
 /// [`placed_point`] with the triangle's [`object_normal`] computed beforehand: the moving
 /// objects keep it per triangle, since its square root and division were a fifth of the time of
-/// placing a point (`swinging-lamp` places one for every light sample).
+/// placing a point (`swinging-lamp` places one for every light sample). `object_normal` must be
+/// `object_normal(v)` itself: the offsets' argument is made for that plane.
 #[inline]
 pub fn placed_point_with_normal(
     placement: &Placement,
@@ -59,6 +60,11 @@ pub fn placed_point_with_normal(
     b1: f32,
     b2: f32,
 ) -> SurfacePoint {
+    debug_assert!(
+        object_normal.to_array().map(f64::to_bits)
+            == self::object_normal(v).to_array().map(f64::to_bits),
+        "the normal given is the triangle's own"
+    );
     let local = SurfacePoint::on_triangle_with_normal(v, b1, b2, object_normal.as_vec3());
     let (p_object, e_object) = (local.p.as_dvec3(), local.error.as_dvec3());
     let p_world = placement.point(p_object);

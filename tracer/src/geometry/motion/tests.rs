@@ -3,6 +3,7 @@
 use super::bounds::swept_bounds;
 use super::*;
 use crate::geometry::intersect_brute_force;
+use crate::geometry::offset::SurfacePoint;
 use crate::scene::{TransformKey, Triangle};
 
 /// A splitmix64 stream, so every run checks the same cases.
@@ -144,6 +145,34 @@ fn aimed_ray(s: &mut Stream, objects: &[MovingObject], time: f64) -> Ray {
     }
 }
 
+/// A point's coordinates, bound, normal and spawned origins as bits, signed zeros apart.
+fn point_bits(point: &SurfacePoint) -> Vec<u32> {
+    let mut vectors = vec![point.p, point.error, point.normal];
+    vectors.extend(point.spawn.into_iter().flatten());
+    vectors
+        .iter()
+        .flat_map(|v| v.to_array().map(f32::to_bits))
+        .collect()
+}
+
+/// The accelerator keeps each moving triangle's corners and unit normal under the index the
+/// scene gives it: every triangle of every object, the normal [`object_normal`] of its own
+/// corners to the bit.
+#[test]
+fn each_moving_triangle_keeps_its_own_corners_and_normal() {
+    let mut s = Stream(5);
+    let objects = objects(&mut s, 12, true);
+    let motion = MotionAccel::build(&objects, 3, BuildQuality::Medium);
+    for (object, o) in objects.iter().enumerate() {
+        for (triangle, t) in o.triangles.iter().enumerate() {
+            let (v, normal) = motion.triangle(MovingTriangle { object, triangle });
+            assert_eq!(v, &t.p, "object {object}, triangle {triangle}");
+            let bits = |n: DVec3| n.to_array().map(f64::to_bits);
+            assert_eq!(bits(normal), bits(object_normal(&t.p)));
+        }
+    }
+}
+
 /// Three objects, as most scenes move (tried in turn), twelve (a tree, the path's placements
 /// made as it starts) and forty (a tree, placements made when first needed), where the tree
 /// over their boxes prunes (its nodes padded and spanning times, `tree.rs`) and walks them in
@@ -198,7 +227,10 @@ fn moving_objects_are_hit_as_brute_force_over_their_triangles_in_object_space() 
                             e.b1,
                             e.b2,
                         );
-                        assert_eq!(motion.surface(&moment, at, &e), alone);
+                        assert_eq!(
+                            point_bits(&motion.surface(&moment, at, &e)),
+                            point_bits(&alone)
+                        );
                         // Numbered below every moving triangle: level, the still hit stays.
                         let t = [e.t, 0.5 * e.t, 2.0 * e.t][(s.unit() * 3.0) as usize % 3];
                         let still = Hit {
