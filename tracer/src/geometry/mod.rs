@@ -62,7 +62,8 @@ pub use bvh::{Accel, BuildQuality, Traversal};
 pub use closest::{intersect_brute_force, occluded_brute_force};
 pub(crate) use memory::{on_huge_pages, prefetch, release_freed_memory};
 pub use motion::{
-    Moment, MotionAccel, MovingTriangle, object_normal, placed_point, placed_point_with_normal,
+    Moment, MotionAccel, MovingTriangle, object_normal, placed_normal, placed_point,
+    placed_point_with_normal,
 };
 pub use offset::{
     OffsetMethod, SurfacePoint, hit_point, offset_ray_origin, plane_normal, spawn_ray, spawn_ray_to,

@@ -16,7 +16,9 @@
 //! weights are the same code (`lights.rs`).
 
 use super::LightSample;
-use crate::geometry::{Moment, MovingTriangle, SurfacePoint, placed_point_with_normal};
+use crate::geometry::{
+    Moment, MovingTriangle, SurfacePoint, placed_normal, placed_point_with_normal,
+};
 use crate::scene::{Placement, Scene};
 use glam::{DVec3, Vec2, Vec3};
 
@@ -82,16 +84,16 @@ pub(super) fn mean_area(scene: &Scene, object: u32, v: &[Vec3; 3]) -> f32 {
 
 /// The area of the object-space triangle `v` placed by `placement`, and its unit normal in the
 /// world as [`placed_point_with_normal`] gives it for the same `object_normal` (the side it
-/// emits to).
+/// emits to: [`placed_normal`]).
 pub(super) fn placed_shape(
     placement: &Placement,
     v: &[Vec3; 3],
     object_normal: DVec3,
 ) -> (f32, Vec3) {
-    let normal = (placement.normal * object_normal)
-        .normalize_or_zero()
-        .as_vec3();
-    (placed_area(placement, v), normal)
+    (
+        placed_area(placement, v),
+        placed_normal(placement, object_normal),
+    )
 }
 
 /// The area of the object-space triangle `v` placed by `placement`, taken from the placed

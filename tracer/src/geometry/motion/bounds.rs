@@ -48,6 +48,16 @@ pub fn object_normal(v: &[Vec3; 3]) -> DVec3 {
     (b - a).cross(c - a).normalize_or_zero()
 }
 
+/// The unit normal in the world of a triangle whose [`object_normal`] is `object_normal`,
+/// placed by `placement`: `M'^T n` normalised, the side a direction is on being its side of
+/// the object's plane. The one rule for a placed point's normal and a moving emitter's.
+#[inline(always)]
+pub fn placed_normal(placement: &Placement, object_normal: DVec3) -> Vec3 {
+    (placement.normal * object_normal)
+        .normalize_or_zero()
+        .as_vec3()
+}
+
 /// [`placed_point`] with the triangle's [`object_normal`] computed beforehand: the moving
 /// objects keep it per triangle, since its square root and division were a fifth of the time of
 /// placing a point (`swinging-lamp` places one for every light sample). `object_normal` must be
@@ -91,9 +101,7 @@ pub fn placed_point_with_normal(
     SurfacePoint {
         p,
         error: round_up(abs(&placement.linear) * e_object + g * p.as_dvec3().abs() + world_noise),
-        normal: (placement.normal * object_normal)
-            .normalize_or_zero()
-            .as_vec3(),
+        normal: placed_normal(placement, object_normal),
         spawn: Some([
             origin(placement, &widened, local.normal),
             origin(placement, &widened, -local.normal),

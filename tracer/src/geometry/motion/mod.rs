@@ -32,7 +32,7 @@ use super::offset::SurfacePoint;
 use super::{Accel, BuildQuality, Hit, Ray, Traversal, TraversalStats};
 use crate::scene::{MovingObject, Placement, TransformTrack};
 use bounds::{SweptBox, SweptRay, swept_bounds, to_object};
-pub use bounds::{object_normal, placed_point, placed_point_with_normal};
+pub use bounds::{object_normal, placed_normal, placed_point, placed_point_with_normal};
 use elsa::FrozenMap;
 use glam::{DVec3, Vec3};
 use std::cell::Cell;
