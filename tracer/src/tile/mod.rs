@@ -219,27 +219,27 @@ impl<'w> Cameras<'w> {
             let jitter = packet.samplers[k].next_2d();
             (px[k], py[k]) = (x as f32 + jitter.x, y as f32 + jitter.y);
         }
+        // Then, under motion blur, each sample's time (before a lens's numbers: the order
+        // within a sampler is jitter, time, lens).
+        if self.blur {
+            for (time, sampler) in packet.times.iter_mut().zip(&mut packet.samplers).take(n) {
+                *time = world.scene.shutter.time(self.frame, sampler.time());
+            }
+        }
         // A still pinhole, the common camera: the eight rays at once, their divisions and
         // square roots in vector lanes (`CameraRays::rays_into`).
         let lens = world.effects.depth_of_field && self.still.has_lens();
         if !self.blur && !lens {
             self.still.rays_into(&px, &py, &mut packet.rays);
         } else if self.camera_moves && !world.effects.depth_of_field {
-            // A moving pinhole under motion blur (no lens at any time: the effect is off):
-            // each sample's time, then the eight rays, each from its own pose, at once
-            // (`CameraTrack::pinhole_rays_into`).
-            for (time, sampler) in packet.times.iter_mut().zip(&mut packet.samplers).take(n) {
-                *time = world.scene.shutter.time(self.frame, sampler.time());
-            }
+            // A moving pinhole under motion blur (no lens at any time: the effect is off): the
+            // eight rays, each from its own pose, at once (`CameraTrack::pinhole_rays_into`).
             let size = (settings.width, settings.height);
             let track = &world.scene.camera;
             track.pinhole_rays_into(&packet.times, size, (&px, &py), &mut packet.rays);
         } else {
             for k in 0..n {
                 let sampler = &mut packet.samplers[k];
-                if self.blur {
-                    packet.times[k] = world.scene.shutter.time(self.frame, sampler.time());
-                }
                 let moved;
                 let camera = if self.camera_moves {
                     moved = world
